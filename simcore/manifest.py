@@ -1,0 +1,95 @@
+"""Loading SimulationRun manifests: untrusted YAML → validated models, with one clear line per problem."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import ValidationError
+
+from simcore.errors import BadInput
+from simcore.spec import SimulationRun
+
+MAX_MANIFEST_BYTES = 4 * 1024 * 1024
+
+
+def _location(loc: tuple[int | str, ...]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part.startswith(("function-", "tagged-union")):
+            continue
+        else:
+            out += f".{part}" if out else str(part)
+    return out
+
+
+def format_validation_error(error: ValidationError) -> str:
+    """pydantic's errors as `field.path: message` lines (camelCase paths, as the user wrote them)."""
+    lines = []
+    for item in error.errors(include_url=False):
+        loc = _location(tuple(item["loc"]))
+        message = str(item["msg"]).removeprefix("Value error, ")
+        if item["type"] == "extra_forbidden":
+            message = "unknown field (check the spelling; fields are camelCase, see `carlos explain`)"
+        elif item["type"] == "missing":
+            message = "required field is missing"
+        lines.append(f"{loc}: {message}" if loc else message)
+    return "; ".join(lines)
+
+
+def parse_manifest(data: Any, *, source: str) -> SimulationRun:
+    """Validate an already-loaded manifest document."""
+    if not isinstance(data, dict):
+        raise BadInput("the manifest must be a YAML mapping with apiVersion, kind, metadata and spec", file=source)
+    try:
+        run = SimulationRun.model_validate(data)
+    except ValidationError as exc:
+        raise BadInput(format_validation_error(exc), file=source) from None
+    return run
+
+
+def load_manifest(path: str | Path) -> SimulationRun:
+    """Read and validate a manifest file. A missing `metadata.name` is taken from the file name."""
+    path = Path(path)
+    source = str(path)
+    try:
+        size = path.stat().st_size
+    except FileNotFoundError:
+        raise BadInput("file not found", file=source) from None
+    except OSError as exc:
+        raise BadInput(f"cannot read: {exc.strerror}", file=source) from None
+    if size > MAX_MANIFEST_BYTES:
+        raise BadInput(f"manifest is {size} bytes; at most {MAX_MANIFEST_BYTES} are allowed", file=source)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise BadInput("not UTF-8 text", file=source) from None
+    try:
+        documents = [doc for doc in yaml.safe_load_all(text) if doc is not None]
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise BadInput(f"invalid YAML{where}: {problem}", file=source) from None
+    if len(documents) != 1:
+        raise BadInput(f"expected exactly one YAML document, found {len(documents)}", file=source)
+    data = documents[0]
+    if isinstance(data, dict):
+        metadata = data.setdefault("metadata", {}) or {}
+        if isinstance(metadata, dict) and not metadata.get("name") and not metadata.get("generateName"):
+            metadata["name"] = _name_from_file(path)
+            data["metadata"] = metadata
+    run = parse_manifest(data, source=source)
+    if run.metadata.name is None and run.metadata.generate_name:
+        # locally there is no API server to generate a name: take the prefix plus the file name
+        name = f"{run.metadata.generate_name.rstrip('-')}-{_name_from_file(path)}"[:63].strip("-")
+        run = run.model_copy(update={"metadata": run.metadata.model_copy(update={"name": name})})
+    return run
+
+
+def _name_from_file(path: Path) -> str:
+    stem = "".join(ch if ch.isalnum() else "-" for ch in path.stem.lower()).strip("-")
+    return (stem or "run")[:63].strip("-")

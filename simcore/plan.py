@@ -1,0 +1,91 @@
+"""Index → run: the pure mapping from a run index to its scenario, parameters and seed.
+
+Index order (DESIGN.md): scenarios in manifest order; within a scenario the matrix permutations in mixed
+radix over the matrix keys in manifest order, last key fastest; repetitions innermost. Nothing is ever
+materialised: any index is computed alone, on any machine, in O(number of matrix keys).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from math import prod
+
+from simcore.spec import ParameterValue, ScenarioRef, SimulationRunSpec
+
+
+@dataclass(frozen=True, slots=True)
+class RunPoint:
+    """One run of a SimulationRun."""
+
+    index: int
+    scenario: ScenarioRef
+    permutation: int  # index of the matrix permutation within the scenario
+    repetition: int
+    sweep_values: dict[str, ParameterValue]  # the matrix values of this permutation
+    parameters: dict[str, ParameterValue]  # every override for the scenario: spec < scenario < matrix
+    seed: int
+
+
+def permutation(matrix: Sequence[tuple[str, Sequence[ParameterValue]]], k: int) -> dict[str, ParameterValue]:
+    """The k-th permutation of `matrix` in mixed radix, last key fastest."""
+    size = prod(len(values) for _, values in matrix)
+    if not 0 <= k < size:
+        raise IndexError(f"permutation {k} is out of range 0..{size - 1}")
+    digits: dict[str, ParameterValue] = {}
+    for name, values in reversed(matrix):
+        k, digit = divmod(k, len(values))
+        digits[name] = values[digit]
+    return {name: digits[name] for name, _ in matrix}
+
+
+class Plan(Sequence[RunPoint]):
+    """The runs of a spec as a lazy sequence: `len(plan)`, `plan[i]`, iteration."""
+
+    def __init__(self, spec: SimulationRunSpec) -> None:
+        self.spec = spec
+        self.matrix: tuple[tuple[str, tuple[ParameterValue, ...]], ...] = tuple(
+            (name, tuple(values)) for name, values in spec.sweep.matrix.items()
+        )
+        self.permutations = prod(len(values) for _, values in self.matrix)
+        self.repetitions = spec.sweep.repetitions
+        self.per_scenario = self.permutations * self.repetitions
+
+    def __len__(self) -> int:
+        return len(self.spec.scenarios) * self.per_scenario
+
+    def __getitem__(self, index: int) -> RunPoint:  # type: ignore[override]
+        if not isinstance(index, int):
+            raise TypeError("plan indexes are integers")
+        total = len(self)
+        if not 0 <= index < total:
+            raise IndexError(f"index {index} is out of range 0..{total - 1}")
+        scenario_index, k = divmod(index, self.per_scenario)
+        perm, repetition = divmod(k, self.repetitions)
+        scenario = self.spec.scenarios[scenario_index]
+        values = permutation(self.matrix, perm)
+        parameters: dict[str, ParameterValue] = {**self.spec.parameters, **scenario.parameters, **values}
+        return RunPoint(
+            index=index,
+            scenario=scenario,
+            permutation=perm,
+            repetition=repetition,
+            sweep_values=values,
+            parameters=parameters,
+            seed=self.spec.simulation.seed + repetition,
+        )
+
+    def __iter__(self) -> Iterator[RunPoint]:
+        for index in range(len(self)):
+            yield self[index]
+
+    def indexes_of(self, scenario_name: str) -> range:
+        for position, scenario in enumerate(self.spec.scenarios):
+            if scenario.name == scenario_name:
+                return range(position * self.per_scenario, (position + 1) * self.per_scenario)
+        raise KeyError(scenario_name)
+
+
+def describe(values: Mapping[str, ParameterValue]) -> str:
+    """`a=1,b=x` — a permutation in one short line (test names, progress)."""
+    return ",".join(f"{name}={value}" for name, value in values.items())
