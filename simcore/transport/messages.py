@@ -1,0 +1,339 @@
+"""ROS 2 jazzy messages built from the world state (DESIGN.md, "Topics").
+
+One type store, :data:`TYPESTORE`: rosbags' ROS 2 jazzy store extended with `vision_msgs` (4.x) and
+`ackermann_msgs` (2.x), whose official `.msg` definitions ship under `simcore/transport/msg/<pkg>/`.
+
+Every builder is a pure function of a :class:`~simcore.world.state.WorldFrame`; stamps are simulated time
+from 0 (`/clock` and every header carry `frame.time`). Frames follow REP-103/105: the world frame is
+`map` (ENU), each entity's frame `<entity>/base_link` at its reference point (x forward, y left, z up).
+
+Entity names become ROS name tokens through :func:`ros_name` (characters other than letters, digits and
+`_` become `_`, runs of `_` collapse, a leading digit gets an `e` prefix); two entities whose names map to
+the same token are an error rather than two vehicles silently sharing one frame.
+
+`/carlos/status` uses `diagnostic_msgs/msg/DiagnosticStatus` (see :func:`status`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
+from rosbags.typesys.stores.ros2_jazzy import (
+    builtin_interfaces__msg__Time as Time,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    diagnostic_msgs__msg__DiagnosticStatus as DiagnosticStatus,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    diagnostic_msgs__msg__KeyValue as KeyValue,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__Point as Point,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__Pose as Pose,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__PoseWithCovariance as PoseWithCovariance,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__Quaternion as Quaternion,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__Transform as Transform,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__TransformStamped as TransformStamped,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__Twist as Twist,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__TwistWithCovariance as TwistWithCovariance,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__Vector3 as Vector3,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    nav_msgs__msg__Odometry as Odometry,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    rosgraph_msgs__msg__Clock as Clock,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    std_msgs__msg__Header as Header,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    tf2_msgs__msg__TFMessage as TFMessage,
+)
+
+from simcore.world.state import EntityState, WorldFrame
+
+__all__ = [
+    "MAP_FRAME",
+    "MSG_DIR",
+    "STATUS_TOPIC",
+    "TYPESTORE",
+    "base_link",
+    "clock",
+    "deserialize",
+    "frame_messages",
+    "msgdef",
+    "objects",
+    "odometry",
+    "odometry_topic",
+    "quaternion",
+    "ros_name",
+    "serialize",
+    "stamp",
+    "status",
+    "tf",
+]
+
+#: Where the extra `.msg` definitions live: `msg/<package>/<Type>.msg`.
+MSG_DIR = Path(__file__).with_name("msg")
+MAP_FRAME = "map"
+CLOCK_TOPIC = "/clock"
+TF_TOPIC = "/tf"
+OBJECTS_TOPIC = "/carlos/objects"
+STATUS_TOPIC = "/carlos/status"
+
+_ZERO_COVARIANCE = np.zeros(36, dtype=np.float64)
+
+
+def _build_typestore() -> Typestore:
+    store = get_typestore(Stores.ROS2_JAZZY)
+    types: dict[str, Any] = {}
+    for path in sorted(MSG_DIR.glob("*/*.msg")):
+        typename = f"{path.parent.name}/msg/{path.stem}"
+        types.update(get_types_from_msg(path.read_text(encoding="utf-8"), typename))
+    store.register(types)
+    return store
+
+
+#: The one type store of CARLOS: ROS 2 jazzy + vision_msgs + ackermann_msgs.
+TYPESTORE: Typestore = _build_typestore()
+
+
+def _type(typename: str) -> Any:
+    return TYPESTORE.types[typename]
+
+
+# --- names and small conversions ------------------------------------------------------------------------
+
+_INVALID = re.compile(r"[^A-Za-z0-9_]+")
+_UNDERSCORES = re.compile(r"_{2,}")
+
+
+def ros_name(name: str) -> str:
+    """`name` as a valid ROS 2 name token (letters, digits, single `_`, not starting with a digit)."""
+    token = _UNDERSCORES.sub("_", _INVALID.sub("_", name)).strip("_")
+    if not token:
+        token = "entity"
+    if token[0].isdigit():
+        token = "e" + token
+    return token
+
+
+def base_link(entity: str) -> str:
+    """The entity's body frame (REP-105): `<entity>/base_link`."""
+    return f"{ros_name(entity)}/base_link"
+
+
+def odometry_topic(entity: str) -> str:
+    return f"/carlos/{ros_name(entity)}/odometry"
+
+
+def _check_unique(frame: WorldFrame) -> None:
+    seen: dict[str, str] = {}
+    for entity in frame.entities:
+        token = ros_name(entity.name)
+        if token in seen and seen[token] != entity.name:
+            raise ValueError(
+                f"entities {seen[token]!r} and {entity.name!r} both map to the ROS name {token!r}; "
+                "rename one of them in the scenario"
+            )
+        seen[token] = entity.name
+
+
+def stamp(time_s: float) -> Time:
+    """Simulated time in seconds as builtin_interfaces/Time (rounded to the nanosecond)."""
+    ns = round(time_s * 1e9)
+    if ns < 0:
+        raise ValueError(f"negative simulation time {time_s}")
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def quaternion(yaw: float, pitch: float = 0.0, roll: float = 0.0) -> Quaternion:
+    """Quaternion of the intrinsic z-y'-x'' rotation (yaw, pitch, roll), as tf2's `setRPY(roll, pitch, yaw)`."""
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    return Quaternion(
+        x=sr * cp * cy - cr * sp * sy,
+        y=cr * sp * cy + sr * cp * sy,
+        z=cr * cp * sy - sr * sp * cy,
+        w=cr * cp * cy + sr * sp * sy,
+    )
+
+
+def _header(frame: WorldFrame, frame_id: str = MAP_FRAME) -> Header:
+    return Header(stamp=stamp(frame.time), frame_id=frame_id)
+
+
+def _orientation(entity: EntityState) -> Quaternion:
+    return quaternion(entity.heading, entity.pitch, entity.roll)
+
+
+# --- message builders ----------------------------------------------------------------------------------
+
+
+def clock(frame: WorldFrame) -> Clock:
+    """rosgraph_msgs/msg/Clock at the frame's simulated time."""
+    return Clock(clock=stamp(frame.time))
+
+
+def tf(frame: WorldFrame) -> TFMessage:
+    """tf2_msgs/msg/TFMessage: one transform `map` → `<entity>/base_link` per entity (full orientation)."""
+    _check_unique(frame)
+    header = _header(frame)
+    return TFMessage(
+        transforms=[
+            TransformStamped(
+                header=header,
+                child_frame_id=base_link(entity.name),
+                transform=Transform(
+                    translation=Vector3(x=entity.x, y=entity.y, z=entity.z),
+                    rotation=_orientation(entity),
+                ),
+            )
+            for entity in frame.entities
+        ]
+    )
+
+
+def odometry(frame: WorldFrame, entity: str | EntityState) -> Odometry:
+    """nav_msgs/msg/Odometry of one entity: pose in `map`, twist in `<entity>/base_link`
+    (linear.x = speed, angular.z = yaw_rate). Ground truth, so the covariances are zero."""
+    state = frame.entity(entity) if isinstance(entity, str) else entity
+    return Odometry(
+        header=_header(frame),
+        child_frame_id=base_link(state.name),
+        pose=PoseWithCovariance(
+            pose=Pose(position=Point(x=state.x, y=state.y, z=state.z), orientation=_orientation(state)),
+            covariance=_ZERO_COVARIANCE.copy(),
+        ),
+        twist=TwistWithCovariance(
+            twist=Twist(
+                linear=Vector3(x=state.speed, y=0.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=state.yaw_rate)
+            ),
+            covariance=_ZERO_COVARIANCE.copy(),
+        ),
+    )
+
+
+def objects(frame: WorldFrame) -> Any:
+    """vision_msgs/msg/Detection3DArray in `map`: ground truth, one Detection3D per entity.
+
+    bbox.center = the box centre (`EntityState.box_center()`) with the heading as orientation, bbox.size =
+    (length, width, height); one hypothesis with class_id = category, score 1 and the same pose;
+    id = the entity's name as in the scenario."""
+    _check_unique(frame)
+    detection_array = _type("vision_msgs/msg/Detection3DArray")
+    detection = _type("vision_msgs/msg/Detection3D")
+    bbox3d = _type("vision_msgs/msg/BoundingBox3D")
+    hypothesis_with_pose = _type("vision_msgs/msg/ObjectHypothesisWithPose")
+    hypothesis = _type("vision_msgs/msg/ObjectHypothesis")
+    header = _header(frame)
+    detections = []
+    for entity in frame.entities:
+        cx, cy, cz = entity.box_center()
+        center = Pose(position=Point(x=cx, y=cy, z=cz), orientation=quaternion(entity.heading))
+        detections.append(
+            detection(
+                header=header,
+                results=[
+                    hypothesis_with_pose(
+                        hypothesis=hypothesis(class_id=entity.category, score=1.0),
+                        pose=PoseWithCovariance(pose=center, covariance=_ZERO_COVARIANCE.copy()),
+                    )
+                ],
+                bbox=bbox3d(
+                    center=center,
+                    size=Vector3(x=entity.bbox.length, y=entity.bbox.width, z=entity.bbox.height),
+                ),
+                id=entity.name,
+            )
+        )
+    return detection_array(header=header, detections=detections)
+
+
+#: `state` values of /carlos/status that are errors (level ERROR); every other state is level OK.
+ERROR_STATES = frozenset({"error", "failed"})
+
+
+def status(frame: WorldFrame, state: str, detail: Mapping[str, str] | None = None) -> DiagnosticStatus:
+    """The run state for `/carlos/status` as diagnostic_msgs/msg/DiagnosticStatus.
+
+    name = "carlos", message = `state` (e.g. "running", "ended", "error"), level = ERROR for "error" and
+    "failed", else OK; values (KeyValue): `state`, `time` (simulated seconds, repr), `step`, then `detail`
+    in its order. The end of the run is the status whose state is "ended" or "error"."""
+    values = [
+        KeyValue(key="state", value=state),
+        KeyValue(key="time", value=repr(float(frame.time))),
+        KeyValue(key="step", value=str(frame.step)),
+    ]
+    values.extend(KeyValue(key=str(k), value=str(v)) for k, v in (detail or {}).items())
+    return DiagnosticStatus(
+        level=DiagnosticStatus.ERROR if state in ERROR_STATES else DiagnosticStatus.OK,
+        name="carlos",
+        message=state,
+        hardware_id="",
+        values=values,
+    )
+
+
+def frame_messages(frame: WorldFrame) -> list[tuple[str, str, Any]]:
+    """(topic, typename, message) for one step: `/clock`, `/tf`, `/carlos/<entity>/odometry` for every
+    entity, `/carlos/objects`."""
+    _check_unique(frame)
+    out: list[tuple[str, str, Any]] = [
+        (CLOCK_TOPIC, Clock.__msgtype__, clock(frame)),
+        (TF_TOPIC, TFMessage.__msgtype__, tf(frame)),
+    ]
+    out.extend(
+        (odometry_topic(entity.name), Odometry.__msgtype__, odometry(frame, entity))
+        for entity in frame.entities
+    )
+    out.append((OBJECTS_TOPIC, "vision_msgs/msg/Detection3DArray", objects(frame)))
+    return out
+
+
+# --- serialisation -------------------------------------------------------------------------------------
+
+
+def serialize(msg: Any) -> bytes:
+    """CDR (little endian, with the 4-byte encapsulation header) as on the wire and in rosbag2."""
+    return bytes(TYPESTORE.serialize_cdr(msg, msg.__msgtype__))
+
+
+def deserialize(data: bytes, typename: str) -> Any:
+    return TYPESTORE.deserialize_cdr(data, typename)
+
+
+@cache
+def msgdef(typename: str) -> str:
+    """The ros2msg schema text of `typename` as ROS 2 bag writers store it: the type's own fields, then one
+    `====…\\nMSG: pkg/Type` section per nested type."""
+    if typename not in TYPESTORE.fielddefs:
+        raise KeyError(f"unknown message type {typename!r}")
+    text, _ = TYPESTORE.generate_msgdef(typename, ros_version=2)
+    return text

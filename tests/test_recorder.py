@@ -1,0 +1,276 @@
+"""McapRecorder: what it writes is read back by mcap + mcap_ros2 and by rosbags' AnyReader."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+
+from simcore.recorder import McapRecorder, RecorderError
+from simcore.transport import messages
+from simcore.world.state import BoundingBox, EntityState, WorldFrame
+
+CAR_BOX = BoundingBox(center_x=1.4, center_y=0.0, center_z=0.75, length=4.5, width=1.8, height=1.5)
+TRUCK_BOX = BoundingBox(center_x=3.0, center_y=0.0, center_z=1.9, length=10.0, width=2.5, height=3.8)
+STEP = 0.05
+N_FRAMES = 20
+
+
+def _frame(step: int) -> WorldFrame:
+    t = step * STEP
+    ego = EntityState(
+        name="Ego",
+        object_type="vehicle",
+        category="car",
+        x=10.0 * t,
+        y=0.0,
+        z=0.0,
+        heading=0.0,
+        pitch=0.0,
+        roll=0.0,
+        speed=10.0,
+        acceleration=0.0,
+        yaw_rate=0.0,
+        bbox=CAR_BOX,
+    )
+    heading = 0.1 * t
+    truck = EntityState(
+        name="lead truck",
+        object_type="vehicle",
+        category="truck",
+        x=50.0 + 20.0 * t,
+        y=3.5,
+        z=0.0,
+        heading=heading,
+        pitch=0.0,
+        roll=0.0,
+        speed=20.0,
+        acceleration=0.5,
+        yaw_rate=0.1,
+        bbox=TRUCK_BOX,
+    )
+    return WorldFrame(step=step, time=t, entities=(ego, truck), ego="Ego")
+
+
+FRAMES = [_frame(i) for i in range(N_FRAMES)]
+METADATA = {
+    "carlos.spec": {"yaml": "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\n"},
+    "carlos.run": {"index": "3", "seed": "42", "parameters": json.dumps({"speed": 10})},
+}
+
+
+def _record(path: Path, **kwargs: Any) -> None:
+    with McapRecorder(path, metadata=METADATA, **kwargs) as rec:
+        for frame in FRAMES:
+            rec.write_frame(frame)
+        rec.write(
+            messages.STATUS_TOPIC,
+            "diagnostic_msgs/msg/DiagnosticStatus",
+            messages.status(FRAMES[-1], "ended"),
+            FRAMES[-1].time,
+        )
+
+
+def _read_mcap(path: Path) -> tuple[list[tuple[str, str, int, Any]], dict[str, dict[str, str]], str]:
+    out = []
+    with path.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        header_profile = reader.get_header().profile
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            assert schema is not None
+            assert schema.encoding == "ros2msg"
+            assert channel.message_encoding == "cdr"
+            assert message.log_time == message.publish_time
+            out.append((channel.topic, schema.name, message.log_time, decoded))
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    return out, meta, header_profile
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+def test_mcap_reader_decodes_values(tmp_path: Path, compression: Any) -> None:
+    path = tmp_path / "run" / "0" / "recording.mcap"
+    _record(path, compression=compression)
+    assert path.exists()
+    assert not path.with_name("recording.mcap.part").exists()
+
+    msgs, meta, profile = _read_mcap(path)
+    assert profile == "ros2"
+    assert meta == METADATA
+    per_frame = 2 + 2 + 1  # clock, tf, 2 × odometry, objects
+    assert len(msgs) == N_FRAMES * per_frame + 1
+
+    topics = {topic: typename for topic, typename, _, _ in msgs}
+    assert topics == {
+        "/clock": "rosgraph_msgs/msg/Clock",
+        "/tf": "tf2_msgs/msg/TFMessage",
+        "/carlos/Ego/odometry": "nav_msgs/msg/Odometry",
+        "/carlos/lead_truck/odometry": "nav_msgs/msg/Odometry",
+        "/carlos/objects": "vision_msgs/msg/Detection3DArray",
+        "/carlos/status": "diagnostic_msgs/msg/DiagnosticStatus",
+    }
+
+    clocks = [(t, m) for topic, _, t, m in msgs if topic == "/clock"]
+    assert [t for t, _ in clocks] == [round(f.time * 1e9) for f in FRAMES]
+    sec, ns = clocks[7][1].clock.sec, clocks[7][1].clock.nanosec
+    assert sec * 1_000_000_000 + ns == round(7 * STEP * 1e9)
+
+    tfs = [m for topic, _, _, m in msgs if topic == "/tf"]
+    last = tfs[-1]
+    assert [t.child_frame_id for t in last.transforms] == ["Ego/base_link", "lead_truck/base_link"]
+    assert all(t.header.frame_id == "map" for t in last.transforms)
+    truck = FRAMES[-1].entity("lead truck")
+    tr = last.transforms[1].transform
+    assert tr.translation.x == pytest.approx(truck.x)
+    assert tr.translation.y == pytest.approx(3.5)
+    # yaw from the quaternion
+    q = tr.rotation
+    yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+    assert yaw == pytest.approx(truck.heading)
+
+    odo = [m for topic, _, _, m in msgs if topic == "/carlos/lead_truck/odometry"]
+    assert len(odo) == N_FRAMES
+    assert odo[-1].header.frame_id == "map"
+    assert odo[-1].child_frame_id == "lead_truck/base_link"
+    assert odo[-1].twist.twist.linear.x == pytest.approx(20.0)
+    assert odo[-1].twist.twist.angular.z == pytest.approx(0.1)
+    assert odo[-1].pose.pose.position.x == pytest.approx(truck.x)
+    assert list(odo[-1].pose.covariance) == [0.0] * 36
+
+    dets = [m for topic, _, _, m in msgs if topic == "/carlos/objects"]
+    arr = dets[-1]
+    assert arr.header.frame_id == "map"
+    assert [d.id for d in arr.detections] == ["Ego", "lead truck"]
+    d = arr.detections[1]
+    assert d.results[0].hypothesis.class_id == "truck"
+    assert d.results[0].hypothesis.score == 1.0
+    assert (d.bbox.size.x, d.bbox.size.y, d.bbox.size.z) == (10.0, 2.5, 3.8)
+    cx, cy, cz = truck.box_center()
+    assert (d.bbox.center.position.x, d.bbox.center.position.y, d.bbox.center.position.z) == pytest.approx(
+        (cx, cy, cz)
+    )
+    assert arr.detections[0].results[0].hypothesis.class_id == "car"
+
+    status = next(m for topic, _, _, m in msgs if topic == "/carlos/status")
+    assert status.message == "ended"
+    assert {kv.key: kv.value for kv in status.values} == {
+        "state": "ended",
+        "time": repr(FRAMES[-1].time),
+        "step": "19",
+    }
+
+
+def test_anyreader_reads_bare_mcap(tmp_path: Path) -> None:
+    """rosbags 0.11: AnyReader (rosbag2 Reader) opens a bare `.mcap` file by its suffix; no metadata.yaml.
+    Types come from the schemas embedded in the file; we decode with them and with our own TYPESTORE."""
+    path = tmp_path / "recording.mcap"
+    _record(path)
+    with AnyReader([path], default_typestore=messages.TYPESTORE) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        assert topics["/carlos/objects"] == "vision_msgs/msg/Detection3DArray"
+        assert reader.message_count == N_FRAMES * 5 + 1
+        assert reader.start_time == 0
+        conns = [c for c in reader.connections if c.topic in ("/carlos/objects", "/carlos/Ego/odometry")]
+        seen: dict[str, list[Any]] = {"/carlos/objects": [], "/carlos/Ego/odometry": []}
+        for conn, timestamp, raw in reader.messages(connections=conns):
+            embedded: Any = reader.deserialize(raw, conn.msgtype)
+            ours = messages.deserialize(raw, conn.msgtype)
+            assert embedded.header.stamp.sec * 10**9 + embedded.header.stamp.nanosec == timestamp
+            seen[conn.topic].append((embedded, ours))
+    assert len(seen["/carlos/objects"]) == N_FRAMES
+    embedded, ours = seen["/carlos/objects"][-1]
+    assert embedded.detections[1].bbox.size.x == ours.detections[1].bbox.size.x == 10.0
+    assert embedded.detections[1].results[0].hypothesis.class_id == "truck"
+    embedded, ours = seen["/carlos/Ego/odometry"][5]
+    assert embedded.twist.twist.linear.x == ours.twist.twist.linear.x == 10.0
+    assert embedded.pose.pose.position.x == pytest.approx(10.0 * 5 * STEP)
+
+
+def test_schema_text_matches_typestore(tmp_path: Path) -> None:
+    path = tmp_path / "recording.mcap"
+    _record(path)
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    schemas = {s.name: s.data.decode() for s in summary.schemas.values()}
+    text = schemas["vision_msgs/msg/Detection3DArray"]
+    assert text.startswith("std_msgs/Header header\nvision_msgs/Detection3D[] detections\n")
+    assert "=" * 80 + "\nMSG: vision_msgs/ObjectHypothesis\nstring class_id\nfloat64 score\n" in text
+    for channel in summary.channels.values():
+        assert "offered_qos_profiles" in channel.metadata
+
+
+def test_topic_filter(tmp_path: Path) -> None:
+    path = tmp_path / "filtered.mcap"
+    with McapRecorder(path, topics=["/carlos/*/odometry", "/clock"]) as rec:
+        for frame in FRAMES[:3]:
+            assert rec.write_frame(frame) == 3
+        assert not rec.write("/tf", "tf2_msgs/msg/TFMessage", messages.tf(FRAMES[0]), 0.0)
+    msgs, meta, _ = _read_mcap(path)
+    assert meta == {}
+    assert {m[0] for m in msgs} == {"/clock", "/carlos/Ego/odometry", "/carlos/lead_truck/odometry"}
+    assert len(msgs) == 9
+
+
+def test_crash_leaves_no_final_file(tmp_path: Path) -> None:
+    path = tmp_path / "recording.mcap"
+    with pytest.raises(RuntimeError, match="simulator died"), McapRecorder(path, metadata=METADATA) as rec:
+        for frame in FRAMES[:5]:
+            rec.write_frame(frame)
+        raise RuntimeError("simulator died")
+    assert not path.exists()
+    part = tmp_path / "recording.mcap.part"
+    assert part.exists()  # kept for debugging, finished as far as it got: still a readable MCAP
+    with part.open("rb") as f:
+        assert sum(1 for _ in make_reader(f).iter_messages()) == 5 * 5
+    with pytest.raises(RecorderError, match="closed"):
+        rec.write_frame(FRAMES[0])
+
+
+def test_abort_without_partial(tmp_path: Path) -> None:
+    path = tmp_path / "recording.mcap"
+    rec = McapRecorder(path)
+    rec.write_frame(FRAMES[0])
+    rec.abort(keep_partial=False)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_arguments(tmp_path: Path) -> None:
+    with pytest.raises(RecorderError, match="compression"):
+        McapRecorder(tmp_path / "x.mcap", compression="gzip")  # type: ignore[arg-type]
+    with pytest.raises(RecorderError, match="strings"):
+        McapRecorder(tmp_path / "y.mcap", metadata={"carlos.run": {"seed": 42}})  # type: ignore[dict-item]
+    assert not (tmp_path / "y.mcap.part").exists()
+    with McapRecorder(tmp_path / "z.mcap") as rec:
+        rec.write("/a", "rosgraph_msgs/msg/Clock", messages.clock(FRAMES[0]), 0.0)
+        with pytest.raises(RecorderError, match="type"):
+            rec.write("/a", "tf2_msgs/msg/TFMessage", messages.tf(FRAMES[0]), 0.0)
+
+
+def test_entity_name_collision_is_an_error() -> None:
+    a = FRAMES[0].entities[1]
+    b = EntityState(**{**{s: getattr(a, s) for s in a.__slots__}, "name": "lead-truck"})
+    frame = WorldFrame(step=0, time=0.0, entities=(a, b))
+    with pytest.raises(ValueError, match="lead_truck"):
+        messages.frame_messages(frame)
+    assert messages.ros_name("1st car") == "e1st_car"
+    assert messages.ros_name("Ego") == "Ego"
+    assert messages.ros_name("a//b--c") == "a_b_c"
+
+
+def test_bytes_per_frame(tmp_path: Path) -> None:
+    """Size of the recording per step for two entities (printed with -s; a loose upper bound asserted)."""
+    sizes = {}
+    for compression in ("zstd", "none"):
+        path = tmp_path / f"{compression}.mcap"
+        with McapRecorder(path, compression=compression) as rec:
+            for i in range(1000):
+                rec.write_frame(_frame(i))
+        sizes[compression] = path.stat().st_size / 1000
+    print(f"bytes per frame (2 entities): {sizes}")
+    assert sizes["zstd"] < sizes["none"] < 4000
