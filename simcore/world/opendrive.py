@@ -1,0 +1,1173 @@
+"""Pure-Python OpenDRIVE (1.4–1.7) road geometry.
+
+Parses the road network of an ``.xodr`` file (planView geometry, elevation, lane offsets, lane sections,
+lanes and their widths, road and lane links, junctions) and answers the geometric questions a scenario
+engine needs: road/lane coordinates to world poses, world points back to road coordinates, lane topology
+(what lane follows the end of a lane) and sampled lane borders for later triangulation.
+
+Supported planView geometries: ``line``, ``arc``, ``spiral`` (clothoid, via Fresnel integrals, any
+curvStart/curvEnd), ``poly3`` and ``paramPoly3`` (``pRange`` ``arcLength`` or ``normalized``). For
+``poly3`` and ``paramPoly3`` the road ``s`` is mapped to the curve parameter through a numerically
+integrated arc-length table, so ``s`` is a true arc length along the curve.
+
+Deliberately not modelled (documented limitations):
+
+* ``lateralProfile``: ``superelevation`` is applied as a roll of the whole cross section about the reference
+  line (``t`` is measured in the tilted plane: horizontal offset ``t*cos(roll)``, height ``t*sin(roll)``,
+  as esmini does); ``crossfall`` and ``shape`` are ignored. Pose headings never include pitch or roll.
+* Lane ``height`` records, road marks, objects, signals and the header ``geoReference``/``offset`` are ignored.
+* Lane ``border`` records are used only for lanes without ``width`` records; the border polynomial is taken
+  as the outer border's distance from the centre lane (laneOffset-shifted reference line).
+
+XML is parsed with :mod:`defusedxml` (files are untrusted), files over 64 MiB are refused, and every
+problem in the input is reported as :class:`OpenDriveError` naming the file and the element.
+"""
+
+from __future__ import annotations
+
+import bisect
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from xml.etree.ElementTree import Element
+
+import defusedxml.ElementTree as DET
+import numpy as np
+from defusedxml import DefusedXmlException
+from scipy.special import fresnel
+
+__all__ = [
+    "MAX_FILE_BYTES",
+    "Geometry",
+    "Junction",
+    "JunctionConnection",
+    "Lane",
+    "LaneBoundary",
+    "LaneSection",
+    "OpenDrive",
+    "OpenDriveError",
+    "Poly3",
+    "Pose",
+    "Road",
+    "RoadCoordinates",
+    "RoadLink",
+]
+
+MAX_FILE_BYTES = 64 * 1024 * 1024
+"""Files (and strings) larger than this are refused."""
+
+DRIVING_LANE_TYPES = frozenset(
+    {"driving", "entry", "exit", "onramp", "offramp", "connectingramp", "bidirectional", "sliplane"}
+)
+"""Lane types (lower case) counted as drivable by ``lane_ids(..., driving_only=True)``."""
+
+_S_TOL = 1e-3  # m: s values this far outside [0, length] are clamped silently
+
+
+class OpenDriveError(ValueError):
+    """A malformed, unsupported or unsafe OpenDRIVE input, or a query on something the file does not have."""
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A world pose. ``heading`` in rad, counter-clockwise from +x."""
+
+    x: float
+    y: float
+    z: float
+    heading: float
+
+
+@dataclass(frozen=True)
+class RoadCoordinates:
+    """A position in road coordinates.
+
+    ``offset`` is ``t`` minus the lane-centre ``t``; ``heading`` is the reference-line heading at ``s``.
+    """
+
+    road_id: str
+    lane_id: int
+    s: float
+    t: float
+    offset: float
+    heading: float
+
+
+@dataclass(frozen=True)
+class Poly3:
+    """``a + b*ds + c*ds**2 + d*ds**3`` with ``ds = s - s0`` (``s0`` is ``s`` or ``sOffset`` in the file)."""
+
+    s0: float
+    a: float
+    b: float
+    c: float
+    d: float
+
+    def value(self, s: float) -> float:
+        """The polynomial at ``s`` (absolute in the same frame as ``s0``)."""
+        ds = s - self.s0
+        return self.a + ds * (self.b + ds * (self.c + ds * self.d))
+
+    def slope(self, s: float) -> float:
+        """The first derivative at ``s``."""
+        ds = s - self.s0
+        return self.b + ds * (2.0 * self.c + ds * 3.0 * self.d)
+
+
+def _poly_at(polys: Sequence[Poly3], starts: Sequence[float], s: float) -> Poly3 | None:
+    """The record in effect at ``s`` (the last one starting at or before ``s``; the first one before it)."""
+    if not polys:
+        return None
+    i = bisect.bisect_right(starts, s + 1e-12) - 1
+    return polys[max(i, 0)]
+
+
+# --------------------------------------------------------------------------------------------------- geometry
+
+
+class Geometry:
+    """One planView geometry record. ``local(ds)`` gives ``(x, y, heading)`` at ``ds`` in ``[0, length]``."""
+
+    kind = "geometry"
+
+    def __init__(self, s: float, x: float, y: float, hdg: float, length: float) -> None:
+        self.s = s
+        self.x = x
+        self.y = y
+        self.hdg = hdg
+        self.length = length
+
+    def local(self, ds: float) -> tuple[float, float, float]:
+        """World ``(x, y, heading)`` at distance ``ds`` from the start of this geometry."""
+        raise NotImplementedError
+
+    def curvature(self, ds: float) -> float:
+        """Signed curvature (1/m, positive turns left) at ``ds``."""
+        raise NotImplementedError
+
+
+class Line(Geometry):
+    """A straight line."""
+
+    kind = "line"
+
+    def local(self, ds: float) -> tuple[float, float, float]:
+        return self.x + ds * math.cos(self.hdg), self.y + ds * math.sin(self.hdg), self.hdg
+
+    def curvature(self, ds: float) -> float:
+        return 0.0
+
+
+class Arc(Geometry):
+    """A circular arc of constant curvature."""
+
+    kind = "arc"
+
+    def __init__(self, s: float, x: float, y: float, hdg: float, length: float, k: float) -> None:
+        super().__init__(s, x, y, hdg, length)
+        self.k = k
+
+    def local(self, ds: float) -> tuple[float, float, float]:
+        k = self.k
+        h = self.hdg + k * ds
+        if abs(k) < 1e-12:
+            return self.x + ds * math.cos(self.hdg), self.y + ds * math.sin(self.hdg), h
+        return (
+            self.x + (math.sin(h) - math.sin(self.hdg)) / k,
+            self.y - (math.cos(h) - math.cos(self.hdg)) / k,
+            h,
+        )
+
+    def curvature(self, ds: float) -> float:
+        return self.k
+
+
+class Spiral(Geometry):
+    """A clothoid whose curvature changes linearly from ``k0`` to ``k1`` over its length.
+
+    Evaluated on the standard clothoid ``k(u) = c*u`` (``c = (k1-k0)/length``) between ``u0 = k0/c`` and
+    ``u0 + length`` using Fresnel integrals, then shifted and rotated onto the record's start pose.
+    """
+
+    kind = "spiral"
+
+    def __init__(self, s: float, x: float, y: float, hdg: float, length: float, k0: float, k1: float) -> None:
+        super().__init__(s, x, y, hdg, length)
+        self.k0 = k0
+        self.k1 = k1
+        self.c = (k1 - k0) / length if length > 0 else 0.0
+        # a clothoid with negligible curvature change over the record is an arc to double precision
+        self._as_arc = abs(self.c) * max(length, 1.0) ** 3 < 1e-9 or abs(self.c) < 1e-15
+        if not self._as_arc:
+            self._scale = math.sqrt(math.pi / abs(self.c))
+            self._sign = 1.0 if self.c > 0 else -1.0
+            self._u0 = k0 / self.c
+            self._x0, self._y0 = self._std(self._u0)
+            self._th0 = 0.5 * self.c * self._u0 * self._u0
+            self._cos0 = math.cos(self._th0)
+            self._sin0 = math.sin(self._th0)
+
+    def _std(self, u: float) -> tuple[float, float]:
+        sf, cf = fresnel(u / self._scale)
+        return self._scale * float(cf), self._sign * self._scale * float(sf)
+
+    def local(self, ds: float) -> tuple[float, float, float]:
+        h = self.hdg + self.k0 * ds + 0.5 * self.c * ds * ds
+        if self._as_arc:
+            k = self.k0 + 0.5 * self.c * ds  # mean curvature: exact heading, position to < 1e-9 m
+            if abs(k) < 1e-12:
+                return self.x + ds * math.cos(self.hdg), self.y + ds * math.sin(self.hdg), h
+            return (
+                self.x + (math.sin(self.hdg + k * ds) - math.sin(self.hdg)) / k,
+                self.y - (math.cos(self.hdg + k * ds) - math.cos(self.hdg)) / k,
+                h,
+            )
+        xs, ys = self._std(self._u0 + ds)
+        dx, dy = xs - self._x0, ys - self._y0
+        # rotate out the standard clothoid's heading at u0, then into the record's start heading
+        lx = dx * self._cos0 + dy * self._sin0
+        ly = -dx * self._sin0 + dy * self._cos0
+        ch, sh = math.cos(self.hdg), math.sin(self.hdg)
+        return self.x + lx * ch - ly * sh, self.y + lx * sh + ly * ch, h
+
+    def curvature(self, ds: float) -> float:
+        return self.k0 + self.c * ds
+
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(6)
+
+
+class ParamPoly3(Geometry):
+    """A parametric cubic ``u(p), v(p)`` in the record's local frame (also used for ``poly3``, with ``u = p``).
+
+    ``s`` is mapped to ``p`` through a table of the numerically integrated arc length, scaled so that the
+    table's total equals the record's ``length``.
+    """
+
+    kind = "paramPoly3"
+
+    def __init__(
+        self,
+        s: float,
+        x: float,
+        y: float,
+        hdg: float,
+        length: float,
+        u: tuple[float, float, float, float],
+        v: tuple[float, float, float, float],
+        p_max: float | None,
+    ) -> None:
+        super().__init__(s, x, y, hdg, length)
+        self.u = u
+        self.v = v
+        self._cos = math.cos(hdg)
+        self._sin = math.sin(hdg)
+        if p_max is None:  # poly3: find the u at which the arc length reaches ``length``
+            lo, hi = 0.0, max(length, 1e-9)
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                if self._arclen(np.linspace(0.0, mid, 65))[-1] < length:
+                    lo = mid
+                else:
+                    hi = mid
+            p_max = 0.5 * (lo + hi)
+        self.p_max = p_max
+        n = int(min(max(64, math.ceil(length / 0.2)), 20000))
+        ps = np.linspace(0.0, p_max, n + 1)
+        cum = self._arclen(ps)
+        total = float(cum[-1])
+        if total > 0:
+            cum = cum * (length / total)
+        self._ps: list[float] = ps.tolist()
+        self._ss: list[float] = cum.tolist()
+
+    def _speed(self, p: np.ndarray) -> np.ndarray:
+        _, bu, cu, du = self.u
+        _, bv, cv, dv = self.v
+        up = bu + p * (2 * cu + 3 * du * p)
+        vp = bv + p * (2 * cv + 3 * dv * p)
+        return np.asarray(np.hypot(up, vp))
+
+    def _arclen(self, ps: np.ndarray) -> np.ndarray:
+        """Cumulative arc length at the grid ``ps`` (Gauss-Legendre on each interval)."""
+        a, b = ps[:-1], ps[1:]
+        half = 0.5 * (b - a)
+        mid = 0.5 * (a + b)
+        pts = mid[:, None] + half[:, None] * _GL_X[None, :]
+        seg = half * (self._speed(pts) @ _GL_W)
+        return np.concatenate(([0.0], np.cumsum(seg)))
+
+    def _p_of(self, ds: float) -> float:
+        ss, ps = self._ss, self._ps
+        i = bisect.bisect_right(ss, ds) - 1
+        i = min(max(i, 0), len(ss) - 2)
+        s0, s1 = ss[i], ss[i + 1]
+        f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
+        return ps[i] + f * (ps[i + 1] - ps[i])
+
+    def _uv(self, p: float) -> tuple[float, float, float, float, float, float]:
+        au, bu, cu, du = self.u
+        av, bv, cv, dv = self.v
+        u = au + p * (bu + p * (cu + p * du))
+        v = av + p * (bv + p * (cv + p * dv))
+        up = bu + p * (2 * cu + 3 * du * p)
+        vp = bv + p * (2 * cv + 3 * dv * p)
+        upp = 2 * cu + 6 * du * p
+        vpp = 2 * cv + 6 * dv * p
+        return u, v, up, vp, upp, vpp
+
+    def local(self, ds: float) -> tuple[float, float, float]:
+        p = self._p_of(ds)
+        u, v, up, vp, _, _ = self._uv(p)
+        return (
+            self.x + u * self._cos - v * self._sin,
+            self.y + u * self._sin + v * self._cos,
+            self.hdg + math.atan2(vp, up),
+        )
+
+    def curvature(self, ds: float) -> float:
+        _, _, up, vp, upp, vpp = self._uv(self._p_of(ds))
+        sp = math.hypot(up, vp)
+        return 0.0 if sp == 0 else (up * vpp - vp * upp) / sp**3
+
+
+# ------------------------------------------------------------------------------------------------ road model
+
+
+@dataclass(frozen=True)
+class RoadLink:
+    """A road's predecessor or successor: ``element_type`` is ``"road"`` or ``"junction"``."""
+
+    element_type: str
+    element_id: str
+    contact_point: str | None  # "start" / "end" for roads, None for junctions
+
+
+@dataclass
+class Lane:
+    """One lane of a lane section."""
+
+    id: int
+    type: str
+    widths: list[Poly3] = field(default_factory=list)  # s0 = sOffset (relative to the section start)
+    borders: list[Poly3] = field(default_factory=list)
+    predecessor: int | None = None
+    successor: int | None = None
+    level: bool = False
+
+    def __post_init__(self) -> None:
+        self.widths.sort(key=lambda p: p.s0)
+        self.borders.sort(key=lambda p: p.s0)
+        self._wstarts = [p.s0 for p in self.widths]
+        self._bstarts = [p.s0 for p in self.borders]
+
+    def width_at(self, ds: float) -> float:
+        """The width at ``ds`` from the section start (0 for the centre lane and lanes without widths)."""
+        p = _poly_at(self.widths, self._wstarts, ds)
+        return 0.0 if p is None else p.value(ds)
+
+    def border_at(self, ds: float) -> float | None:
+        """The ``border`` record value at ``ds`` (only used for lanes without widths)."""
+        p = _poly_at(self.borders, self._bstarts, ds)
+        return None if p is None else p.value(ds)
+
+
+@dataclass
+class LaneSection:
+    """A lane section starting at ``s`` (ending at ``end``). ``left`` ids 1, 2, ...; ``right`` -1, -2, ..."""
+
+    s: float
+    end: float
+    left: list[Lane]
+    right: list[Lane]
+    center: Lane | None
+    single_side: bool = False
+
+    def lane(self, lane_id: int) -> Lane | None:
+        """The lane with ``lane_id`` in this section, or None."""
+        if lane_id == 0:
+            return self.center
+        side = self.left if lane_id > 0 else self.right
+        for lane in side:
+            if lane.id == lane_id:
+                return lane
+        return None
+
+
+@dataclass
+class Road:
+    """One ``<road>``: reference line, elevation, lane offset, lane sections and links."""
+
+    id: str
+    name: str
+    length: float
+    junction: str
+    geometries: list[Geometry]
+    elevations: list[Poly3]
+    lane_offsets: list[Poly3]
+    lane_sections: list[LaneSection]
+    predecessor: RoadLink | None = None
+    successor: RoadLink | None = None
+    superelevations: list[Poly3] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self._gstarts = [g.s for g in self.geometries]
+        self._estarts = [p.s0 for p in self.elevations]
+        self._ostarts = [p.s0 for p in self.lane_offsets]
+        self._rstarts = [p.s0 for p in self.superelevations]
+        # per side: the sections defining that side (a singleSide section only defines the side it has)
+        self._side_sections: dict[int, list[LaneSection]] = {}
+        for side in (1, -1):
+            secs = [
+                sec
+                for sec in self.lane_sections
+                if not sec.single_side or (sec.left if side > 0 else sec.right)
+            ]
+            self._side_sections[side] = secs or list(self.lane_sections)
+        self._side_starts = {k: [sec.s for sec in v] for k, v in self._side_sections.items()}
+
+    # -- reference line
+    def geometry_at(self, s: float) -> Geometry:
+        """The planView record containing ``s``."""
+        i = bisect.bisect_right(self._gstarts, s) - 1
+        return self.geometries[min(max(i, 0), len(self.geometries) - 1)]
+
+    def reference_xyh(self, s: float) -> tuple[float, float, float]:
+        """``(x, y, heading)`` of the reference line at ``s``."""
+        g = self.geometry_at(s)
+        return g.local(max(s - g.s, 0.0))
+
+    def curvature(self, s: float) -> float:
+        """Reference-line curvature at ``s``."""
+        g = self.geometry_at(s)
+        return g.curvature(max(s - g.s, 0.0))
+
+    def elevation(self, s: float) -> float:
+        """``z`` of the reference line at ``s`` (0 without an elevationProfile)."""
+        p = _poly_at(self.elevations, self._estarts, s)
+        return 0.0 if p is None else p.value(s)
+
+    def roll(self, s: float) -> float:
+        """Superelevation (roll about the reference line, rad) at ``s``; 0 without lateralProfile."""
+        p = _poly_at(self.superelevations, self._rstarts, s)
+        return 0.0 if p is None else p.value(s)
+
+    def world_xyz(self, s: float, t: float) -> tuple[float, float, float, float]:
+        """World ``(x, y, z, reference heading)`` of road coordinates ``(s, t)``."""
+        x, y, h = self.reference_xyh(s)
+        z = self.elevation(s)
+        if self.superelevations:
+            r = self.roll(s)
+            th = t * math.cos(r)
+            z += t * math.sin(r)
+        else:
+            th = t
+        return x - th * math.sin(h), y + th * math.cos(h), z, h
+
+    def lane_offset(self, s: float) -> float:
+        """``t`` of the centre lane (laneOffset) at ``s``."""
+        p = _poly_at(self.lane_offsets, self._ostarts, s)
+        return 0.0 if p is None else p.value(s)
+
+    # -- lanes
+    def section_at(self, s: float, side: int = -1) -> LaneSection:
+        """The lane section in effect at ``s`` for the lanes of ``side`` (+1 left, -1 right)."""
+        secs = self._side_sections[1 if side > 0 else -1]
+        i = bisect.bisect_right(self._side_starts[1 if side > 0 else -1], s + 1e-9) - 1
+        return secs[max(i, 0)]
+
+    def side_borders(self, s: float, side: int) -> list[tuple[Lane, float, float]]:
+        """``(lane, t_inner, t_outer)`` for the lanes of ``side`` at ``s``, innermost first."""
+        sec = self.section_at(s, side)
+        ds = s - sec.s
+        off = self.lane_offset(s)
+        out: list[tuple[Lane, float, float]] = []
+        acc = 0.0
+        for lane in sec.left if side > 0 else sec.right:
+            if lane.widths:
+                w = lane.width_at(ds)
+            else:
+                b = lane.border_at(ds)
+                w = 0.0 if b is None else abs(b) - acc
+            inner = off + side * acc
+            acc += w
+            out.append((lane, inner, off + side * acc))
+        return out
+
+    def all_borders(self, s: float) -> list[tuple[Lane, float, float]]:
+        """Borders of every non-centre lane at ``s`` (right side first, then left)."""
+        return self.side_borders(s, -1) + self.side_borders(s, 1)
+
+
+@dataclass(frozen=True)
+class JunctionConnection:
+    """One junction ``<connection>``; ``lane_links`` are ``(from, to)`` lane ids.
+
+    For a direct junction (OpenDRIVE 1.7 ``type="direct"``) ``connecting_road`` is the ``linkedRoad``.
+    """
+
+    id: str
+    incoming_road: str
+    connecting_road: str
+    contact_point: str
+    lane_links: tuple[tuple[int, int], ...]
+
+
+@dataclass
+class Junction:
+    """A ``<junction>`` and its connections (in file order)."""
+
+    id: str
+    name: str
+    connections: list[JunctionConnection]
+
+
+@dataclass(frozen=True)
+class LaneBoundary:
+    """Samples of one lane's inner and outer border within one lane section (for triangulation).
+
+    ``s`` has shape (N,), ``inner``/``outer`` shape (N, 3) of world x, y, z.
+    """
+
+    road_id: str
+    section_index: int
+    lane_id: int
+    lane_type: str
+    s: np.ndarray
+    inner: np.ndarray
+    outer: np.ndarray
+
+
+# ------------------------------------------------------------------------------------------------------ parsing
+
+
+class _Ctx:
+    """Error-message context: file name plus a path of element descriptions."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.parts: list[str] = []
+
+    def error(self, msg: str) -> OpenDriveError:
+        return OpenDriveError(": ".join([self.name, *self.parts, msg]))
+
+    def num(self, el: Element, attr: str, default: float | None = None) -> float:
+        raw = el.get(attr)
+        if raw is None:
+            if default is not None:
+                return default
+            raise self.error(f"<{el.tag}> is missing attribute '{attr}'")
+        try:
+            val = float(raw)
+        except ValueError:
+            raise self.error(f"<{el.tag}> attribute {attr}={raw!r} is not a number") from None
+        if not math.isfinite(val):
+            raise self.error(f"<{el.tag}> attribute {attr}={raw!r} is not finite")
+        return val
+
+    def integer(self, el: Element, attr: str) -> int:
+        raw = el.get(attr)
+        if raw is None:
+            raise self.error(f"<{el.tag}> is missing attribute '{attr}'")
+        try:
+            f = float(raw)
+        except ValueError:
+            raise self.error(f"<{el.tag}> attribute {attr}={raw!r} is not an integer") from None
+        if not f.is_integer():
+            raise self.error(f"<{el.tag}> attribute {attr}={raw!r} is not an integer")
+        return int(f)
+
+    def string(self, el: Element, attr: str) -> str:
+        raw = el.get(attr)
+        if raw is None:
+            raise self.error(f"<{el.tag}> is missing attribute '{attr}'")
+        return raw.strip()
+
+    def poly(self, el: Element, s_attr: str) -> Poly3:
+        return Poly3(
+            self.num(el, s_attr),
+            self.num(el, "a", 0.0),
+            self.num(el, "b", 0.0),
+            self.num(el, "c", 0.0),
+            self.num(el, "d", 0.0),
+        )
+
+
+def _parse_geometry(ctx: _Ctx, el: Element) -> Geometry:
+    s, x, y = ctx.num(el, "s"), ctx.num(el, "x"), ctx.num(el, "y")
+    hdg, length = ctx.num(el, "hdg"), ctx.num(el, "length")
+    if length < 0:
+        raise ctx.error(f"negative length {length}")
+    kids = list(el)
+    if not kids:
+        raise ctx.error("no geometry type (expected line, arc, spiral, poly3 or paramPoly3)")
+    g = kids[0]
+    if g.tag == "line":
+        return Line(s, x, y, hdg, length)
+    if g.tag == "arc":
+        return Arc(s, x, y, hdg, length, ctx.num(g, "curvature"))
+    if g.tag == "spiral":
+        return Spiral(s, x, y, hdg, length, ctx.num(g, "curvStart"), ctx.num(g, "curvEnd"))
+    if g.tag == "poly3":
+        v = (ctx.num(g, "a"), ctx.num(g, "b"), ctx.num(g, "c"), ctx.num(g, "d"))
+        return ParamPoly3(s, x, y, hdg, length, (0.0, 1.0, 0.0, 0.0), v, None)
+    if g.tag == "paramPoly3":
+        u = (ctx.num(g, "aU"), ctx.num(g, "bU"), ctx.num(g, "cU"), ctx.num(g, "dU"))
+        v = (ctx.num(g, "aV"), ctx.num(g, "bV"), ctx.num(g, "cV"), ctx.num(g, "dV"))
+        prange = (g.get("pRange") or "normalized").strip()
+        if prange == "arcLength":
+            p_max = length
+        elif prange == "normalized":
+            p_max = 1.0
+        else:
+            raise ctx.error(f"paramPoly3 has unsupported pRange {prange!r}")
+        return ParamPoly3(s, x, y, hdg, length, u, v, p_max)
+    raise ctx.error(f"unsupported type {g.tag!r}")
+
+
+def _parse_link(ctx: _Ctx, el: Element | None) -> RoadLink | None:
+    if el is None:
+        return None
+    etype = ctx.string(el, "elementType")
+    if etype not in ("road", "junction"):
+        raise ctx.error(f"<{el.tag}> has unsupported elementType {etype!r}")
+    cp = el.get("contactPoint")
+    if etype == "road":
+        if cp not in ("start", "end"):
+            raise ctx.error(
+                f"<{el.tag}> to road {el.get('elementId')!r} needs contactPoint start/end, got {cp!r}"
+            )
+    else:
+        cp = None
+    return RoadLink(etype, ctx.string(el, "elementId"), cp)
+
+
+def _parse_lane(ctx: _Ctx, el: Element) -> Lane:
+    lane_id = ctx.integer(el, "id")
+    ctx.parts.append(f"lane id={lane_id}")
+    widths = []
+    for i, w in enumerate(el.findall("width")):
+        ctx.parts.append(f"width {i}")
+        widths.append(ctx.poly(w, "sOffset"))
+        ctx.parts.pop()
+    borders = []
+    for i, b in enumerate(el.findall("border")):
+        ctx.parts.append(f"border {i}")
+        borders.append(ctx.poly(b, "sOffset"))
+        ctx.parts.pop()
+    pred = succ = None
+    link = el.find("link")
+    if link is not None:
+        p = link.find("predecessor")
+        if p is not None:
+            pred = ctx.integer(p, "id")
+        q = link.find("successor")
+        if q is not None:
+            succ = ctx.integer(q, "id")
+    level = (el.get("level") or "false").strip().lower() in ("true", "1")
+    ctx.parts.pop()
+    return Lane(lane_id, (el.get("type") or "none").strip(), widths, borders, pred, succ, level)
+
+
+def _parse_road(ctx: _Ctx, el: Element) -> Road:
+    rid = ctx.string(el, "id")
+    ctx.parts.append(f"road id={rid}")
+    length = ctx.num(el, "length")
+    if length <= 0:
+        raise ctx.error(f"non-positive length {length}")
+    junction = (el.get("junction") or "-1").strip()
+    plan = el.find("planView")
+    if plan is None:
+        raise ctx.error("no <planView>")
+    geoms = []
+    for i, g in enumerate(plan.findall("geometry")):
+        ctx.parts.append(f"geometry {i}")
+        geoms.append(_parse_geometry(ctx, g))
+        ctx.parts.pop()
+    if not geoms:
+        raise ctx.error("<planView> has no <geometry>")
+    geoms.sort(key=lambda g: g.s)
+    elevs = []
+    ep = el.find("elevationProfile")
+    if ep is not None:
+        for i, e in enumerate(ep.findall("elevation")):
+            ctx.parts.append(f"elevation {i}")
+            elevs.append(ctx.poly(e, "s"))
+            ctx.parts.pop()
+    elevs.sort(key=lambda p: p.s0)
+    supers = []
+    lp = el.find("lateralProfile")
+    if lp is not None:
+        for i, e in enumerate(lp.findall("superelevation")):
+            ctx.parts.append(f"superelevation {i}")
+            supers.append(ctx.poly(e, "s"))
+            ctx.parts.pop()
+    supers.sort(key=lambda p: p.s0)
+    lanes_el = el.find("lanes")
+    if lanes_el is None:
+        raise ctx.error("no <lanes>")
+    offsets = []
+    for i, o in enumerate(lanes_el.findall("laneOffset")):
+        ctx.parts.append(f"laneOffset {i}")
+        offsets.append(ctx.poly(o, "s"))
+        ctx.parts.pop()
+    offsets.sort(key=lambda p: p.s0)
+    sections: list[LaneSection] = []
+    sec_els = lanes_el.findall("laneSection")
+    if not sec_els:
+        raise ctx.error("<lanes> has no <laneSection>")
+    for i, sec in enumerate(sec_els):
+        ctx.parts.append(f"laneSection {i}")
+        s0 = ctx.num(sec, "s")
+        single = (sec.get("singleSide") or "false").strip().lower() in ("true", "1")
+        left: list[Lane] = []
+        right: list[Lane] = []
+        center: Lane | None = None
+        for side_name in ("left", "center", "right"):
+            side_el = sec.find(side_name)
+            if side_el is None:
+                continue
+            for lane_el in side_el.findall("lane"):
+                lane = _parse_lane(ctx, lane_el)
+                if side_name == "left" and lane.id > 0:
+                    left.append(lane)
+                elif side_name == "right" and lane.id < 0:
+                    right.append(lane)
+                elif side_name == "center" and lane.id == 0:
+                    center = lane
+                else:
+                    raise ctx.error(f"lane id={lane.id} does not belong in <{side_name}>")
+        left.sort(key=lambda ln: ln.id)
+        right.sort(key=lambda ln: -ln.id)
+        for side_lanes, sign in ((left, 1), (right, -1)):
+            if [ln.id for ln in side_lanes] != [sign * (k + 1) for k in range(len(side_lanes))]:
+                raise ctx.error(f"lane ids {[ln.id for ln in side_lanes]} are not consecutive from {sign}")
+        sections.append(LaneSection(s0, length, left, right, center, single))
+        ctx.parts.pop()
+    sections.sort(key=lambda sc: sc.s)
+    for a, b in itertools.pairwise(sections):
+        a.end = b.s
+    link = el.find("link")
+    pred = succ = None
+    if link is not None:
+        ctx.parts.append("link")
+        pred = _parse_link(ctx, link.find("predecessor"))
+        succ = _parse_link(ctx, link.find("successor"))
+        ctx.parts.pop()
+    ctx.parts.pop()
+    return Road(
+        rid, el.get("name") or "", length, junction, geoms, elevs, offsets, sections, pred, succ, supers
+    )
+
+
+def _parse_junction(ctx: _Ctx, el: Element) -> Junction:
+    jid = ctx.string(el, "id")
+    ctx.parts.append(f"junction id={jid}")
+    conns = []
+    for i, c in enumerate(el.findall("connection")):
+        ctx.parts.append(f"connection {c.get('id', i)}")
+        links = tuple((ctx.integer(ll, "from"), ctx.integer(ll, "to")) for ll in c.findall("laneLink"))
+        cp = (c.get("contactPoint") or "start").strip()
+        if cp not in ("start", "end"):
+            raise ctx.error(f"unsupported contactPoint {cp!r}")
+        conns.append(
+            JunctionConnection(
+                (c.get("id") or str(i)).strip(),
+                ctx.string(c, "incomingRoad"),
+                ctx.string(c, "connectingRoad" if c.get("connectingRoad") is not None else "linkedRoad"),
+                cp,
+                links,
+            )
+        )
+        ctx.parts.pop()
+    ctx.parts.pop()
+    return Junction(jid, el.get("name") or "", conns)
+
+
+# ------------------------------------------------------------------------------------------------- the network
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class OpenDrive:
+    """A parsed OpenDRIVE road network with geometric queries. Build with :meth:`from_file` / :meth:`from_string`."""
+
+    def __init__(
+        self, roads: dict[str, Road], junctions: dict[str, Junction], name: str = "<string>"
+    ) -> None:
+        self.name = name
+        self.roads = roads
+        self.junctions = junctions
+        self._index: Any = None
+
+    # ---------------------------------------------------------------- construction
+    @classmethod
+    def from_file(cls, path: str | Path) -> OpenDrive:
+        """Parse an ``.xodr`` file (refused if larger than 64 MiB)."""
+        p = Path(path)
+        try:
+            size = p.stat().st_size
+        except OSError as e:
+            raise OpenDriveError(f"{p}: cannot read: {e.strerror or e}") from None
+        if size > MAX_FILE_BYTES:
+            raise OpenDriveError(f"{p}: file is {size} bytes, larger than the {MAX_FILE_BYTES} byte limit")
+        with p.open("rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
+        if len(data) > MAX_FILE_BYTES:
+            raise OpenDriveError(f"{p}: file is larger than the {MAX_FILE_BYTES} byte limit")
+        return cls._from_bytes(data, str(path))
+
+    @classmethod
+    def from_string(cls, text: str, name: str = "<string>") -> OpenDrive:
+        """Parse OpenDRIVE XML text; ``name`` is used in error messages."""
+        data = text.encode("utf-8")
+        if len(data) > MAX_FILE_BYTES:
+            raise OpenDriveError(f"{name}: input is larger than the {MAX_FILE_BYTES} byte limit")
+        return cls._from_bytes(data, name)
+
+    @classmethod
+    def _from_bytes(cls, data: bytes, name: str) -> OpenDrive:
+        try:
+            root = DET.fromstring(data, forbid_dtd=False, forbid_entities=True, forbid_external=True)
+        except DefusedXmlException as e:
+            raise OpenDriveError(f"{name}: unsafe XML rejected: {e}") from None
+        except Exception as e:  # xml.etree.ElementTree.ParseError and friends
+            raise OpenDriveError(f"{name}: not well-formed XML: {e}") from None
+        if root.tag != "OpenDRIVE":
+            raise OpenDriveError(f"{name}: root element is <{root.tag}>, expected <OpenDRIVE>")
+        ctx = _Ctx(name)
+        roads: dict[str, Road] = {}
+        for el in root.findall("road"):
+            road = _parse_road(ctx, el)
+            if road.id in roads:
+                raise OpenDriveError(f"{name}: road id={road.id}: duplicate road id")
+            roads[road.id] = road
+        junctions: dict[str, Junction] = {}
+        for el in root.findall("junction"):
+            j = _parse_junction(ctx, el)
+            junctions[j.id] = j
+        if not roads:
+            raise OpenDriveError(f"{name}: no <road> elements")
+        return cls(roads, junctions, name)
+
+    # ---------------------------------------------------------------- basic queries
+    def road(self, road_id: str) -> Road:
+        """The road with ``road_id``; :class:`OpenDriveError` if there is none."""
+        try:
+            return self.roads[str(road_id)]
+        except KeyError:
+            raise OpenDriveError(f"{self.name}: no road id={road_id}") from None
+
+    def road_length(self, road_id: str) -> float:
+        """Length of the road's reference line."""
+        return self.road(road_id).length
+
+    def _check_s(self, road: Road, s: float) -> float:
+        if -_S_TOL <= s <= road.length + _S_TOL:
+            return min(max(s, 0.0), road.length)
+        raise OpenDriveError(f"{self.name}: road id={road.id}: s={s} outside [0, {road.length}]")
+
+    def reference_pose(self, road_id: str, s: float) -> Pose:
+        """Pose of the reference line at ``s`` (no lane offset)."""
+        road = self.road(road_id)
+        s = self._check_s(road, s)
+        x, y, h = road.reference_xyh(s)
+        return Pose(x, y, road.elevation(s), h)
+
+    def road_to_world(self, road_id: str, s: float, t: float) -> Pose:
+        """World pose of road coordinates ``(s, t)``; the heading is the reference-line heading."""
+        road = self.road(road_id)
+        s = self._check_s(road, s)
+        return Pose(*road.world_xyz(s, t))
+
+    def _lane_borders(self, road: Road, lane_id: int, s: float) -> tuple[Lane, float, float]:
+        if lane_id == 0:
+            off = road.lane_offset(s)
+            sec = road.section_at(s)
+            lane = sec.center or Lane(0, "none")
+            return lane, off, off
+        for lane, inner, outer in road.side_borders(s, 1 if lane_id > 0 else -1):
+            if lane.id == lane_id:
+                return lane, inner, outer
+        raise OpenDriveError(f"{self.name}: road id={road.id}: no lane id={lane_id} at s={s:.3f}")
+
+    def lane_center_t(self, road_id: str, lane_id: int, s: float) -> float:
+        """``t`` of the lane's centre at ``s`` (includes laneOffset; lane 0 gives the laneOffset)."""
+        road = self.road(road_id)
+        _, inner, outer = self._lane_borders(road, lane_id, self._check_s(road, s))
+        return 0.5 * (inner + outer)
+
+    def lane_width(self, road_id: str, lane_id: int, s: float) -> float:
+        """Width of the lane at ``s`` (0 for lane 0)."""
+        road = self.road(road_id)
+        _, inner, outer = self._lane_borders(road, lane_id, self._check_s(road, s))
+        return abs(outer - inner)
+
+    def lane_type(self, road_id: str, lane_id: int, s: float) -> str:
+        """The lane's ``type`` attribute at ``s``."""
+        road = self.road(road_id)
+        lane, _, _ = self._lane_borders(road, lane_id, self._check_s(road, s))
+        return lane.type
+
+    def lane_to_world(self, road_id: str, lane_id: int, s: float, offset: float = 0.0) -> Pose:
+        """World pose ``offset`` m to the left (+t) of the lane centre at ``s``.
+
+        The heading is the direction of the curve of constant ``offset`` from the lane centre in the
+        direction of increasing ``s`` (the reference heading plus the slope of lane widths / laneOffset);
+        add pi for travel toward decreasing ``s``.
+        """
+        road = self.road(road_id)
+        s = self._check_s(road, s)
+        t = self.lane_center_t(road_id, lane_id, s) + offset
+        x, y, z, h = road.world_xyz(s, t)
+        return Pose(x, y, z, h + self._lane_slope_angle(road, lane_id, s, t))
+
+    def lane_heading(self, road_id: str, lane_id: int, s: float) -> float:
+        """Heading (toward increasing ``s``) of the lane centre line at ``s``."""
+        return self.lane_to_world(road_id, lane_id, s).heading
+
+    def _lane_slope_angle(self, road: Road, lane_id: int, s: float, t: float) -> float:
+        """Angle between the lane-centre curve and the reference line at ``s`` (from dt/ds and curvature)."""
+        sec = road.section_at(s, 1 if lane_id > 0 else -1)
+        eps = 1e-3
+        lo = max(sec.s, s - eps, 0.0)
+        hi = min(sec.end, s + eps, road.length)
+        if hi <= lo:
+            return 0.0
+        hi_q = hi - 1e-9 if hi >= sec.end and sec.end < road.length else hi
+        _, i0, o0 = self._lane_borders(road, lane_id, lo)
+        _, i1, o1 = self._lane_borders(road, lane_id, hi_q)
+        c0 = c1 = c = 1.0
+        if road.superelevations:  # horizontal offsets: t is measured in the rolled cross section
+            c0, c1, c = math.cos(road.roll(lo)), math.cos(road.roll(hi_q)), math.cos(road.roll(s))
+        _, ic, oc = self._lane_borders(road, lane_id, s)
+        off = t - 0.5 * (ic + oc)
+        dt = ((0.5 * (i1 + o1) + off) * c1 - (0.5 * (i0 + o0) + off) * c0) / (hi_q - lo)
+        return math.atan2(dt, 1.0 - road.curvature(s) * t * c)
+
+    def lane_ids(self, road_id: str, s: float, driving_only: bool = False) -> list[int]:
+        """Ids of the lanes (not 0) with positive width at ``s``, right to left; optionally drivable ones only."""
+        road = self.road(road_id)
+        s = self._check_s(road, s)
+        out = []
+        for lane, inner, outer in road.all_borders(s):
+            if abs(outer - inner) <= 1e-9:
+                continue
+            if driving_only and lane.type.lower() not in DRIVING_LANE_TYPES:
+                continue
+            out.append(lane.id)
+        return sorted(out)
+
+    # ---------------------------------------------------------------- topology
+    def successor(self, road_id: str, lane_id: int, s_direction: int) -> tuple[str, int, int] | None:
+        """Where an entity goes when it leaves the end of ``road_id``/``lane_id`` travelling in ``s_direction``.
+
+        ``s_direction`` +1 leaves at ``s = length`` via the road's successor, -1 leaves at ``s = 0`` via its
+        predecessor; ``lane_id`` is the lane in the last (first) lane section. Follows the lane's own link
+        for a road link, and for a junction the first connection from this road with a laneLink from
+        ``lane_id``. Returns ``(road_id, lane_id, new_s_direction)`` or None at a dead end.
+        """
+        road = self.road(road_id)
+        if s_direction not in (1, -1):
+            raise ValueError(f"s_direction must be +1 or -1, got {s_direction}")
+        link = road.successor if s_direction > 0 else road.predecessor
+        if link is None:
+            return None
+        if link.element_type == "road":
+            if link.element_id not in self.roads:
+                return None
+            sec = road.lane_sections[-1] if s_direction > 0 else road.lane_sections[0]
+            lane = sec.lane(lane_id)
+            if lane is None:
+                raise OpenDriveError(f"{self.name}: road id={road.id}: no lane id={lane_id} at its end")
+            target = lane.successor if s_direction > 0 else lane.predecessor
+            if target is None:
+                return None
+            return link.element_id, target, 1 if link.contact_point == "start" else -1
+        junction = self.junctions.get(link.element_id)
+        if junction is None:
+            return None
+        for conn in junction.connections:
+            if conn.incoming_road != road.id or conn.connecting_road not in self.roads:
+                continue
+            for frm, to in conn.lane_links:
+                if frm == lane_id:
+                    return conn.connecting_road, to, 1 if conn.contact_point == "start" else -1
+        return None
+
+    # ---------------------------------------------------------------- sampling
+    def sample_lane_boundaries(self, road_id: str, step: float = 1.0) -> list[LaneBoundary]:
+        """Inner/outer border points of every lane (not lane 0) of each lane section, every ``step`` m or less.
+
+        Each section is sampled from its start to its end inclusive; zero-width stretches are kept so the
+        arrays of one lane stay aligned (triangulation can drop degenerate triangles).
+        """
+        if step <= 0:
+            raise ValueError("step must be positive")
+        road = self.road(road_id)
+        out: list[LaneBoundary] = []
+        for si, sec in enumerate(road.lane_sections):
+            n = max(1, math.ceil((sec.end - sec.s) / step))
+            ss = np.linspace(sec.s, sec.end, n + 1)
+            lane_ids = [ln.id for ln in sec.right + sec.left]
+            if not lane_ids:
+                continue
+            inner = {lid: np.zeros((len(ss), 3)) for lid in lane_ids}
+            outer = {lid: np.zeros((len(ss), 3)) for lid in lane_ids}
+            for k, s in enumerate(ss):
+                s = float(s)
+                q = min(s, sec.end - 1e-9) if sec.end > sec.s else s
+                for side in (-1, 1):
+                    if road.section_at(q, side) is not sec:
+                        continue
+                    for lane, ti, to in road.side_borders(q, side):
+                        inner[lane.id][k] = road.world_xyz(s, ti)[:3]
+                        outer[lane.id][k] = road.world_xyz(s, to)[:3]
+            for lane in sec.right + sec.left:
+                out.append(LaneBoundary(road.id, si, lane.id, lane.type, ss, inner[lane.id], outer[lane.id]))
+        return out
+
+    # ---------------------------------------------------------------- world -> road
+    def _build_index(self) -> dict[str, Any]:
+        from scipy.spatial import cKDTree
+
+        xs: list[float] = []
+        ys: list[float] = []
+        rix: list[int] = []
+        ss: list[float] = []
+        reach: list[float] = []
+        road_list = list(self.roads.values())
+        spacing: list[float] = []
+        for ri, road in enumerate(road_list):
+            n = max(2, math.ceil(road.length / 2.0) + 1)
+            sp = road.length / (n - 1)
+            spacing.append(sp)
+            for s in np.linspace(0.0, road.length, n):
+                s = float(s)
+                x, y, _ = road.reference_xyh(s)
+                ext = 0.0
+                for _lane, inner, outer in road.all_borders(s):
+                    ext = max(ext, abs(inner), abs(outer) + 0.5 * abs(outer - inner))
+                xs.append(x)
+                ys.append(y)
+                rix.append(ri)
+                ss.append(s)
+                reach.append(ext + sp + 0.5)
+        pts = np.column_stack([xs, ys])
+        return {
+            "tree": cKDTree(pts),
+            "roads": road_list,
+            "rix": np.asarray(rix),
+            "s": np.asarray(ss),
+            "reach": np.asarray(reach),
+            "max_reach": float(max(reach)),
+            "spacing": spacing,
+        }
+
+    def _project(
+        self, road: Road, px: float, py: float, s0: float, spacing: float
+    ) -> tuple[float, float, float]:
+        """Newton projection of ``(px, py)`` on the reference line from ``s0``: ``(s, t, along_residual)``."""
+        s = s0
+        along = 0.0
+        t = 0.0
+        for _ in range(30):
+            x, y, h = road.reference_xyh(s)
+            c, sn = math.cos(h), math.sin(h)
+            dx, dy = px - x, py - y
+            along = dx * c + dy * sn
+            t = -dx * sn + dy * c
+            if abs(along) < 1e-9:
+                break
+            denom = 1.0 - road.curvature(s) * t
+            step = along / denom if denom > 0.2 else along
+            step = max(-2.0 * spacing - 1.0, min(2.0 * spacing + 1.0, step))
+            s_new = min(max(s + step, 0.0), road.length)
+            if abs(s_new - s) < 1e-10:
+                break
+            s = s_new
+        return s, t, along
+
+    def world_to_road(
+        self, x: float, y: float, z: float | None = None, road_hint: str | None = None
+    ) -> RoadCoordinates | None:
+        """The road and lane containing world point ``(x, y)`` (``z`` disambiguates stacked roads).
+
+        Candidates come from a k-d tree of reference-line samples (every <= 2 m); ``s`` is refined by
+        Newton projection. A point laterally outside the outermost lane by up to half that lane's width is
+        still mapped (to that lane); beyond that, or past the road ends, it is off the road. Among several
+        roads containing the point (junctions), ``road_hint`` wins if it is one of them, then the nearest
+        elevation if ``z`` is given, then the smallest ``|offset|`` relative to the lane width.
+        Returns None when the point is on no road.
+        """
+        if self._index is None:
+            self._index = self._build_index()
+        idx = self._index
+        cand = idx["tree"].query_ball_point([x, y], idx["max_reach"])
+        if not cand:
+            return None
+        cand_arr = np.asarray(cand)
+        d = np.hypot(idx["tree"].data[cand_arr, 0] - x, idx["tree"].data[cand_arr, 1] - y)
+        keep = d <= idx["reach"][cand_arr]
+        cand_arr, d = cand_arr[keep], d[keep]
+        order = np.argsort(d)
+        seeds: dict[int, list[float]] = {}
+        for j in order:
+            ci = int(cand_arr[j])
+            ri = int(idx["rix"][ci])
+            s0 = float(idx["s"][ci])
+            lst = seeds.setdefault(ri, [])
+            if len(lst) < 3 and all(abs(s0 - o) > 3.0 * idx["spacing"][ri] for o in lst):
+                lst.append(s0)
+        best: tuple[tuple[float, ...], RoadCoordinates] | None = None
+        for ri, starts in seeds.items():
+            road: Road = idx["roads"][ri]
+            sp = idx["spacing"][ri]
+            for s0 in starts:
+                s, t, along = self._project(road, x, y, s0, sp)
+                if road.superelevations:
+                    t /= max(math.cos(road.roll(s)), 1e-6)
+                if abs(along) > 0.05:  # beyond the road's ends (or not converged)
+                    continue
+                borders = [b for b in road.all_borders(s) if abs(b[2] - b[1]) > 1e-9]
+                if not borders:
+                    continue
+                lane_hit: tuple[Lane, float, float] | None = None
+                outside = math.inf
+                for b in borders:
+                    lo, hi = min(b[1], b[2]), max(b[1], b[2])
+                    dist = 0.0 if lo <= t <= hi else min(abs(t - lo), abs(t - hi))
+                    if dist < outside or (
+                        dist == outside and lane_hit is not None and abs(b[0].id) < abs(lane_hit[0].id)
+                    ):
+                        outside, lane_hit = dist, b
+                assert lane_hit is not None
+                lane, inner, outer = lane_hit
+                width = abs(outer - inner)
+                if outside > 0.5 * width:
+                    continue
+                offset = t - 0.5 * (inner + outer)
+                dz = abs(z - road.world_xyz(s, t)[2]) if z is not None else 0.0
+                key = (
+                    0.0 if outside == 0.0 else 1.0,
+                    0.0 if dz < 2.0 else 1.0,
+                    0.0 if road.id == road_hint else 1.0,
+                    dz,
+                    outside,
+                    abs(offset) / max(width, 1e-6),
+                )
+                _, _, h = road.reference_xyh(s)
+                rc = RoadCoordinates(road.id, lane.id, s, t, offset, h)
+                if best is None or key < best[0]:
+                    best = (key, rc)
+        return None if best is None else best[1]
+
+
+def load(path: str | Path) -> OpenDrive:
+    """Shorthand for :meth:`OpenDrive.from_file`."""
+    return OpenDrive.from_file(path)
