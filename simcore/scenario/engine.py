@@ -1,0 +1,814 @@
+"""The scenario engine: runs a parsed OpenSCENARIO storyboard against the world, one fixed step at a time.
+
+Per step (time t → t + dt): (1) triggers are evaluated on the state at t and storyboard elements change
+state; (2) running actions set the motion of their actors; (3) scenario-driven entities move along their
+lanes and are placed into SUMO; SUMO steps, moving the entities it drives; (4) the new frame is published.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from simcore.errors import BadInput, SimulationError
+from simcore.evaluation.geometry import box_distance, boxes_overlap
+from simcore.scenario import model as m
+from simcore.scenario.motion import (
+    Body,
+    advance_on_road,
+    lane_at_t,
+    lane_shift,
+    shape_peak_rate_factor,
+    shape_value,
+    update_pose_from_road,
+    wrap_angle,
+)
+from simcore.scenario.storyboard import Node, Registry, State, Transition
+from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
+
+if TYPE_CHECKING:
+    from simcore.world.opendrive import OpenDrive
+    from simcore.world.sumo import SumoWorld
+
+_COMPARE = {
+    "greaterThan": lambda a, b: a > b,
+    "lessThan": lambda a, b: a < b,
+    "equalTo": lambda a, b: abs(a - b) < 1e-9 if isinstance(a, float) else a == b,
+    "greaterOrEqual": lambda a, b: a >= b,
+    "lessOrEqual": lambda a, b: a <= b,
+    "notEqualTo": lambda a, b: a != b,
+}
+
+
+def compare(rule: str, a: Any, b: Any) -> bool:
+    return bool(_COMPARE[rule](a, b))
+
+
+# --- action runtimes --------------------------------------------------------------------------------------
+
+
+class ActionRuntime:
+    domain = "other"
+
+    def __init__(self, engine: ScenarioEngine, actor: Body) -> None:
+        self.engine = engine
+        self.actor = actor
+        self.done = False
+
+    def start(self) -> None: ...
+
+    def step(self, dt: float) -> None: ...
+
+
+class SpeedRuntime(ActionRuntime):
+    domain = "longitudinal"
+
+    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.SpeedAction) -> None:
+        super().__init__(engine, actor)
+        self.action = action
+        self.v0 = 0.0
+        self.elapsed = 0.0
+        self.start_odometer = 0.0
+        self.duration = 0.0
+
+    def target(self) -> float:
+        target = self.action.target
+        if isinstance(target, m.AbsoluteTargetSpeed):
+            return target.value
+        reference = self.engine.body(target.entity).speed
+        return reference + target.value if target.value_type == "delta" else reference * target.value
+
+    def start(self) -> None:
+        self.v0 = self.actor.speed
+        self.start_odometer = self.actor.odometer
+        dyn = self.action.dynamics
+        dv = abs(self.target() - self.v0)
+        if dyn.dimension == "rate":
+            self.duration = dv / dyn.value * shape_peak_rate_factor(dyn.shape) if dyn.value > 0 else 0.0
+        else:
+            self.duration = dyn.value
+        if self.actor.entity.driver == "sumo":
+            # the SUMO driver reaches the desired speed with its own dynamics
+            self.engine.sumo_set_speed(self.actor, self.target())
+            self.done = not self._continuous
+            return
+        if dyn.shape == "step" or self.duration <= 0:
+            self._set(self.target())
+            self.done = not self._continuous
+
+    @property
+    def _continuous(self) -> bool:
+        return isinstance(self.action.target, m.RelativeTargetSpeed) and self.action.target.continuous
+
+    def _set(self, speed: float) -> None:
+        self.actor.speed = speed
+
+    def step(self, dt: float) -> None:
+        if self.actor.entity.driver == "sumo":
+            self.engine.sumo_set_speed(self.actor, self.target())
+            return
+        if self.done or (self.action.dynamics.shape == "step" and self._continuous):
+            self._set(self.target())
+            return
+        self.elapsed += dt
+        dyn = self.action.dynamics
+        if dyn.dimension == "distance":
+            progress = (self.actor.odometer - self.start_odometer + self.actor.speed * dt) / max(dyn.value, 1e-9)
+        else:
+            progress = self.elapsed / max(self.duration, 1e-9)
+        target = self.target()
+        self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress))
+        if progress >= 1.0 - 1e-9:
+            self._set(target)
+            self.done = not self._continuous
+
+
+class LaneChangeRuntime(ActionRuntime):
+    domain = "lateral"
+
+    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.LaneChangeAction) -> None:
+        super().__init__(engine, actor)
+        self.action = action
+        self.elapsed = 0.0
+        self.start_odometer = 0.0
+        self.offset0 = 0.0
+        self.offset1 = 0.0
+
+    def start(self) -> None:
+        actor = self.actor
+        road = self.engine.road
+        if road is None or actor.road_id is None:
+            raise BadInput(f"LaneChangeAction on {actor.name!r}, which is not on a road", file=self.engine.source)
+        target = self.action.target
+        try:
+            if isinstance(target, m.AbsoluteTargetLane):
+                lane = target.lane_id
+                if lane not in road.lane_ids(actor.road_id, actor.s):
+                    raise ValueError(f"lane {lane} does not exist on road {actor.road_id} at s={actor.s:.1f}")
+            else:
+                reference = self.engine.body(target.entity)
+                base = reference.lane_id if reference.road_id == actor.road_id else actor.lane_id
+                lane = lane_shift(road, actor.road_id, actor.s, base, target.value, reference.direction)
+        except ValueError as exc:
+            raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.engine.source) from None
+        t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
+        centre = road.lane_center_t(actor.road_id, lane, actor.s)
+        actor.lane_id = lane
+        actor.offset = t_now - centre
+        self.offset0 = actor.offset
+        self.offset1 = self.action.target_lane_offset * actor.direction
+        self.start_odometer = actor.odometer
+        self.target_lane = lane
+        if actor.entity.driver == "sumo":
+            self.engine.sumo_change_lane(actor, lane, self.action.dynamics.value)
+            self.done = True
+            return
+        if self.action.dynamics.shape == "step" or self.action.dynamics.value <= 0:
+            actor.offset = self.offset1
+            self.done = True
+
+    def step(self, dt: float) -> None:
+        if self.done:
+            return
+        dyn = self.action.dynamics
+        self.elapsed += dt
+        if dyn.dimension == "distance":
+            progress = (self.actor.odometer - self.start_odometer + abs(self.actor.speed) * dt) / dyn.value
+        elif dyn.dimension == "rate":  # lateral rate in m/s: duration from the lateral distance
+            duration = abs(self.offset1 - self.offset0) / dyn.value * shape_peak_rate_factor(dyn.shape)
+            progress = self.elapsed / max(duration, 1e-9)
+        else:
+            progress = self.elapsed / dyn.value
+        new_offset = self.offset0 + (self.offset1 - self.offset0) * shape_value(dyn.shape, progress)
+        self.actor.lateral_velocity = (new_offset - self.actor.offset) / dt
+        self.actor.offset = new_offset
+        if progress >= 1.0 - 1e-9:
+            self.actor.offset = self.offset1
+            self.actor.lateral_velocity = 0.0
+            self.done = True
+
+
+class TeleportRuntime(ActionRuntime):
+    domain = "teleport"
+
+    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.TeleportAction) -> None:
+        super().__init__(engine, actor)
+        self.action = action
+
+    def start(self) -> None:
+        self.engine.place(self.actor, self.action.position)
+        self.done = True
+
+
+def make_runtime(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> ActionRuntime:
+    if isinstance(action, m.SpeedAction):
+        return SpeedRuntime(engine, actor, action)
+    if isinstance(action, m.LaneChangeAction):
+        return LaneChangeRuntime(engine, actor, action)
+    return TeleportRuntime(engine, actor, action)
+
+
+# --- conditions -------------------------------------------------------------------------------------------
+
+
+@dataclass
+class ConditionState:
+    """Edge and delay bookkeeping of one condition instance."""
+
+    condition: m.Condition
+    previous: bool | None = None
+    history: deque[tuple[float, bool]] = field(default_factory=deque)
+
+
+class ScenarioEngine:
+    """Runs one scenario. `step()` advances one fixed step and returns the new frame."""
+
+    def __init__(
+        self,
+        scenario: m.Scenario,
+        *,
+        road: OpenDrive | None,
+        sumo: SumoWorld | None,
+        step_seconds: float,
+        ego: str | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.source = str(scenario.path)
+        self.road = road
+        self.sumo = sumo
+        self.dt = step_seconds
+        self.time = 0.0
+        self.step_index = 0
+        self.log: list[str] = []
+        self.ended_by: str | None = None
+        self.bodies: dict[str, Body] = {e.name: Body(entity=e) for e in scenario.entities}
+        self.ego = ego or _default_ego(scenario)
+        if self.ego not in self.bodies:
+            raise BadInput(f"ego entity {self.ego!r} is not in the scenario", field="spec.simulation.ego")
+        for entity in scenario.entities:
+            if entity.driver == "sumo" and sumo is None:
+                raise BadInput(
+                    f"entity {entity.name!r} is driven by SUMO but the scenario has no road network",
+                    file=self.source,
+                    field="RoadNetwork/LogicFile",
+                )
+        self.conditions: dict[int, ConditionState] = {}
+        self.root = self._build()
+        self.registry = Registry(self.root)
+        self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
+        self._init()
+
+    # --- set-up ---------------------------------------------------------------------------------------
+
+    def _build(self) -> Node:
+        root = Node("storyboard", "storyboard", None)
+        for story in self.scenario.stories:
+            s = Node("story", story.name, story, root)
+            root.children.append(s)
+            for act in story.acts:
+                a = Node("act", act.name, act, s)
+                s.children.append(a)
+                for group in act.groups:
+                    g = Node("maneuverGroup", group.name, group, a, actors=group.actors)
+                    a.children.append(g)
+                    for maneuver in group.maneuvers:
+                        mv = Node("maneuver", maneuver.name, maneuver, g)
+                        g.children.append(mv)
+                        for event in maneuver.events:
+                            e = Node("event", event.name, event, mv)
+                            mv.children.append(e)
+                            for action in event.actions:
+                                e.children.append(Node("action", action.name, action, e))
+        return root
+
+    def _init(self) -> None:
+        # teleports first (other init actions may refer to positions of entities placed here)
+        ordered = sorted(self.scenario.init, key=lambda i: not isinstance(i.action, m.TeleportAction))
+        for item in ordered:
+            body = self.bodies[item.entity]
+            runtime = make_runtime(self, body, item.action)
+            if isinstance(item.action, m.SpeedAction):
+                # initial speed: reached at once (esmini and ScenarioRunner do the same for Init)
+                body.speed = runtime.target() if isinstance(runtime, SpeedRuntime) else body.speed
+            else:
+                runtime.start()
+        for body in self.bodies.values():
+            if not body.placed:
+                raise BadInput(
+                    f"entity {body.name!r} has no initial position (add a TeleportAction to Init)",
+                    file=self.source,
+                    field="Storyboard/Init",
+                )
+        if self.sumo is not None:
+            for body in self.bodies.values():
+                e = body.entity
+                self.sumo.add_vehicle(
+                    body.name,
+                    length=e.box.length,
+                    width=e.box.width,
+                    height=e.box.height,
+                    front_offset=e.box.center_x + e.box.length / 2,
+                    max_speed=e.performance.max_speed,
+                    max_accel=e.performance.max_acceleration,
+                    max_decel=e.performance.max_deceleration,
+                    x=body.x,
+                    y=body.y,
+                    heading=body.heading,
+                    speed=body.speed,
+                    scripted=e.driver != "sumo",
+                )
+        self.root.transition(Transition.START, State.RUNNING, 0, self.log, 0.0)
+        for story in self.root.children:
+            story.transition(Transition.START, State.RUNNING, 0, self.log, 0.0)
+
+    # --- positions ------------------------------------------------------------------------------------
+
+    def body(self, name: str) -> Body:
+        try:
+            return self.bodies[name]
+        except KeyError:
+            raise BadInput(f"entity {name!r} is not declared in <Entities>", file=self.source) from None
+
+    def resolve_position(self, position: m.Position, for_body: Body | None = None) -> tuple[float, float, float, float]:
+        """World (x, y, z, heading) of a position."""
+        road = self.road
+
+        def need_road() -> OpenDrive:
+            if road is None:
+                raise BadInput(f"{type(position).__name__} needs a road network (RoadNetwork/LogicFile)", file=self.source)
+            return road
+
+        def orient(base: float, orientation: m.Orientation | None) -> float:
+            if orientation is None:
+                return base
+            return orientation.h if orientation.type == "absolute" else wrap_angle(base + orientation.h)
+
+        try:
+            if isinstance(position, m.WorldPosition):
+                z = position.z if position.z is not None else 0.0
+                return position.x, position.y, z, position.h if position.h is not None else 0.0
+            if isinstance(position, m.LanePosition):
+                r = need_road()
+                pose = r.lane_to_world(position.road_id, position.lane_id, position.s, position.offset)
+                driving = pose.heading + (math.pi if position.lane_id > 0 else 0.0)
+                base = pose.heading if (position.orientation and position.orientation.type == "relative") else driving
+                return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
+            if isinstance(position, m.RoadPosition):
+                r = need_road()
+                pose = r.road_to_world(position.road_id, position.s, position.t)
+                return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
+            ref = self.body(position.entity)
+            if isinstance(position, m.RelativeWorldPosition):
+                return ref.x + position.dx, ref.y + position.dy, ref.z + position.dz, orient(ref.heading, position.orientation)
+            if isinstance(position, m.RelativeObjectPosition):
+                c, s = math.cos(ref.heading), math.sin(ref.heading)
+                return (
+                    ref.x + c * position.dx - s * position.dy,
+                    ref.y + s * position.dx + c * position.dy,
+                    ref.z + position.dz,
+                    orient(ref.heading, position.orientation),
+                )
+            r = need_road()
+            if ref.road_id is None:
+                raise BadInput(f"{type(position).__name__}: entity {ref.name!r} is not on a road", file=self.source)
+            if isinstance(position, m.RelativeLanePosition):
+                s_new = ref.s + position.ds * ref.direction
+                lane = lane_shift(r, ref.road_id, s_new, ref.lane_id, position.d_lane, ref.direction)
+                pose = r.lane_to_world(ref.road_id, lane, s_new, position.offset * ref.direction)
+                base = pose.heading + (math.pi if ref.direction < 0 else 0.0)
+                return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
+            if isinstance(position, m.RelativeRoadPosition):
+                t_ref = r.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
+                pose = r.road_to_world(ref.road_id, ref.s + position.ds, t_ref + position.dt)
+                return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
+        except (KeyError, ValueError) as exc:
+            raise BadInput(f"{type(position).__name__}: {exc}", file=self.source) from None
+        raise BadInput(f"position {type(position).__name__} is not supported", file=self.source)
+
+    def place(self, body: Body, position: m.Position) -> None:
+        """Teleport: pose from the position; road coordinates from the road network when on a road."""
+        x, y, z, heading = self.resolve_position(position)
+        body.x, body.y, body.z, body.heading = x, y, z, heading
+        body.placed = True
+        body.road_id = None
+        if self.road is not None:
+            hint = getattr(position, "road_id", None)
+            rc = self.road.world_to_road(x, y, None, road_hint=hint)
+            if rc is not None:
+                body.road_id, body.lane_id, body.s = rc.road_id, rc.lane_id, rc.s
+                body.offset = rc.offset
+                body.direction = 1 if math.cos(heading - rc.heading) >= 0 else -1
+                if isinstance(position, m.LanePosition):
+                    body.road_id, body.lane_id, body.s = position.road_id, position.lane_id, position.s
+                    body.offset = position.offset
+        if self.sumo is not None and self.step_index > 0:
+            self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+
+    # --- SUMO hooks -----------------------------------------------------------------------------------
+
+    def sumo_set_speed(self, body: Body, speed: float) -> None:
+        if self.sumo is not None:
+            self.sumo.set_desired_speed(body.name, speed)
+
+    def sumo_change_lane(self, body: Body, lane_id: int, duration: float) -> None:
+        if self.sumo is None or self.road is None or body.road_id is None:
+            return
+        # SUMO lane index 0 is the rightmost driving lane in the travel direction
+        lanes = sorted(self.road.lane_ids(body.road_id, body.s, driving_only=True), reverse=body.direction < 0)
+        if lane_id in lanes:
+            index = lanes.index(lane_id) if body.direction > 0 else lanes.index(lane_id)
+            self.sumo.change_lane(body.name, index, duration)
+
+    # --- conditions -----------------------------------------------------------------------------------
+
+    def _value(self, cond: m.Condition, triggering: list[str]) -> bool:
+        if cond.value_condition is not None:
+            return self._value_condition(cond.value_condition)
+        assert cond.entity_condition is not None
+        results = [self._entity_condition(cond.entity_condition, self.body(name)) for name in cond.triggering_entities]
+        if cond.triggering_rule == "all":
+            ok = bool(results) and all(results)
+            if ok:
+                triggering.extend(cond.triggering_entities)
+            return ok
+        hits = [name for name, r in zip(cond.triggering_entities, results, strict=True) if r]
+        triggering.extend(hits)
+        return bool(hits)
+
+    def _value_condition(self, c: m.ValueCondition) -> bool:
+        if isinstance(c, m.SimulationTimeCondition):
+            return compare(c.rule, self.time, c.value)
+        if isinstance(c, m.StoryboardElementStateCondition):
+            nodes = self.registry.find(c.element_type, c.element_ref)
+            if not nodes:
+                raise BadInput(
+                    f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
+                    file=self.source,
+                )
+            return any(node.is_(c.state, self.step_index) for node in nodes)
+        value = self.scenario.parameters.get(c.name)
+        if value is None:
+            raise BadInput(f"ParameterCondition on undeclared parameter {c.name!r}", file=self.source)
+        if isinstance(value, bool):
+            return compare(c.rule, value, c.value.lower() == "true")
+        if isinstance(value, int | float):
+            return compare(c.rule, float(value), float(c.value))
+        return compare(c.rule, value, c.value)
+
+    def _entity_condition(self, c: m.EntityCondition, body: Body) -> bool:
+        if isinstance(c, m.SpeedCondition):
+            return compare(c.rule, body.speed, c.value)
+        if isinstance(c, m.AccelerationCondition):
+            return compare(c.rule, body.acceleration, c.value)
+        if isinstance(c, m.TraveledDistanceCondition):
+            return body.odometer >= c.value
+        if isinstance(c, m.StandStillCondition):
+            return body.standstill_since is not None and self.time - body.standstill_since >= c.duration - 1e-9
+        if isinstance(c, m.EndOfRoadCondition):
+            return body.end_of_road_since is not None and self.time - body.end_of_road_since >= c.duration - 1e-9
+        if isinstance(c, m.RelativeSpeedCondition):
+            return compare(c.rule, body.speed - self.body(c.entity).speed, c.value)
+        if isinstance(c, m.CollisionCondition):
+            others = [self.body(c.entity)] if c.entity else [b for b in self.bodies.values() if b is not body]
+            mine = self.state_of(body)
+            return any(boxes_overlap(mine.corners(), self.state_of(o).corners()) for o in others)
+        if isinstance(c, m.ReachPositionCondition):
+            x, y, _, _ = self.resolve_position(c.position)
+            return math.hypot(body.x - x, body.y - y) <= c.tolerance
+        if isinstance(c, m.DistanceCondition):
+            x, y, _, _ = self.resolve_position(c.position)
+            if c.freespace:
+                distance = box_distance(self.state_of(body).corners(), [(x, y)] * 1)
+            else:
+                distance = math.hypot(body.x - x, body.y - y)
+            return compare(c.rule, distance, c.value)
+        if isinstance(c, m.RelativeDistanceCondition):
+            other = self.body(c.entity)
+            return compare(c.rule, self.relative_distance(body, other, c.distance_type, c.freespace), c.value)
+        if isinstance(c, m.TimeHeadwayCondition):
+            other = self.body(c.entity)
+            gap = self.relative_distance(body, other, "longitudinal", c.freespace, signed=True)
+            if gap <= 0 or body.speed <= 1e-6:
+                return compare(c.rule, math.inf, c.value)
+            return compare(c.rule, gap / body.speed, c.value)
+        if isinstance(c, m.TimeToCollisionCondition):
+            other = self.body(c.entity)
+            gap = self.relative_distance(body, other, "longitudinal", c.freespace, signed=True)
+            closing = body.speed - other.speed * math.cos(other.heading - body.heading)
+            if gap <= 0 or closing <= 1e-6:
+                return compare(c.rule, math.inf, c.value)
+            return compare(c.rule, gap / closing, c.value)
+        raise BadInput(f"condition {type(c).__name__} is not supported", file=self.source)
+
+    def relative_distance(self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False) -> float:
+        """Distance from a to b in a's frame (longitudinal: along a's heading; lateral: across it)."""
+        sa, sb = self.state_of(a), self.state_of(b)
+        if kind in ("euclidianDistance", "cartesianDistance"):
+            if freespace:
+                return box_distance(sa.corners(), sb.corners())
+            return math.hypot(b.x - a.x, b.y - a.y)
+        ax, ay, _ = sa.box_center()
+        bx, by, _ = sb.box_center()
+        c, s = math.cos(a.heading), math.sin(a.heading)
+        dx, dy = bx - ax, by - ay
+        lon, lat = c * dx + s * dy, -s * dx + c * dy
+        value = lon if kind == "longitudinal" else lat
+        if freespace:
+            rel = b.heading - a.heading
+            if kind == "longitudinal":
+                extent_b = abs(math.cos(rel)) * b.entity.box.length / 2 + abs(math.sin(rel)) * b.entity.box.width / 2
+                extent = a.entity.box.length / 2 + extent_b
+            else:
+                extent_b = abs(math.sin(rel)) * b.entity.box.length / 2 + abs(math.cos(rel)) * b.entity.box.width / 2
+                extent = a.entity.box.width / 2 + extent_b
+            magnitude = max(abs(value) - extent, 0.0)
+            value = math.copysign(magnitude, value)
+        return value if signed else abs(value)
+
+    def _condition(self, cond: m.Condition, triggering: list[str]) -> bool:
+        state = self.conditions.setdefault(id(cond), ConditionState(cond))
+        value = self._value(cond, triggering)
+        previous = state.previous if state.previous is not None else False
+        state.previous = value
+        if cond.edge == "rising":
+            fired = value and not previous
+        elif cond.edge == "falling":
+            fired = previous and not value
+        elif cond.edge == "risingOrFalling":
+            fired = value != previous
+        else:
+            fired = value
+        if cond.delay <= 0:
+            return fired
+        state.history.append((self.time, fired))
+        result = False
+        while state.history and state.history[0][0] <= self.time - cond.delay + 1e-9:
+            result = state.history.popleft()[1] or result
+        return result
+
+    def trigger(self, trigger: m.Trigger | None, triggering: list[str] | None = None) -> bool:
+        """OR over groups, AND within a group. Every condition is evaluated each time (edges need it)."""
+        if trigger is None:
+            return False
+        fired = False
+        for group in trigger.groups:
+            group_entities: list[str] = []
+            results = [self._condition(c, group_entities) for c in group]
+            if all(results):
+                fired = True
+                if triggering is not None:
+                    triggering.extend(group_entities)
+        return fired
+
+    # --- storyboard -----------------------------------------------------------------------------------
+
+    def _set(self, node: Node, transition: Transition, state: State) -> None:
+        node.transition(transition, state, self.step_index, self.log, self.time)
+
+    def _stop(self, node: Node) -> None:
+        for child in node.children:
+            if child.state != State.COMPLETE:
+                self._stop(child)
+        if node.kind == "action":
+            self._release(node)
+        if node.state != State.COMPLETE:
+            self._set(node, Transition.STOP, State.COMPLETE)
+
+    def _release(self, node: Node) -> None:
+        for key, running in list(self.running.items()):
+            if running is node:
+                del self.running[key]
+        node.runtime = None
+
+    def _start_group(self, group: Node) -> None:
+        self._set(group, Transition.START, State.RUNNING)
+        for maneuver in group.children:
+            maneuver.state = State.STANDBY
+            maneuver.executions = 0
+            self._set(maneuver, Transition.START, State.RUNNING)
+            for event in maneuver.children:
+                event.state = State.STANDBY
+                event.executions = 0
+                for action in event.children:
+                    action.state = State.STANDBY
+
+    def _start_event(self, event: Node, actors: tuple[str, ...]) -> None:
+        definition: m.Event = event.definition
+        maneuver = event.parent
+        assert maneuver is not None
+        others = [e for e in maneuver.children if e is not event and e.state == State.RUNNING]
+        if definition.priority == "skip" and others:
+            self._set(event, Transition.SKIP, State.STANDBY)
+            return
+        if definition.priority in ("override", "overwrite"):
+            for other in others:
+                self._stop(other)
+                other.executions += 1
+        self._set(event, Transition.START, State.RUNNING)
+        for action in event.children:
+            self._set(action, Transition.START, State.RUNNING)
+            self._start_action(action, actors)
+
+    def _start_action(self, node: Node, actors: tuple[str, ...]) -> None:
+        action: m.Action = node.definition
+        if action.private is None:
+            self._set(node, Transition.END, State.COMPLETE)
+            return
+        runtimes = []
+        for actor_name in actors:
+            body = self.body(actor_name)
+            runtime = make_runtime(self, body, action.private)
+            key = (actor_name, runtime.domain)
+            previous = self.running.get(key)
+            if previous is not None and previous is not node:
+                # a new action of the same domain on the same actor overrides the running one
+                self._release(previous)
+                self._set(previous, Transition.STOP, State.COMPLETE)
+            self.running[key] = node
+            runtime.start()
+            runtimes.append(runtime)
+        node.runtime = runtimes
+        if all(r.done for r in runtimes):
+            self._release(node)
+            self._set(node, Transition.END, State.COMPLETE)
+
+    def _evaluate_storyboard(self) -> None:
+        if self.trigger(self.scenario.stop_trigger):
+            self._stop(self.root)
+            self.ended_by = "stopTrigger"
+            return
+        for story in self.root.children:
+            for act in story.children:
+                definition: m.Act = act.definition
+                if act.state == State.STANDBY:
+                    if definition.start_trigger is None or self.trigger(definition.start_trigger):
+                        self._set(act, Transition.START, State.RUNNING)
+                        for group in act.children:
+                            self._start_group(group)
+                elif act.state == State.RUNNING and self.trigger(definition.stop_trigger):
+                    self._stop(act)
+                    continue
+                if act.state != State.RUNNING:
+                    continue
+                for group in act.children:
+                    if group.state != State.RUNNING:
+                        continue
+                    for maneuver in group.children:
+                        if maneuver.state != State.RUNNING:
+                            continue
+                        for event in maneuver.children:
+                            if event.state != State.STANDBY:
+                                continue
+                            ev: m.Event = event.definition
+                            triggering: list[str] = []
+                            if ev.start_trigger is None or self.trigger(ev.start_trigger, triggering):
+                                gdef: m.ManeuverGroup = group.definition
+                                actors = gdef.actors
+                                if gdef.select_triggering_entities and triggering:
+                                    actors = tuple(dict.fromkeys(triggering))
+                                self._start_event(event, actors)
+
+    def _complete_elements(self) -> None:
+        for story in self.root.children:
+            for act in story.children:
+                if act.state != State.RUNNING:
+                    continue
+                for group in act.children:
+                    if group.state != State.RUNNING:
+                        continue
+                    for maneuver in group.children:
+                        if maneuver.state != State.RUNNING:
+                            continue
+                        for event in maneuver.children:
+                            if event.state == State.RUNNING and all(a.state == State.COMPLETE for a in event.children):
+                                event.executions += 1
+                                if event.executions < event.definition.maximum_execution_count:
+                                    self._set(event, Transition.END, State.STANDBY)
+                                    for action in event.children:
+                                        action.state = State.STANDBY
+                                else:
+                                    self._set(event, Transition.END, State.COMPLETE)
+                        if all(
+                            e.state == State.COMPLETE or e.executions >= e.definition.maximum_execution_count
+                            for e in maneuver.children
+                        ):
+                            self._set(maneuver, Transition.END, State.COMPLETE)
+                    if all(mv.state == State.COMPLETE for mv in group.children):
+                        group.executions += 1
+                        if group.executions < group.definition.maximum_execution_count:
+                            self._start_group(group)
+                        else:
+                            self._set(group, Transition.END, State.COMPLETE)
+                if all(g.state == State.COMPLETE for g in act.children):
+                    self._set(act, Transition.END, State.COMPLETE)
+            if story.state == State.RUNNING and all(a.state == State.COMPLETE for a in story.children):
+                self._set(story, Transition.END, State.COMPLETE)
+
+    # --- stepping -------------------------------------------------------------------------------------
+
+    def step(self) -> WorldFrame:
+        """Advance one step; returns the frame at the new time."""
+        dt = self.dt
+        self._evaluate_storyboard()
+        previous_speed = {name: b.speed for name, b in self.bodies.items()}
+        previous_heading = {name: b.heading for name, b in self.bodies.items()}
+        for node in {id(n): n for n in self.running.values()}.values():
+            runtimes: list[ActionRuntime] = node.runtime or []
+            for runtime in runtimes:
+                runtime.step(dt)
+            if runtimes and all(r.done for r in runtimes):
+                self._release(node)
+                self._set(node, Transition.END, State.COMPLETE)
+        self._complete_elements()
+        now = self.time + dt
+        for body in self.bodies.values():
+            if body.entity.driver == "sumo" or body.gone:
+                continue
+            distance = body.speed * dt
+            if self.road is not None and body.road_id is not None:
+                advance_on_road(self.road, body, distance, now)
+            else:
+                body.x += distance * math.cos(body.heading)
+                body.y += distance * math.sin(body.heading)
+            body.odometer += abs(distance)
+            if self.sumo is not None:
+                self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+        if self.sumo is not None:
+            self.sumo.step()
+            for body in self.bodies.values():
+                if body.entity.driver != "sumo" or body.gone:
+                    continue
+                state = self.sumo.read(body.name)
+                if state is None:
+                    body.gone = True
+                    body.speed = 0.0
+                    if body.end_of_road_since is None:
+                        body.end_of_road_since = now
+                    continue
+                body.odometer += math.hypot(state.x - body.x, state.y - body.y)
+                body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
+                if self.road is not None:
+                    rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
+                    if rc is not None:
+                        body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
+                        body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
+                        body.z = self.road.road_to_world(rc.road_id, rc.s, rc.t).z
+        for body in self.bodies.values():
+            body.acceleration = (body.speed - previous_speed[body.name]) / dt
+            body.yaw_rate = wrap_angle(body.heading - previous_heading[body.name]) / dt
+            if abs(body.speed) < 1e-3:
+                if body.standstill_since is None:
+                    body.standstill_since = now
+            else:
+                body.standstill_since = None
+        self.time = now
+        self.step_index += 1
+        return self.frame()
+
+    def state_of(self, body: Body) -> EntityState:
+        e = body.entity
+        lane = None
+        if body.road_id is not None and self.road is not None:
+            t = self.road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
+            lane_id, offset = lane_at_t(self.road, body.road_id, body.s, t)
+            lane = LaneCoordinates(road_id=body.road_id, lane_id=lane_id, s=body.s, t=t, offset=offset)
+        return EntityState(
+            name=body.name,
+            object_type=e.object_type,
+            category=e.category,
+            x=body.x,
+            y=body.y,
+            z=body.z,
+            heading=body.heading,
+            pitch=body.pitch,
+            roll=body.roll,
+            speed=body.speed,
+            acceleration=body.acceleration,
+            yaw_rate=body.yaw_rate,
+            bbox=BoundingBox(e.box.center_x, e.box.center_y, e.box.center_z, e.box.length, e.box.width, e.box.height),
+            lane=lane,
+            controlled_by=e.driver,
+        )
+
+    def frame(self) -> WorldFrame:
+        entities = tuple(self.state_of(b) for b in self.bodies.values())
+        return WorldFrame(step=self.step_index, time=self.time, entities=entities, ego=self.ego)
+
+    @property
+    def ended(self) -> bool:
+        return self.ended_by is not None
+
+
+def _default_ego(scenario: m.Scenario) -> str:
+    names = [e.name for e in scenario.entities]
+    for candidate in ("Ego", "ego", "hero", "Hero"):
+        if candidate in names:
+            return candidate
+    if not names:
+        raise BadInput("the scenario declares no entities", file=str(scenario.path), field="Entities")
+    return names[0]
+
+
+__all__ = ["ScenarioEngine", "SimulationError", "compare", "update_pose_from_road"]

@@ -1,0 +1,145 @@
+"""How entities move: road-following kinematics for entities the scenario drives, and the transition shapes
+of OpenSCENARIO's TransitionDynamics."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from simcore.scenario import model as m
+
+if TYPE_CHECKING:
+    from simcore.world.opendrive import OpenDrive
+
+
+def shape_value(shape: str, p: float) -> float:
+    """Fraction of a transition completed at progress p ∈ [0, 1] for a dynamics shape."""
+    p = min(max(p, 0.0), 1.0)
+    if shape == "step":
+        return 1.0
+    if shape == "linear":
+        return p
+    if shape == "cubic":
+        return p * p * (3.0 - 2.0 * p)
+    if shape == "sinusoidal":
+        return 0.5 - 0.5 * math.cos(math.pi * p)
+    raise ValueError(shape)
+
+
+def shape_peak_rate_factor(shape: str) -> float:
+    """Peak slope of a shape relative to the linear one (rate dimension means the peak rate)."""
+    return {"linear": 1.0, "cubic": 1.5, "sinusoidal": math.pi / 2, "step": 1.0}[shape]
+
+
+def wrap_angle(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+@dataclass
+class Body:
+    """The mutable state of one entity during a run."""
+
+    entity: m.Entity
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    heading: float = 0.0
+    pitch: float = 0.0
+    roll: float = 0.0
+    speed: float = 0.0
+    acceleration: float = 0.0
+    yaw_rate: float = 0.0
+    # road following (None when the entity is off every road)
+    road_id: str | None = None
+    lane_id: int = 0
+    s: float = 0.0
+    offset: float = 0.0  # from the centre of lane_id, + to the left of the reference line (+t)
+    direction: int = 1  # +1 travels toward increasing s
+    odometer: float = 0.0
+    standstill_since: float | None = 0.0
+    end_of_road_since: float | None = None
+    lateral_velocity: float = 0.0  # d(offset)/dt during a lane change, in t units
+    placed: bool = False
+    gone: bool = False  # left the SUMO network
+    extra: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.entity.name
+
+
+def lane_shift(road: OpenDrive, road_id: str, s: float, lane_id: int, steps: int, direction: int) -> int:
+    """The lane `steps` lanes to the left (negative: right) of `lane_id`, seen in the travel direction."""
+    lanes = sorted(road.lane_ids(road_id, s))
+    if lane_id not in lanes:
+        raise ValueError(f"lane {lane_id} does not exist on road {road_id} at s={s:.1f}")
+    # +t is left when travelling toward +s
+    along_t = steps if direction > 0 else -steps
+    position = lanes.index(lane_id) + along_t
+    if not 0 <= position < len(lanes):
+        raise ValueError(f"no lane {steps:+d} from lane {lane_id} on road {road_id}")
+    return lanes[position]
+
+
+def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, float]:
+    """The lane containing lateral position t (closest centre) and the offset from its centre."""
+    best_lane, best_offset = 0, t
+    best = math.inf
+    for lane in road.lane_ids(road_id, s):
+        centre = road.lane_center_t(road_id, lane, s)
+        distance = abs(t - centre)
+        half = road.lane_width(road_id, lane, s) / 2
+        if distance <= half + 1e-9:
+            return lane, t - centre
+        if distance < best:
+            best, best_lane, best_offset = distance, lane, t - centre
+    return best_lane, best_offset
+
+
+def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) -> None:
+    """Move a road-following body `distance` metres along its lane, across road links; pose updated."""
+    assert body.road_id is not None
+    remaining = distance
+    for _ in range(16):  # at most this many road changes in one step
+        t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
+        # metres along the lane per unit of s (curvature makes lanes longer or shorter than the reference line)
+        eps = 0.05
+        length = road.road_length(body.road_id)
+        s_probe = min(max(body.s, 0.0), max(length - eps, 0.0))
+        a = road.road_to_world(body.road_id, s_probe, t)
+        b = road.road_to_world(body.road_id, min(s_probe + eps, length), t)
+        scale = math.hypot(b.x - a.x, b.y - a.y) / eps if length > eps else 1.0
+        ds = remaining / max(scale, 1e-6)
+        target = body.s + body.direction * ds
+        if 0.0 <= target <= length:
+            body.s = target
+            body.end_of_road_since = None
+            break
+        # past the end of this road: continue on the successor
+        overshoot = (target - length) if target > length else -target
+        edge_s = length if target > length else 0.0
+        nxt = road.successor(body.road_id, body.lane_id, body.direction)
+        if nxt is None:
+            body.s = edge_s
+            if body.end_of_road_since is None:
+                body.end_of_road_since = now
+            break
+        road_id, lane_id, direction = nxt
+        body.road_id, body.lane_id, body.direction = road_id, lane_id, direction
+        body.s = 0.0 if direction > 0 else road.road_length(road_id)
+        remaining = overshoot * scale
+    update_pose_from_road(road, body)
+
+
+def update_pose_from_road(road: OpenDrive, body: Body) -> None:
+    assert body.road_id is not None
+    t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
+    pose = road.road_to_world(body.road_id, body.s, t)
+    body.x, body.y, body.z = pose.x, pose.y, pose.z
+    road_heading = pose.heading if body.direction > 0 else pose.heading + math.pi
+    drift = 0.0
+    if abs(body.speed) > 0.1:
+        lateral = body.lateral_velocity * body.direction  # + is to the left of the travel direction
+        drift = math.atan2(lateral, abs(body.speed))
+    body.heading = wrap_angle(road_heading + drift)

@@ -1,0 +1,75 @@
+"""Storyboard state machines (OpenSCENARIO 1.x, clause 8.4): standby → running → complete, with the start,
+end, stop and skip transitions that StoryboardElementStateConditions observe.
+
+Pure bookkeeping: no world access. The engine decides when triggers fire and when actions finish.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any
+
+
+class State(Enum):
+    STANDBY = "standbyState"
+    RUNNING = "runningState"
+    COMPLETE = "completeState"
+
+
+class Transition(Enum):
+    START = "startTransition"
+    END = "endTransition"
+    STOP = "stopTransition"
+    SKIP = "skipTransition"
+
+
+@dataclass(eq=False)
+class Node:
+    """One storyboard element at run time."""
+
+    kind: str  # storyboard, story, act, maneuverGroup, maneuver, event, action
+    name: str
+    definition: Any
+    parent: Node | None = None
+    children: list[Node] = field(default_factory=list)
+    state: State = State.STANDBY
+    executions: int = 0  # completed executions (events and maneuver groups)
+    last_transition: Transition | None = None
+    transition_step: int = -10
+    runtime: Any = None  # action runtime while running
+    actors: tuple[str, ...] = ()
+
+    def transition(self, transition: Transition, state: State, step: int, log: list[str], time: float) -> None:
+        self.state = state
+        self.last_transition = transition
+        self.transition_step = step
+        log.append(f"{time:8.3f} {self.kind} {self.name}: {transition.value} → {state.value}")
+
+    def is_(self, state_name: str, step: int) -> bool:
+        """Does the element match `state_name` (a state, or a transition seen this step or the previous one)?"""
+        if state_name.endswith("State"):
+            return self.state.value == state_name
+        return (
+            self.last_transition is not None
+            and self.last_transition.value == state_name
+            and self.transition_step >= step - 1
+        )
+
+    def walk(self) -> list[Node]:
+        nodes = [self]
+        for child in self.children:
+            nodes.extend(child.walk())
+        return nodes
+
+
+class Registry:
+    """Storyboard elements by type and name, for StoryboardElementStateConditions."""
+
+    def __init__(self, root: Node) -> None:
+        self.by_key: dict[tuple[str, str], list[Node]] = {}
+        for node in root.walk():
+            self.by_key.setdefault((node.kind, node.name), []).append(node)
+
+    def find(self, kind: str, name: str) -> list[Node]:
+        return self.by_key.get((kind, name), [])

@@ -1,0 +1,290 @@
+"""SUMO as the traffic world: road networks converted with netconvert, vehicles simulated with libsumo.
+
+Every scenario entity is a SUMO vehicle, so SUMO's drivers see it (leaders, gaps, collisions). Entities the
+scenario moves are placed each step with `moveToXY`; entities assigned the SUMO driver
+(controller property `carlos.driver: sumo`) are moved by SUMO's car-following model and read back.
+
+libsumo holds one simulation per process (a worker runs its runs one after another); `import libsumo`
+happens only here, when a run starts, never at operator import time.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from simcore.errors import BadInput, SimulationError
+
+NETCONVERT_OPTIONS = (
+    "--output.original-names",  # keep OpenDRIVE road/lane ids on the SUMO edges and lanes
+    "--no-turnarounds",
+    "--offset.disable-normalization",  # SUMO x/y == OpenDRIVE x/y
+    "--opendrive.import-all-lanes",
+    "false",
+)
+NETCONVERT_TIMEOUT_S = 300
+
+
+def sumo_home() -> Path:
+    import sumo  # the eclipse-sumo wheel: binaries and data
+
+    return Path(sumo.SUMO_HOME)
+
+
+def default_cache_dir() -> Path:
+    base = os.environ.get("CARLOS_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "carlos"
+    )
+    return Path(base) / "networks"
+
+
+def sumo_version() -> str:
+    from importlib.metadata import version
+
+    return version("eclipse-sumo")
+
+
+def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
+    """The SUMO network for an OpenDRIVE file (converted once, cached by content hash) or a `.net.xml`."""
+    if not road_file.is_file():
+        raise BadInput("road network file not found", file=str(road_file))
+    if road_file.name.endswith(".net.xml"):
+        return road_file
+    if road_file.suffix != ".xodr":
+        raise BadInput("road network must be OpenDRIVE (.xodr) or SUMO (.net.xml)", file=str(road_file))
+    digest = hashlib.sha256()
+    digest.update(road_file.read_bytes())
+    digest.update(" ".join(NETCONVERT_OPTIONS).encode())
+    digest.update(sumo_version().encode())
+    cache_dir = cache_dir or default_cache_dir()
+    target = cache_dir / f"{road_file.stem}-{digest.hexdigest()[:16]}.net.xml"
+    if target.is_file():
+        return target
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    netconvert = sumo_home() / "bin" / "netconvert"
+    with tempfile.TemporaryDirectory(dir=cache_dir) as scratch:
+        out = Path(scratch) / "net.xml"
+        env = {**os.environ, "SUMO_HOME": str(sumo_home())}
+        try:
+            result = subprocess.run(
+                [str(netconvert), "--opendrive-files", str(road_file), *NETCONVERT_OPTIONS, "-o", str(out)],
+                capture_output=True,
+                text=True,
+                timeout=NETCONVERT_TIMEOUT_S,
+                env=env,
+                check=False,
+            )
+        except subprocess.TimeoutExpired:
+            raise BadInput(f"netconvert took longer than {NETCONVERT_TIMEOUT_S} s", file=str(road_file)) from None
+        if result.returncode != 0 or not out.is_file():
+            errors = [line for line in result.stderr.splitlines() if line.startswith("Error")]
+            detail = "; ".join(errors[-3:]) or result.stderr.strip()[-300:]
+            raise BadInput(f"netconvert could not convert the road network: {detail}", file=str(road_file))
+        os.replace(out, target)  # atomic: parallel workers may race, both write the same content
+    return target
+
+
+@dataclass(frozen=True, slots=True)
+class SumoVehicleState:
+    x: float  # reference point (rear axle), map frame
+    y: float
+    heading: float
+    speed: float
+    acceleration: float
+    edge: str
+    lane_index: int
+
+
+def _sumo_angle(heading: float) -> float:
+    """ENU heading (rad, CCW from +x) → SUMO angle (deg, clockwise from north)."""
+    return (90.0 - math.degrees(heading)) % 360.0
+
+
+def _heading(angle: float) -> float:
+    return math.radians(90.0 - angle)
+
+
+class SumoWorld:
+    """One libsumo simulation. Time advances only through `step()`."""
+
+    def __init__(self, network: Path, step_seconds: float, seed: int) -> None:
+        import libsumo  # heavy import: only where a run really starts
+
+        self._sumo: Any = libsumo
+        self.step_seconds = step_seconds
+        self._front: dict[str, float] = {}  # reference point → front bumper distance
+        self._scripted: set[str] = set()
+        self._departed: set[str] = set()
+        args = [
+            "sumo",
+            "-n",
+            str(network),
+            "--step-length",
+            repr(step_seconds),
+            "--seed",
+            str(seed),
+            "--begin",
+            "0",
+            "--no-step-log",
+            "true",
+            "--no-warnings",
+            "true",
+            "--collision.action",
+            "none",  # CARLOS measures collisions itself; SUMO must not teleport or remove vehicles
+            "--time-to-teleport",
+            "-1",
+            "--default.action-step-length",
+            repr(step_seconds),
+        ]
+        try:
+            self._sumo.start(args)
+        except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError
+            raise SimulationError(f"SUMO did not start: {exc}") from exc
+
+    def close(self) -> None:
+        try:
+            self._sumo.close()
+        except Exception:  # already closed or never started: nothing to release
+            pass
+
+    def __enter__(self) -> SumoWorld:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- vehicles --------------------------------------------------------------------------------------
+
+    def add_vehicle(
+        self,
+        name: str,
+        *,
+        length: float,
+        width: float,
+        height: float,
+        front_offset: float,
+        max_speed: float,
+        max_accel: float,
+        max_decel: float,
+        x: float,
+        y: float,
+        heading: float,
+        speed: float,
+        scripted: bool,
+        vclass: str = "passenger",
+    ) -> None:
+        """Insert a vehicle whose reference point is at (x, y). `front_offset`: reference point → front."""
+        sumo = self._sumo
+        vtype = f"carlos.{name}"
+        sumo.vehicletype.copy("DEFAULT_VEHTYPE", vtype)
+        sumo.vehicletype.setLength(vtype, max(length, 0.1))
+        sumo.vehicletype.setWidth(vtype, max(width, 0.1))
+        sumo.vehicletype.setHeight(vtype, max(height, 0.1))
+        sumo.vehicletype.setMaxSpeed(vtype, max(max_speed, 0.1))
+        sumo.vehicletype.setAccel(vtype, max(max_accel, 0.1))
+        sumo.vehicletype.setDecel(vtype, max(max_decel, 0.1))
+        sumo.vehicletype.setEmergencyDecel(vtype, max(max_decel, 0.1))
+        sumo.vehicletype.setImperfection(vtype, 0.0)  # deterministic driver; noise comes from the scenario
+        sumo.vehicletype.setMinGap(vtype, 2.0)
+        self._front[name] = front_offset
+        fx, fy = x + front_offset * math.cos(heading), y + front_offset * math.sin(heading)
+        edge, pos, lane_index = sumo.simulation.convertRoad(fx, fy, False, vclass)
+        route_id = f"carlos.route.{name}"
+        sumo.route.add(route_id, self._route_from(edge))
+        sumo.vehicle.add(
+            name,
+            route_id,
+            vtype,
+            depart="now",
+            departLane=str(lane_index),
+            departPos=repr(max(pos, 0.0)),
+            departSpeed=repr(max(speed, 0.0)),
+        )
+        sumo.vehicle.setLaneChangeMode(name, 0)  # lane changes come from the scenario only
+        if scripted:
+            self._scripted.add(name)
+            sumo.vehicle.setSpeedMode(name, 0)  # the scenario's speed is taken as it is
+        else:
+            sumo.vehicle.setMaxSpeed(name, max(speed, 0.1))
+        self.place(name, x, y, heading, speed)
+
+    def _route_from(self, edge: str) -> list[str]:
+        """The start edge and its straight-on successors, as far as the network goes (no cycles)."""
+        sumo = self._sumo
+        route = [edge]
+        seen = {edge}
+        current = edge
+        for _ in range(500):
+            nxt = None
+            for lane_index in range(sumo.edge.getLaneNumber(current)):
+                for link in sumo.lane.getLinks(f"{current}_{lane_index}"):
+                    candidate = sumo.lane.getEdgeID(link[0])
+                    if candidate not in seen and not candidate.startswith(":"):
+                        nxt = candidate
+                        break
+                if nxt:
+                    break
+            if nxt is None:
+                break
+            route.append(nxt)
+            seen.add(nxt)
+            current = nxt
+        return route
+
+    def place(self, name: str, x: float, y: float, heading: float, speed: float) -> None:
+        """Put a scripted vehicle's reference point at (x, y) with heading and speed, for the next step."""
+        front = self._front[name]
+        fx, fy = x + front * math.cos(heading), y + front * math.sin(heading)
+        try:
+            self._sumo.vehicle.moveToXY(name, "", -1, fx, fy, _sumo_angle(heading), keepRoute=2, matchThreshold=50)
+            if name in self._scripted:
+                self._sumo.vehicle.setSpeed(name, max(speed, 0.0))
+        except Exception as exc:
+            raise SimulationError(f"SUMO could not place {name!r} at ({x:.2f}, {y:.2f}): {exc}") from exc
+
+    def set_desired_speed(self, name: str, speed: float) -> None:
+        self._sumo.vehicle.setMaxSpeed(name, max(speed, 0.01))
+
+    def change_lane(self, name: str, lane_index: int, duration: float) -> None:
+        self._sumo.vehicle.changeLane(name, lane_index, max(duration, self.step_seconds))
+
+    def lane_index_of(self, name: str) -> int:
+        return int(self._sumo.vehicle.getLaneIndex(name))
+
+    def step(self) -> None:
+        try:
+            self._sumo.simulationStep()
+        except Exception as exc:
+            raise SimulationError(f"SUMO step failed: {exc}") from exc
+
+    def read(self, name: str) -> SumoVehicleState | None:
+        """A vehicle's state after the last step; None once it left the network."""
+        sumo = self._sumo
+        if name not in sumo.vehicle.getIDList():
+            return None
+        fx, fy = sumo.vehicle.getPosition(name)
+        heading = _heading(sumo.vehicle.getAngle(name))
+        front = self._front[name]
+        return SumoVehicleState(
+            x=fx - front * math.cos(heading),
+            y=fy - front * math.sin(heading),
+            heading=heading,
+            speed=sumo.vehicle.getSpeed(name),
+            acceleration=sumo.vehicle.getAcceleration(name),
+            edge=sumo.vehicle.getRoadID(name),
+            lane_index=sumo.vehicle.getLaneIndex(name),
+        )
+
+
+def netconvert_available() -> bool:
+    try:
+        return (sumo_home() / "bin" / "netconvert").is_file() or shutil.which("netconvert") is not None
+    except ImportError:
+        return False
