@@ -1,0 +1,106 @@
+"""Criteria against a run's metrics, and the run's verdict.
+
+- A criterion on a metric that is absent from the metrics fails, with a message saying why the metric is
+  absent (see `simcore.evaluation.metrics.METRICS`) or that the name is unknown.
+- `==` and `!=` compare with a tolerance of `EQUALITY_TOLERANCE` (absolute and relative), so that
+  `simSeconds == 10` holds after 200 steps of 0.05 s; the ordering operators compare exactly.
+- A NaN metric fails every criterion.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+from simcore.evaluation.metrics import KNOWN_METRICS, METRICS
+from simcore.spec import CriterionModel
+
+Status = Literal["passed", "failed", "error"]
+
+#: Absolute and relative tolerance of `==` and `!=`.
+EQUALITY_TOLERANCE = 1e-9
+
+
+def _equal(a: float, b: float) -> bool:
+    return math.isclose(a, b, rel_tol=EQUALITY_TOLERANCE, abs_tol=EQUALITY_TOLERANCE)
+
+
+_OPERATORS: dict[str, Callable[[float, float], bool]] = {
+    ">=": operator.ge,
+    ">": operator.gt,
+    "<=": operator.le,
+    "<": operator.lt,
+    "==": _equal,
+    "!=": lambda a, b: not _equal(a, b),
+}
+
+
+def format_number(value: float) -> str:
+    """Shortest faithful text of a number: `2` for 2.0, `0.1` for 0.1, `1e+20` for 1e20."""
+    if math.isfinite(value) and value.is_integer() and abs(value) < 1e15:
+        return str(int(value))
+    return repr(float(value))
+
+
+@dataclass(frozen=True, slots=True)
+class CriterionResult:
+    """One criterion's outcome. `expected` is the operator and threshold (`>= 2`); `actual` is the
+    metric's value, None when the metric was absent."""
+
+    name: str
+    metric: str
+    expected: str
+    actual: float | None
+    passed: bool
+    optional: bool
+    message: str
+
+
+def _evaluate_one(criterion: CriterionModel, metrics: Mapping[str, float]) -> CriterionResult:
+    expected = f"{criterion.operator} {format_number(criterion.value)}"
+    metric = criterion.metric
+    actual = metrics.get(metric)
+    if actual is None:
+        if metric in KNOWN_METRICS:
+            message = f"metric {metric!r} was not measured in this run ({METRICS[metric]}), so {expected} cannot hold"
+        else:
+            message = (
+                f"unknown metric {metric!r}: it is not among this run's metrics "
+                f"({', '.join(sorted(metrics)) or 'none'}) nor the known ones ({', '.join(sorted(KNOWN_METRICS))})"
+            )
+        passed = False
+    else:
+        actual = float(actual)
+        if math.isnan(actual):
+            passed = False
+            message = f"{metric} is NaN, expected {expected}"
+        else:
+            passed = _OPERATORS[criterion.operator](actual, criterion.value)
+            verb = "holds" if passed else "does not hold"
+            message = f"{metric} = {format_number(actual)}: {expected} {verb}"
+    return CriterionResult(
+        name=criterion.label,
+        metric=metric,
+        expected=expected,
+        actual=actual,
+        passed=passed,
+        optional=criterion.optional,
+        message=message,
+    )
+
+
+def evaluate(criteria: Iterable[CriterionModel], metrics: Mapping[str, float]) -> list[CriterionResult]:
+    """Every criterion against the metrics, in the criteria's order."""
+    return [_evaluate_one(criterion, metrics) for criterion in criteria]
+
+
+def verdict(results: Sequence[CriterionResult], error: str | None) -> Status:
+    """`error` when `error` is set; else `failed` when a non-optional criterion failed; else `passed`."""
+    if error is not None:
+        return "error"
+    if any(not r.passed and not r.optional for r in results):
+        return "failed"
+    return "passed"

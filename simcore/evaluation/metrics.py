@@ -1,0 +1,350 @@
+"""Run metrics measured from the ego, one `WorldFrame` at a time, in constant memory.
+
+`MetricsAccumulator.update(frame)` is called every simulation step; `result()` gives the numbers the
+criteria are evaluated on (name → float) and `details()` the non-numeric facts (who was hit, …).
+
+Geometry is 2D, on the ground plane (x east, y north). An entity's footprint is its bounding box
+(`EntityState.corners()`), an oriented rectangle. Two footprints collide when they overlap or touch
+(separating-axis test, within `TOUCH_TOLERANCE`); distances are free-space distances between footprints.
+
+Metrics (see `METRICS`; "absent" means the key is not in `result()`):
+
+- `collision` 1.0 when the ego's box overlapped any other entity's box at some frame, else 0.0.
+- `collisionTime` simulated time of the first frame with a collision; absent without a collision.
+- `minDistance` minimum free-space distance between the ego's box and any other entity's box
+  (0 when they overlap); absent when the ego never had another entity to measure against.
+- `minTimeHeadway` minimum over frames and over entities ahead of the ego in its lane of
+  gap / ego speed, sampled only while the ego's (signed) speed is above `HEADWAY_MIN_SPEED`.
+  "In its lane": when both the ego and the entity carry `LaneCoordinates`, the same `road_id` and
+  `lane_id`; otherwise the entity's box centre within ±`lane_width`/2 laterally of the ego's box centre,
+  in the ego's frame. "Ahead": the entity's box centre is in front of the ego's box centre along the ego's
+  heading. The gap is the free-space longitudinal gap along the ego's heading (ego's front to the entity's
+  nearest extent), clamped at 0 when the boxes overlap longitudinally; it is a straight-line measure,
+  exact on straight roads. Absent when never defined (nobody ahead in lane while the ego moved).
+- `minTimeToCollision` minimum of gap / closing speed over the same entities, sampled only while the
+  closing speed (ego speed minus the entity's speed along the ego's heading) is above
+  `TTC_MIN_CLOSING_SPEED`. Absent when the ego never closed in on anybody ahead in its lane.
+- `minLateralDistance` minimum lateral free-space gap (across the ego's heading) to entities whose boxes
+  overlap the ego's box longitudinally (side by side); 0 when the boxes overlap. Absent when never
+  side by side.
+- `maxDeceleration` largest deceleration of the ego, a positive number (max of −acceleration; 0 when it
+  never decelerated). `maxAcceleration` likewise for acceleration.
+- `maxSpeed` largest |speed| of the ego; `meanSpeed` time average of |speed| (trapezoidal over frame
+  times; the single speed when there is one frame); `egoDistance` path length of the ego's reference point.
+- `simSeconds` time of the last frame.
+
+The ego is `frame.ego` when set (it must be in the frame), else the first entity. A frame without entities
+only advances `simSeconds`. `stopTriggered` is not measured here: the runner knows how the run ended and
+adds it (1.0/0.0) to the metrics before the criteria are evaluated.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from simcore.world.state import EntityState, WorldFrame
+
+Point = tuple[float, float]
+
+#: Boxes closer than this (m) count as touching, hence colliding (absorbs rounding of rotated corners).
+TOUCH_TOLERANCE = 1e-9
+#: Lane width (m) assumed for the "same lane" test of entities without lane coordinates.
+LANE_WIDTH = 3.5
+#: Time headway is only sampled while the ego is faster than this (m/s).
+HEADWAY_MIN_SPEED = 0.1
+#: Time to collision is only sampled while the closing speed is above this (m/s).
+TTC_MIN_CLOSING_SPEED = 0.01
+
+#: Every metric name this module (or the runner, for `stopTriggered`) can produce, with what it means
+#: when it is absent from `result()`.
+METRICS: dict[str, str] = {
+    "collision": "no frame with an ego was recorded",
+    "collisionTime": "the ego never collided",
+    "minDistance": "there was never another entity besides the ego",
+    "minTimeHeadway": (
+        f"there was never an entity ahead of the ego in its lane while the ego moved faster than "
+        f"{HEADWAY_MIN_SPEED} m/s"
+    ),
+    "minTimeToCollision": (
+        f"the ego never closed in (faster than {TTC_MIN_CLOSING_SPEED} m/s) on an entity ahead in its lane"
+    ),
+    "minLateralDistance": "no entity was ever side by side with the ego",
+    "maxDeceleration": "no frame with an ego was recorded",
+    "maxAcceleration": "no frame with an ego was recorded",
+    "maxSpeed": "no frame with an ego was recorded",
+    "meanSpeed": "no frame with an ego was recorded",
+    "egoDistance": "no frame with an ego was recorded",
+    "simSeconds": "no frame was recorded",
+    "stopTriggered": "the runner did not report how the run ended",
+}
+KNOWN_METRICS = frozenset(METRICS)
+
+
+class Box(NamedTuple):
+    """A ground-plane footprint: four corners (counter-clockwise) and the two unit axes of the box
+    (forward, left). The axes come from the heading, so they stay valid for degenerate (zero length or
+    width) boxes, and they are the separating-axis candidates of the box."""
+
+    corners: tuple[Point, Point, Point, Point]
+    axes: tuple[Point, Point]
+
+    @classmethod
+    def of(cls, entity: EntityState) -> Box:
+        c0, c1, c2, c3 = entity.corners()
+        c, s = math.cos(entity.heading), math.sin(entity.heading)
+        return cls((c0, c1, c2, c3), ((c, s), (-s, c)))
+
+
+def separation(a: Box, b: Box) -> float:
+    """Largest gap between the projections of `a` and `b` on the four candidate separating axes.
+
+    Positive: the boxes are disjoint and at least that far apart (a lower bound of `box_distance`).
+    Zero or negative: no candidate axis separates them: they touch or overlap (separating-axis theorem)."""
+    best = -math.inf
+    for ax, ay in (*a.axes, *b.axes):
+        pa = [x * ax + y * ay for x, y in a.corners]
+        pb = [x * ax + y * ay for x, y in b.corners]
+        gap = max(min(pb) - max(pa), min(pa) - max(pb))
+        if gap > best:
+            best = gap
+    return best
+
+
+def boxes_overlap(a: Box, b: Box) -> bool:
+    """Whether the boxes overlap or touch (within `TOUCH_TOLERANCE`): the separating-axis test."""
+    return separation(a, b) <= TOUCH_TOLERANCE
+
+
+def _point_segment_distance(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
+    dx, dy = bx - ax, by - ay
+    length2 = dx * dx + dy * dy
+    t = 0.0 if length2 == 0.0 else max(0.0, min(1.0, ((px - ax) * dx + (py - ay) * dy) / length2))
+    return math.hypot(px - ax - t * dx, py - ay - t * dy)
+
+
+def _disjoint_distance(a: Box, b: Box) -> float:
+    """Distance between two disjoint convex polygons: the nearest pair is a vertex of one and an edge
+    of the other."""
+    best = math.inf
+    for p, q in ((a.corners, b.corners), (b.corners, a.corners)):
+        for px, py in p:
+            for i in range(4):
+                (x0, y0), (x1, y1) = q[i - 1], q[i]
+                d = _point_segment_distance(px, py, x0, y0, x1, y1)
+                if d < best:
+                    best = d
+    return best
+
+
+def box_distance(a: Box, b: Box) -> float:
+    """Free-space distance between two boxes: 0 when they overlap or touch (`boxes_overlap`), else the
+    Euclidean distance between their nearest points (> `TOUCH_TOLERANCE`)."""
+    if boxes_overlap(a, b):
+        return 0.0
+    return _disjoint_distance(a, b)
+
+
+class MetricsAccumulator:
+    """Accumulates the run metrics frame by frame in constant memory (see the module docstring)."""
+
+    __slots__ = (
+        "_collision",
+        "_collision_entities",
+        "_collision_time",
+        "_collision_with",
+        "_distance",
+        "_first_time",
+        "_has_ego",
+        "_lane_width",
+        "_max_acc",
+        "_max_dec",
+        "_max_speed",
+        "_min_distance",
+        "_min_distance_with",
+        "_min_lateral",
+        "_min_thw",
+        "_min_thw_with",
+        "_min_ttc",
+        "_min_ttc_with",
+        "_prev",
+        "_sim_seconds",
+        "_speed_integral",
+    )
+
+    def __init__(self, lane_width: float = LANE_WIDTH) -> None:
+        if not lane_width > 0:
+            raise ValueError(f"lane_width must be positive, not {lane_width!r}")
+        self._lane_width = lane_width
+        self._sim_seconds: float | None = None
+        self._has_ego = False
+        self._first_time = 0.0
+        self._prev: tuple[float, float, float, float] | None = None  # time, x, y, |speed| of the ego
+        self._distance = 0.0
+        self._speed_integral = 0.0
+        self._max_speed = 0.0
+        self._max_acc = 0.0
+        self._max_dec = 0.0
+        self._collision = False
+        self._collision_time: float | None = None
+        self._collision_with: str | None = None
+        self._collision_entities: dict[str, None] = {}  # insertion-ordered set, bounded by the entities
+        self._min_distance = math.inf
+        self._min_distance_with: str | None = None
+        self._min_thw = math.inf
+        self._min_thw_with: str | None = None
+        self._min_ttc = math.inf
+        self._min_ttc_with: str | None = None
+        self._min_lateral = math.inf
+
+    @staticmethod
+    def _ego(frame: WorldFrame) -> EntityState:
+        if frame.ego is None:
+            return frame.entities[0]
+        for entity in frame.entities:
+            if entity.name == frame.ego:
+                return entity
+        raise ValueError(
+            f"the ego {frame.ego!r} is not among the entities of the frame at t={frame.time:g} s "
+            f"(step {frame.step}): {', '.join(e.name for e in frame.entities)}"
+        )
+
+    def update(self, frame: WorldFrame) -> None:
+        """Takes the next frame (frames in time order)."""
+        t = frame.time
+        self._sim_seconds = t
+        if not frame.entities:
+            return
+        ego = self._ego(frame)
+
+        # Ego kinematics.
+        speed = abs(ego.speed)
+        if self._prev is None:
+            self._first_time = t
+        else:
+            t0, x0, y0, v0 = self._prev
+            self._distance += math.hypot(ego.x - x0, ego.y - y0)
+            self._speed_integral += 0.5 * (v0 + speed) * (t - t0)
+        self._prev = (t, ego.x, ego.y, speed)
+        self._has_ego = True
+        if speed > self._max_speed:
+            self._max_speed = speed
+        acc = ego.acceleration
+        if acc > self._max_acc:
+            self._max_acc = acc
+        if -acc > self._max_dec:
+            self._max_dec = -acc
+
+        # Ego geometry, in its own frame: f forward, l left, around the box centre.
+        h = ego.heading
+        fx, fy = math.cos(h), math.sin(h)
+        ex, ey, _ = ego.box_center()
+        e_hl, e_hw = ego.bbox.length / 2, ego.bbox.width / 2
+        e_radius = math.hypot(e_hl, e_hw)
+        e_speed = ego.speed
+        e_lane = ego.lane
+        half_lane = self._lane_width / 2
+        ego_box: Box | None = None
+
+        for other in frame.entities:
+            if other is ego:
+                continue
+            ox, oy, _ = other.box_center()
+            dx, dy = ox - ex, oy - ey
+            o_hl, o_hw = other.bbox.length / 2, other.bbox.width / 2
+
+            # Collision and distance; the bounding circles give a cheap lower bound of the distance.
+            lower = math.hypot(dx, dy) - e_radius - math.hypot(o_hl, o_hw)
+            if lower <= TOUCH_TOLERANCE or lower < self._min_distance:
+                if ego_box is None:
+                    c0, c1, c2, c3 = ego.corners()
+                    ego_box = Box((c0, c1, c2, c3), ((fx, fy), (-fy, fx)))
+                other_box = Box.of(other)
+                if boxes_overlap(ego_box, other_box):
+                    distance = 0.0
+                    if not self._collision:
+                        self._collision = True
+                        self._collision_time = t
+                        self._collision_with = other.name
+                    self._collision_entities.setdefault(other.name, None)
+                else:
+                    distance = _disjoint_distance(ego_box, other_box)
+                if distance < self._min_distance:
+                    self._min_distance = distance
+                    self._min_distance_with = other.name
+
+            # Longitudinal / lateral position and extents of the other box in the ego's frame.
+            lon = dx * fx + dy * fy
+            lat = dy * fx - dx * fy
+            rel = other.heading - h
+            cr, sr = math.cos(rel), abs(math.sin(rel))
+            acr = abs(cr)
+            o_lon = o_hl * acr + o_hw * sr
+            o_lat = o_hl * sr + o_hw * acr
+
+            if abs(lon) < o_lon + e_hl:  # side by side
+                lateral = abs(lat) - o_lat - e_hw
+                if lateral < self._min_lateral:
+                    self._min_lateral = max(lateral, 0.0)
+
+            if lon <= 0.0:
+                continue
+            o_lane = other.lane
+            if e_lane is not None and o_lane is not None:
+                if o_lane.road_id != e_lane.road_id or o_lane.lane_id != e_lane.lane_id:
+                    continue
+            elif abs(lat) > half_lane:
+                continue
+            gap = max(lon - o_lon - e_hl, 0.0)
+            if e_speed > HEADWAY_MIN_SPEED:
+                thw = gap / e_speed
+                if thw < self._min_thw:
+                    self._min_thw = thw
+                    self._min_thw_with = other.name
+            closing = e_speed - other.speed * cr
+            if closing > TTC_MIN_CLOSING_SPEED:
+                ttc = gap / closing
+                if ttc < self._min_ttc:
+                    self._min_ttc = ttc
+                    self._min_ttc_with = other.name
+
+    def result(self) -> dict[str, float]:
+        """The metrics so far; a metric that was never defined is absent (see the module docstring)."""
+        out: dict[str, float] = {}
+        if self._has_ego and self._prev is not None:
+            out["collision"] = 1.0 if self._collision else 0.0
+            if self._collision_time is not None:
+                out["collisionTime"] = self._collision_time
+            if self._min_distance < math.inf:
+                out["minDistance"] = self._min_distance
+            if self._min_thw < math.inf:
+                out["minTimeHeadway"] = self._min_thw
+            if self._min_ttc < math.inf:
+                out["minTimeToCollision"] = self._min_ttc
+            if self._min_lateral < math.inf:
+                out["minLateralDistance"] = self._min_lateral
+            out["maxDeceleration"] = self._max_dec
+            out["maxAcceleration"] = self._max_acc
+            out["maxSpeed"] = self._max_speed
+            duration = self._prev[0] - self._first_time
+            out["meanSpeed"] = self._speed_integral / duration if duration > 0 else self._prev[3]
+            out["egoDistance"] = self._distance
+        if self._sim_seconds is not None:
+            out["simSeconds"] = self._sim_seconds
+        return out
+
+    def details(self) -> dict[str, str | list[str]]:
+        """Non-numeric facts: `collisionWith` (the entity hit first), `collisionEntities` (every entity
+        hit, in order of first contact), `minDistanceWith`, `minTimeHeadwayWith`, `minTimeToCollisionWith`
+        (the entity each minimum was measured against); each only when defined."""
+        out: dict[str, str | list[str]] = {}
+        if self._collision_with is not None:
+            out["collisionWith"] = self._collision_with
+            out["collisionEntities"] = list(self._collision_entities)
+        if self._min_distance_with is not None:
+            out["minDistanceWith"] = self._min_distance_with
+        if self._min_thw_with is not None:
+            out["minTimeHeadwayWith"] = self._min_thw_with
+        if self._min_ttc_with is not None:
+            out["minTimeToCollisionWith"] = self._min_ttc_with
+        return out

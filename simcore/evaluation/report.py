@@ -1,0 +1,299 @@
+"""Per-index and run-level summaries (summary.json) and the JUnit report (junit.xml); pure functions.
+
+Run-level counting (every index lands in exactly one bucket, so
+`passed + failed + errors + optionalFailed + missing == total`):
+
+- `passed`: indexes with status `passed` (required or optional scenario);
+- `failed`, `errors`: indexes of required scenarios with status `failed`, `error`;
+- `optionalFailed`: indexes of optional scenarios with status `failed` or `error`;
+- `missing`: indexes in `0 … total-1` without a summary.
+
+The run's `status` is `passed` when `failed == errors == missing == 0`, else `failed`. Its `exitCode`
+(DESIGN.md): 1 when a required index failed (a test failure wins over everything else, because a retry
+cannot fix it), else 3 when a required index errored or an index is missing (infrastructure), else 0.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, Literal
+
+from simcore.evaluation.criteria import CriterionResult, format_number, verdict
+
+EndReason = Literal["stopTrigger", "maxSeconds", "error"]
+END_REASONS: tuple[str, ...] = ("stopTrigger", "maxSeconds", "error")
+STATUSES: tuple[str, ...] = ("passed", "failed", "error")
+
+EXIT_PASSED = 0
+EXIT_TEST_FAILED = 1
+EXIT_INFRASTRUCTURE = 3
+
+
+def _finite(name: str, value: float) -> float:
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"{name} is {number!r}: summary.json holds finite numbers only")
+    return number
+
+
+def index_summary(
+    *,
+    index: int,
+    scenario: str,
+    parameters: Mapping[str, Any],
+    seed: int,
+    optional: bool,
+    sim_seconds: float,
+    wall_seconds: float,
+    metrics: Mapping[str, float],
+    results: Sequence[CriterionResult],
+    error: str | None,
+    end_reason: EndReason,
+    attempts: int = 1,
+) -> dict[str, Any]:
+    """The per-index summary.json as a dict (DESIGN.md fields plus `endReason` and `attempts`).
+
+    `status` is `verdict(results, error)`. `end_reason` is why the simulation ended; `error` (the message)
+    must be set when it is `error`. Metric values must be finite."""
+    if end_reason not in END_REASONS:
+        raise ValueError(f"end_reason must be one of {', '.join(END_REASONS)}, not {end_reason!r}")
+    if end_reason == "error" and error is None:
+        raise ValueError("end_reason 'error' needs the error message")
+    if index < 0:
+        raise ValueError(f"index must be >= 0, not {index}")
+    if attempts < 1:
+        raise ValueError(f"attempts must be >= 1, not {attempts}")
+    return {
+        "index": index,
+        "scenario": scenario,
+        "parameters": dict(parameters),
+        "seed": seed,
+        "status": verdict(results, error),
+        "optional": optional,
+        "simSeconds": _finite("simSeconds", sim_seconds),
+        "wallSeconds": _finite("wallSeconds", wall_seconds),
+        "metrics": {name: _finite(f"metric {name}", value) for name, value in metrics.items()},
+        "criteria": [
+            {
+                "name": r.name,
+                "metric": r.metric,
+                "expected": r.expected,
+                "actual": r.actual,
+                "passed": r.passed,
+                "optional": r.optional,
+                "message": r.message,
+            }
+            for r in results
+        ],
+        "error": error,
+        "endReason": end_reason,
+        "attempts": attempts,
+    }
+
+
+class _Aggregate:
+    __slots__ = ("count", "max", "min", "total")
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.total = 0.0
+        self.min = math.inf
+        self.max = -math.inf
+
+    def add(self, value: float) -> None:
+        self.count += 1
+        self.total += value
+        self.min = min(self.min, value)
+        self.max = max(self.max, value)
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {"min": self.min, "mean": self.total / self.count, "max": self.max, "count": self.count}
+
+
+def _new_counts() -> dict[str, int]:
+    return {"runs": 0, "passed": 0, "failed": 0, "errors": 0, "optionalFailed": 0}
+
+
+def run_summary(run_name: str, index_summaries: Iterable[Mapping[str, Any]], total: int) -> dict[str, Any]:
+    """The run-level summary.json from the per-index summaries (streamed once; see the module docstring).
+
+    Fields: `run`, `status`, `exitCode`, `counts` {total, passed, failed, errors, optionalFailed, missing},
+    `scenarios` {name: {optional, counts {runs, passed, failed, errors, optionalFailed},
+    metrics {metric: {min, mean, max, count}}}} in order of first appearance. A metric's `count` is the
+    number of that scenario's indexes that had it (metrics can be absent). Raises ValueError for an index
+    outside `0 … total-1`, a repeated index or an unknown status."""
+    if total < 0:
+        raise ValueError(f"total must be >= 0, not {total}")
+    counts = {"total": total, "passed": 0, "failed": 0, "errors": 0, "optionalFailed": 0, "missing": 0}
+    scenarios: dict[str, dict[str, Any]] = {}
+    aggregates: dict[str, dict[str, _Aggregate]] = {}
+    seen: set[int] = set()
+    for summary in index_summaries:
+        index = summary["index"]
+        if not 0 <= index < total:
+            raise ValueError(f"index {index} is outside 0…{total - 1}")
+        if index in seen:
+            raise ValueError(f"index {index} has two summaries")
+        seen.add(index)
+        status = summary["status"]
+        if status not in STATUSES:
+            raise ValueError(f"index {index}: status {status!r} is not one of {', '.join(STATUSES)}")
+        optional = bool(summary.get("optional", False))
+        name = summary["scenario"]
+        scenario = scenarios.get(name)
+        if scenario is None:
+            scenario = scenarios[name] = {"optional": optional, "counts": _new_counts()}
+            aggregates[name] = {}
+        scenario["optional"] = scenario["optional"] or optional
+        bucket = (
+            "passed"
+            if status == "passed"
+            else "optionalFailed"
+            if optional
+            else "failed"
+            if status == "failed"
+            else "errors"
+        )
+        counts[bucket] += 1
+        scenario["counts"][bucket] += 1
+        scenario["counts"]["runs"] += 1
+        metric_aggregates = aggregates[name]
+        for metric, value in summary.get("metrics", {}).items():
+            aggregate = metric_aggregates.get(metric)
+            if aggregate is None:
+                aggregate = metric_aggregates[metric] = _Aggregate()
+            aggregate.add(float(value))
+    counts["missing"] = total - len(seen)
+    for name, scenario in scenarios.items():
+        scenario["metrics"] = {metric: a.as_dict() for metric, a in aggregates[name].items()}
+
+    if counts["failed"]:
+        exit_code = EXIT_TEST_FAILED
+    elif counts["errors"] or counts["missing"]:
+        exit_code = EXIT_INFRASTRUCTURE
+    else:
+        exit_code = EXIT_PASSED
+    return {
+        "run": run_name,
+        "status": "passed" if exit_code == EXIT_PASSED else "failed",
+        "exitCode": exit_code,
+        "counts": counts,
+        "scenarios": scenarios,
+    }
+
+
+# XML 1.0 cannot hold most control characters, lone surrogates or U+FFFE/U+FFFF, even escaped.
+_XML_INVALID = re.compile("[^\x09\x0a\x0d\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
+
+
+def _xml_text(value: object) -> str:
+    return _XML_INVALID.sub("\ufffd", str(value))
+
+
+def _format_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        short = f"{value:g}"
+        return short if float(short) == value else repr(value)
+    return str(value)
+
+
+def testcase_name(summary: Mapping[str, Any]) -> str:
+    """`cut-in[3] speed=30,gap=15` (parameters in their order; no suffix without parameters)."""
+    parameters = summary.get("parameters") or {}
+    name = f"{summary['scenario']}[{summary['index']}]"
+    if parameters:
+        name += " " + ",".join(f"{key}={_format_value(value)}" for key, value in parameters.items())
+    return name
+
+
+def _failure_message(summary: Mapping[str, Any]) -> tuple[str, str]:
+    """(one-line message, detailed text) for a failed index: its failed required criteria."""
+    failed = [c for c in summary.get("criteria", []) if not c["passed"] and not c.get("optional", False)]
+    if not failed:
+        return "failed", "failed without a failed required criterion"
+    parts = []
+    for c in failed:
+        actual = "absent" if c["actual"] is None else format_number(float(c["actual"]))
+        parts.append(f"{c['name']}: expected {c['expected']}, actual {actual}")
+    message = f"{len(failed)} criteria failed: " + "; ".join(parts) if len(failed) > 1 else parts[0]
+    text = "\n".join(c.get("message") or c["name"] for c in failed)
+    return message, text
+
+
+def junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]]) -> str:
+    """JUnit XML: `<testsuites>` with one `<testsuite>` per scenario (in order of first appearance) and
+    one `<testcase>` per index (by index): name `testcase_name`, classname `carlos.<run>.<scenario>`,
+    time the wall seconds, `<properties>` with the parameters (`param.<name>`), `seed`, `attempts` and
+    `endReason`. A failed index gets `<failure>` listing its failed required criteria with expected and
+    actual values, an errored one `<error>`; in an optional scenario either is `<skipped message="optional:
+    …">` instead."""
+    by_scenario: dict[str, list[Mapping[str, Any]]] = {}
+    for summary in index_summaries:
+        by_scenario.setdefault(summary["scenario"], []).append(summary)
+
+    root = ET.Element("testsuites", name=_xml_text(run_name))
+    totals = {"tests": 0, "failures": 0, "errors": 0, "skipped": 0}
+    total_time = 0.0
+    for scenario, summaries in by_scenario.items():
+        suite = ET.SubElement(root, "testsuite", name=_xml_text(scenario))
+        counts = {"tests": 0, "failures": 0, "errors": 0, "skipped": 0}
+        suite_time = 0.0
+        for summary in sorted(summaries, key=lambda s: s["index"]):
+            wall = float(summary.get("wallSeconds") or 0.0)
+            suite_time += wall
+            case = ET.SubElement(
+                suite,
+                "testcase",
+                name=_xml_text(testcase_name(summary)),
+                classname=_xml_text(f"carlos.{run_name}.{scenario}"),
+                time=f"{wall:.3f}",
+            )
+            properties = ET.SubElement(case, "properties")
+            for key, value in (summary.get("parameters") or {}).items():
+                ET.SubElement(
+                    properties,
+                    "property",
+                    name=_xml_text(f"param.{key}"),
+                    value=_xml_text(_format_value(value)),
+                )
+            for key in ("seed", "attempts", "endReason"):
+                if summary.get(key) is not None:
+                    ET.SubElement(properties, "property", name=key, value=_xml_text(summary[key]))
+            counts["tests"] += 1
+            status = summary["status"]
+            if status == "passed":
+                continue
+            if status == "failed":
+                message, text = _failure_message(summary)
+                kind = "failure"
+            else:
+                message = str(summary.get("error") or "error")
+                text = message
+                kind = "error"
+            if summary.get("optional", False):
+                skipped = ET.SubElement(case, "skipped", message=_xml_text(f"optional: {message}"))
+                skipped.text = _xml_text(text)
+                counts["skipped"] += 1
+            elif kind == "failure":
+                element = ET.SubElement(case, "failure", message=_xml_text(message), type="CriterionFailed")
+                element.text = _xml_text(text)
+                counts["failures"] += 1
+            else:
+                element = ET.SubElement(case, "error", message=_xml_text(message), type="SimulationError")
+                element.text = _xml_text(text)
+                counts["errors"] += 1
+        for key, value in counts.items():
+            suite.set(key, str(value))
+            totals[key] += value
+        suite.set("time", f"{suite_time:.3f}")
+        total_time += suite_time
+    for key, value in totals.items():
+        root.set(key, str(value))
+    root.set("time", f"{total_time:.3f}")
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
