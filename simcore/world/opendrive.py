@@ -185,6 +185,9 @@ class Arc(Geometry):
         return self.k
 
 
+_GL16_X, _GL16_W = np.polynomial.legendre.leggauss(16)
+
+
 class Spiral(Geometry):
     """A clothoid whose curvature changes linearly from ``k0`` to ``k1`` over its length.
 
@@ -201,7 +204,10 @@ class Spiral(Geometry):
         self.c = (k1 - k0) / length if length > 0 else 0.0
         # a clothoid with negligible curvature change over the record is an arc to double precision
         self._as_arc = abs(self.c) * max(length, 1.0) ** 3 < 1e-9 or abs(self.c) < 1e-15
-        if not self._as_arc:
+        # for tiny curvature change (huge standard-clothoid scale) the Fresnel difference loses digits:
+        # integrate the exact heading polynomial numerically instead
+        self._numeric = not self._as_arc and abs(self.c) < 1e-6
+        if not self._as_arc and not self._numeric:
             self._scale = math.sqrt(math.pi / abs(self.c))
             self._sign = 1.0 if self.c > 0 else -1.0
             self._u0 = k0 / self.c
@@ -225,6 +231,8 @@ class Spiral(Geometry):
                 self.y - (math.cos(self.hdg + k * ds) - math.cos(self.hdg)) / k,
                 h,
             )
+        if self._numeric:
+            return (*self._integrate(ds), h)
         xs, ys = self._std(self._u0 + ds)
         dx, dy = xs - self._x0, ys - self._y0
         # rotate out the standard clothoid's heading at u0, then into the record's start heading
@@ -232,6 +240,19 @@ class Spiral(Geometry):
         ly = -dx * self._sin0 + dy * self._cos0
         ch, sh = math.cos(self.hdg), math.sin(self.hdg)
         return self.x + lx * ch - ly * sh, self.y + lx * sh + ly * ch, h
+
+    def _integrate(self, ds: float) -> tuple[float, float]:
+        """Composite Gauss-Legendre integration of (cos, sin)(heading) from 0 to ``ds``."""
+        turn = max(abs(self.k0), abs(self.k0 + self.c * ds)) * abs(ds)
+        n = max(1, math.ceil(turn / 0.25), math.ceil(abs(ds) / 100.0))
+        edges = np.linspace(0.0, ds, n + 1)
+        half = 0.5 * (edges[1:] - edges[:-1])
+        u = 0.5 * (edges[1:] + edges[:-1])[:, None] + half[:, None] * _GL16_X[None, :]
+        h = self.hdg + self.k0 * u + 0.5 * self.c * u * u
+        return (
+            self.x + float(np.sum(half * (np.cos(h) @ _GL16_W))),
+            self.y + float(np.sum(half * (np.sin(h) @ _GL16_W))),
+        )
 
     def curvature(self, ds: float) -> float:
         return self.k0 + self.c * ds
@@ -777,7 +798,12 @@ def _parse_junction(ctx: _Ctx, el: Element) -> Junction:
             JunctionConnection(
                 (c.get("id") or str(i)).strip(),
                 ctx.string(c, "incomingRoad"),
-                ctx.string(c, "connectingRoad" if c.get("connectingRoad") is not None else "linkedRoad"),
+                ctx.string(
+                    c,
+                    "linkedRoad"
+                    if c.get("connectingRoad") is None and c.get("linkedRoad")
+                    else "connectingRoad",
+                ),
                 cp,
                 links,
             )

@@ -1,0 +1,541 @@
+"""Tests for simcore.world.opendrive: hand-written roads with exact answers, and the esmini reference corpus."""
+
+from __future__ import annotations
+
+import csv
+import functools
+import gzip
+import itertools
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from simcore.world.opendrive import MAX_FILE_BYTES, OpenDrive, OpenDriveError
+
+CORPUS = Path("/work/shared/corpus/esmini")
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _xodr(roads: str, junctions: str = "") -> str:
+    return (
+        f'<?xml version="1.0"?>\n<OpenDRIVE><header revMajor="1" revMinor="6"/>{roads}{junctions}</OpenDRIVE>'
+    )
+
+
+def _lanes(right: str = "", left: str = "", offsets: str = "", s: float = 0.0) -> str:
+    return (
+        f"<lanes>{offsets}<laneSection s='{s}'>"
+        f"<left>{left}</left><center><lane id='0' type='none'/></center><right>{right}</right>"
+        "</laneSection></lanes>"
+    )
+
+
+def _lane(lane_id: int, a: float = 3.5, b: float = 0.0, typ: str = "driving", link: str = "") -> str:
+    return (
+        f"<lane id='{lane_id}' type='{typ}'><link>{link}</link>"
+        f"<width sOffset='0' a='{a}' b='{b}' c='0' d='0'/></lane>"
+    )
+
+
+def _road(
+    rid: str, length: float, geometry: str, lanes: str, link: str = "", junction: str = "-1", extra: str = ""
+) -> str:
+    return (
+        f"<road id='{rid}' length='{length}' junction='{junction}'><link>{link}</link>"
+        f"<planView>{geometry}</planView>{extra}{lanes}</road>"
+    )
+
+
+# --------------------------------------------------------------------------------------- hand-written roads
+
+STRAIGHT = _xodr(
+    _road(
+        "7",
+        100.0,
+        "<geometry s='0' x='10' y='5' hdg='0.3' length='100'><line/></geometry>",
+        _lanes(
+            right=_lane(-1, 3.5) + _lane(-2, 3.0, 0.01, typ="shoulder"),
+            left=_lane(1, 3.25),
+            offsets="<laneOffset s='0' a='0.5' b='0' c='0' d='0'/><laneOffset s='50' a='0.5' b='0.01' c='0' d='0'/>",
+        ),
+        extra="<elevationProfile><elevation s='0' a='2' b='0.05' c='0' d='0'/></elevationProfile>",
+    )
+)
+
+
+@pytest.fixture(scope="module")
+def straight() -> OpenDrive:
+    return OpenDrive.from_string(STRAIGHT, "straight.xodr")
+
+
+def test_straight_road_exact(straight: OpenDrive) -> None:
+    od = straight
+    assert list(od.roads) == ["7"]
+    road = od.roads["7"]
+    assert road.id == "7" and road.junction == "-1" and od.road_length("7") == 100.0
+    c, s_ = math.cos(0.3), math.sin(0.3)
+    for s in (0.0, 12.5, 50.0, 99.0, 100.0):
+        for t in (-4.0, 0.0, 2.5):
+            p = od.road_to_world("7", s, t)
+            assert p.x == pytest.approx(10 + s * c - t * s_, abs=1e-9)
+            assert p.y == pytest.approx(5 + s * s_ + t * c, abs=1e-9)
+            assert p.z == pytest.approx(2 + 0.05 * s, abs=1e-9)
+            assert p.heading == pytest.approx(0.3)
+    ref = od.reference_pose("7", 20.0)
+    assert (ref.x, ref.y) == pytest.approx((10 + 20 * c, 5 + 20 * s_))
+
+
+def test_lane_widths_and_offset(straight: OpenDrive) -> None:
+    od = straight
+    # laneOffset 0.5 before s=50, then 0.5 + 0.01*(s-50)
+    assert od.lane_center_t("7", 0, 10.0) == pytest.approx(0.5)
+    assert od.lane_center_t("7", -1, 10.0) == pytest.approx(0.5 - 1.75)
+    assert od.lane_center_t("7", 1, 10.0) == pytest.approx(0.5 + 3.25 / 2)
+    # lane -2 width 3 + 0.01*s (sOffset relative to the section start at 0)
+    assert od.lane_width("7", -2, 40.0) == pytest.approx(3.4)
+    assert od.lane_center_t("7", -2, 40.0) == pytest.approx(0.5 - 3.5 - 3.4 / 2)
+    assert od.lane_center_t("7", -1, 80.0) == pytest.approx(0.5 + 0.3 - 1.75)
+    assert od.lane_width("7", 0, 80.0) == 0.0
+    assert od.lane_ids("7", 30.0) == [-2, -1, 1]
+    assert od.lane_ids("7", 30.0, driving_only=True) == [-1, 1]
+    p = od.lane_to_world("7", -1, 30.0, offset=0.25)
+    q = od.road_to_world("7", 30.0, 0.5 - 1.75 + 0.25)
+    assert (p.x, p.y, p.z) == pytest.approx((q.x, q.y, q.z))
+    # after s=50 the lanes drift left by 0.01 per m: the lane heading follows them
+    assert od.lane_heading("7", -1, 80.0) == pytest.approx(0.3 + math.atan(0.01), abs=1e-6)
+    with pytest.raises(OpenDriveError, match="no lane id=-3"):
+        od.lane_width("7", -3, 10.0)
+    with pytest.raises(OpenDriveError, match="no road id=nope"):
+        od.road_length("nope")
+
+
+def test_straight_world_to_road(straight: OpenDrive) -> None:
+    od = straight
+    for s, t, lane in ((5.0, -1.0, -1), (60.0, -5.0, -2), (99.5, 2.0, 1), (0.3, 0.51, 1), (0.3, 0.49, -1)):
+        p = od.road_to_world("7", s, t)
+        rc = od.world_to_road(p.x, p.y)
+        assert rc is not None
+        assert rc.road_id == "7" and rc.lane_id == lane
+        assert rc.s == pytest.approx(s, abs=1e-6) and rc.t == pytest.approx(t, abs=1e-6)
+        assert rc.offset == pytest.approx(t - od.lane_center_t("7", lane, s), abs=1e-6)
+        assert rc.heading == pytest.approx(0.3)
+    # just outside the outermost right lane (within half its width) still maps to it; far outside is off-road
+    edge = 0.5 - 3.5 - od.lane_width("7", -2, 20.0)
+    p = od.road_to_world("7", 20.0, edge - 1.0)
+    rc = od.world_to_road(p.x, p.y)
+    assert rc is not None and rc.lane_id == -2
+    p = od.road_to_world("7", 20.0, edge - 3.0)
+    assert od.world_to_road(p.x, p.y) is None
+    p = od.road_to_world("7", 100.0, 0.0)
+    assert od.world_to_road(p.x + 5 * math.cos(0.3), p.y + 5 * math.sin(0.3)) is None  # beyond the end
+
+
+ARC_K = 0.02
+
+
+@pytest.fixture(scope="module")
+def arc() -> OpenDrive:
+    return OpenDrive.from_string(
+        _xodr(
+            _road(
+                "a",
+                120.0,
+                f"<geometry s='0' x='0' y='0' hdg='0' length='120'><arc curvature='{ARC_K}'/></geometry>",
+                _lanes(right=_lane(-1), left=_lane(1)),
+            )
+        ),
+        "arc.xodr",
+    )
+
+
+def test_arc_road_exact(arc: OpenDrive) -> None:
+    r = 1.0 / ARC_K  # circle centred at (0, 50)
+    for s in np.linspace(0.0, 120.0, 13):
+        for t in (-3.0, -0.01, 0.01, 1.75):
+            p = arc.road_to_world("a", float(s), t)
+            phi = s * ARC_K
+            assert p.x == pytest.approx((r - t) * math.sin(phi), abs=1e-9)
+            assert p.y == pytest.approx(r - (r - t) * math.cos(phi), abs=1e-9)
+            assert p.heading == pytest.approx(phi)
+            rc = arc.world_to_road(p.x, p.y)
+            assert rc is not None and rc.road_id == "a"
+            assert rc.s == pytest.approx(s, abs=1e-6) and rc.t == pytest.approx(t, abs=1e-6)
+            assert rc.lane_id == (-1 if t < 0 else 1)
+
+
+def _integrate_clothoid(
+    x0: float, y0: float, h0: float, k0: float, c: float, ds: float
+) -> tuple[float, float]:
+    def hdg(u: float) -> float:
+        return h0 + k0 * u + 0.5 * c * u * u
+
+    x = quad(lambda u: math.cos(hdg(u)), 0.0, ds, epsabs=1e-11, epsrel=1e-12, limit=400)[0]
+    y = quad(lambda u: math.sin(hdg(u)), 0.0, ds, epsabs=1e-11, epsrel=1e-12, limit=400)[0]
+    return x0 + x, y0 + y
+
+
+@pytest.mark.parametrize(
+    ("k0", "k1", "length"),
+    [
+        (0.0, 0.05, 80.0),
+        (0.03, -0.02, 150.0),
+        (-0.1, -0.01, 60.0),
+        (0.01, 0.0100000001, 200.0),
+        (0.01, 0.0101, 200.0),
+        (-0.01, -0.0105, 300.0),
+        (0.2, 0.2, 10.0),
+    ],
+)
+def test_spiral_matches_numerical_integration(k0: float, k1: float, length: float) -> None:
+    geo = f"<geometry s='0' x='3' y='-4' hdg='1.1' length='{length}'><spiral curvStart='{k0}' curvEnd='{k1}'/></geometry>"
+    od = OpenDrive.from_string(_xodr(_road("s", length, geo, _lanes(right=_lane(-1)))), "spiral.xodr")
+    c = (k1 - k0) / length
+    for ds in np.linspace(0.0, length, 9):
+        p = od.reference_pose("s", float(ds))
+        x, y = _integrate_clothoid(3.0, -4.0, 1.1, k0, c, float(ds))
+        assert math.hypot(p.x - x, p.y - y) < 1e-7
+        assert _wrap(p.heading - (1.1 + k0 * ds + 0.5 * c * ds * ds)) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_param_poly3_ranges_and_poly3() -> None:
+    # the same cubic written with normalized and arcLength parameters; poly3 with u = p
+    v = (0.0, 0.0, 0.004, -0.00002)
+    length_guess = 60.0
+    geo_poly3 = f"<geometry s='0' x='1' y='2' hdg='0.5' length='{{L}}'><poly3 a='0' b='0' c='{v[2]}' d='{v[3]}'/></geometry>"
+    # arc length of the poly3 from u = 0 to u = 60
+    arclen = quad(
+        lambda q: math.hypot(1.0, 2 * v[2] * q + 3 * v[3] * q * q), 0.0, length_guess, epsabs=1e-12
+    )[0]
+    od3 = OpenDrive.from_string(
+        _xodr(_road("p", arclen, geo_poly3.replace("{L}", repr(arclen)), _lanes(right=_lane(-1))))
+    )
+    end = od3.reference_pose("p", arclen)
+    ev = v[2] * 60.0**2 + v[3] * 60.0**3
+    ex = 1 + 60.0 * math.cos(0.5) - ev * math.sin(0.5)
+    ey = 2 + 60.0 * math.sin(0.5) + ev * math.cos(0.5)
+    assert math.hypot(end.x - ex, end.y - ey) < 1e-6
+    slope = 2 * v[2] * 60 + 3 * v[3] * 3600
+    assert end.heading == pytest.approx(0.5 + math.atan(slope), abs=1e-9)
+    # normalized: p in [0, 1] -> u = 60 p, v scaled accordingly
+    nu = (0.0, 60.0, 0.0, 0.0)
+    nv = (0.0, 0.0, v[2] * 3600, v[3] * 216000)
+    pp = (
+        f"<geometry s='0' x='1' y='2' hdg='0.5' length='{arclen!r}'><paramPoly3 pRange='normalized' "
+        f"aU='{nu[0]}' bU='{nu[1]}' cU='{nu[2]}' dU='{nu[3]}' aV='{nv[0]}' bV='{nv[1]}' cV='{nv[2]}' dV='{nv[3]}'/></geometry>"
+    )
+    odn = OpenDrive.from_string(_xodr(_road("n", arclen, pp, _lanes(right=_lane(-1)))))
+    # arcLength: p in [0, length]; u(p) = p * 60/length
+    k = 60.0 / arclen
+    au = (0.0, k, 0.0, 0.0)
+    av = (0.0, 0.0, v[2] * k**2, v[3] * k**3)
+    pa = (
+        f"<geometry s='0' x='1' y='2' hdg='0.5' length='{arclen!r}'><paramPoly3 pRange='arcLength' "
+        f"aU='{au[0]}' bU='{au[1]}' cU='{au[2]}' dU='{au[3]}' aV='{av[0]}' bV='{av[1]}' cV='{av[2]}' dV='{av[3]}'/></geometry>"
+    )
+    oda = OpenDrive.from_string(_xodr(_road("m", arclen, pa, _lanes(right=_lane(-1)))))
+    for s in np.linspace(0.0, arclen, 7):
+        a = od3.reference_pose("p", float(s))
+        b = odn.reference_pose("n", float(s))
+        c = oda.reference_pose("m", float(s))
+        assert math.hypot(a.x - b.x, a.y - b.y) < 1e-6 and math.hypot(a.x - c.x, a.y - c.y) < 1e-6
+        assert a.heading == pytest.approx(b.heading, abs=1e-9) and a.heading == pytest.approx(
+            c.heading, abs=1e-9
+        )
+    # s is a true arc length: consecutive samples 1 m apart in s are ~1 m apart in space
+    pts = [od3.reference_pose("p", s) for s in np.arange(0.0, 50.0, 1.0)]
+    gaps = [math.hypot(q.x - p.x, q.y - p.y) for p, q in itertools.pairwise(pts)]
+    assert max(abs(g - 1.0) for g in gaps) < 1e-4
+
+
+def test_lane_section_offsets_and_single_side() -> None:
+    lanes = (
+        "<lanes><laneSection s='0'><center><lane id='0' type='none'/></center>"
+        "<right>" + _lane(-1, 3.0) + "</right><left>" + _lane(1, 3.0) + "</left></laneSection>"
+        "<laneSection s='40'><center><lane id='0' type='none'/></center><right>"
+        "<lane id='-1' type='driving'><width sOffset='0' a='3' b='0' c='0' d='0'/>"
+        "<width sOffset='10' a='3' b='0.1' c='0' d='0'/></lane>"
+        "<lane id='-2' type='driving'><width sOffset='0' a='0' b='0.2' c='0' d='0'/></lane></right></laneSection>"
+        "<laneSection s='70' singleSide='true'><center><lane id='0' type='none'/></center>"
+        "<left>" + _lane(1, 4.0) + _lane(2, 2.0, typ="sidewalk") + "</left></laneSection></lanes>"
+    )
+    od = OpenDrive.from_string(
+        _xodr(_road("r", 100.0, "<geometry s='0' x='0' y='0' hdg='0' length='100'><line/></geometry>", lanes))
+    )
+    assert od.lane_width("r", -1, 45.0) == pytest.approx(3.0)
+    assert od.lane_width("r", -1, 55.0) == pytest.approx(3.5)  # sOffset is relative to the section start
+    assert od.lane_width("r", -2, 45.0) == pytest.approx(1.0)
+    assert od.lane_center_t("r", -2, 45.0) == pytest.approx(-3.5)
+    assert od.lane_ids("r", 20.0) == [-1, 1]
+    assert od.lane_ids("r", 40.0) == [-1]  # lane -2 has zero width at its section start
+    # the singleSide section at 70 only replaces the left side: the right side continues from s=40
+    assert od.lane_ids("r", 80.0) == [-2, -1, 1, 2]
+    assert od.lane_width("r", -1, 80.0) == pytest.approx(3 + 0.1 * 30)
+    assert od.lane_center_t("r", 2, 80.0) == pytest.approx(5.0)
+    strips = od.sample_lane_boundaries("r", step=2.0)
+    by_key = {(b.section_index, b.lane_id): b for b in strips}
+    m = by_key[(1, -2)]
+    assert m.inner.shape == m.outer.shape == (m.s.shape[0], 3)
+    assert np.allclose(m.inner, by_key[(1, -1)].outer)
+    assert np.allclose(
+        m.outer[:, 1], -(3 + np.where(m.s - 40 >= 10, 0.1 * (m.s - 50), 0.0)) - 0.2 * (m.s - 40)
+    )
+    assert m.s[0] == 40.0 and m.s[-1] == 70.0 and np.all(np.diff(m.s) <= 2.0 + 1e-9)
+
+
+# ------------------------------------------------------------------------------------------------- topology
+
+LINE = "<geometry s='0' x='{x}' y='0' hdg='0' length='50'><line/></geometry>"
+TOPO = _xodr(
+    _road(
+        "1",
+        50.0,
+        LINE.format(x=0),
+        _lanes(right=_lane(-1, link="<successor id='1'/>"), left=_lane(1, link="<predecessor id='1'/>")),
+        link="<successor elementType='road' elementId='2' contactPoint='end'/>",
+    )
+    + _road(
+        "2",
+        50.0,
+        "<geometry s='0' x='100' y='0' hdg='3.141592653589793' length='50'><line/></geometry>",
+        _lanes(right=_lane(-1, link="<successor id='1'/>"), left=_lane(1, link="<successor id='-1'/>")),
+        link="<successor elementType='road' elementId='1' contactPoint='end'/>"
+        "<predecessor elementType='junction' elementId='9'/>",
+    )
+    + _road(
+        "3",
+        20.0,
+        LINE.format(x=100).replace("length='50'", "length='20'"),
+        _lanes(right=_lane(-1, link="<predecessor id='1'/><successor id='-1'/>")),
+        link="<predecessor elementType='road' elementId='2' contactPoint='start'/>"
+        "<successor elementType='road' elementId='4' contactPoint='start'/>",
+        junction="9",
+    )
+    + _road(
+        "5",
+        20.0,
+        LINE.format(x=100).replace("length='50'", "length='20'"),
+        _lanes(right=_lane(-1, link="<predecessor id='2'/>")),
+        junction="9",
+    )
+    + _road("4", 50.0, LINE.format(x=120), _lanes(right=_lane(-1))),
+    "<junction id='9' name='j'>"
+    "<connection id='0' incomingRoad='2' connectingRoad='5' contactPoint='start'><laneLink from='2' to='-1'/></connection>"
+    "<connection id='1' incomingRoad='2' connectingRoad='3' contactPoint='start'><laneLink from='1' to='-1'/></connection>"
+    "</junction>",
+)
+
+
+def test_successor_road_link_and_junction() -> None:
+    od = OpenDrive.from_string(TOPO, "topo.xodr")
+    assert od.roads["3"].junction == "9"
+    assert od.junctions["9"].connections[1].connecting_road == "3"
+    # road 1 lane -1 ends at road 2's end: continue on road 2 lane 1 toward decreasing s
+    assert od.successor("1", -1, 1) == ("2", 1, -1)
+    # road 2 lane 1 travelling toward s=0 enters junction 9: the first connection with a laneLink from 1
+    assert od.successor("2", 1, -1) == ("3", -1, 1)
+    # through the connecting road to road 4 (contactPoint start -> increasing s)
+    assert od.successor("3", -1, 1) == ("4", -1, 1)
+    # road 2 lane -1 leaving its end: road 1 lane 1, travelling toward decreasing s on road 1
+    assert od.successor("2", -1, 1) == ("1", 1, -1)
+    # dead ends: no predecessor link on road 1, no links on road 4, no laneLink from lane -1 in the junction
+    assert od.successor("1", -1, -1) is None
+    assert od.successor("4", -1, 1) is None
+    assert od.successor("2", -1, -1) is None
+    with pytest.raises(ValueError):
+        od.successor("1", -1, 0)
+
+
+# ------------------------------------------------------------------------------------------- bad input
+
+GOOD_GEOM = "<geometry s='0' x='0' y='0' hdg='0' length='10'><line/></geometry>"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            _xodr(
+                _road("1", 10, GOOD_GEOM, _lanes(right=_lane(-1)))
+                + _road(
+                    "3",
+                    10,
+                    GOOD_GEOM + "<geometry s='0' x='0' y='0' hdg='0' length='10'><foo/></geometry>",
+                    _lanes(),
+                )
+            ),
+            "roads/x.xodr: road id=3: geometry 1: unsupported type 'foo'",
+        ),
+        (
+            _xodr(
+                _road(
+                    "4", 10, "<geometry s='0' x='0' y='0' hdg='zero' length='10'><line/></geometry>", _lanes()
+                )
+            ),
+            "roads/x.xodr: road id=4: geometry 0: <geometry> attribute hdg='zero' is not a number",
+        ),
+        (
+            _xodr(
+                _road("5", 10, "<geometry s='0' x='0' y='0' hdg='0' length='10'><arc/></geometry>", _lanes())
+            ),
+            "roads/x.xodr: road id=5: geometry 0: <arc> is missing attribute 'curvature'",
+        ),
+        (
+            _xodr(_road("6", 10, GOOD_GEOM, _lanes(right=_lane(-1) + _lane(-3)))),
+            "roads/x.xodr: road id=6: laneSection 0: lane ids [-1, -3] are not consecutive from -1",
+        ),
+        (
+            _xodr(_road("7", 10, GOOD_GEOM, _lanes(right=_lane(-1).replace("a='3.5'", "a='x'")))),
+            "roads/x.xodr: road id=7: laneSection 0: lane id=-1: width 0: <width> attribute a='x' is not a number",
+        ),
+        (
+            _xodr(
+                _road("8", 10, GOOD_GEOM, _lanes()),
+                "<junction id='1'><connection id='0' incomingRoad='8'/></junction>",
+            ),
+            "roads/x.xodr: junction id=1: connection 0: <connection> is missing attribute 'connectingRoad'",
+        ),
+        (_xodr(""), "roads/x.xodr: no <road> elements"),
+        ("<OpenDRIVE><road", "roads/x.xodr: not well-formed XML"),
+        ("<Other/>", "roads/x.xodr: root element is <Other>, expected <OpenDRIVE>"),
+    ],
+)
+def test_malformed_input_names_file_and_element(text: str, message: str) -> None:
+    with pytest.raises(OpenDriveError) as exc:
+        OpenDrive.from_string(text, "roads/x.xodr")
+    assert message in str(exc.value)
+
+
+BOMB = """<?xml version="1.0"?>
+<!DOCTYPE lolz [
+ <!ENTITY lol "lol">
+ <!ENTITY lol2 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">
+ <!ENTITY lol3 "&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;">
+ <!ENTITY lol4 "&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;">
+]>
+<OpenDRIVE><header name="&lol4;"/></OpenDRIVE>"""
+
+EXTERNAL = """<?xml version="1.0"?>
+<!DOCTYPE r [<!ENTITY xxe SYSTEM "file:///etc/passwd">]>
+<OpenDRIVE><header name="&xxe;"/></OpenDRIVE>"""
+
+
+@pytest.mark.parametrize("text", [BOMB, EXTERNAL])
+def test_entity_expansion_rejected(text: str, tmp_path: Path) -> None:
+    with pytest.raises(OpenDriveError, match=r"bomb\.xodr: unsafe XML rejected"):
+        OpenDrive.from_string(text, "bomb.xodr")
+    f = tmp_path / "bomb.xodr"
+    f.write_text(text)
+    with pytest.raises(OpenDriveError, match="unsafe XML rejected"):
+        OpenDrive.from_file(f)
+
+
+def test_oversized_and_missing_files_refused(tmp_path: Path) -> None:
+    big = tmp_path / "big.xodr"
+    with big.open("wb") as fh:  # sparse: no real disk use
+        fh.truncate(MAX_FILE_BYTES + 1)
+    with pytest.raises(OpenDriveError, match=r"big\.xodr: file is .* larger than"):
+        OpenDrive.from_file(big)
+    with pytest.raises(OpenDriveError, match=r"missing\.xodr: cannot read"):
+        OpenDrive.from_file(tmp_path / "missing.xodr")
+
+
+def test_s_out_of_range(straight: OpenDrive) -> None:
+    assert straight.road_to_world("7", 100.0005, 0.0).x == pytest.approx(
+        straight.road_to_world("7", 100.0, 0.0).x
+    )
+    with pytest.raises(OpenDriveError, match="s=101"):
+        straight.road_to_world("7", 101.0, 0.0)
+
+
+# --------------------------------------------------------------------------------- esmini reference corpus
+
+# scenario -> what it exercises
+REFERENCE_SCENARIOS = {
+    "xosc/cut-in_cr": "curves_elevation: spirals (curvStart != 0), arcs, elevation",
+    "xosc/acc-toggle": "curves_elevation: the whole road",
+    "xosc/cut-in": "e6mini: paramPoly3 arcLength, elevation",
+    "xosc/left-hand-traffic_using_road_rule": "e6mini-lht",
+    "xosc/lane_change": "jolengatan: paramPoly3",
+    "xosc/highway_merge": "soderleden: direct junction, laneOffset",
+    "xosc/traffic_lights": "fabriksgatan: junction, paramPoly3, laneOffset",
+    "xosc/pedestrian_collision": "fabriksgatan: junction connecting roads",
+    "xosc/routing-test": "multi_intersections: spirals, junctions",
+    "xosc/sumo-test": "multi_intersections: junctions",
+    "xosc/lane_change_crest": "crest-curve: spiral, elevation",
+    "xosc/alks-test": "curve_r100: arc",
+    "xosc/light_state": "circle_300m: arc",
+    "xosc/velodrome": "velodrome: superelevation, spirals",
+    "xosc/tunnels": "tunnels: spirals, elevation",
+    "xosc/two_plus_one_road": "two_plus_one: laneOffset",
+    "xosc/parking_demo": "parking_demo: spirals, junction",
+    "xosc/straight_500m": "straight_500m: line",
+    "scenario_construct_examples/scenario_runner_with_acts": "spirals",
+}
+MAX_ROWS = 300  # deterministic sample per scenario
+
+
+@functools.cache
+def _index() -> dict[str, dict[str, str]]:
+    with (CORPUS / "INDEX.tsv").open() as fh:
+        return {
+            row["path"].removeprefix("resources/").removesuffix(".xosc"): row
+            for row in csv.DictReader(fh, delimiter="\t")
+        }
+
+
+@functools.cache
+def _network(path: str) -> OpenDrive:
+    return OpenDrive.from_file(path)
+
+
+def _reference(scenario: str) -> tuple[OpenDrive, list[dict[str, str]]]:
+    if not (CORPUS / "INDEX.tsv").is_file():
+        pytest.skip(f"reference corpus not available at {CORPUS}")
+    row = _index()[scenario]
+    xodr = (CORPUS / "resources" / scenario).parent / row["road_file"]
+    with gzip.open(CORPUS / row["reference_csv"], "rt") as fh:
+        rows = list(csv.DictReader(fh))
+    return _network(str(xodr.resolve())), rows[:: max(1, len(rows) // MAX_ROWS)]
+
+
+@pytest.mark.parametrize("scenario", sorted(REFERENCE_SCENARIOS))
+def test_against_esmini_reference(scenario: str) -> None:
+    """Rows where the entity is on its lane centre (esmini offset 0) inside the road: the pose computed
+    from esmini's (road, s, t) must match esmini's world pose, and world_to_road must give back the road
+    coordinates (or, where roads overlap in a junction, another road mapping to the same point)."""
+    od, rows = _reference(scenario)
+    checked = 0
+    for row in rows:
+        road_id, lane_id = row["roadId"], int(row["laneId"])
+        s, t, offset = float(row["s"]), float(row["t"]), float(row["offset"])
+        x, y, z, h = (float(row[k]) for k in "xyzh")
+        assert road_id in od.roads, f"{scenario}: esmini road {road_id} not in the network"
+        if abs(offset) > 1e-3 or not 0.05 < s < od.road_length(road_id) - 0.05:
+            continue  # lane changes, off-road motion, road ends: not lane following
+        where = f"{scenario} t={row['time']} {row['name']} road {road_id} lane {lane_id} s={s} t={t}"
+        p = od.road_to_world(road_id, s, t)
+        assert math.hypot(p.x - x, p.y - y) < 0.02, f"{where}: ({p.x:.4f}, {p.y:.4f}) vs ({x}, {y})"
+        assert abs(p.z - z) < 0.02, f"{where}: z {p.z:.4f} vs {z}"
+        assert od.lane_center_t(road_id, lane_id, s) == pytest.approx(t, abs=2e-3), where
+        lane_h = od.lane_heading(road_id, lane_id, s)
+        assert abs(_wrap(2 * (lane_h - h))) / 2 < 0.01, f"{where}: lane heading {lane_h:.4f} vs {h} (mod pi)"
+        rc = od.world_to_road(x, y, z)
+        assert rc is not None, f"{where}: world_to_road found no road"
+        if rc.road_id == road_id:
+            assert (rc.lane_id, rc.s, rc.t) == (
+                lane_id,
+                pytest.approx(s, abs=0.02),
+                pytest.approx(t, abs=0.02),
+            ), where
+        else:  # overlapping roads (junction): must be a point of that road and lane
+            q = od.road_to_world(rc.road_id, rc.s, rc.t)
+            assert math.hypot(q.x - x, q.y - y) < 0.02, f"{where}: mapped to road {rc.road_id}"
+            assert od.roads[rc.road_id].junction != "-1" or od.roads[road_id].junction != "-1", where
+        checked += 1
+    assert checked >= 20, f"{scenario}: only {checked} lane-following rows"
