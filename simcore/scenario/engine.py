@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from simcore.errors import BadInput, SimulationError
-from simcore.evaluation.geometry import box_distance, boxes_overlap
+from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
 from simcore.scenario import model as m
 from simcore.scenario.motion import (
     Body,
@@ -472,15 +472,16 @@ class ScenarioEngine:
             return compare(c.rule, body.speed - self.body(c.entity).speed, c.value)
         if isinstance(c, m.CollisionCondition):
             others = [self.body(c.entity)] if c.entity else [b for b in self.bodies.values() if b is not body]
-            mine = self.state_of(body)
-            return any(boxes_overlap(mine.corners(), self.state_of(o).corners()) for o in others)
+            mine = Box.of(self.state_of(body))
+            return any(boxes_overlap(mine, Box.of(self.state_of(o))) for o in others)
         if isinstance(c, m.ReachPositionCondition):
             x, y, _, _ = self.resolve_position(c.position)
             return math.hypot(body.x - x, body.y - y) <= c.tolerance
         if isinstance(c, m.DistanceCondition):
             x, y, _, _ = self.resolve_position(c.position)
             if c.freespace:
-                distance = box_distance(self.state_of(body).corners(), [(x, y)] * 1)
+                point = Box(((x, y),) * 4, ((1.0, 0.0), (0.0, 1.0)))
+                distance = box_distance(Box.of(self.state_of(body)), point)
             else:
                 distance = math.hypot(body.x - x, body.y - y)
             return compare(c.rule, distance, c.value)
@@ -507,7 +508,7 @@ class ScenarioEngine:
         sa, sb = self.state_of(a), self.state_of(b)
         if kind in ("euclidianDistance", "cartesianDistance"):
             if freespace:
-                return box_distance(sa.corners(), sb.corners())
+                return box_distance(Box.of(sa), Box.of(sb))
             return math.hypot(b.x - a.x, b.y - a.y)
         ax, ay, _ = sa.box_center()
         bx, by, _ = sb.box_center()

@@ -1,0 +1,246 @@
+"""`carlos` — the command line. Bad input ends in one clear line and exit code 2, never a traceback."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from simcore.errors import BadInput, CarlosError
+
+app = typer.Typer(
+    name="carlos",
+    help="CARLOS: simulation runs for cooperative intelligent transport systems, locally or on Kubernetes.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+console = Console(stderr=True)
+out = Console()
+
+
+def _fail(exc: CarlosError) -> typer.Exit:
+    console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+    return typer.Exit(int(exc.exit_code))
+
+
+@app.command()
+def run(
+    manifest: Annotated[Path, typer.Argument(help="SimulationRun manifest (YAML).")],
+    output: Annotated[str | None, typer.Option("--output", "-o", help="Output URL (file://… or s3://…); overrides spec.output.url.")] = None,
+    parallel: Annotated[int | None, typer.Option("--parallel", "-j", min=1, help="Worker processes (default: spec.execution.parallelism, else the number of cores).")] = None,
+    index: Annotated[list[int] | None, typer.Option("--index", "-i", help="Run only these indexes (repeatable).")] = None,
+    fresh: Annotated[bool, typer.Option("--fresh", help="Replace existing results of this run instead of resuming.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Run every scenario × permutation of a SimulationRun on this machine.
+
+    Exit codes: 0 every required run passed, 1 a required test failed, 2 bad input, 3 infrastructure error."""
+    from simcore.executor import Events, execute
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan
+
+    try:
+        simulation_run = load_manifest(manifest)
+        total = len(Plan(simulation_run.spec))
+        _preflight(simulation_run, manifest.parent.resolve())
+        progress = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[stats]}"),
+            TimeElapsedColumn(),
+            console=console,
+            disable=quiet or not console.is_terminal and os.environ.get("CARLOS_PROGRESS") != "1",
+        )
+        state = {"passed": 0, "failed": 0, "errors": 0, "sim": 0.0}
+        live_sim: dict[int, float] = {}
+        started = time.monotonic()
+
+        def stats() -> str:
+            wall = max(time.monotonic() - started, 1e-6)
+            sim = state["sim"] + sum(live_sim.values())
+            return f"passed {state['passed']:.0f} failed {state['failed']:.0f} errors {state['errors']:.0f} · {sim / wall:,.0f} sim-s/wall-s"
+
+        task = progress.add_task(simulation_run.name, total=total, stats="")
+
+        def on_start(count: int, skipped: int) -> None:
+            progress.update(task, total=count, completed=skipped, stats=stats())
+            if skipped:
+                console.print(f"resuming: {skipped} of {count} runs already complete (use --fresh to rerun them)")
+
+        def on_progress(i: int, sim_time: float) -> None:
+            live_sim[i] = sim_time
+            progress.update(task, stats=stats())
+
+        def on_done(outcome: object) -> None:
+            summary = outcome.summary  # type: ignore[attr-defined]
+            live_sim.pop(summary["index"], None)
+            state["sim"] += summary.get("simSeconds", 0.0)
+            key = {"passed": "passed", "failed": "failed"}.get(summary["status"], "errors")
+            state[key] += 1
+            progress.update(task, advance=1, stats=stats())
+            if quiet or not progress.live.is_started:
+                return
+            if summary["status"] == "error":
+                progress.console.print(f"[red]index {summary['index']} ({summary['scenario']}): {summary['error']}[/]", highlight=False)
+
+        def on_retry(i: int, attempt: int, reason: str) -> None:
+            progress.console.print(f"[yellow]index {i}: attempt {attempt} failed ({reason}); retrying[/]", highlight=False)
+
+        with progress:
+            report = execute(
+                simulation_run,
+                base_dir=manifest.parent.resolve(),
+                output_url=output,
+                parallel=parallel,
+                fresh=fresh,
+                indexes=list(index) if index else None,
+                events=Events(on_start=on_start, on_progress=on_progress, on_done=on_done, on_retry=on_retry),
+            )
+    except CarlosError as exc:
+        raise _fail(exc) from None
+    except KeyboardInterrupt:
+        console.print("interrupted: completed runs are kept; run the same command again to resume")
+        raise typer.Exit(130) from None
+    _print_report(report)
+    raise typer.Exit(report.exit_code)
+
+
+def _preflight(simulation_run: object, base_dir: Path) -> None:
+    """Check what can be checked before any worker starts: scenario files exist and parse, parameter and
+    matrix names are declared, and road files exist, so a typo fails at once with exit code 2."""
+    from simcore.scenario.xosc import declared_parameters
+    from simcore.spec import SimulationRun
+
+    assert isinstance(simulation_run, SimulationRun)
+    spec = simulation_run.spec
+    for position, scenario in enumerate(spec.scenarios):
+        source = scenario.openscenario
+        if source is None or source.startswith("s3://"):
+            continue  # a ConfigMap (cluster) or an object: checked by the run itself
+        path = Path(source.removeprefix("file://")).expanduser() if source.startswith("file://") else base_dir / source
+        field = f"spec.scenarios[{position}].openscenario"
+        if not path.is_file():
+            raise BadInput(f"scenario file {str(path)!r} not found", field=field)
+        declared = declared_parameters(path)
+        names = {**spec.parameters, **scenario.parameters, **spec.sweep.matrix}
+        unknown = sorted(set(names) - set(declared))
+        if unknown:
+            where = (
+                "spec.sweep.matrix"
+                if set(unknown) & set(spec.sweep.matrix)
+                else f"spec.scenarios[{position}].parameters"
+                if set(unknown) & set(scenario.parameters)
+                else "spec.parameters"
+            )
+            raise BadInput(
+                f"parameter(s) {', '.join(unknown)} not declared in {path.name} "
+                f"(declared: {', '.join(sorted(declared)) or 'none'})",
+                file=str(path),
+                field=where,
+            )
+
+
+def _print_report(report: object) -> None:
+    from simcore.executor import RunReport
+
+    assert isinstance(report, RunReport)
+    summary = report.summary
+    table = Table(title=f"SimulationRun {report.run_name}", show_edge=False)
+    table.add_column("scenario")
+    table.add_column("runs", justify="right")
+    table.add_column("passed", justify="right", style="green")
+    table.add_column("failed", justify="right", style="red")
+    table.add_column("errors", justify="right", style="red")
+    table.add_column("optional")
+    optional = {s.name for s in report.optional_scenarios}
+    for name, scenario in summary.get("scenarios", {}).items():
+        counts = scenario.get("counts", {})
+        table.add_row(
+            name,
+            str(counts.get("runs", 0)),
+            str(counts.get("passed", 0)),
+            str(counts.get("failed", 0)),
+            str(counts.get("errors", 0)),
+            "yes" if name in optional else "",
+        )
+    out.print(table)
+    status = summary["status"]
+    colour = "green" if status == "passed" else "red"
+    out.print(
+        f"[bold {colour}]{status}[/] · {summary['counts']['total']} runs in {report.wall_seconds:.1f} s "
+        f"({report.skipped} resumed) · results: {report.output_url}",
+        highlight=False,
+    )
+
+
+@app.command()
+def validate(manifest: Annotated[Path, typer.Argument(help="SimulationRun manifest (YAML).")]) -> None:
+    """Check a manifest and its scenarios without running anything."""
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan
+
+    try:
+        simulation_run = load_manifest(manifest)
+        _preflight(simulation_run, manifest.parent.resolve())
+    except CarlosError as exc:
+        raise _fail(exc) from None
+    plan = Plan(simulation_run.spec)
+    out.print(f"{manifest}: valid · {len(plan)} runs ({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})")
+
+
+@app.command()
+def plan(
+    manifest: Annotated[Path, typer.Argument(help="SimulationRun manifest (YAML).")],
+    index: Annotated[list[int] | None, typer.Option("--index", "-i", help="Show these indexes.")] = None,
+    limit: Annotated[int, typer.Option(help="Show at most this many runs.")] = 20,
+) -> None:
+    """Show which scenario, parameters and seed each index runs (computed lazily, any sweep size)."""
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan, describe
+
+    try:
+        simulation_run = load_manifest(manifest)
+    except CarlosError as exc:
+        raise _fail(exc) from None
+    runs = Plan(simulation_run.spec)
+    chosen = list(index) if index else list(range(min(limit, len(runs))))
+    table = Table(title=f"{simulation_run.name}: {len(runs)} runs", show_edge=False)
+    for column in ("index", "scenario", "parameters", "seed"):
+        table.add_column(column)
+    for i in chosen:
+        try:
+            point = runs[i]
+        except IndexError as exc:
+            raise _fail(BadInput(str(exc), field="--index")) from None
+        table.add_row(str(i), point.scenario.name, describe(point.sweep_values) or "(defaults)", str(point.seed))
+    out.print(table)
+
+
+@app.command()
+def schema() -> None:
+    """Print the SimulationRun JSON schema (generated from the spec models)."""
+    from simcore.spec import SimulationRun
+
+    out.print_json(json.dumps(SimulationRun.model_json_schema(by_alias=True)))
+
+
+def main() -> None:
+    try:
+        app()
+    except CarlosError as exc:  # a last guard: never a traceback for our own errors
+        console.print(f"[bold red]error:[/] {exc}", highlight=False)
+        sys.exit(int(exc.exit_code))
+
+
+if __name__ == "__main__":
+    main()

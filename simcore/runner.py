@@ -1,0 +1,267 @@
+"""One run (one index of a SimulationRun): scenario + parameters → simulation → MCAP, metrics, verdict.
+
+Used by the local executor's worker processes and by the `simcore` pod role alike. Results are written to a
+scratch directory and uploaded to the object store under `<run>/<index>/`, the summary last: its presence
+means the index is complete (DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import platform
+import tempfile
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib.metadata import version
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
+from simcore.evaluation.criteria import CriterionResult, evaluate
+from simcore.evaluation.metrics import MetricsAccumulator
+from simcore.evaluation.report import index_summary
+from simcore.plan import Plan, RunPoint
+from simcore.spec import SimulationRun
+from simcore.store import Store
+
+log = logging.getLogger("carlos.run")
+
+#: called with (index, simulated seconds so far) while a run progresses
+Progress = Callable[[int, float], None]
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    index: int
+    summary: dict[str, Any]
+    exit_code: ExitCode
+
+
+def versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for package in ("carlos", "eclipse-sumo", "libsumo", "mcap", "rosbags"):
+        try:
+            out[package] = version(package)
+        except Exception:  # a package missing from the environment is reported, not fatal
+            out[package] = "unknown"
+    return out
+
+
+def resolve_scenario_file(point: RunPoint, base_dir: Path, scratch: Path, store_factory: Callable[[str], Store]) -> Path:
+    """The local path of the scenario's OpenSCENARIO file (downloading it, and its road, from S3)."""
+    ref = point.scenario
+    field = f"spec.scenarios[{ref.name}].openscenario"
+    if ref.config_map_ref is not None:
+        raise BadInput(
+            "configMapRef scenarios exist on a cluster only (the operator mounts them); "
+            "locally use a path or URL in 'openscenario'",
+            field=f"spec.scenarios[{ref.name}].configMapRef",
+        )
+    source = ref.openscenario or ""
+    if source.startswith("file://"):
+        return Path(source.removeprefix("file://")).expanduser()
+    if source.startswith("s3://"):
+        return _fetch_from_s3(source, scratch, store_factory, field)
+    if "://" in source:
+        raise BadInput(f"unsupported URL scheme in {source!r}: use a path, file:// or s3://", field=field)
+    return (base_dir / source).resolve()
+
+
+def _fetch_from_s3(url: str, scratch: Path, store_factory: Callable[[str], Store], field: str) -> Path:
+    bucket_and_key = url.removeprefix("s3://")
+    if "/" not in bucket_and_key:
+        raise BadInput(f"{url!r} names a bucket but no key", field=field)
+    directory, _, name = url.rpartition("/")
+    store = store_factory(directory)
+    local = scratch / "scenario" / name
+    local.parent.mkdir(parents=True, exist_ok=True)
+    local.write_bytes(store.get_bytes(name))
+    # the road network the scenario names, relative to it
+    from simcore.scenario.xosc import read_xml
+
+    root = read_xml(local, what="OpenSCENARIO file")
+    logic = root.find("RoadNetwork/LogicFile")
+    if logic is not None and logic.get("filepath") and not str(logic.get("filepath")).startswith("$"):
+        relative = str(logic.get("filepath"))
+        target = (local.parent / relative).resolve()
+        if scratch.resolve() not in target.parents:
+            raise BadInput(f"road file {relative!r} points outside the scenario's folder", field=field)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        key = "/".join(part for part in Path(relative).as_posix().split("/") if part not in ("", "."))
+        if ".." in key.split("/"):
+            raise BadInput(f"road file {relative!r}: '..' is not supported for s3:// scenarios", field=field)
+        target.write_bytes(store.get_bytes(key))
+    return local
+
+
+def simulate(
+    run: SimulationRun,
+    point: RunPoint,
+    scenario_file: Path,
+    out_dir: Path,
+    *,
+    progress: Progress | None = None,
+    deadline: float | None = None,
+) -> tuple[dict[str, float], str, float, list[str]]:
+    """Run the simulation of one index, recording into `out_dir/recording.mcap`.
+
+    Returns (metrics, end reason, simulated seconds, storyboard log)."""
+    from simcore.recorder import McapRecorder
+    from simcore.scenario.engine import ScenarioEngine
+    from simcore.scenario.xosc import load_scenario
+    from simcore.world.opendrive import OpenDrive, OpenDriveError
+    from simcore.world.sumo import SumoWorld, prepare_network
+
+    spec = run.spec
+    scenario = load_scenario(scenario_file, point.parameters)
+    road = None
+    sumo = None
+    if scenario.road_file is not None:
+        try:
+            road = OpenDrive.from_file(scenario.road_file) if scenario.road_file.suffix == ".xodr" else None
+        except OpenDriveError as exc:
+            raise BadInput(str(exc), file=str(scenario.road_file)) from None
+        except FileNotFoundError:
+            raise BadInput("road network file not found", file=str(scenario.road_file)) from None
+        network = prepare_network(scenario.road_file)
+        sumo = SumoWorld(network, spec.simulation.step_seconds, point.seed)
+    metadata = {
+        "carlos.spec": {"manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))},
+        "carlos.run": {
+            "run": run.name,
+            "index": str(point.index),
+            "scenario": point.scenario.name,
+            "scenarioFile": str(scenario_file),
+            "parameters": json.dumps(point.parameters, sort_keys=True),
+            "resolvedParameters": json.dumps(scenario.parameters, sort_keys=True, default=str),
+            "seed": str(point.seed),
+            "stepSeconds": repr(spec.simulation.step_seconds),
+        },
+        "carlos.versions": versions(),
+    }
+    metrics = MetricsAccumulator()
+    recorder = None
+    try:
+        engine = ScenarioEngine(
+            scenario, road=road, sumo=sumo, step_seconds=spec.simulation.step_seconds, ego=spec.simulation.ego
+        )
+        if spec.recording.enabled:
+            recorder = McapRecorder(
+                out_dir / "recording.mcap",
+                topics=spec.recording.topics,
+                compression=spec.recording.compression,
+                metadata=metadata,
+            )
+        frame = engine.frame()
+        metrics.update(frame)
+        if recorder is not None:
+            recorder.write_frame(frame)
+        max_steps = round(spec.simulation.max_seconds / spec.simulation.step_seconds)
+        reported = 0.0
+        while not engine.ended and engine.step_index < max_steps:
+            frame = engine.step()
+            metrics.update(frame)
+            if recorder is not None:
+                recorder.write_frame(frame)
+            if progress is not None and frame.time - reported >= 1.0:
+                reported = frame.time
+                progress(point.index, frame.time)
+            if deadline is not None and engine.step_index % 100 == 0 and time.monotonic() > deadline:
+                raise SimulationError(
+                    f"run exceeded execution.timeoutSeconds={spec.execution.timeout_seconds} "
+                    f"at simulated t={frame.time:.1f} s"
+                )
+        if recorder is not None:
+            from simcore.transport import messages
+
+            recorder.write("/carlos/status", "diagnostic_msgs/msg/DiagnosticStatus", messages.status(frame, "ended"), frame.time)
+            recorder.close()
+            recorder = None
+    finally:
+        if recorder is not None:
+            recorder.abort()
+        if sumo is not None:
+            sumo.close()
+    result = metrics.result()
+    end_reason = engine.ended_by or "maxSeconds"
+    result["stopTriggered"] = 1.0 if end_reason == "stopTrigger" else 0.0
+    return result, end_reason, engine.time, engine.log
+
+
+def run_index(
+    run: SimulationRun,
+    index: int,
+    *,
+    base_dir: Path,
+    store: Store,
+    store_factory: Callable[[str], Store],
+    attempt: int = 1,
+    final_attempt: bool = True,
+    progress: Progress | None = None,
+    scratch_root: Path | None = None,
+) -> RunOutcome:
+    """Run one index and upload its results; never raises for problems of the run itself (object-store
+    failures do raise `StoreError`). An infrastructure error on an attempt that will be retried uploads
+    its log but no summary, so the index does not look complete."""
+    plan = Plan(run.spec)
+    point = plan[index]
+    criteria = [*run.spec.evaluation.criteria, *point.scenario.criteria]
+    started = time.monotonic()
+    deadline = started + run.spec.execution.timeout_seconds
+    metrics: dict[str, float] = {}
+    results: list[CriterionResult] = []
+    error: str | None = None
+    end_reason = "error"
+    sim_seconds = 0.0
+    exit_code = ExitCode.PASSED
+    log_lines: list[str] = [f"carlos run {run.name} index {index}: scenario {point.scenario.name}, seed {point.seed}"]
+    log_lines.append(f"parameters: {json.dumps(point.parameters, sort_keys=True)}")
+    prefix = f"{run.name}/{index}"
+    with tempfile.TemporaryDirectory(prefix=f"carlos-{index}-", dir=scratch_root) as scratch_name:
+        scratch = Path(scratch_name)
+        try:
+            scenario_file = resolve_scenario_file(point, base_dir, scratch, store_factory)
+            metrics, end_reason, sim_seconds, storyboard_log = simulate(
+                run, point, scenario_file, scratch, progress=progress, deadline=deadline
+            )
+            log_lines.extend(storyboard_log)
+            results = evaluate(criteria, metrics)
+        except CarlosError as exc:
+            error = str(exc)
+            exit_code = exc.exit_code
+            log_lines.append(f"error: {error}")
+        except Exception as exc:  # a crash of the simulator is an infrastructure error of this index
+            error = f"{type(exc).__name__}: {exc}"
+            exit_code = ExitCode.INFRASTRUCTURE
+            log_lines.append("error: " + error)
+            log_lines.append(traceback.format_exc())
+        summary = index_summary(
+            index=index,
+            scenario=point.scenario.name,
+            parameters=point.parameters,
+            seed=point.seed,
+            optional=point.scenario.optional,
+            sim_seconds=sim_seconds,
+            wall_seconds=time.monotonic() - started,
+            metrics=metrics,
+            results=results,
+            error=error,
+            end_reason=end_reason if error is None else "error",  # type: ignore[arg-type]
+            attempts=attempt,
+        )
+        if error is None and summary["status"] == "failed":
+            exit_code = ExitCode.FAILED
+        log_lines.append(f"status: {summary['status']}")
+        recording = scratch / "recording.mcap"
+        if recording.is_file():
+            store.put_file(f"{prefix}/recording.mcap", recording)
+        store.put_bytes(f"{prefix}/log.txt", ("\n".join(log_lines) + "\n").encode())
+        if exit_code == ExitCode.INFRASTRUCTURE and not final_attempt:
+            return RunOutcome(index=index, summary=summary, exit_code=exit_code)
+        store.put_bytes(f"{prefix}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode())
+    return RunOutcome(index=index, summary=summary, exit_code=exit_code)
