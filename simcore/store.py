@@ -1,0 +1,398 @@
+"""Object store for results: `file://PATH` and `s3://bucket/prefix` (DESIGN.md, "Object store layout").
+
+Keys are relative, `/`-separated (`<run>/<index>/summary.json`). Writes are atomic in both backends: a
+reader never sees a half-written object under its final key.
+
+- :class:`FileStore`: a temporary file in the target's directory, fsync, `os.replace`, fsync of the
+  directory. Relative paths are taken from the working directory when the store is opened.
+- :class:`S3Store` (boto3): a PUT is atomic; `put_file` uses `upload_file`, multipart above the threshold,
+  and S3 makes the key visible only when the multipart upload completes (a failed upload is aborted).
+  The endpoint comes from the argument, else `AWS_ENDPOINT_URL_S3` / `AWS_ENDPOINT_URL`, else AWS. The
+  credentials come only from the environment (`AWS_ACCESS_KEY_ID`, `AWS_SECRET_ACCESS_KEY`, optional
+  `AWS_SESSION_TOKEN`); they are never logged, and error messages are scrubbed of the secret.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import IO, Any, Protocol, runtime_checkable
+
+__all__ = [
+    "FileStore",
+    "NotFoundError",
+    "S3Store",
+    "Store",
+    "StoreError",
+    "open_store",
+]
+
+_TMP_PREFIX = ".carlos-tmp-"
+
+
+class StoreError(RuntimeError):
+    """An object-store operation failed; the message names the object and the cause (never a secret)."""
+
+
+class NotFoundError(StoreError):
+    """The object does not exist."""
+
+
+@runtime_checkable
+class Store(Protocol):
+    """What the executor, the pods and the reports need from an object store."""
+
+    def put_file(self, key: str, local_path: str | os.PathLike[str]) -> None: ...
+
+    def put_bytes(self, key: str, data: bytes) -> None: ...
+
+    def get_bytes(self, key: str) -> bytes: ...
+
+    def exists(self, key: str) -> bool: ...
+
+    def list(self, prefix: str = "") -> list[str]: ...
+
+    def url_for(self, key: str) -> str: ...
+
+
+def _check_key(key: str) -> str:
+    if not isinstance(key, str) or not key:
+        raise ValueError(f"object key must be a non-empty string, not {key!r}")
+    if key.startswith("/") or "\\" in key or "\x00" in key:
+        raise ValueError(f"object key {key!r} must be relative and use '/' as separator")
+    parts = key.split("/")
+    if any(part in ("", ".", "..") for part in parts):
+        raise ValueError(f"object key {key!r} has an empty, '.' or '..' component")
+    return key
+
+
+def _check_prefix(prefix: str) -> str:
+    if prefix.startswith("/") or "\\" in prefix or ".." in prefix.split("/"):
+        raise ValueError(f"prefix {prefix!r} must be relative, without '..'")
+    return prefix
+
+
+def open_store(url: str, *, endpoint: str | None = None, region: str | None = None) -> Store:
+    """The store for an `output.url`: `file://PATH` (relative to the working directory) or
+    `s3://bucket/prefix`. An S3 store checks at once that the bucket exists and is accessible."""
+    if url.startswith("file://"):
+        path = url[len("file://") :]
+        if not path:
+            raise ValueError(f"{url!r}: file:// needs a path, e.g. file://./results")
+        return FileStore(path)
+    if url.startswith("s3://"):
+        store = S3Store.from_url(url, endpoint=endpoint, region=region)
+        store.check_bucket()
+        return store
+    raise ValueError(f"unsupported store URL {url!r}: use file://PATH or s3://bucket/prefix")
+
+
+# --- file:// --------------------------------------------------------------------------------------------
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:  # pragma: no cover - platforms without directory fds
+        return
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+class FileStore:
+    """A directory as object store (atomic writes, directories created as needed)."""
+
+    def __init__(self, root: str | os.PathLike[str]) -> None:
+        self.root = Path(root).expanduser().absolute()
+
+    def __repr__(self) -> str:
+        return f"FileStore({str(self.root)!r})"
+
+    def _path(self, key: str) -> Path:
+        return self.root.joinpath(*_check_key(key).split("/"))
+
+    @contextlib.contextmanager
+    def _atomic(self, key: str) -> Iterator[IO[bytes]]:
+        target = self._path(key)
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=_TMP_PREFIX + target.name + ".")
+        except OSError as exc:
+            raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
+        try:
+            with os.fdopen(fd, "wb") as f:
+                yield f
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, target)
+        except BaseException as exc:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            if isinstance(exc, OSError):
+                raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
+            raise
+        _fsync_dir(target.parent)
+
+    def put_bytes(self, key: str, data: bytes) -> None:
+        with self._atomic(key) as f:
+            f.write(data)
+
+    def put_file(self, key: str, local_path: str | os.PathLike[str]) -> None:
+        try:
+            src = open(local_path, "rb")  # noqa: SIM115 - closed below
+        except OSError as exc:
+            raise StoreError(f"cannot read {local_path}: {exc.strerror or exc}") from exc
+        with src, self._atomic(key) as f:
+            shutil.copyfileobj(src, f, 1024 * 1024)
+
+    def get_bytes(self, key: str) -> bytes:
+        path = self._path(key)
+        try:
+            return path.read_bytes()
+        except FileNotFoundError:
+            raise NotFoundError(f"{self.url_for(key)} does not exist") from None
+        except OSError as exc:
+            raise StoreError(f"cannot read {path}: {exc.strerror or exc}") from exc
+
+    def exists(self, key: str) -> bool:
+        return self._path(key).is_file()
+
+    def list(self, prefix: str = "") -> list[str]:
+        """Keys starting with `prefix` (a plain string prefix, as in S3), sorted."""
+        _check_prefix(prefix)
+        # walk only below the deepest directory the prefix names
+        head = prefix.rsplit("/", 1)[0] if "/" in prefix else ""
+        start = self.root.joinpath(*head.split("/")) if head else self.root
+        if not start.is_dir():
+            return []
+        keys: list[str] = []
+        for dirpath, _dirnames, filenames in os.walk(start):
+            rel = Path(dirpath).relative_to(self.root).as_posix()
+            for name in filenames:
+                if name.startswith(_TMP_PREFIX):
+                    continue
+                key = name if rel == "." else f"{rel}/{name}"
+                if key.startswith(prefix):
+                    keys.append(key)
+        return sorted(keys)
+
+    def url_for(self, key: str) -> str:
+        return self._path(key).as_uri()
+
+
+# --- s3:// ----------------------------------------------------------------------------------------------
+
+_CREDENTIAL_HINT = "check AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY"
+
+
+class S3Store:
+    """An S3 bucket (AWS, MinIO, Ceph, SeaweedFS) under an optional key prefix."""
+
+    def __init__(
+        self,
+        bucket: str,
+        prefix: str = "",
+        *,
+        endpoint: str | None = None,
+        region: str | None = None,
+        max_attempts: int = 5,
+        connect_timeout: float = 10.0,
+        read_timeout: float = 60.0,
+        multipart_threshold: int = 64 * 1024 * 1024,
+        multipart_chunksize: int = 16 * 1024 * 1024,
+    ) -> None:
+        import boto3
+        from boto3.s3.transfer import TransferConfig
+        from botocore.config import Config
+
+        if not bucket:
+            raise ValueError("S3 bucket name is empty")
+        self.bucket = bucket
+        self.prefix = prefix.strip("/")
+        env = os.environ
+        self.endpoint = endpoint or env.get("AWS_ENDPOINT_URL_S3") or env.get("AWS_ENDPOINT_URL") or None
+        self.region = region or env.get("AWS_REGION") or env.get("AWS_DEFAULT_REGION") or "us-east-1"
+        access_key = env.get("AWS_ACCESS_KEY_ID")
+        secret_key = env.get("AWS_SECRET_ACCESS_KEY")
+        session_token = env.get("AWS_SESSION_TOKEN") or None
+        if not access_key or not secret_key:
+            raise StoreError(
+                f"no S3 credentials for s3://{bucket}: set AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY "
+                "in the environment"
+            )
+        self._secrets = tuple(s for s in (secret_key, session_token) if s)
+        config = Config(
+            retries={"mode": "standard", "max_attempts": max_attempts},
+            connect_timeout=connect_timeout,
+            read_timeout=read_timeout,
+            # MinIO, Ceph and SeaweedFS are addressed by path; AWS itself picks virtual hosts
+            s3={"addressing_style": "path"} if self.endpoint else {},
+        )
+        session = boto3.session.Session(
+            aws_access_key_id=access_key,
+            aws_secret_access_key=secret_key,
+            aws_session_token=session_token,
+            region_name=self.region,
+        )
+        self._client: Any = session.client("s3", endpoint_url=self.endpoint, config=config)
+        self._transfer = TransferConfig(
+            multipart_threshold=multipart_threshold,
+            multipart_chunksize=multipart_chunksize,
+            max_concurrency=4,
+        )
+
+    @classmethod
+    def from_url(
+        cls, url: str, *, endpoint: str | None = None, region: str | None = None, **kwargs: Any
+    ) -> S3Store:
+        if not url.startswith("s3://"):
+            raise ValueError(f"{url!r} is not an s3:// URL")
+        bucket, _, prefix = url[len("s3://") :].partition("/")
+        if not bucket:
+            raise ValueError(f"{url!r}: no bucket, write s3://bucket/prefix")
+        return cls(bucket, prefix, endpoint=endpoint, region=region, **kwargs)
+
+    def __repr__(self) -> str:
+        return f"S3Store(s3://{self.bucket}/{self.prefix}, endpoint={self.endpoint or 'AWS'})"
+
+    # --- helpers -----------------------------------------------------------------------------------------
+
+    def _key(self, key: str) -> str:
+        _check_key(key)
+        return f"{self.prefix}/{key}" if self.prefix else key
+
+    def _redact(self, text: str) -> str:
+        for secret in self._secrets:
+            text = text.replace(secret, "***")
+        return text
+
+    def _where(self) -> str:
+        return self.endpoint or "AWS"
+
+    def _error(self, op: str, target: str, exc: BaseException) -> StoreError:
+        from botocore.exceptions import ClientError, EndpointConnectionError
+
+        cause: BaseException | None = exc
+        while cause is not None and not isinstance(cause, (ClientError, EndpointConnectionError)):
+            cause = cause.__cause__ or cause.__context__
+        error_class: type[StoreError] = StoreError
+        if isinstance(cause, ClientError):
+            err = cause.response.get("Error", {})
+            code = str(err.get("Code", ""))
+            status = cause.response.get("ResponseMetadata", {}).get("HTTPStatusCode")
+            if code == "NoSuchBucket":
+                reason = f"bucket {self.bucket!r} does not exist"
+            elif code in ("NoSuchKey", "NotFound", "404"):
+                reason = "no such object"
+                error_class = NotFoundError
+            elif code == "InvalidAccessKeyId":
+                reason = f"the access key id is not known to the server ({_CREDENTIAL_HINT})"
+            elif code == "SignatureDoesNotMatch":
+                reason = f"the request signature does not match: wrong secret key ({_CREDENTIAL_HINT})"
+            elif code in ("AccessDenied", "403", "Forbidden") or status == 403:
+                reason = f"access denied ({_CREDENTIAL_HINT} and the bucket policy)"
+            else:
+                reason = f"{code or status}: {err.get('Message', '')}".rstrip(": ")
+        elif isinstance(cause, EndpointConnectionError):
+            reason = f"cannot connect to the endpoint {self._where()}"
+        else:
+            reason = f"{type(exc).__name__}: {exc}"
+        return error_class(self._redact(f"S3 {op} {target} (endpoint {self._where()}) failed: {reason}"))
+
+    # --- API ---------------------------------------------------------------------------------------------
+
+    def check_bucket(self) -> None:
+        """Raise StoreError unless the bucket exists and the credentials may use it."""
+        from botocore.exceptions import BotoCoreError, ClientError
+
+        try:
+            self._client.head_bucket(Bucket=self.bucket)
+        except ClientError as exc:
+            code = str(exc.response.get("Error", {}).get("Code", ""))
+            if code in ("404", "NoSuchBucket", "NotFound"):
+                raise StoreError(
+                    f"S3 bucket {self.bucket!r} does not exist at {self._where()}: create it first"
+                ) from exc
+            raise self._error("access to bucket", f"s3://{self.bucket}", exc) from exc
+        except BotoCoreError as exc:
+            raise self._error("access to bucket", f"s3://{self.bucket}", exc) from exc
+
+    def put_bytes(self, key: str, data: bytes) -> None:
+        from botocore.exceptions import BotoCoreError, ClientError
+
+        full = self._key(key)
+        try:
+            self._client.put_object(Bucket=self.bucket, Key=full, Body=data)
+        except (BotoCoreError, ClientError) as exc:
+            raise self._error("put", self.url_for(key), exc) from exc
+
+    def put_file(
+        self,
+        key: str,
+        local_path: str | os.PathLike[str],
+        *,
+        progress: Callable[[int], None] | None = None,
+    ) -> None:
+        """Upload a file (multipart above the threshold); `progress` is called with bytes sent so far
+        per part (boto3's Callback). The key appears only once the whole upload has completed."""
+        from boto3.exceptions import S3UploadFailedError
+        from botocore.exceptions import BotoCoreError, ClientError
+
+        full = self._key(key)
+        if not Path(local_path).is_file():
+            raise StoreError(f"cannot upload {local_path} to {self.url_for(key)}: not a file")
+        try:
+            self._client.upload_file(
+                os.fspath(local_path), self.bucket, full, Config=self._transfer, Callback=progress
+            )
+        except (BotoCoreError, ClientError, S3UploadFailedError) as exc:
+            raise self._error("upload", self.url_for(key), exc) from exc
+
+    def get_bytes(self, key: str) -> bytes:
+        from botocore.exceptions import BotoCoreError, ClientError
+
+        full = self._key(key)
+        try:
+            response = self._client.get_object(Bucket=self.bucket, Key=full)
+            return bytes(response["Body"].read())
+        except (BotoCoreError, ClientError) as exc:
+            raise self._error("get", self.url_for(key), exc) from exc
+
+    def exists(self, key: str) -> bool:
+        from botocore.exceptions import BotoCoreError, ClientError
+
+        full = self._key(key)
+        try:
+            self._client.head_object(Bucket=self.bucket, Key=full)
+        except ClientError as exc:
+            error = self._error("head", self.url_for(key), exc)
+            if isinstance(error, NotFoundError):
+                return False
+            raise error from exc
+        except BotoCoreError as exc:
+            raise self._error("head", self.url_for(key), exc) from exc
+        return True
+
+    def list(self, prefix: str = "") -> list[str]:
+        """Keys (relative to the store's prefix) starting with `prefix`, sorted."""
+        from botocore.exceptions import BotoCoreError, ClientError
+
+        _check_prefix(prefix)
+        base = f"{self.prefix}/" if self.prefix else ""
+        keys: list[str] = []
+        try:
+            paginator = self._client.get_paginator("list_objects_v2")
+            for page in paginator.paginate(Bucket=self.bucket, Prefix=base + prefix):
+                keys.extend(obj["Key"][len(base) :] for obj in page.get("Contents", []))
+        except (BotoCoreError, ClientError) as exc:
+            raise self._error("list", f"s3://{self.bucket}/{base}{prefix}", exc) from exc
+        return sorted(keys)
+
+    def url_for(self, key: str) -> str:
+        return f"s3://{self.bucket}/{self._key(key)}"
