@@ -539,3 +539,63 @@ def test_against_esmini_reference(scenario: str) -> None:
             assert od.roads[rc.road_id].junction != "-1" or od.roads[road_id].junction != "-1", where
         checked += 1
     assert checked >= 20, f"{scenario}: only {checked} lane-following rows"
+
+
+def _corpus_network(name: str) -> OpenDrive:
+    path = CORPUS / "resources" / "xodr" / name
+    if not path.is_file():
+        pytest.skip(f"reference corpus not available at {CORPUS}")
+    return _network(str(path.resolve()))
+
+
+@pytest.mark.parametrize(
+    "name", ["fabriksgatan.xodr", "multi_intersections.xodr", "soderleden.xodr", "parking_demo.xodr"]
+)
+def test_successor_links_are_geometrically_continuous(name: str) -> None:
+    """Every successor() step of every driving lane in real junction networks lands where the lane left off,
+    with the same direction of travel."""
+    od = _corpus_network(name)
+    followed = 0
+    for road_id, road in od.roads.items():
+        for direction in (1, -1):
+            sec = road.lane_sections[-1] if direction > 0 else road.lane_sections[0]
+            for lane in sec.left + sec.right:
+                if lane.type != "driving":
+                    continue
+                nxt = od.successor(road_id, lane.id, direction)
+                if nxt is None:
+                    continue
+                road2, lane2, direction2 = nxt
+                p = od.lane_to_world(road_id, lane.id, road.length if direction > 0 else 0.0)
+                q = od.lane_to_world(road2, lane2, 0.0 if direction2 > 0 else od.road_length(road2))
+                where = f"{name}: road {road_id} lane {lane.id} dir {direction} -> {nxt}"
+                assert math.hypot(p.x - q.x, p.y - q.y) < 0.05, where
+                hp = p.heading + (0.0 if direction > 0 else math.pi)
+                hq = q.heading + (0.0 if direction2 > 0 else math.pi)
+                assert abs(_wrap(hp - hq)) < 0.02, where
+                followed += 1
+    assert followed >= 5
+
+
+@pytest.mark.parametrize("name", ["fabriksgatan.xodr", "multi_intersections.xodr", "velodrome.xodr"])
+def test_world_to_road_round_trip(name: str) -> None:
+    """Random points inside lanes map back to a road position at the same world point (same road: same lane)."""
+    od = _corpus_network(name)
+    rng = np.random.default_rng(7)
+    for road_id, road in od.roads.items():
+        for s in rng.uniform(0.01, road.length - 0.01, 6):
+            ids = od.lane_ids(road_id, float(s))
+            if not ids:
+                continue
+            lane_id = ids[int(rng.integers(len(ids)))]
+            offset = float(rng.uniform(-0.45, 0.45)) * od.lane_width(road_id, lane_id, float(s))
+            p = od.lane_to_world(road_id, lane_id, float(s), offset)
+            rc = od.world_to_road(p.x, p.y, p.z)
+            where = f"{name}: road {road_id} lane {lane_id} s={s:.3f} offset={offset:.3f}"
+            assert rc is not None, where
+            q = od.road_to_world(rc.road_id, rc.s, rc.t)
+            assert math.hypot(q.x - p.x, q.y - p.y) < 1e-3 and abs(q.z - p.z) < 1e-3, f"{where}: {rc}"
+            if rc.road_id == road_id:
+                assert rc.lane_id == lane_id and rc.offset == pytest.approx(offset, abs=1e-3), (
+                    f"{where}: {rc}"
+                )

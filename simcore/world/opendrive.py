@@ -1180,11 +1180,11 @@ class OpenDrive:
                 offset = t - 0.5 * (inner + outer)
                 dz = abs(z - road.world_xyz(s, t)[2]) if z is not None else 0.0
                 key = (
-                    0.0 if outside == 0.0 else 1.0,
+                    0.0 if outside == 0.0 and abs(along) < 1e-6 else 1.0,
                     0.0 if dz < 2.0 else 1.0,
                     0.0 if road.id == road_hint else 1.0,
                     dz,
-                    outside,
+                    outside + abs(along),
                     abs(offset) / max(width, 1e-6),
                 )
                 _, _, h = road.reference_xyh(s)
