@@ -730,3 +730,41 @@ def test_testcase_names_and_escaping() -> None:
     case = root.find("testsuite/testcase")
     assert case is not None and case.get("name") == case_name(s)
     assert xml.startswith('<?xml version="1.0" encoding="UTF-8"?>')
+
+
+poses = st.tuples(coords, coords, st.floats(-math.pi, math.pi))
+
+
+@settings(max_examples=300, deadline=None)
+@given(poses, poses, st.floats(0.2, 40.0), st.floats(-40.0, 40.0))
+def test_accumulator_agrees_with_corner_geometry(
+    ego_pose: tuple[float, float, float], other_pose: tuple[float, float, float], v_ego: float, v_other: float
+) -> None:
+    """One frame: the accumulator's distance, collision, headway and TTC against the same quantities
+    computed directly from `corners()` in the ego's frame."""
+    ego = car("ego", *ego_pose[:2], heading=ego_pose[2], speed=v_ego)
+    other = car("other", *other_pose[:2], heading=other_pose[2], speed=v_other, length=3.0, width=2.5)
+    acc = MetricsAccumulator()
+    acc.update(frame(0.0, ego, other))
+    m = acc.result()
+    a, b = Box.of(ego), Box.of(other)
+    assert m["minDistance"] == box_distance(a, b)
+    assert m["collision"] == (1.0 if boxes_overlap(a, b) else 0.0)
+
+    fx, fy = math.cos(ego.heading), math.sin(ego.heading)
+    ex, ey, _ = ego.box_center()
+    ox, oy, _ = other.box_center()
+    lon = (ox - ex) * fx + (oy - ey) * fy
+    lat = -(ox - ex) * fy + (oy - ey) * fx
+    along = [x * fx + y * fy for x, y in b.corners]
+    ego_along = [x * fx + y * fy for x, y in a.corners]
+    if lon > 0 and abs(lat) <= 1.75:
+        gap = max(min(along) - max(ego_along), 0.0)
+        assert m["minTimeHeadway"] == pytest.approx(gap / v_ego, abs=1e-9)
+        closing = v_ego - v_other * math.cos(other.heading - ego.heading)
+        if closing > 0.02:
+            assert m["minTimeToCollision"] == pytest.approx(gap / closing, rel=1e-9, abs=1e-9)
+        elif closing < 0.005:
+            assert "minTimeToCollision" not in m
+    else:
+        assert "minTimeHeadway" not in m and "minTimeToCollision" not in m

@@ -96,45 +96,57 @@ class Box(NamedTuple):
         return cls((c0, c1, c2, c3), ((c, s), (-s, c)))
 
 
+def _axis_gap(a: Box, b: Box, ax: float, ay: float) -> float:
+    """Gap between the projections of the boxes on the axis (negative when they overlap on it)."""
+    (a0x, a0y), (a1x, a1y), (a2x, a2y), (a3x, a3y) = a.corners
+    (b0x, b0y), (b1x, b1y), (b2x, b2y), (b3x, b3y) = b.corners
+    p0, p1, p2, p3 = a0x * ax + a0y * ay, a1x * ax + a1y * ay, a2x * ax + a2y * ay, a3x * ax + a3y * ay
+    q0, q1, q2, q3 = b0x * ax + b0y * ay, b1x * ax + b1y * ay, b2x * ax + b2y * ay, b3x * ax + b3y * ay
+    return max(min(q0, q1, q2, q3) - max(p0, p1, p2, p3), min(p0, p1, p2, p3) - max(q0, q1, q2, q3))
+
+
 def separation(a: Box, b: Box) -> float:
     """Largest gap between the projections of `a` and `b` on the four candidate separating axes.
 
     Positive: the boxes are disjoint and at least that far apart (a lower bound of `box_distance`).
     Zero or negative: no candidate axis separates them: they touch or overlap (separating-axis theorem)."""
-    best = -math.inf
-    for ax, ay in (*a.axes, *b.axes):
-        pa = [x * ax + y * ay for x, y in a.corners]
-        pb = [x * ax + y * ay for x, y in b.corners]
-        gap = max(min(pb) - max(pa), min(pa) - max(pb))
-        if gap > best:
-            best = gap
-    return best
+    (f1, l1), (f2, l2) = a.axes, b.axes
+    return max(
+        _axis_gap(a, b, f1[0], f1[1]),
+        _axis_gap(a, b, l1[0], l1[1]),
+        _axis_gap(a, b, f2[0], f2[1]),
+        _axis_gap(a, b, l2[0], l2[1]),
+    )
 
 
 def boxes_overlap(a: Box, b: Box) -> bool:
-    """Whether the boxes overlap or touch (within `TOUCH_TOLERANCE`): the separating-axis test."""
-    return separation(a, b) <= TOUCH_TOLERANCE
-
-
-def _point_segment_distance(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
-    dx, dy = bx - ax, by - ay
-    length2 = dx * dx + dy * dy
-    t = 0.0 if length2 == 0.0 else max(0.0, min(1.0, ((px - ax) * dx + (py - ay) * dy) / length2))
-    return math.hypot(px - ax - t * dx, py - ay - t * dy)
+    """Whether the boxes overlap or touch (within `TOUCH_TOLERANCE`): the separating-axis test.
+    Equivalent to `separation(a, b) <= TOUCH_TOLERANCE`, stopping at the first separating axis."""
+    return all(_axis_gap(a, b, ax, ay) <= TOUCH_TOLERANCE for ax, ay in (*a.axes, *b.axes))
 
 
 def _disjoint_distance(a: Box, b: Box) -> float:
     """Distance between two disjoint convex polygons: the nearest pair is a vertex of one and an edge
-    of the other."""
+    of the other (squared distances compared, one square root)."""
     best = math.inf
     for p, q in ((a.corners, b.corners), (b.corners, a.corners)):
-        for px, py in p:
-            for i in range(4):
-                (x0, y0), (x1, y1) = q[i - 1], q[i]
-                d = _point_segment_distance(px, py, x0, y0, x1, y1)
-                if d < best:
-                    best = d
-    return best
+        for i in range(4):
+            x0, y0 = q[i - 1]
+            x1, y1 = q[i]
+            dx, dy = x1 - x0, y1 - y0
+            length2 = dx * dx + dy * dy
+            for px, py in p:
+                rx, ry = px - x0, py - y0
+                if length2 > 0.0:
+                    t = (rx * dx + ry * dy) / length2
+                    if t > 1.0:
+                        rx, ry = px - x1, py - y1
+                    elif t > 0.0:
+                        rx, ry = rx - t * dx, ry - t * dy
+                d2 = rx * rx + ry * ry
+                if d2 < best:
+                    best = d2
+    return math.sqrt(best)
 
 
 def box_distance(a: Box, b: Box) -> float:
@@ -260,15 +272,18 @@ class MetricsAccumulator:
                     c0, c1, c2, c3 = ego.corners()
                     ego_box = Box((c0, c1, c2, c3), ((fx, fy), (-fy, fx)))
                 other_box = Box.of(other)
-                if boxes_overlap(ego_box, other_box):
+                gap = separation(ego_box, other_box)  # <= TOUCH_TOLERANCE: overlap; else <= the distance
+                if gap <= TOUCH_TOLERANCE:
                     distance = 0.0
                     if not self._collision:
                         self._collision = True
                         self._collision_time = t
                         self._collision_with = other.name
                     self._collision_entities.setdefault(other.name, None)
-                else:
+                elif gap < self._min_distance:
                     distance = _disjoint_distance(ego_box, other_box)
+                else:
+                    distance = math.inf
                 if distance < self._min_distance:
                     self._min_distance = distance
                     self._min_distance_with = other.name
@@ -314,7 +329,7 @@ class MetricsAccumulator:
         if self._has_ego and self._prev is not None:
             out["collision"] = 1.0 if self._collision else 0.0
             if self._collision_time is not None:
-                out["collisionTime"] = self._collision_time
+                out["collisionTime"] = float(self._collision_time)
             if self._min_distance < math.inf:
                 out["minDistance"] = self._min_distance
             if self._min_thw < math.inf:
@@ -323,14 +338,14 @@ class MetricsAccumulator:
                 out["minTimeToCollision"] = self._min_ttc
             if self._min_lateral < math.inf:
                 out["minLateralDistance"] = self._min_lateral
-            out["maxDeceleration"] = self._max_dec
-            out["maxAcceleration"] = self._max_acc
-            out["maxSpeed"] = self._max_speed
+            out["maxDeceleration"] = float(self._max_dec)
+            out["maxAcceleration"] = float(self._max_acc)
+            out["maxSpeed"] = float(self._max_speed)
             duration = self._prev[0] - self._first_time
-            out["meanSpeed"] = self._speed_integral / duration if duration > 0 else self._prev[3]
-            out["egoDistance"] = self._distance
+            out["meanSpeed"] = float(self._speed_integral / duration if duration > 0 else self._prev[3])
+            out["egoDistance"] = float(self._distance)
         if self._sim_seconds is not None:
-            out["simSeconds"] = self._sim_seconds
+            out["simSeconds"] = float(self._sim_seconds)
         return out
 
     def details(self) -> dict[str, str | list[str]]:
