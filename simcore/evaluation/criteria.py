@@ -65,7 +65,9 @@ def _evaluate_one(criterion: CriterionModel, metrics: Mapping[str, float]) -> Cr
     actual = metrics.get(metric)
     if actual is None:
         if metric in KNOWN_METRICS:
-            message = f"metric {metric!r} was not measured in this run ({METRICS[metric]}), so {expected} cannot hold"
+            message = (
+                f"metric {metric!r} was not measured in this run ({METRICS[metric]}): {expected} cannot hold"
+            )
         else:
             message = (
                 f"unknown metric {metric!r}: it is not among this run's metrics "
