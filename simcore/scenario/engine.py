@@ -70,7 +70,6 @@ class SpeedRuntime(ActionRuntime):
         self.action = action
         self.v0 = 0.0
         self.elapsed = 0.0
-        self.start_odometer = 0.0
         self.duration = 0.0
 
     def target(self) -> float:
@@ -82,11 +81,16 @@ class SpeedRuntime(ActionRuntime):
 
     def start(self) -> None:
         self.v0 = self.actor.speed
-        self.start_odometer = self.actor.odometer
         dyn = self.action.dynamics
-        dv = abs(self.target() - self.v0)
+        target = self.target()
+        dv = abs(target - self.v0)
         if dyn.dimension == "rate":
             self.duration = dv / dyn.value * shape_peak_rate_factor(dyn.shape) if dyn.value > 0 else 0.0
+        elif dyn.dimension == "distance":
+            # every shape is symmetric, so the mean speed over the transition is (v0 + v1) / 2: the
+            # transition covers `value` metres in this time (as esmini does)
+            mean = (abs(self.v0) + abs(target)) / 2
+            self.duration = dyn.value / mean if mean > 1e-9 else 0.0
         else:
             self.duration = dyn.value
         if self.actor.entity.driver == "sumo":
@@ -114,10 +118,7 @@ class SpeedRuntime(ActionRuntime):
             return
         self.elapsed += dt
         dyn = self.action.dynamics
-        if dyn.dimension == "distance":
-            progress = (self.actor.odometer - self.start_odometer + self.actor.speed * dt) / max(dyn.value, 1e-9)
-        else:
-            progress = self.elapsed / max(self.duration, 1e-9)
+        progress = self.elapsed / max(self.duration, 1e-9)
         target = self.target()
         self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress))
         if progress >= 1.0 - 1e-9:
@@ -723,7 +724,7 @@ class ScenarioEngine:
                 self._release(node)
                 self._set(node, Transition.END, State.COMPLETE)
         self._complete_elements()
-        now = self.time + dt
+        now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         for body in self.bodies.values():
             if body.entity.driver == "sumo" or body.gone:
                 continue

@@ -1,0 +1,214 @@
+"""The scenario engine on the example highway: transition shapes, lane changes, storyboard semantics.
+
+Entities here are moved by the scenario alone (no SUMO), so every number is exact."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from simcore.errors import BadInput
+from simcore.scenario.engine import ScenarioEngine
+from simcore.scenario.xosc import load_scenario
+from simcore.world.opendrive import OpenDrive
+
+ROOT = Path(__file__).resolve().parents[1]
+HIGHWAY = ROOT / "examples" / "maps" / "highway.xodr"
+
+CAR = """
+<ScenarioObject name="{name}">
+  <Vehicle name="car" vehicleCategory="car">
+    <BoundingBox><Center x="1.4" y="0" z="0.75"/><Dimensions width="1.8" length="4.5" height="1.5"/></BoundingBox>
+    <Performance maxSpeed="70" maxAcceleration="5" maxDeceleration="9"/>
+    <Axles><FrontAxle maxSteering="0.5" wheelDiameter="0.6" trackWidth="1.6" positionX="2.8" positionZ="0.3"/>
+      <RearAxle maxSteering="0" wheelDiameter="0.6" trackWidth="1.6" positionX="0" positionZ="0.3"/></Axles>
+  </Vehicle>
+</ScenarioObject>"""
+
+
+def place(name: str, s: float, lane: int = -2, speed: float = 20.0) -> str:
+    return f"""
+<Private entityRef="{name}">
+  <PrivateAction><TeleportAction><Position><LanePosition roadId="1" laneId="{lane}" s="{s}" offset="0"/></Position></TeleportAction></PrivateAction>
+  <PrivateAction><LongitudinalAction><SpeedAction>
+    <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
+    <SpeedActionTarget><AbsoluteTargetSpeed value="{speed}"/></SpeedActionTarget>
+  </SpeedAction></LongitudinalAction></PrivateAction>
+</Private>"""
+
+
+def sim_time(rule: str, value: float, edge: str = "none", delay: float = 0.0) -> str:
+    return f"""<Condition name="t" delay="{delay}" conditionEdge="{edge}"><ByValueCondition>
+  <SimulationTimeCondition value="{value}" rule="{rule}"/></ByValueCondition></Condition>"""
+
+
+def speed_action(shape: str, dimension: str, value: float, target: float) -> str:
+    return f"""<PrivateAction><LongitudinalAction><SpeedAction>
+  <SpeedActionDynamics dynamicsShape="{shape}" dynamicsDimension="{dimension}" value="{value}"/>
+  <SpeedActionTarget><AbsoluteTargetSpeed value="{target}"/></SpeedActionTarget></SpeedAction></LongitudinalAction></PrivateAction>"""
+
+
+def event(name: str, action: str, trigger: str, priority: str = "override", count: int = 1) -> str:
+    return f"""<Event name="{name}" priority="{priority}" maximumExecutionCount="{count}">
+  <Action name="{name}Action">{action}</Action>
+  <StartTrigger><ConditionGroup>{trigger}</ConditionGroup></StartTrigger></Event>"""
+
+
+def scenario(tmp_path: Path, events: str, *, stop: str = "", entities: tuple[str, ...] = ("Ego",), init: str = "") -> Path:
+    init = init or place("Ego", 100.0)
+    text = f"""<?xml version="1.0"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
+  <ParameterDeclarations><ParameterDeclaration name="Target" parameterType="double" value="10"/></ParameterDeclarations>
+  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/></RoadNetwork>
+  <Entities>{"".join(CAR.format(name=n) for n in entities)}</Entities>
+  <Storyboard>
+    <Init><Actions>{init}</Actions></Init>
+    <Story name="S"><Act name="A">
+      <ManeuverGroup name="G" maximumExecutionCount="1"><Actors selectTriggeringEntities="false"><EntityRef entityRef="Ego"/></Actors>
+        <Maneuver name="M">{events}</Maneuver>
+      </ManeuverGroup>
+      <StartTrigger><ConditionGroup>{sim_time("greaterOrEqual", 0)}</ConditionGroup></StartTrigger>
+    </Act></Story>
+    <StopTrigger>{f"<ConditionGroup>{stop}</ConditionGroup>" if stop else ""}</StopTrigger>
+  </Storyboard>
+</OpenSCENARIO>"""
+    path = tmp_path / "s.xosc"
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture(scope="module")
+def road() -> OpenDrive:
+    return OpenDrive.from_file(HIGHWAY)
+
+
+def run(path: Path, road: OpenDrive, seconds: float, overrides: dict[str, float] | None = None) -> tuple[ScenarioEngine, dict[float, dict[str, float]]]:
+    engine = ScenarioEngine(load_scenario(path, overrides or {}), road=road, sumo=None, step_seconds=0.05)
+    trace = {}
+    while engine.time < seconds - 1e-9 and not engine.ended:
+        frame = engine.step()
+        ego = frame.entity("Ego")
+        trace[round(frame.time, 2)] = {"speed": ego.speed, "x": ego.x, "y": ego.y, "lane": ego.lane.lane_id if ego.lane else 0,
+                                        "offset": ego.lane.offset if ego.lane else 0.0, "s": ego.lane.s if ego.lane else 0.0}
+    return engine, trace
+
+
+@pytest.mark.parametrize(
+    ("shape", "dimension", "value", "checks"),
+    [
+        ("linear", "time", 4.0, {1.05: 20 - 10 * 1 / 4, 2.05: 15.0, 4.05: 10.0, 6.0: 10.0}),
+        ("cubic", "time", 4.0, {1.05: 20 - 10 * (3 * 0.25**2 - 2 * 0.25**3), 4.05: 10.0}),
+        ("sinusoidal", "time", 4.0, {2.05: 15.0, 1.05: 20 - 10 * (0.5 - 0.5 * math.cos(math.pi / 4))}),
+        ("linear", "rate", 2.5, {2.05: 15.0, 4.05: 10.0}),  # 10 m/s at 2.5 m/s² takes 4 s
+        ("step", "time", 0.0, {0.1: 10.0}),
+    ],
+)
+def test_speed_action_shapes(tmp_path: Path, road: OpenDrive, shape: str, dimension: str, value: float, checks: dict[float, float]) -> None:
+    # the event starts at t = 0.05 (its trigger is evaluated at the start of the step from 0.05): speeds are
+    # checked at times shifted by that step
+    path = scenario(tmp_path, event("Slow", speed_action(shape, dimension, value, 10.0), sim_time("greaterThan", 0.0)))
+    _, trace = run(path, road, 6.0)
+    for t, expected in checks.items():
+        assert trace[t]["speed"] == pytest.approx(expected, abs=1e-6), f"t={t}"
+
+
+def test_speed_over_distance_and_parameter_override(tmp_path: Path, road: OpenDrive) -> None:
+    action = speed_action("linear", "distance", 50.0, 10.0).replace('value="10.0"', 'value="$Target"')
+    path = scenario(tmp_path, event("Slow", action, sim_time("greaterThan", 0.0)))
+    _, trace = run(path, road, 8.0, {"Target": 0.0})
+    assert trace[8.0]["speed"] == pytest.approx(0.0)
+    # from 20 to 0 within 50 m (the transition starts with the step from t = 0.05; Euler steps: ±1 m)
+    travelled = trace[8.0]["s"] - trace[0.05]["s"]
+    assert travelled == pytest.approx(50.0, abs=1.0)
+
+
+def test_lane_change_moves_to_the_target_lane_centre(tmp_path: Path, road: OpenDrive) -> None:
+    change = """<PrivateAction><LateralAction><LaneChangeAction>
+      <LaneChangeActionDynamics dynamicsShape="sinusoidal" dynamicsDimension="time" value="3"/>
+      <LaneChangeTarget><RelativeTargetLane entityRef="Ego" value="1"/></LaneChangeTarget></LaneChangeAction></LateralAction></PrivateAction>"""
+    path = scenario(tmp_path, event("Change", change, sim_time("greaterThan", 1.0)))
+    engine, trace = run(path, road, 6.0)
+    assert trace[1.0]["lane"] == -2
+    assert trace[6.0]["lane"] == -1  # one lane to the left of -2 when driving toward +s
+    assert trace[6.0]["offset"] == pytest.approx(0.0, abs=1e-9)
+    # halfway through a sinusoidal change the vehicle is on the lane border: 1.75 m from either centre
+    mid = trace[2.55]
+    assert abs(mid["offset"]) == pytest.approx(1.75, abs=0.1)
+    centre = road.lane_to_world("1", -1, trace[6.0]["s"])
+    assert (trace[6.0]["x"], trace[6.0]["y"]) == pytest.approx((centre.x, centre.y), abs=1e-6)
+    assert any("Change: endTransition" in line for line in engine.log)
+
+
+def test_event_repeats_up_to_its_maximum_execution_count(tmp_path: Path, road: OpenDrive) -> None:
+    bump = """<PrivateAction><LongitudinalAction><SpeedAction>
+      <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
+      <SpeedActionTarget><RelativeTargetSpeed entityRef="Ego" value="1" speedTargetValueType="delta" continuous="false"/></SpeedActionTarget>
+      </SpeedAction></LongitudinalAction></PrivateAction>"""
+    path = scenario(tmp_path, event("Bump", bump, sim_time("greaterThan", 1.0), count=3))
+    engine, trace = run(path, road, 3.0)
+    assert trace[3.0]["speed"] == pytest.approx(23.0)
+    assert sum("event Bump: startTransition" in line for line in engine.log) == 3
+
+
+def test_state_condition_chains_events_and_stop_trigger_delay(tmp_path: Path, road: OpenDrive) -> None:
+    first = event("First", speed_action("linear", "time", 1.0, 15.0), sim_time("greaterThan", 1.0))
+    after_first = """<Condition name="c" delay="0" conditionEdge="none"><ByValueCondition>
+      <StoryboardElementStateCondition storyboardElementType="event" storyboardElementRef="First" state="endTransition"/>
+      </ByValueCondition></Condition>"""
+    second = event("Second", speed_action("step", "time", 0, 5.0), after_first)
+    path = scenario(tmp_path, first + second, stop=sim_time("greaterThan", 3.0, edge="rising", delay=1.0))
+    engine, trace = run(path, road, 20.0)
+    assert engine.ended_by == "stopTrigger"
+    assert engine.time == pytest.approx(4.05 + 0.05, abs=0.051)  # condition true at 3.05, +1 s delay
+    starts = {line.split()[2].rstrip(":"): float(line.split()[0]) for line in engine.log if "startTransition" in line and "event" in line}
+    assert starts["Second"] - starts["First"] == pytest.approx(1.0 + 0.05, abs=0.051)
+    assert trace[round(engine.time, 2)]["speed"] == pytest.approx(5.0)
+
+
+def test_override_priority_stops_the_running_event(tmp_path: Path, road: OpenDrive) -> None:
+    slow = event("Slow", speed_action("linear", "time", 10.0, 0.0), sim_time("greaterThan", 0.0))
+    fast = event("Fast", speed_action("step", "time", 0, 30.0), sim_time("greaterThan", 2.0), priority="override")
+    engine, trace = run(scenario(tmp_path, slow + fast), road, 4.0)
+    assert any("event Slow: stopTransition" in line for line in engine.log)
+    assert trace[4.0]["speed"] == pytest.approx(30.0)
+
+
+def test_relative_distance_trigger_with_two_entities(tmp_path: Path, road: OpenDrive) -> None:
+    init = place("Ego", 100.0, speed=30.0) + place("Lead", 200.0, speed=20.0)
+    close = """<Condition name="near" delay="0" conditionEdge="rising"><ByEntityCondition>
+      <TriggeringEntities triggeringEntitiesRule="any"><EntityRef entityRef="Ego"/></TriggeringEntities>
+      <EntityCondition><RelativeDistanceCondition entityRef="Lead" relativeDistanceType="longitudinal" freespace="true"
+        value="20" rule="lessThan"/></EntityCondition></ByEntityCondition></Condition>"""
+    path = scenario(tmp_path, event("Match", speed_action("step", "time", 0, 20.0), close), entities=("Ego", "Lead"), init=init)
+    engine, trace = run(path, road, 12.0)
+    start = next(float(line.split()[0]) for line in engine.log if "event Match: startTransition" in line)
+    # free space 100 - 4.5 = 95.5 m closing at 10 m/s → below 20 m after 7.55 s
+    assert start == pytest.approx(7.6, abs=0.1)
+    assert trace[12.0]["speed"] == pytest.approx(20.0)
+
+
+def test_unknown_parameter_override_is_bad_input(tmp_path: Path) -> None:
+    path = scenario(tmp_path, event("Slow", speed_action("step", "time", 0, 1.0), sim_time("greaterThan", 0.0)))
+    with pytest.raises(BadInput, match="Targt not declared"):
+        load_scenario(path, {"Targt": 1.0})
+
+
+def test_unsupported_action_names_the_element(tmp_path: Path) -> None:
+    path = scenario(tmp_path, event("X", "<PrivateAction><RoutingAction/></PrivateAction>", sim_time("greaterThan", 0.0)))
+    with pytest.raises(BadInput, match="RoutingAction is not supported yet") as info:
+        load_scenario(path)
+    assert "Maneuver[M]/Event[X]" in str(info.value)
+
+
+def test_hostile_xml_is_refused(tmp_path: Path) -> None:
+    bomb = tmp_path / "bomb.xosc"
+    bomb.write_text('<?xml version="1.0"?><!DOCTYPE x [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;">]><OpenSCENARIO>&b;</OpenSCENARIO>')
+    with pytest.raises(BadInput, match="forbidden XML"):
+        load_scenario(bomb)
+    broken = tmp_path / "broken.xosc"
+    broken.write_text("<OpenSCENARIO><Storyboard></OpenSCENARIO>")
+    with pytest.raises(BadInput, match="not well-formed"):
+        load_scenario(broken)
