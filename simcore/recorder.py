@@ -28,6 +28,7 @@ from typing import IO, Any, Literal, Self
 
 from mcap.writer import CompressionType, Writer
 
+from simcore.spec import Recording
 from simcore.transport.messages import frame_messages, msgdef, serialize
 from simcore.world.state import WorldFrame
 
@@ -131,6 +132,16 @@ class McapRecorder:
             self._file.close()
             self.part_path.unlink(missing_ok=True)
             raise
+
+    @classmethod
+    def for_recording(
+        cls,
+        path: str | os.PathLike[str],
+        recording: Recording,
+        metadata: Mapping[str, Mapping[str, str]] | None = None,
+    ) -> McapRecorder:
+        """A recorder configured by the spec's `recording` section (topics, compression)."""
+        return cls(path, topics=recording.topics, compression=recording.compression, metadata=metadata)
 
     # --- writing -----------------------------------------------------------------------------------------
 

@@ -13,6 +13,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
 from simcore.recorder import McapRecorder, RecorderError
+from simcore.spec import Recording
 from simcore.transport import messages
 from simcore.world.state import BoundingBox, EntityState, WorldFrame
 
@@ -215,6 +216,20 @@ def test_topic_filter(tmp_path: Path) -> None:
     assert meta == {}
     assert {m[0] for m in msgs} == {"/clock", "/carlos/Ego/odometry", "/carlos/lead_truck/odometry"}
     assert len(msgs) == 9
+
+
+def test_for_recording_uses_the_spec(tmp_path: Path) -> None:
+    recording = Recording.model_validate({"topics": ["/carlos/objects"], "compression": "lz4"})
+    path = tmp_path / "recording.mcap"
+    with McapRecorder.for_recording(path, recording, METADATA) as rec:
+        assert rec.compression == "lz4"
+        for frame in FRAMES[:4]:
+            assert rec.write_frame(frame) == 1
+    msgs, meta, _ = _read_mcap(path)
+    assert {m[0] for m in msgs} == {"/carlos/objects"} and len(msgs) == 4
+    assert meta == METADATA
+    with path.open("rb") as f:
+        assert {c.compression for c in make_reader(f).get_summary().chunk_indexes} == {"lz4"}  # type: ignore[union-attr]
 
 
 def test_crash_leaves_no_final_file(tmp_path: Path) -> None:

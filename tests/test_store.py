@@ -7,6 +7,7 @@ import os
 import re
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import boto3
 import pytest
@@ -15,7 +16,12 @@ from botocore.config import Config
 from botocore.exceptions import ConnectionClosedError
 
 from simcore.store import FileStore, NotFoundError, S3Store, Store, StoreError, open_store
-from tests.s3server import S3Server, s3_server  # noqa: F401 - the session fixture
+
+if TYPE_CHECKING:
+    from tests.s3server import S3Server
+
+# the session fixture `s3_server` (registered once even when tests/conftest.py names the plugin too)
+pytest_plugins = ["tests.s3server"]
 
 MiB = 1024 * 1024
 
@@ -125,7 +131,7 @@ def test_open_store_rejects_other_schemes() -> None:
 
 
 @pytest.fixture
-def s3_env(s3_server: S3Server, monkeypatch: pytest.MonkeyPatch) -> S3Server:  # noqa: F811
+def s3_env(s3_server: S3Server, monkeypatch: pytest.MonkeyPatch) -> S3Server:
     for name in ("AWS_SESSION_TOKEN", "AWS_ENDPOINT_URL_S3", "AWS_PROFILE", "AWS_DEFAULT_REGION"):
         monkeypatch.delenv(name, raising=False)
     for name, value in s3_server.env().items():

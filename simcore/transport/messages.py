@@ -112,7 +112,13 @@ _ZERO_COVARIANCE = np.zeros(36, dtype=np.float64)
 def _build_typestore() -> Typestore:
     store = get_typestore(Stores.ROS2_JAZZY)
     types: dict[str, Any] = {}
-    for path in sorted(MSG_DIR.glob("*/*.msg")):
+    paths = sorted(MSG_DIR.glob("*/*.msg"))
+    if not paths:
+        raise RuntimeError(
+            f"no message definitions under {MSG_DIR}: the package was installed without its .msg files "
+            "(package data 'transport/msg/*/*.msg')"
+        )
+    for path in paths:
         typename = f"{path.parent.name}/msg/{path.stem}"
         types.update(get_types_from_msg(path.read_text(encoding="utf-8"), typename))
     store.register(types)
