@@ -366,3 +366,25 @@ def test_generate_reproduces_the_roads() -> None:
         assert module.main(["--check"]) == 0, "examples/maps/*.xodr differ from examples/generate.py's output"
     finally:
         del sys.modules[spec.name]
+
+
+# -- end to end (slow: `make test-slow`) ---------------------------------------------------------------
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("manifest", "exit_code"),
+    [("automated-testing.yaml", 0), ("automated-testing-failing.yaml", 1), ("prototyping.yaml", 0)],
+)
+def test_carlos_run_gives_the_documented_exit_code(manifest: str, exit_code: int, tmp_path: Path) -> None:
+    carlos = Path(sys.executable).parent / "carlos"
+    if not carlos.exists():
+        pytest.skip(f"the carlos CLI is not installed next to {sys.executable}")
+    result = subprocess.run(
+        [str(carlos), "run", "-q", str(EXAMPLES / "runs" / manifest), "--output", f"file://{tmp_path}"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert result.returncode == exit_code, result.stdout + result.stderr
