@@ -9,6 +9,7 @@ roads convert with SUMO's netconvert; examples/generate.py reproduces the roads 
 from __future__ import annotations
 
 import functools
+import importlib.metadata
 import importlib.util
 import math
 import os
@@ -68,18 +69,49 @@ def _package_dir(name: str) -> Path | None:
     return Path(next(iter(spec.submodule_search_locations)))
 
 
+def _scenariogeneration_copy(filename: str) -> Path | None:
+    """scenariogeneration ships copies of the ASAM XSDs (top-level `schemas/`)."""
+    try:
+        files = importlib.metadata.files("scenariogeneration") or []
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    for file in files:
+        if file.parts == ("schemas", filename):
+            return Path(str(file.locate()))
+    return None
+
+
 @functools.cache
 def _schema(kind: str) -> Any:
-    """The official XSD ('xosc': OpenSCENARIO 1.2, 'xodr': OpenDRIVE 1.7) as an xmlschema object."""
+    """The official XSD ('xosc': OpenSCENARIO 1.2, 'xodr': OpenDRIVE 1.7) as an xmlschema object.
+
+    From ASAM's quality-checker packages; else from the copy scenariogeneration ships (asam-qc-opendrive
+    pins numpy<2, so an environment may lack it)."""
     xmlschema = pytest.importorskip("xmlschema", reason="xmlschema is not installed (pip install xmlschema)")
-    package, relative, pypi = {
-        "xosc": ("qc_openscenario", "schema/1.2.0/OpenSCENARIO.xsd", "asam-qc-openscenarioxml"),
-        "xodr": ("qc_opendrive", "schema/1.7.0/opendrive_17_core.xsd", "asam-qc-opendrive"),
+    package, relative, pypi, copy = {
+        "xosc": (
+            "qc_openscenario",
+            "schema/1.2.0/OpenSCENARIO.xsd",
+            "asam-qc-openscenarioxml",
+            "OpenSCENARIO_1_2.xsd",
+        ),
+        "xodr": (
+            "qc_opendrive",
+            "schema/1.7.0/opendrive_17_core.xsd",
+            "asam-qc-opendrive",
+            "opendrive_17_core.xsd",
+        ),
     }[kind]
     directory = _package_dir(package)
-    if directory is None or not (directory / relative).is_file():
-        pytest.skip(f"the official XSD is not installed: pip install {pypi} (it ships {package}/{relative})")
-    return xmlschema.XMLSchema(str(directory / relative))
+    path = directory / relative if directory is not None else None
+    if path is None or not path.is_file():
+        path = _scenariogeneration_copy(copy)
+    if path is None or not path.is_file():
+        pytest.skip(
+            f"the official XSD is not installed: pip install {pypi} (it ships {package}/{relative}) "
+            "or scenariogeneration (it ships a copy)"
+        )
+    return xmlschema.XMLSchema(str(path))
 
 
 def _xml(path: Path) -> ET.Element:
