@@ -477,7 +477,7 @@ REFERENCE_SCENARIOS = {
     "xosc/straight_500m": "straight_500m: line",
     "scenario_construct_examples/scenario_runner_with_acts": "spirals",
 }
-MAX_ROWS = 300  # deterministic sample per scenario
+MAX_ROWS = 3000  # deterministic sample per scenario (most have fewer rows: all of them are checked)
 
 
 @functools.cache
@@ -501,13 +501,25 @@ def _reference(scenario: str) -> tuple[OpenDrive, list[dict[str, str]]]:
     xodr = (CORPUS / "resources" / scenario).parent / row["road_file"]
     with gzip.open(CORPUS / row["reference_csv"], "rt") as fh:
         rows = list(csv.DictReader(fh))
+    # lane following: on the lane centre at this and the entity's neighbouring samples (not crossing the
+    # centre during a lane change or lane-offset manoeuvre)
+    by_entity: dict[str, list[dict[str, str]]] = {}
+    for r in rows:
+        by_entity.setdefault(r["id"], []).append(r)
+    for track in by_entity.values():
+        for i, r in enumerate(track):
+            near = track[max(i - 1, 0) : i + 2]
+            r["steady"] = str(
+                all(abs(float(q["offset"])) <= 1e-3 and q["roadId"] == r["roadId"] for q in near)
+            )
     return _network(str(xodr.resolve())), rows[:: max(1, len(rows) // MAX_ROWS)]
 
 
 @pytest.mark.parametrize("scenario", sorted(REFERENCE_SCENARIOS))
 def test_against_esmini_reference(scenario: str) -> None:
-    """Rows where the entity is on its lane centre (esmini offset 0) inside the road: the pose computed
-    from esmini's (road, s, t) must match esmini's world pose, and world_to_road must give back the road
+    """Rows where the entity follows its lane centre (esmini offset 0, also at its neighbouring samples)
+    inside the road: the pose computed
+    from esmini's (road, s, t) must match esmini's world pose (heading: for moving entities, modulo pi), and world_to_road must give back the road
     coordinates (or, where roads overlap in a junction, another road mapping to the same point)."""
     od, rows = _reference(scenario)
     checked = 0
@@ -516,7 +528,7 @@ def test_against_esmini_reference(scenario: str) -> None:
         s, t, offset = float(row["s"]), float(row["t"]), float(row["offset"])
         x, y, z, h = (float(row[k]) for k in "xyzh")
         assert road_id in od.roads, f"{scenario}: esmini road {road_id} not in the network"
-        if abs(offset) > 1e-3 or not 0.05 < s < od.road_length(road_id) - 0.05:
+        if row["steady"] != "True" or abs(offset) > 1e-3 or not 0.05 < s < od.road_length(road_id) - 0.05:
             continue  # lane changes, off-road motion, road ends: not lane following
         where = f"{scenario} t={row['time']} {row['name']} road {road_id} lane {lane_id} s={s} t={t}"
         p = od.road_to_world(road_id, s, t)
@@ -524,7 +536,10 @@ def test_against_esmini_reference(scenario: str) -> None:
         assert abs(p.z - z) < 0.02, f"{where}: z {p.z:.4f} vs {z}"
         assert od.lane_center_t(road_id, lane_id, s) == pytest.approx(t, abs=2e-3), where
         lane_h = od.lane_heading(road_id, lane_id, s)
-        assert abs(_wrap(2 * (lane_h - h))) / 2 < 0.01, f"{where}: lane heading {lane_h:.4f} vs {h} (mod pi)"
+        if float(row["speed"]) > 0.5:  # parked objects may be placed at an angle to the lane
+            assert abs(_wrap(2 * (lane_h - h))) / 2 < 0.01, (
+                f"{where}: lane heading {lane_h:.4f} vs {h} (mod pi)"
+            )
         rc = od.world_to_road(x, y, z)
         assert rc is not None, f"{where}: world_to_road found no road"
         if rc.road_id == road_id:
