@@ -816,10 +816,6 @@ def _parse_junction(ctx: _Ctx, el: Element) -> Junction:
 # ------------------------------------------------------------------------------------------------- the network
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
 class OpenDrive:
     """A parsed OpenDRIVE road network with geometric queries. Build with :meth:`from_file` / :meth:`from_string`."""
 
@@ -1126,9 +1122,10 @@ class OpenDrive:
 
         Candidates come from a k-d tree of reference-line samples (every <= 2 m); ``s`` is refined by
         Newton projection. A point laterally outside the outermost lane by up to half that lane's width is
-        still mapped (to that lane); beyond that, or past the road ends, it is off the road. Among several
-        roads containing the point (junctions), ``road_hint`` wins if it is one of them, then the nearest
-        elevation if ``z`` is given, then the smallest ``|offset|`` relative to the lane width.
+        still mapped (to that lane); beyond that, or more than 5 cm past the road ends, it is off the road.
+        Candidates strictly inside a lane and inside the road's s range come first; among several such roads
+        (junctions), one within 2 m of ``z`` (if given) wins, then ``road_hint``, then the nearest
+        elevation, then the smallest ``|offset|`` relative to the lane width. All lane types count.
         Returns None when the point is on no road.
         """
         if self._index is None:
