@@ -51,7 +51,7 @@ def run(
     try:
         simulation_run = load_manifest(manifest)
         total = len(Plan(simulation_run.spec))
-        _preflight(simulation_run, manifest.parent.resolve())
+        _preflight(simulation_run, manifest)
         progress = Progress(
             TextColumn("[bold]{task.description}"),
             BarColumn(),
@@ -115,14 +115,18 @@ def run(
     raise typer.Exit(report.exit_code)
 
 
-def _preflight(simulation_run: object, base_dir: Path) -> None:
-    """Check what can be checked before any worker starts: scenario files exist and parse, parameter and
-    matrix names are declared, and road files exist, so a typo fails at once with exit code 2."""
-    from simcore.scenario.xosc import declared_parameters
+def _preflight(simulation_run: object, manifest: Path) -> None:
+    """Check what can be checked before any worker starts, so a typo fails at once with exit code 2: every
+    local scenario file parses with the first permutation's parameters (all matrix, spec and scenario
+    parameter names declared, every element supported) and its road network file exists."""
+    from simcore.plan import Plan
+    from simcore.scenario.xosc import declared_parameters, load_scenario
     from simcore.spec import SimulationRun
 
     assert isinstance(simulation_run, SimulationRun)
     spec = simulation_run.spec
+    plan = Plan(spec)
+    base_dir = manifest.parent.resolve()
     for position, scenario in enumerate(spec.scenarios):
         source = scenario.openscenario
         if source is None or source.startswith("s3://"):
@@ -130,7 +134,7 @@ def _preflight(simulation_run: object, base_dir: Path) -> None:
         path = Path(source.removeprefix("file://")).expanduser() if source.startswith("file://") else base_dir / source
         field = f"spec.scenarios[{position}].openscenario"
         if not path.is_file():
-            raise BadInput(f"scenario file {str(path)!r} not found", field=field)
+            raise BadInput(f"scenario file {str(path)!r} not found", file=str(manifest), field=field)
         declared = declared_parameters(path)
         names = {**spec.parameters, **scenario.parameters, **spec.sweep.matrix}
         unknown = sorted(set(names) - set(declared))
@@ -145,9 +149,12 @@ def _preflight(simulation_run: object, base_dir: Path) -> None:
             raise BadInput(
                 f"parameter(s) {', '.join(unknown)} not declared in {path.name} "
                 f"(declared: {', '.join(sorted(declared)) or 'none'})",
-                file=str(path),
+                file=str(manifest),
                 field=where,
             )
+        parsed = load_scenario(path, plan[plan.indexes_of(scenario.name).start].parameters)
+        if parsed.road_file is not None and not parsed.road_file.is_file():
+            raise BadInput(f"road network {str(parsed.road_file)!r} not found", file=str(path), field="RoadNetwork/LogicFile")
 
 
 def _print_report(report: object) -> None:
@@ -191,7 +198,7 @@ def validate(manifest: Annotated[Path, typer.Argument(help="SimulationRun manife
 
     try:
         simulation_run = load_manifest(manifest)
-        _preflight(simulation_run, manifest.parent.resolve())
+        _preflight(simulation_run, manifest)
     except CarlosError as exc:
         raise _fail(exc) from None
     plan = Plan(simulation_run.spec)

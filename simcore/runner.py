@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import platform
+import posixpath
 import tempfile
 import time
 import traceback
@@ -73,29 +74,28 @@ def resolve_scenario_file(point: RunPoint, base_dir: Path, scratch: Path, store_
 
 
 def _fetch_from_s3(url: str, scratch: Path, store_factory: Callable[[str], Store], field: str) -> Path:
-    bucket_and_key = url.removeprefix("s3://")
-    if "/" not in bucket_and_key:
-        raise BadInput(f"{url!r} names a bucket but no key", field=field)
-    directory, _, name = url.rpartition("/")
-    store = store_factory(directory)
-    local = scratch / "scenario" / name
+    """Download an s3:// scenario and the road file it names (relative to it, within the same bucket) into
+    a mirror of the bucket under `scratch`, so the relative path resolves locally as it does in the bucket."""
+    bucket, _, key = url.removeprefix("s3://").partition("/")
+    if not bucket or not key or key.endswith("/"):
+        raise BadInput(f"{url!r} is not s3://bucket/key of a file", field=field)
+    store = store_factory(f"s3://{bucket}")
+    mirror = scratch / "s3" / bucket
+    local = mirror / key
     local.parent.mkdir(parents=True, exist_ok=True)
-    local.write_bytes(store.get_bytes(name))
-    # the road network the scenario names, relative to it
+    local.write_bytes(store.get_bytes(key))
     from simcore.scenario.xosc import read_xml
 
     root = read_xml(local, what="OpenSCENARIO file")
     logic = root.find("RoadNetwork/LogicFile")
-    if logic is not None and logic.get("filepath") and not str(logic.get("filepath")).startswith("$"):
-        relative = str(logic.get("filepath"))
-        target = (local.parent / relative).resolve()
-        if scratch.resolve() not in target.parents:
-            raise BadInput(f"road file {relative!r} points outside the scenario's folder", field=field)
+    relative = logic.get("filepath") if logic is not None else None
+    if relative and not relative.startswith("$"):
+        road_key = posixpath.normpath(posixpath.join(posixpath.dirname(key), relative))
+        if road_key.startswith("../") or road_key.startswith("/"):
+            raise BadInput(f"road file {relative!r} lies outside the bucket {bucket!r}", field=field)
+        target = mirror / road_key
         target.parent.mkdir(parents=True, exist_ok=True)
-        key = "/".join(part for part in Path(relative).as_posix().split("/") if part not in ("", "."))
-        if ".." in key.split("/"):
-            raise BadInput(f"road file {relative!r}: '..' is not supported for s3:// scenarios", field=field)
-        target.write_bytes(store.get_bytes(key))
+        target.write_bytes(store.get_bytes(road_key))
     return local
 
 

@@ -30,6 +30,8 @@ NETCONVERT_OPTIONS = (
     "false",
 )
 NETCONVERT_TIMEOUT_S = 300
+#: SUMO's default deceleration of a passenger car (m/s²): what its driver uses when not in an emergency
+COMFORT_DECELERATION = 4.5
 
 
 def sumo_home() -> Path:
@@ -189,7 +191,8 @@ class SumoWorld:
         sumo.vehicletype.setHeight(vtype, max(height, 0.1))
         sumo.vehicletype.setMaxSpeed(vtype, max(max_speed, 0.1))
         sumo.vehicletype.setAccel(vtype, max(max_accel, 0.1))
-        sumo.vehicletype.setDecel(vtype, max(max_decel, 0.1))
+        # the driver brakes comfortably (at most 4.5 m/s²) and uses the vehicle's full braking only in an emergency
+        sumo.vehicletype.setDecel(vtype, max(min(COMFORT_DECELERATION, max_decel), 0.1))
         sumo.vehicletype.setEmergencyDecel(vtype, max(max_decel, 0.1))
         sumo.vehicletype.setImperfection(vtype, 0.0)  # deterministic driver; noise comes from the scenario
         sumo.vehicletype.setMinGap(vtype, 2.0)
