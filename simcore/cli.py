@@ -35,10 +35,25 @@ def _fail(exc: CarlosError) -> typer.Exit:
 @app.command()
 def run(
     manifest: Annotated[Path, typer.Argument(help="SimulationRun manifest (YAML).")],
-    output: Annotated[str | None, typer.Option("--output", "-o", help="Output URL (file://… or s3://…); overrides spec.output.url.")] = None,
-    parallel: Annotated[int | None, typer.Option("--parallel", "-j", min=1, help="Worker processes (default: spec.execution.parallelism, else the number of cores).")] = None,
-    index: Annotated[list[int] | None, typer.Option("--index", "-i", help="Run only these indexes (repeatable).")] = None,
-    fresh: Annotated[bool, typer.Option("--fresh", help="Replace existing results of this run instead of resuming.")] = False,
+    output: Annotated[
+        str | None,
+        typer.Option("--output", "-o", help="Output URL (file://… or s3://…); overrides spec.output.url."),
+    ] = None,
+    parallel: Annotated[
+        int | None,
+        typer.Option(
+            "--parallel",
+            "-j",
+            min=1,
+            help="Worker processes (default: spec.execution.parallelism, else the number of cores).",
+        ),
+    ] = None,
+    index: Annotated[
+        list[int] | None, typer.Option("--index", "-i", help="Run only these indexes (repeatable).")
+    ] = None,
+    fresh: Annotated[
+        bool, typer.Option("--fresh", help="Replace existing results of this run instead of resuming.")
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """Run every scenario × permutation of a SimulationRun on this machine.
@@ -59,7 +74,7 @@ def run(
             TextColumn("{task.fields[stats]}"),
             TimeElapsedColumn(),
             console=console,
-            disable=quiet or not console.is_terminal and os.environ.get("CARLOS_PROGRESS") != "1",
+            disable=quiet or (not console.is_terminal and os.environ.get("CARLOS_PROGRESS") != "1"),
         )
         state = {"passed": 0, "failed": 0, "errors": 0, "sim": 0.0}
         live_sim: dict[int, float] = {}
@@ -75,7 +90,9 @@ def run(
         def on_start(count: int, skipped: int) -> None:
             progress.update(task, total=count, completed=skipped, stats=stats())
             if skipped:
-                console.print(f"resuming: {skipped} of {count} runs already complete (use --fresh to rerun them)")
+                console.print(
+                    f"resuming: {skipped} of {count} runs already complete (use --fresh to rerun them)"
+                )
 
         def on_progress(i: int, sim_time: float) -> None:
             live_sim[i] = sim_time
@@ -91,10 +108,15 @@ def run(
             if quiet or not progress.live.is_started:
                 return
             if summary["status"] == "error":
-                progress.console.print(f"[red]index {summary['index']} ({summary['scenario']}): {summary['error']}[/]", highlight=False)
+                progress.console.print(
+                    f"[red]index {summary['index']} ({summary['scenario']}): {summary['error']}[/]",
+                    highlight=False,
+                )
 
         def on_retry(i: int, attempt: int, reason: str) -> None:
-            progress.console.print(f"[yellow]index {i}: attempt {attempt} failed ({reason}); retrying[/]", highlight=False)
+            progress.console.print(
+                f"[yellow]index {i}: attempt {attempt} failed ({reason}); retrying[/]", highlight=False
+            )
 
         with progress:
             report = execute(
@@ -131,7 +153,11 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
         source = scenario.openscenario
         if source is None or source.startswith("s3://"):
             continue  # a ConfigMap (cluster) or an object: checked by the run itself
-        path = Path(source.removeprefix("file://")).expanduser() if source.startswith("file://") else base_dir / source
+        path = (
+            Path(source.removeprefix("file://")).expanduser()
+            if source.startswith("file://")
+            else base_dir / source
+        )
         field = f"spec.scenarios[{position}].openscenario"
         if not path.is_file():
             raise BadInput(f"scenario file {str(path)!r} not found", file=str(manifest), field=field)
@@ -154,7 +180,11 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
             )
         parsed = load_scenario(path, plan[plan.indexes_of(scenario.name).start].parameters)
         if parsed.road_file is not None and not parsed.road_file.is_file():
-            raise BadInput(f"road network {str(parsed.road_file)!r} not found", file=str(path), field="RoadNetwork/LogicFile")
+            raise BadInput(
+                f"road network {str(parsed.road_file)!r} not found",
+                file=str(path),
+                field="RoadNetwork/LogicFile",
+            )
 
 
 def _print_report(report: object) -> None:
@@ -202,7 +232,9 @@ def validate(manifest: Annotated[Path, typer.Argument(help="SimulationRun manife
     except CarlosError as exc:
         raise _fail(exc) from None
     plan = Plan(simulation_run.spec)
-    out.print(f"{manifest}: valid · {len(plan)} runs ({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})")
+    out.print(
+        f"{manifest}: valid · {len(plan)} runs ({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})"
+    )
 
 
 @app.command()
@@ -229,7 +261,9 @@ def plan(
             point = runs[i]
         except IndexError as exc:
             raise _fail(BadInput(str(exc), field="--index")) from None
-        table.add_row(str(i), point.scenario.name, describe(point.sweep_values) or "(defaults)", str(point.seed))
+        table.add_row(
+            str(i), point.scenario.name, describe(point.sweep_values) or "(defaults)", str(point.seed)
+        )
     out.print(table)
 
 

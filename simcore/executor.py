@@ -94,10 +94,10 @@ def _work(settings: Settings, index: int, attempt: int, final_attempt: bool) -> 
 class Events:
     """Callbacks for progress display (all optional)."""
 
-    on_start: Callable[[int, int], None] = lambda total, skipped: None  # noqa: E731
-    on_progress: Callable[[int, float], None] = lambda index, sim_time: None  # noqa: E731
-    on_done: Callable[[RunOutcome], None] = lambda outcome: None  # noqa: E731
-    on_retry: Callable[[int, int, str], None] = lambda index, attempt, reason: None  # noqa: E731
+    on_start: Callable[[int, int], None] = lambda total, skipped: None
+    on_progress: Callable[[int, float], None] = lambda index, sim_time: None
+    on_done: Callable[[RunOutcome], None] = lambda outcome: None
+    on_retry: Callable[[int, int, str], None] = lambda index, attempt, reason: None
 
 
 @dataclass
@@ -116,7 +116,9 @@ class RunReport:
 
 
 def _dump_spec(run: SimulationRun) -> bytes:
-    return yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True), sort_keys=False).encode()
+    return yaml.safe_dump(
+        run.model_dump(mode="json", by_alias=True, exclude_none=True), sort_keys=False
+    ).encode()
 
 
 def execute(
@@ -134,7 +136,9 @@ def execute(
     events = events or Events()
     spec = run.spec
     url = output_url or spec.output.url
-    settings = Settings(run=run, base_dir=base_dir, output_url=url, endpoint=spec.output.endpoint, region=spec.output.region)
+    settings = Settings(
+        run=run, base_dir=base_dir, output_url=url, endpoint=spec.output.endpoint, region=spec.output.region
+    )
     store = make_store(url, settings)
     plan = Plan(spec)
     total = len(plan)
@@ -173,15 +177,7 @@ def execute(
         ) as pool:
             in_flight: dict[Future[RunOutcome], int] = {}
             broken = False
-
-            def submit() -> None:
-                while pending and len(in_flight) < workers * 2:
-                    index = pending.pop(0)
-                    attempts[index] += 1
-                    final = attempts[index] >= max_attempts
-                    in_flight[pool.submit(_work, settings, index, attempts[index], final)] = index
-
-            submit()
+            _submit(pool, settings, pending, in_flight, attempts, max_attempts, workers * 2)
             while in_flight:
                 done, _ = wait(list(in_flight), timeout=0.2, return_when=FIRST_COMPLETED)
                 _drain(progress, events)
@@ -204,7 +200,7 @@ def execute(
                         in_flight.pop(future)
                         _crashed(index, attempts, max_attempts, pending, outcomes, settings, store, events)
                     break
-                submit()
+                _submit(pool, settings, pending, in_flight, attempts, max_attempts, workers * 2)
     _drain(progress, events)
     summary = run_summary(name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted))
     summary["outputUrl"] = store.url_for(name)
@@ -219,6 +215,23 @@ def execute(
         wall_seconds=time.monotonic() - started,
         optional_scenarios=[s for s in spec.scenarios if s.optional],
     )
+
+
+def _submit(
+    pool: ProcessPoolExecutor,
+    settings: Settings,
+    pending: list[int],
+    in_flight: dict[Future[RunOutcome], int],
+    attempts: dict[int, int],
+    max_attempts: int,
+    limit: int,
+) -> None:
+    """Keep up to `limit` indexes queued in the pool (a small queue keeps retries and progress prompt)."""
+    while pending and len(in_flight) < limit:
+        index = pending.pop(0)
+        attempts[index] += 1
+        final = attempts[index] >= max_attempts
+        in_flight[pool.submit(_work, settings, index, attempts[index], final)] = index
 
 
 def _drain(progress: Any, events: Events) -> None:
@@ -263,6 +276,9 @@ def _crashed(
         end_reason="error",
         attempts=attempts[index],
     )
-    store.put_bytes(f"{settings.run.name}/{index}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode())
+    store.put_bytes(
+        f"{settings.run.name}/{index}/summary.json",
+        (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode(),
+    )
     outcomes[index] = summary
     events.on_done(RunOutcome(index=index, summary=summary, exit_code=ExitCode.INFRASTRUCTURE))

@@ -43,7 +43,9 @@ def format_validation_error(error: ValidationError) -> str:
 def parse_manifest(data: Any, *, source: str) -> SimulationRun:
     """Validate an already-loaded manifest document."""
     if not isinstance(data, dict):
-        raise BadInput("the manifest must be a YAML mapping with apiVersion, kind, metadata and spec", file=source)
+        raise BadInput(
+            "the manifest must be a YAML mapping with apiVersion, kind, metadata and spec", file=source
+        )
     try:
         run = SimulationRun.model_validate(data)
     except ValidationError as exc:

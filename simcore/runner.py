@@ -53,7 +53,9 @@ def versions() -> dict[str, str]:
     return out
 
 
-def resolve_scenario_file(point: RunPoint, base_dir: Path, scratch: Path, store_factory: Callable[[str], Store]) -> Path:
+def resolve_scenario_file(
+    point: RunPoint, base_dir: Path, scratch: Path, store_factory: Callable[[str], Store]
+) -> Path:
     """The local path of the scenario's OpenSCENARIO file (downloading it, and its road, from S3)."""
     ref = point.scenario
     field = f"spec.scenarios[{ref.name}].openscenario"
@@ -131,7 +133,9 @@ def simulate(
         network = prepare_network(scenario.road_file)
         sumo = SumoWorld(network, spec.simulation.step_seconds, point.seed)
     metadata = {
-        "carlos.spec": {"manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))},
+        "carlos.spec": {
+            "manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))
+        },
         "carlos.run": {
             "run": run.name,
             "index": str(point.index),
@@ -179,7 +183,12 @@ def simulate(
         if recorder is not None:
             from simcore.transport import messages
 
-            recorder.write("/carlos/status", "diagnostic_msgs/msg/DiagnosticStatus", messages.status(frame, "ended"), frame.time)
+            recorder.write(
+                "/carlos/status",
+                "diagnostic_msgs/msg/DiagnosticStatus",
+                messages.status(frame, "ended"),
+                frame.time,
+            )
             recorder.close()
             recorder = None
     finally:
@@ -219,7 +228,9 @@ def run_index(
     end_reason = "error"
     sim_seconds = 0.0
     exit_code = ExitCode.PASSED
-    log_lines: list[str] = [f"carlos run {run.name} index {index}: scenario {point.scenario.name}, seed {point.seed}"]
+    log_lines: list[str] = [
+        f"carlos run {run.name} index {index}: scenario {point.scenario.name}, seed {point.seed}"
+    ]
     log_lines.append(f"parameters: {json.dumps(point.parameters, sort_keys=True)}")
     prefix = f"{run.name}/{index}"
     with tempfile.TemporaryDirectory(prefix=f"carlos-{index}-", dir=scratch_root) as scratch_name:
@@ -263,5 +274,7 @@ def run_index(
         store.put_bytes(f"{prefix}/log.txt", ("\n".join(log_lines) + "\n").encode())
         if exit_code == ExitCode.INFRASTRUCTURE and not final_attempt:
             return RunOutcome(index=index, summary=summary, exit_code=exit_code)
-        store.put_bytes(f"{prefix}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode())
+        store.put_bytes(
+            f"{prefix}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
+        )
     return RunOutcome(index=index, summary=summary, exit_code=exit_code)

@@ -73,7 +73,9 @@ class ObjectMeta(BaseModel):
 
     model_config = ConfigDict(extra="ignore", alias_generator=to_camel, populate_by_name=True, frozen=True)
 
-    name: DnsLabel | None = Field(None, description="Name of the run; the results go under `<output>/<name>/`.")
+    name: DnsLabel | None = Field(
+        None, description="Name of the run; the results go under `<output>/<name>/`."
+    )
     generate_name: str | None = Field(
         None, description="Prefix for a generated name (GitOps: a changed spec is a new run)."
     )
@@ -117,7 +119,8 @@ class ScenarioRef(Model):
         ),
     )
     criteria: list[Criterion] = Field(
-        default_factory=list, description="Criteria for this scenario only, in addition to `evaluation.criteria`."
+        default_factory=list,
+        description="Criteria for this scenario only, in addition to `evaluation.criteria`.",
     )
 
     @model_validator(mode="after")
@@ -160,7 +163,9 @@ class Sweep(Model):
 class Simulation(Model):
     """Time stepping and randomness."""
 
-    step_seconds: float = Field(0.05, gt=0, le=1.0, description="Fixed simulation step in seconds. Default 0.05.")
+    step_seconds: float = Field(
+        0.05, gt=0, le=1.0, description="Fixed simulation step in seconds. Default 0.05."
+    )
     max_seconds: float = Field(
         120.0,
         gt=0,
@@ -204,7 +209,9 @@ def _criterion_from_string(value: Any) -> Any:
 class CriterionModel(Model):
     """A pass/fail criterion on a run's metric. Also written as a string: `minDistance >= 2.0`."""
 
-    name: str | None = Field(None, description="Name in reports. Default: the criterion as text.", max_length=200)
+    name: str | None = Field(
+        None, description="Name in reports. Default: the criterion as text.", max_length=200
+    )
     metric: str = Field(
         description=(
             "Metric name: collision, minDistance, minTimeHeadway, minTimeToCollision, maxDeceleration, "
@@ -215,7 +222,9 @@ class CriterionModel(Model):
     )
     operator: Literal[">=", ">", "<=", "<", "==", "!="] = Field(description="Comparison with `value`.")
     value: float = Field(description="Threshold; booleans are 1 (true) and 0 (false).")
-    optional: bool = Field(False, description="An optional criterion's failure does not fail the run. Default false.")
+    optional: bool = Field(
+        False, description="An optional criterion's failure does not fail the run. Default false."
+    )
 
     @property
     def label(self) -> str:
@@ -242,7 +251,9 @@ class Recording(Model):
         default_factory=lambda: ["*"],
         description="Topic patterns to record (shell-style globs, e.g. `/carlos/*`). Default: every topic.",
     )
-    compression: Literal["zstd", "lz4", "none"] = Field("zstd", description="MCAP chunk compression. Default zstd.")
+    compression: Literal["zstd", "lz4", "none"] = Field(
+        "zstd", description="MCAP chunk compression. Default zstd."
+    )
 
 
 class SecretRef(Model):
@@ -294,7 +305,10 @@ class Execution(Model):
         ),
     )
     timeout_seconds: int = Field(
-        3600, ge=1, le=7 * 86_400, description="Wall-clock limit of one run; a run past it is an error. Default 3600."
+        3600,
+        ge=1,
+        le=7 * 86_400,
+        description="Wall-clock limit of one run; a run past it is an error. Default 3600.",
     )
 
 
@@ -307,7 +321,9 @@ class SimulationRunSpec(Model):
     parameters: dict[ParameterName, ParameterValue] = Field(
         default_factory=dict, description="ParameterDeclaration overrides for every scenario."
     )
-    sweep: Sweep = Field(default_factory=Sweep, description="The parameter sweep. Default: one run per scenario.")
+    sweep: Sweep = Field(
+        default_factory=Sweep, description="The parameter sweep. Default: one run per scenario."
+    )
     simulation: Simulation = Field(default_factory=Simulation, description="Time stepping and seed.")
     sensors: list[dict[str, Any]] = Field(
         default_factory=list,

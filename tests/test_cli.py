@@ -24,18 +24,27 @@ CARLOS = [sys.executable, "-m", "simcore.cli"]
 
 def carlos(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [*CARLOS, *map(str, args)], capture_output=True, text=True, timeout=600, cwd=cwd or ROOT,
-        env={**os.environ, "COLUMNS": "200"}, check=False,
+        [*CARLOS, *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=cwd or ROOT,
+        env={**os.environ, "COLUMNS": "200"},
+        check=False,
     )
 
 
 @pytest.fixture(scope="module")
 def testing_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[subprocess.CompletedProcess[str], Path]:
     out = tmp_path_factory.mktemp("results")
-    return carlos("run", RUNS / "automated-testing.yaml", "--output", f"file://{out}", "-j", "2"), out / "automated-testing"
+    return carlos(
+        "run", RUNS / "automated-testing.yaml", "--output", f"file://{out}", "-j", "2"
+    ), out / "automated-testing"
 
 
-def test_automated_testing_passes_with_exit_0_and_writes_the_layout(testing_run: tuple[subprocess.CompletedProcess[str], Path]) -> None:
+def test_automated_testing_passes_with_exit_0_and_writes_the_layout(
+    testing_run: tuple[subprocess.CompletedProcess[str], Path],
+) -> None:
     result, run_dir = testing_run
     assert result.returncode == 0, result.stderr + result.stdout
     assert (run_dir / "run.yaml").is_file()
@@ -57,11 +66,15 @@ def test_automated_testing_passes_with_exit_0_and_writes_the_layout(testing_run:
     assert suites.get("failures") == "0" and suites.get("errors") == "0"
 
 
-def test_braking_run_is_physically_plausible(testing_run: tuple[subprocess.CompletedProcess[str], Path]) -> None:
+def test_braking_run_is_physically_plausible(
+    testing_run: tuple[subprocess.CompletedProcess[str], Path],
+) -> None:
     """The SUMO-driven ego brakes behind the braking lead and stops behind it without touching it."""
     _, run_dir = testing_run
     braking = next(
-        json.loads(p.read_text()) for p in run_dir.glob("*/summary.json") if json.loads(p.read_text())["scenario"] == "braking"
+        json.loads(p.read_text())
+        for p in run_dir.glob("*/summary.json")
+        if json.loads(p.read_text())["scenario"] == "braking"
     )
     metrics = braking["metrics"]
     assert 0.5 < metrics["minDistance"] < 10.0
@@ -69,7 +82,9 @@ def test_braking_run_is_physically_plausible(testing_run: tuple[subprocess.Compl
     assert metrics["maxSpeed"] == pytest.approx(25.0, abs=0.5)
 
 
-def test_recording_reads_back_with_mcap_and_rosbags(testing_run: tuple[subprocess.CompletedProcess[str], Path]) -> None:
+def test_recording_reads_back_with_mcap_and_rosbags(
+    testing_run: tuple[subprocess.CompletedProcess[str], Path],
+) -> None:
     _, run_dir = testing_run
     path = run_dir / "1" / "recording.mcap"
     summary = json.loads((run_dir / "1" / "summary.json").read_text())
@@ -92,7 +107,10 @@ def test_recording_reads_back_with_mcap_and_rosbags(testing_run: tuple[subproces
         assert topics["/carlos/objects"] == "vision_msgs/msg/Detection3DArray"
         assert topics["/carlos/Ego/odometry"] == "nav_msgs/msg/Odometry"
         odometry = [c for c in bag.connections if c.topic == "/carlos/Ego/odometry"]
-        speeds = [bag.deserialize(raw, c.msgtype).twist.twist.linear.x for c, _, raw in bag.messages(connections=odometry)]
+        speeds = [
+            bag.deserialize(raw, c.msgtype).twist.twist.linear.x
+            for c, _, raw in bag.messages(connections=odometry)
+        ]
     assert max(speeds) == pytest.approx(summary["metrics"]["maxSpeed"], abs=1e-6)
 
 
@@ -114,10 +132,22 @@ def _manifest(tmp_path: Path, body: str) -> Path:
 @pytest.mark.parametrize(
     ("body", "expected"),
     [
-        ("spec:\n  scenarios: [{name: a, openscenario: nowhere.xosc}]\n", "spec.scenarios[0].openscenario: scenario file"),
-        ("spec:\n  scenarios: [{name: a, openscenario: SCEN}]\n  sweep: {matrix: {Speeed: [1, 2]}}\n", "spec.sweep.matrix: parameter(s) Speeed not declared"),
-        ("spec:\n  scenarios: [{name: a, openscenario: SCEN}]\n  simulation: {stepSecond: 0.1}\n", "spec.simulation.stepSecond: unknown field"),
-        ("spec:\n  scenarios: [{name: a, openscenario: SCEN}]\n  simulation: {stepSeconds: -1}\n", "spec.simulation.stepSeconds: Input should be greater than 0"),
+        (
+            "spec:\n  scenarios: [{name: a, openscenario: nowhere.xosc}]\n",
+            "spec.scenarios[0].openscenario: scenario file",
+        ),
+        (
+            "spec:\n  scenarios: [{name: a, openscenario: SCEN}]\n  sweep: {matrix: {Speeed: [1, 2]}}\n",
+            "spec.sweep.matrix: parameter(s) Speeed not declared",
+        ),
+        (
+            "spec:\n  scenarios: [{name: a, openscenario: SCEN}]\n  simulation: {stepSecond: 0.1}\n",
+            "spec.simulation.stepSecond: unknown field",
+        ),
+        (
+            "spec:\n  scenarios: [{name: a, openscenario: SCEN}]\n  simulation: {stepSeconds: -1}\n",
+            "spec.simulation.stepSeconds: Input should be greater than 0",
+        ),
         ("spec: [\n", "invalid YAML at line"),
     ],
 )
@@ -133,8 +163,14 @@ def test_bad_input_exits_2_with_one_clear_line(tmp_path: Path, body: str, expect
 
 def test_missing_road_file_is_bad_input(tmp_path: Path) -> None:
     scenario = tmp_path / "s.xosc"
-    scenario.write_text((ROOT / "examples" / "scenarios" / "braking.xosc").read_text().replace("../maps/highway.xodr", "gone.xodr"))
-    result = carlos("run", _manifest(tmp_path, f"spec:\n  scenarios: [{{name: a, openscenario: {scenario}}}]\n"))
+    scenario.write_text(
+        (ROOT / "examples" / "scenarios" / "braking.xosc")
+        .read_text()
+        .replace("../maps/highway.xodr", "gone.xodr")
+    )
+    result = carlos(
+        "run", _manifest(tmp_path, f"spec:\n  scenarios: [{{name: a, openscenario: {scenario}}}]\n")
+    )
     assert result.returncode == 2
     assert "gone.xodr" in result.stderr and "RoadNetwork/LogicFile" in result.stderr
 
@@ -184,12 +220,19 @@ def test_results_go_to_s3_and_scenarios_come_from_s3(s3_server: object, tmp_path
     server = s3_server
     env = server.env()  # type: ignore[attr-defined]
     client = boto3.client(
-        "s3", endpoint_url=env["AWS_ENDPOINT_URL"], aws_access_key_id=env["AWS_ACCESS_KEY_ID"],
-        aws_secret_access_key=env["AWS_SECRET_ACCESS_KEY"], region_name=env["AWS_REGION"],
+        "s3",
+        endpoint_url=env["AWS_ENDPOINT_URL"],
+        aws_access_key_id=env["AWS_ACCESS_KEY_ID"],
+        aws_secret_access_key=env["AWS_SECRET_ACCESS_KEY"],
+        region_name=env["AWS_REGION"],
     )
     bucket = server.bucket  # type: ignore[attr-defined]
-    client.upload_file(str(ROOT / "examples" / "scenarios" / "braking.xosc"), bucket, "catalogue/scenarios/braking.xosc")
-    client.upload_file(str(ROOT / "examples" / "maps" / "highway.xodr"), bucket, "catalogue/maps/highway.xodr")
+    client.upload_file(
+        str(ROOT / "examples" / "scenarios" / "braking.xosc"), bucket, "catalogue/scenarios/braking.xosc"
+    )
+    client.upload_file(
+        str(ROOT / "examples" / "maps" / "highway.xodr"), bucket, "catalogue/maps/highway.xodr"
+    )
     manifest = _manifest(
         tmp_path,
         f"spec:\n  scenarios: [{{name: b, openscenario: 's3://{bucket}/catalogue/scenarios/braking.xosc'}}]\n"
@@ -198,23 +241,47 @@ def test_results_go_to_s3_and_scenarios_come_from_s3(s3_server: object, tmp_path
     # the scenario names its road as ../maps/highway.xodr: resolved within the bucket, as on disk
     result = subprocess.run(
         [*CARLOS, "run", str(manifest), "--output", f"s3://{bucket}/results", "-q"],
-        capture_output=True, text=True, timeout=300, cwd=ROOT, env={**os.environ, **env}, check=False,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        env={**os.environ, **env},
+        check=False,
     )
     assert result.returncode == 0, result.stderr
     keys = {o["Key"] for o in client.list_objects_v2(Bucket=bucket, Prefix="results/t/")["Contents"]}
-    assert {"results/t/run.yaml", "results/t/0/recording.mcap", "results/t/0/summary.json", "results/t/0/log.txt",
-            "results/t/summary.json", "results/t/junit.xml"} <= keys
+    assert {
+        "results/t/run.yaml",
+        "results/t/0/recording.mcap",
+        "results/t/0/summary.json",
+        "results/t/0/log.txt",
+        "results/t/summary.json",
+        "results/t/junit.xml",
+    } <= keys
     run_summary = json.loads(client.get_object(Bucket=bucket, Key="results/t/summary.json")["Body"].read())
     assert run_summary["status"] == "passed"
     assert run_summary["outputUrl"] == f"s3://{bucket}/results/t"
     assert env["AWS_SECRET_ACCESS_KEY"] not in result.stdout + result.stderr
     # a road outside the bucket is refused with a clear message, for that run only
-    text = (ROOT / "examples" / "scenarios" / "braking.xosc").read_text().replace("../maps/highway.xodr", "../../x.xodr")
+    text = (
+        (ROOT / "examples" / "scenarios" / "braking.xosc")
+        .read_text()
+        .replace("../maps/highway.xodr", "../../x.xodr")
+    )
     client.put_object(Bucket=bucket, Key="bad/braking.xosc", Body=text.encode())
-    manifest.write_text(manifest.read_text().replace("catalogue/scenarios/braking.xosc", "bad/braking.xosc").replace("name: t", "name: t2"))
+    manifest.write_text(
+        manifest.read_text()
+        .replace("catalogue/scenarios/braking.xosc", "bad/braking.xosc")
+        .replace("name: t", "name: t2")
+    )
     result = subprocess.run(
         [*CARLOS, "run", str(manifest), "--output", f"s3://{bucket}/results", "-q"],
-        capture_output=True, text=True, timeout=300, cwd=ROOT, env={**os.environ, **env}, check=False,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        env={**os.environ, **env},
+        check=False,
     )
     assert result.returncode == 3
     summary = json.loads(client.get_object(Bucket=bucket, Key="results/t2/0/summary.json")["Body"].read())

@@ -56,7 +56,9 @@ def event(name: str, action: str, trigger: str, priority: str = "override", coun
   <StartTrigger><ConditionGroup>{trigger}</ConditionGroup></StartTrigger></Event>"""
 
 
-def scenario(tmp_path: Path, events: str, *, stop: str = "", entities: tuple[str, ...] = ("Ego",), init: str = "") -> Path:
+def scenario(
+    tmp_path: Path, events: str, *, stop: str = "", entities: tuple[str, ...] = ("Ego",), init: str = ""
+) -> Path:
     init = init or place("Ego", 100.0)
     text = f"""<?xml version="1.0"?>
 <OpenSCENARIO>
@@ -85,14 +87,22 @@ def road() -> OpenDrive:
     return OpenDrive.from_file(HIGHWAY)
 
 
-def run(path: Path, road: OpenDrive, seconds: float, overrides: dict[str, float] | None = None) -> tuple[ScenarioEngine, dict[float, dict[str, float]]]:
+def run(
+    path: Path, road: OpenDrive, seconds: float, overrides: dict[str, float] | None = None
+) -> tuple[ScenarioEngine, dict[float, dict[str, float]]]:
     engine = ScenarioEngine(load_scenario(path, overrides or {}), road=road, sumo=None, step_seconds=0.05)
     trace = {}
     while engine.time < seconds - 1e-9 and not engine.ended:
         frame = engine.step()
         ego = frame.entity("Ego")
-        trace[round(frame.time, 2)] = {"speed": ego.speed, "x": ego.x, "y": ego.y, "lane": ego.lane.lane_id if ego.lane else 0,
-                                        "offset": ego.lane.offset if ego.lane else 0.0, "s": ego.lane.s if ego.lane else 0.0}
+        trace[round(frame.time, 2)] = {
+            "speed": ego.speed,
+            "x": ego.x,
+            "y": ego.y,
+            "lane": ego.lane.lane_id if ego.lane else 0,
+            "offset": ego.lane.offset if ego.lane else 0.0,
+            "s": ego.lane.s if ego.lane else 0.0,
+        }
     return engine, trace
 
 
@@ -106,10 +116,14 @@ def run(path: Path, road: OpenDrive, seconds: float, overrides: dict[str, float]
         ("step", "time", 0.0, {0.1: 10.0}),
     ],
 )
-def test_speed_action_shapes(tmp_path: Path, road: OpenDrive, shape: str, dimension: str, value: float, checks: dict[float, float]) -> None:
+def test_speed_action_shapes(
+    tmp_path: Path, road: OpenDrive, shape: str, dimension: str, value: float, checks: dict[float, float]
+) -> None:
     # the event starts at t = 0.05 (its trigger is evaluated at the start of the step from 0.05): speeds are
     # checked at times shifted by that step
-    path = scenario(tmp_path, event("Slow", speed_action(shape, dimension, value, 10.0), sim_time("greaterThan", 0.0)))
+    path = scenario(
+        tmp_path, event("Slow", speed_action(shape, dimension, value, 10.0), sim_time("greaterThan", 0.0))
+    )
     _, trace = run(path, road, 6.0)
     for t, expected in checks.items():
         assert trace[t]["speed"] == pytest.approx(expected, abs=1e-6), f"t={t}"
@@ -163,14 +177,20 @@ def test_state_condition_chains_events_and_stop_trigger_delay(tmp_path: Path, ro
     engine, trace = run(path, road, 20.0)
     assert engine.ended_by == "stopTrigger"
     assert engine.time == pytest.approx(4.05 + 0.05, abs=0.051)  # condition true at 3.05, +1 s delay
-    starts = {line.split()[2].rstrip(":"): float(line.split()[0]) for line in engine.log if "startTransition" in line and "event" in line}
+    starts = {
+        line.split()[2].rstrip(":"): float(line.split()[0])
+        for line in engine.log
+        if "startTransition" in line and "event" in line
+    }
     assert starts["Second"] - starts["First"] == pytest.approx(1.0 + 0.05, abs=0.051)
     assert trace[round(engine.time, 2)]["speed"] == pytest.approx(5.0)
 
 
 def test_override_priority_stops_the_running_event(tmp_path: Path, road: OpenDrive) -> None:
     slow = event("Slow", speed_action("linear", "time", 10.0, 0.0), sim_time("greaterThan", 0.0))
-    fast = event("Fast", speed_action("step", "time", 0, 30.0), sim_time("greaterThan", 2.0), priority="override")
+    fast = event(
+        "Fast", speed_action("step", "time", 0, 30.0), sim_time("greaterThan", 2.0), priority="override"
+    )
     engine, trace = run(scenario(tmp_path, slow + fast), road, 4.0)
     assert any("event Slow: stopTransition" in line for line in engine.log)
     assert trace[4.0]["speed"] == pytest.approx(30.0)
@@ -182,7 +202,12 @@ def test_relative_distance_trigger_with_two_entities(tmp_path: Path, road: OpenD
       <TriggeringEntities triggeringEntitiesRule="any"><EntityRef entityRef="Ego"/></TriggeringEntities>
       <EntityCondition><RelativeDistanceCondition entityRef="Lead" relativeDistanceType="longitudinal" freespace="true"
         value="20" rule="lessThan"/></EntityCondition></ByEntityCondition></Condition>"""
-    path = scenario(tmp_path, event("Match", speed_action("step", "time", 0, 20.0), close), entities=("Ego", "Lead"), init=init)
+    path = scenario(
+        tmp_path,
+        event("Match", speed_action("step", "time", 0, 20.0), close),
+        entities=("Ego", "Lead"),
+        init=init,
+    )
     engine, trace = run(path, road, 12.0)
     start = next(float(line.split()[0]) for line in engine.log if "event Match: startTransition" in line)
     # free space 100 - 4.5 = 95.5 m closing at 10 m/s → below 20 m after 7.55 s
@@ -191,13 +216,17 @@ def test_relative_distance_trigger_with_two_entities(tmp_path: Path, road: OpenD
 
 
 def test_unknown_parameter_override_is_bad_input(tmp_path: Path) -> None:
-    path = scenario(tmp_path, event("Slow", speed_action("step", "time", 0, 1.0), sim_time("greaterThan", 0.0)))
+    path = scenario(
+        tmp_path, event("Slow", speed_action("step", "time", 0, 1.0), sim_time("greaterThan", 0.0))
+    )
     with pytest.raises(BadInput, match="Targt not declared"):
         load_scenario(path, {"Targt": 1.0})
 
 
 def test_unsupported_action_names_the_element(tmp_path: Path) -> None:
-    path = scenario(tmp_path, event("X", "<PrivateAction><RoutingAction/></PrivateAction>", sim_time("greaterThan", 0.0)))
+    path = scenario(
+        tmp_path, event("X", "<PrivateAction><RoutingAction/></PrivateAction>", sim_time("greaterThan", 0.0))
+    )
     with pytest.raises(BadInput, match="RoutingAction is not supported yet") as info:
         load_scenario(path)
     assert "Maneuver[M]/Event[X]" in str(info.value)
@@ -205,7 +234,9 @@ def test_unsupported_action_names_the_element(tmp_path: Path) -> None:
 
 def test_hostile_xml_is_refused(tmp_path: Path) -> None:
     bomb = tmp_path / "bomb.xosc"
-    bomb.write_text('<?xml version="1.0"?><!DOCTYPE x [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;">]><OpenSCENARIO>&b;</OpenSCENARIO>')
+    bomb.write_text(
+        '<?xml version="1.0"?><!DOCTYPE x [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;">]><OpenSCENARIO>&b;</OpenSCENARIO>'
+    )
     with pytest.raises(BadInput, match="forbidden XML"):
         load_scenario(bomb)
     broken = tmp_path / "broken.xosc"

@@ -15,13 +15,22 @@ def test_references_and_expressions() -> None:
     assert resolve("${$N * 2 + 1}", values) == "7"
     assert resolve("${-$Speed}", values) == "-20.0"
     assert resolve("${$Speed > 10 and not $On}", values) == "false"
-    assert resolve("${round(2.5) + floor(1.7) + ceil(1.2) + sqrt(16) + pow(2, 3)}", values) == "18.0"  # round half up: 3
+    assert (
+        resolve("${round(2.5) + floor(1.7) + ceil(1.2) + sqrt(16) + pow(2, 3)}", values) == "18.0"
+    )  # round half up: 3
     assert resolve("plain", values) == "plain"
 
 
 @pytest.mark.parametrize(
     "expression",
-    ["${__import__('os').system('true')}", "${$Speed.real}", "${[1, 2]}", "${lambda: 1}", "${$Missing + 1}", "${1 / 0}"],
+    [
+        "${__import__('os').system('true')}",
+        "${$Speed.real}",
+        "${[1, 2]}",
+        "${lambda: 1}",
+        "${$Missing + 1}",
+        "${1 / 0}",
+    ],
 )
 def test_unsafe_or_bad_expressions_are_refused(expression: str) -> None:
     with pytest.raises(ParameterError):

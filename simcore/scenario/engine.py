@@ -141,7 +141,9 @@ class LaneChangeRuntime(ActionRuntime):
         actor = self.actor
         road = self.engine.road
         if road is None or actor.road_id is None:
-            raise BadInput(f"LaneChangeAction on {actor.name!r}, which is not on a road", file=self.engine.source)
+            raise BadInput(
+                f"LaneChangeAction on {actor.name!r}, which is not on a road", file=self.engine.source
+            )
         target = self.action.target
         try:
             if isinstance(target, m.AbsoluteTargetLane):
@@ -332,13 +334,18 @@ class ScenarioEngine:
         except KeyError:
             raise BadInput(f"entity {name!r} is not declared in <Entities>", file=self.source) from None
 
-    def resolve_position(self, position: m.Position, for_body: Body | None = None) -> tuple[float, float, float, float]:
+    def resolve_position(
+        self, position: m.Position, for_body: Body | None = None
+    ) -> tuple[float, float, float, float]:
         """World (x, y, z, heading) of a position."""
         road = self.road
 
         def need_road() -> OpenDrive:
             if road is None:
-                raise BadInput(f"{type(position).__name__} needs a road network (RoadNetwork/LogicFile)", file=self.source)
+                raise BadInput(
+                    f"{type(position).__name__} needs a road network (RoadNetwork/LogicFile)",
+                    file=self.source,
+                )
             return road
 
         def orient(base: float, orientation: m.Orientation | None) -> float:
@@ -354,7 +361,11 @@ class ScenarioEngine:
                 r = need_road()
                 pose = r.lane_to_world(position.road_id, position.lane_id, position.s, position.offset)
                 driving = pose.heading + (math.pi if position.lane_id > 0 else 0.0)
-                base = pose.heading if (position.orientation and position.orientation.type == "relative") else driving
+                base = (
+                    pose.heading
+                    if (position.orientation and position.orientation.type == "relative")
+                    else driving
+                )
                 return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
             if isinstance(position, m.RoadPosition):
                 r = need_road()
@@ -362,7 +373,12 @@ class ScenarioEngine:
                 return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
             ref = self.body(position.entity)
             if isinstance(position, m.RelativeWorldPosition):
-                return ref.x + position.dx, ref.y + position.dy, ref.z + position.dz, orient(ref.heading, position.orientation)
+                return (
+                    ref.x + position.dx,
+                    ref.y + position.dy,
+                    ref.z + position.dz,
+                    orient(ref.heading, position.orientation),
+                )
             if isinstance(position, m.RelativeObjectPosition):
                 c, s = math.cos(ref.heading), math.sin(ref.heading)
                 return (
@@ -373,7 +389,9 @@ class ScenarioEngine:
                 )
             r = need_road()
             if ref.road_id is None:
-                raise BadInput(f"{type(position).__name__}: entity {ref.name!r} is not on a road", file=self.source)
+                raise BadInput(
+                    f"{type(position).__name__}: entity {ref.name!r} is not on a road", file=self.source
+                )
             if isinstance(position, m.RelativeLanePosition):
                 s_new = ref.s + position.ds * ref.direction
                 lane = lane_shift(r, ref.road_id, s_new, ref.lane_id, position.d_lane, ref.direction)
@@ -417,10 +435,12 @@ class ScenarioEngine:
         if self.sumo is None or self.road is None or body.road_id is None:
             return
         # SUMO lane index 0 is the rightmost driving lane in the travel direction
-        lanes = sorted(self.road.lane_ids(body.road_id, body.s, driving_only=True), reverse=body.direction < 0)
+        side = [
+            lane for lane in self.road.lane_ids(body.road_id, body.s, driving_only=True) if lane * lane_id > 0
+        ]
+        lanes = sorted(side, reverse=body.direction < 0)
         if lane_id in lanes:
-            index = lanes.index(lane_id) if body.direction > 0 else lanes.index(lane_id)
-            self.sumo.change_lane(body.name, index, duration)
+            self.sumo.change_lane(body.name, lanes.index(lane_id), duration)
 
     # --- conditions -----------------------------------------------------------------------------------
 
@@ -428,7 +448,10 @@ class ScenarioEngine:
         if cond.value_condition is not None:
             return self._value_condition(cond.value_condition)
         assert cond.entity_condition is not None
-        results = [self._entity_condition(cond.entity_condition, self.body(name)) for name in cond.triggering_entities]
+        results = [
+            self._entity_condition(cond.entity_condition, self.body(name))
+            for name in cond.triggering_entities
+        ]
         if cond.triggering_rule == "all":
             ok = bool(results) and all(results)
             if ok:
@@ -466,9 +489,13 @@ class ScenarioEngine:
         if isinstance(c, m.TraveledDistanceCondition):
             return body.odometer >= c.value
         if isinstance(c, m.StandStillCondition):
-            return body.standstill_since is not None and self.time - body.standstill_since >= c.duration - 1e-9
+            return (
+                body.standstill_since is not None and self.time - body.standstill_since >= c.duration - 1e-9
+            )
         if isinstance(c, m.EndOfRoadCondition):
-            return body.end_of_road_since is not None and self.time - body.end_of_road_since >= c.duration - 1e-9
+            return (
+                body.end_of_road_since is not None and self.time - body.end_of_road_since >= c.duration - 1e-9
+            )
         if isinstance(c, m.RelativeSpeedCondition):
             return compare(c.rule, body.speed - self.body(c.entity).speed, c.value)
         if isinstance(c, m.CollisionCondition):
@@ -520,10 +547,14 @@ class ScenarioEngine:
         if freespace:
             rel = b.heading - a.heading
             if kind == "longitudinal":
-                extent_b = abs(math.cos(rel)) * b.entity.box.length / 2 + abs(math.sin(rel)) * b.entity.box.width / 2
+                extent_b = (
+                    abs(math.cos(rel)) * b.entity.box.length / 2 + abs(math.sin(rel)) * b.entity.box.width / 2
+                )
                 extent = a.entity.box.length / 2 + extent_b
             else:
-                extent_b = abs(math.sin(rel)) * b.entity.box.length / 2 + abs(math.cos(rel)) * b.entity.box.width / 2
+                extent_b = (
+                    abs(math.sin(rel)) * b.entity.box.length / 2 + abs(math.cos(rel)) * b.entity.box.width / 2
+                )
                 extent = a.entity.box.width / 2 + extent_b
             magnitude = max(abs(value) - extent, 0.0)
             value = math.copysign(magnitude, value)
@@ -684,7 +715,9 @@ class ScenarioEngine:
                         if maneuver.state != State.RUNNING:
                             continue
                         for event in maneuver.children:
-                            if event.state == State.RUNNING and all(a.state == State.COMPLETE for a in event.children):
+                            if event.state == State.RUNNING and all(
+                                a.state == State.COMPLETE for a in event.children
+                            ):
                                 event.executions += 1
                                 if event.executions < event.definition.maximum_execution_count:
                                     self._set(event, Transition.END, State.STANDBY)
@@ -754,7 +787,12 @@ class ScenarioEngine:
                 if self.road is not None:
                     rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
                     if rc is not None:
-                        body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
+                        body.road_id, body.lane_id, body.s, body.offset = (
+                            rc.road_id,
+                            rc.lane_id,
+                            rc.s,
+                            rc.offset,
+                        )
                         body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
                         body.z = self.road.road_to_world(rc.road_id, rc.s, rc.t).z
         for body in self.bodies.values():
@@ -789,7 +827,9 @@ class ScenarioEngine:
             speed=body.speed,
             acceleration=body.acceleration,
             yaw_rate=body.yaw_rate,
-            bbox=BoundingBox(e.box.center_x, e.box.center_y, e.box.center_z, e.box.length, e.box.width, e.box.height),
+            bbox=BoundingBox(
+                e.box.center_x, e.box.center_y, e.box.center_z, e.box.length, e.box.width, e.box.height
+            ),
             lane=lane,
             controlled_by=e.driver,
         )

@@ -40,7 +40,9 @@ class Node:
     runtime: Any = None  # action runtime while running
     actors: tuple[str, ...] = ()
 
-    def transition(self, transition: Transition, state: State, step: int, log: list[str], time: float) -> None:
+    def transition(
+        self, transition: Transition, state: State, step: int, log: list[str], time: float
+    ) -> None:
         self.state = state
         self.last_transition = transition
         self.transition_step = step

@@ -32,9 +32,11 @@ def read_xml(path: Path, *, what: str, max_bytes: int = MAX_SCENARIO_BYTES) -> E
     if size > max_bytes:
         raise BadInput(f"{what} is {size} bytes; at most {max_bytes} are allowed", file=str(path))
     try:
-        return SafeET.parse(str(path)).getroot()  # type: ignore[no-any-return]
+        return SafeET.parse(str(path)).getroot()
     except DefusedXmlException as exc:
-        raise BadInput(f"{what} uses forbidden XML constructs ({type(exc).__name__})", file=str(path)) from None
+        raise BadInput(
+            f"{what} uses forbidden XML constructs ({type(exc).__name__})", file=str(path)
+        ) from None
     except ET.ParseError as exc:
         raise BadInput(f"{what} is not well-formed XML: {exc}", file=str(path)) from None
 
@@ -57,7 +59,9 @@ class _Reader:
     def values(self) -> dict[str, ParamValue]:
         return self.scopes[-1]
 
-    def push_declarations(self, element: ET.Element, overrides: Mapping[str, ParamValue] | None = None) -> None:
+    def push_declarations(
+        self, element: ET.Element, overrides: Mapping[str, ParamValue] | None = None
+    ) -> None:
         declarations = []
         block = element.find("ParameterDeclarations")
         if block is not None:
@@ -66,7 +70,9 @@ class _Reader:
                 if not name:
                     raise self.fail("ParameterDeclaration without a name", item)
                 declarations.append(
-                    Declaration(name=name, type=item.get("parameterType", "string"), value=item.get("value", ""))
+                    Declaration(
+                        name=name, type=item.get("parameterType", "string"), value=item.get("value", "")
+                    )
                 )
         try:
             self.scopes.append(declare(declarations, self.values, overrides))
@@ -127,10 +133,11 @@ class _Reader:
             raise self.fail(f"expected exactly one child element, found {len(children)}", element)
         return children[0]
 
-    def within(self, element: ET.Element, label: str | None, fn: Callable[[], T]) -> T:
+    def within(self, element: ET.Element, label: str | None, fn: Callable[..., T], *args: Any) -> T:
+        """`fn(*args)` with `element` on the path that error messages name."""
         self.where.append(f"{element.tag}[{label}]" if label else element.tag)
         try:
-            return fn()
+            return fn(*args)
         finally:
             self.where.pop()
 
@@ -152,10 +159,10 @@ def load_scenario(path: str | Path, overrides: Mapping[str, ParamValue] | None =
     declared = _declared_names(root)
     unknown = sorted(set(reader.overrides) - declared)
     if unknown:
-        names = ", ".join(unknown)
+        listed = ", ".join(unknown)
         known = ", ".join(sorted(declared)) or "none"
         raise BadInput(
-            f"parameter(s) {names} not declared in the scenario (declared: {known})",
+            f"parameter(s) {listed} not declared in the scenario (declared: {known})",
             file=str(path),
             field="ParameterDeclarations",
         )
@@ -175,9 +182,7 @@ def load_scenario(path: str | Path, overrides: Mapping[str, ParamValue] | None =
     names = {e.name for e in entities}
     storyboard = reader.child(root, "Storyboard")
     init = tuple(_init(reader, reader.child(storyboard, "Init")))
-    stories = tuple(
-        reader.within(s, s.get("name"), lambda s=s: _story(reader, s)) for s in storyboard.findall("Story")
-    )
+    stories = tuple(reader.within(s, s.get("name"), _story, reader, s) for s in storyboard.findall("Story"))
     stop = storyboard.find("StopTrigger")
     scenario = m.Scenario(
         path=path,
@@ -213,7 +218,9 @@ def _declared_names(root: ET.Element) -> set[str]:
 def _check_references(scenario: m.Scenario, names: set[str]) -> None:
     def check(name: str, where: str) -> None:
         if name not in names:
-            raise BadInput(f"entity {name!r} is not declared in <Entities>", file=str(scenario.path), field=where)
+            raise BadInput(
+                f"entity {name!r} is not declared in <Entities>", file=str(scenario.path), field=where
+            )
 
     for item in scenario.init:
         check(item.entity, "Storyboard/Init")
@@ -235,16 +242,22 @@ def _catalog_dirs(reader: _Reader, root: ET.Element) -> dict[str, Path]:
     for location in block:
         directory = location.find("Directory")
         if directory is not None:
-            dirs[location.tag.removesuffix("Catalog")] = (reader.path.parent / reader.attr(directory, "path")).resolve()
+            dirs[location.tag.removesuffix("Catalog")] = (
+                reader.path.parent / reader.attr(directory, "path")
+            ).resolve()
     return dirs
 
 
-def _catalog_entry(reader: _Reader, ref: ET.Element, catalogs: dict[str, Path], kind: str) -> tuple[ET.Element, dict[str, ParamValue]]:
+def _catalog_entry(
+    reader: _Reader, ref: ET.Element, catalogs: dict[str, Path], kind: str
+) -> tuple[ET.Element, dict[str, ParamValue]]:
     catalog_name = reader.attr(ref, "catalogName")
     entry_name = reader.attr(ref, "entryName")
     directory = catalogs.get(kind)
     if directory is None:
-        raise reader.fail(f"CatalogReference to {catalog_name}/{entry_name} but no {kind}Catalog location", ref)
+        raise reader.fail(
+            f"CatalogReference to {catalog_name}/{entry_name} but no {kind}Catalog location", ref
+        )
     assignments: dict[str, ParamValue] = {}
     block = ref.find("ParameterAssignments")
     if block is not None:
@@ -266,14 +279,16 @@ def _entities(reader: _Reader, element: ET.Element, catalogs: dict[str, Path]) -
     entities = []
     for obj in element.findall("ScenarioObject"):
         name = reader.attr(obj, "name")
-        entities.append(reader.within(obj, name, lambda obj=obj, name=name: _entity(reader, obj, name, catalogs)))
+        entities.append(reader.within(obj, name, _entity, reader, obj, name, catalogs))
     if element.find("EntitySelection") is not None:
         raise reader.fail("EntitySelection is not supported yet", element)
     return entities
 
 
 def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Path]) -> m.Entity:
-    body = next((c for c in obj if c.tag in ("Vehicle", "Pedestrian", "MiscObject", "CatalogReference")), None)
+    body = next(
+        (c for c in obj if c.tag in ("Vehicle", "Pedestrian", "MiscObject", "CatalogReference")), None
+    )
     if body is None:
         raise reader.fail("a ScenarioObject needs a Vehicle, Pedestrian, MiscObject or CatalogReference", obj)
     pushed = False
@@ -289,9 +304,11 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         object_type = {"Vehicle": "vehicle", "Pedestrian": "pedestrian", "MiscObject": "miscObject"}[body.tag]
         category = reader.attr(
             body,
-            {"Vehicle": "vehicleCategory", "Pedestrian": "pedestrianCategory", "MiscObject": "miscObjectCategory"}[
-                body.tag
-            ],
+            {
+                "Vehicle": "vehicleCategory",
+                "Pedestrian": "pedestrianCategory",
+                "MiscObject": "miscObjectCategory",
+            }[body.tag],
             "car" if body.tag == "Vehicle" else "pedestrian" if body.tag == "Pedestrian" else "obstacle",
         )
         bbox = reader.child(body, "BoundingBox")
@@ -350,14 +367,16 @@ def _properties(reader: _Reader, element: ET.Element) -> dict[str, str]:
 
 
 def _init(reader: _Reader, init: ET.Element) -> list[m.InitAction]:
-    out = []
+    out: list[m.InitAction] = []
     actions = init.find("Actions")
     if actions is None:
         return out
     for private in actions.findall("Private"):
         entity = reader.attr(private, "entityRef")
         for action in private.findall("PrivateAction"):
-            out.append(m.InitAction(entity=entity, action=reader.within(private, entity, lambda a=action: _private(reader, a))))
+            out.append(
+                m.InitAction(entity=entity, action=reader.within(private, entity, _private, reader, action))
+            )
     for other in actions:
         if other.tag == "GlobalAction":
             raise reader.fail("GlobalAction in Init is not supported yet", other)
@@ -367,7 +386,7 @@ def _init(reader: _Reader, init: ET.Element) -> list[m.InitAction]:
 def _story(reader: _Reader, story: ET.Element) -> m.Story:
     reader.push_declarations(story)
     try:
-        acts = tuple(reader.within(a, a.get("name"), lambda a=a: _act(reader, a)) for a in story.findall("Act"))
+        acts = tuple(reader.within(a, a.get("name"), _act, reader, a) for a in story.findall("Act"))
     finally:
         reader.pop()
     return m.Story(name=reader.attr(story, "name"), acts=acts)
@@ -378,7 +397,9 @@ def _act(reader: _Reader, act: ET.Element) -> m.Act:
     stop = act.find("StopTrigger")
     return m.Act(
         name=reader.attr(act, "name"),
-        groups=tuple(reader.within(g, g.get("name"), lambda g=g: _group(reader, g)) for g in act.findall("ManeuverGroup")),
+        groups=tuple(
+            reader.within(g, g.get("name"), _group, reader, g) for g in act.findall("ManeuverGroup")
+        ),
         start_trigger=_trigger(reader, start) if start is not None else None,
         stop_trigger=_trigger(reader, stop) if stop is not None else None,
     )
@@ -399,7 +420,7 @@ def _group(reader: _Reader, group: ET.Element) -> m.ManeuverGroup:
         actors=actors,
         select_triggering_entities=select,
         maneuvers=tuple(
-            reader.within(mv, mv.get("name"), lambda mv=mv: _maneuver(reader, mv)) for mv in group.findall("Maneuver")
+            reader.within(mv, mv.get("name"), _maneuver, reader, mv) for mv in group.findall("Maneuver")
         ),
     )
 
@@ -407,7 +428,7 @@ def _group(reader: _Reader, group: ET.Element) -> m.ManeuverGroup:
 def _maneuver(reader: _Reader, maneuver: ET.Element) -> m.Maneuver:
     reader.push_declarations(maneuver)
     try:
-        events = tuple(reader.within(e, e.get("name"), lambda e=e: _event(reader, e)) for e in maneuver.findall("Event"))
+        events = tuple(reader.within(e, e.get("name"), _event, reader, e) for e in maneuver.findall("Event"))
     finally:
         reader.pop()
     return m.Maneuver(name=reader.attr(maneuver, "name"), events=events)
@@ -424,8 +445,10 @@ def _event(reader: _Reader, event: ET.Element) -> m.Event:
         private = action.find("PrivateAction")
         if private is None:
             inner = reader.only_child(action)
-            raise reader.fail(f"action {name!r}: {inner.tag}/{reader.only_child(inner).tag} is not supported yet", action)
-        actions.append(m.Action(name=name, private=reader.within(action, name, lambda p=private: _private(reader, p))))
+            raise reader.fail(
+                f"action {name!r}: {inner.tag}/{reader.only_child(inner).tag} is not supported yet", action
+            )
+        actions.append(m.Action(name=name, private=reader.within(action, name, _private, reader, private)))
     return m.Event(
         name=reader.attr(event, "name"),
         priority=priority,  # type: ignore[arg-type]
@@ -486,7 +509,9 @@ def _speed_action(reader: _Reader, action: ET.Element) -> m.SpeedAction:
         )
     else:
         raise reader.fail(f"unknown speed target <{target_el.tag}>", target_el)
-    return m.SpeedAction(dynamics=_dynamics(reader, reader.child(action, "SpeedActionDynamics")), target=target)
+    return m.SpeedAction(
+        dynamics=_dynamics(reader, reader.child(action, "SpeedActionDynamics")), target=target
+    )
 
 
 def _lane_change(reader: _Reader, action: ET.Element) -> m.LaneChangeAction:
@@ -495,7 +520,9 @@ def _lane_change(reader: _Reader, action: ET.Element) -> m.LaneChangeAction:
     if target_el.tag == "AbsoluteTargetLane":
         target = m.AbsoluteTargetLane(lane_id=reader.integer(target_el, "value"))
     elif target_el.tag == "RelativeTargetLane":
-        target = m.RelativeTargetLane(entity=reader.attr(target_el, "entityRef"), value=reader.integer(target_el, "value"))
+        target = m.RelativeTargetLane(
+            entity=reader.attr(target_el, "entityRef"), value=reader.integer(target_el, "value")
+        )
     else:
         raise reader.fail(f"unknown lane target <{target_el.tag}>", target_el)
     return m.LaneChangeAction(
@@ -544,7 +571,10 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
         )
     if p.tag == "RoadPosition":
         return m.RoadPosition(
-            road_id=reader.attr(p, "roadId"), s=reader.num(p, "s"), t=reader.num(p, "t"), orientation=_orientation(reader, p)
+            road_id=reader.attr(p, "roadId"),
+            s=reader.num(p, "s"),
+            t=reader.num(p, "t"),
+            orientation=_orientation(reader, p),
         )
     if p.tag == "RelativeLanePosition":
         ds = reader.opt_num(p, "ds")
@@ -559,11 +589,14 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
         )
     if p.tag == "RelativeRoadPosition":
         return m.RelativeRoadPosition(
-            entity=reader.attr(p, "entityRef"), ds=reader.num(p, "ds"), dt=reader.num(p, "dt"), orientation=_orientation(reader, p)
+            entity=reader.attr(p, "entityRef"),
+            ds=reader.num(p, "ds"),
+            dt=reader.num(p, "dt"),
+            orientation=_orientation(reader, p),
         )
     if p.tag in ("RelativeWorldPosition", "RelativeObjectPosition"):
         cls: Any = m.RelativeWorldPosition if p.tag == "RelativeWorldPosition" else m.RelativeObjectPosition
-        return cls(  # type: ignore[no-any-return]
+        return cls(
             entity=reader.attr(p, "entityRef"),
             dx=reader.num(p, "dx"),
             dy=reader.num(p, "dy"),
@@ -595,12 +628,19 @@ def _trigger(reader: _Reader, element: ET.Element) -> m.Trigger:
 def _condition(reader: _Reader, element: ET.Element) -> m.Condition:
     edge = reader.attr(element, "conditionEdge", "none")
     if edge not in ("rising", "falling", "risingOrFalling", "none"):
-        raise reader.fail(f"conditionEdge={edge!r}: expected rising, falling, risingOrFalling or none", element)
+        raise reader.fail(
+            f"conditionEdge={edge!r}: expected rising, falling, risingOrFalling or none", element
+        )
     name = reader.attr(element, "name", "")
     delay = reader.num(element, "delay", 0.0)
     body = reader.only_child(element)
     if body.tag == "ByValueCondition":
-        return m.Condition(name=name, delay=delay, edge=edge, value_condition=_value_condition(reader, reader.only_child(body)))  # type: ignore[arg-type]
+        return m.Condition(
+            name=name,
+            delay=delay,
+            edge=edge,  # type: ignore[arg-type]
+            value_condition=_value_condition(reader, reader.only_child(body)),
+        )
     if body.tag == "ByEntityCondition":
         te = reader.child(body, "TriggeringEntities")
         rule = reader.attr(te, "triggeringEntitiesRule", "any")
@@ -629,7 +669,11 @@ def _value_condition(reader: _Reader, c: ET.Element) -> m.ValueCondition:
             state=reader.attr(c, "state"),
         )
     if c.tag == "ParameterCondition":
-        return m.ParameterCondition(name=reader.attr(c, "parameterRef").lstrip("$"), value=reader.attr(c, "value"), rule=_rule(reader, c))
+        return m.ParameterCondition(
+            name=reader.attr(c, "parameterRef").lstrip("$"),
+            value=reader.attr(c, "value"),
+            rule=_rule(reader, c),
+        )
     raise reader.fail(f"ByValueCondition/{c.tag} is not supported yet", c)
 
 
@@ -653,13 +697,17 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
     if tag == "SpeedCondition":
         return m.SpeedCondition(value=reader.num(c, "value"), rule=_rule(reader, c))
     if tag == "RelativeSpeedCondition":
-        return m.RelativeSpeedCondition(entity=reader.attr(c, "entityRef"), value=reader.num(c, "value"), rule=_rule(reader, c))
+        return m.RelativeSpeedCondition(
+            entity=reader.attr(c, "entityRef"), value=reader.num(c, "value"), rule=_rule(reader, c)
+        )
     if tag == "AccelerationCondition":
         return m.AccelerationCondition(value=reader.num(c, "value"), rule=_rule(reader, c))
     if tag == "TraveledDistanceCondition":
         return m.TraveledDistanceCondition(value=reader.num(c, "value"))
     if tag == "ReachPositionCondition":
-        return m.ReachPositionCondition(position=_position(reader, reader.child(c, "Position")), tolerance=reader.num(c, "tolerance"))
+        return m.ReachPositionCondition(
+            position=_position(reader, reader.child(c, "Position")), tolerance=reader.num(c, "tolerance")
+        )
     if tag == "DistanceCondition":
         return m.DistanceCondition(
             position=_position(reader, reader.child(c, "Position")),
@@ -676,7 +724,7 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
                 raise reader.fail("TimeToCollisionCondition to a position is not supported yet", target_el)
             entity = reader.attr(target_el, "entityRef")
         cls: Any = m.TimeHeadwayCondition if tag == "TimeHeadwayCondition" else m.TimeToCollisionCondition
-        return cls(  # type: ignore[no-any-return]
+        return cls(
             entity=entity if entity is not None else reader.attr(target, "entityRef"),
             freespace=_freespace(reader, c),
             value=reader.num(c, "value"),

@@ -10,6 +10,7 @@ happens only here, when a run starts, never at operator import time.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
@@ -84,7 +85,9 @@ def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
                 check=False,
             )
         except subprocess.TimeoutExpired:
-            raise BadInput(f"netconvert took longer than {NETCONVERT_TIMEOUT_S} s", file=str(road_file)) from None
+            raise BadInput(
+                f"netconvert took longer than {NETCONVERT_TIMEOUT_S} s", file=str(road_file)
+            ) from None
         if result.returncode != 0 or not out.is_file():
             errors = [line for line in result.stderr.splitlines() if line.startswith("Error")]
             detail = "; ".join(errors[-3:]) or result.stderr.strip()[-300:]
@@ -151,10 +154,8 @@ class SumoWorld:
             raise SimulationError(f"SUMO did not start: {exc}") from exc
 
     def close(self) -> None:
-        try:
+        with contextlib.suppress(Exception):  # already closed or never started: nothing to release
             self._sumo.close()
-        except Exception:  # already closed or never started: nothing to release
-            pass
 
     def __enter__(self) -> SumoWorld:
         return self
@@ -246,7 +247,9 @@ class SumoWorld:
         front = self._front[name]
         fx, fy = x + front * math.cos(heading), y + front * math.sin(heading)
         try:
-            self._sumo.vehicle.moveToXY(name, "", -1, fx, fy, _sumo_angle(heading), keepRoute=2, matchThreshold=50)
+            self._sumo.vehicle.moveToXY(
+                name, "", -1, fx, fy, _sumo_angle(heading), keepRoute=2, matchThreshold=50
+            )
             if name in self._scripted:
                 self._sumo.vehicle.setSpeed(name, max(speed, 0.0))
         except Exception as exc:
