@@ -614,3 +614,27 @@ def test_world_to_road_round_trip(name: str) -> None:
                 assert rc.lane_id == lane_id and rc.offset == pytest.approx(offset, abs=1e-3), (
                     f"{where}: {rc}"
                 )
+
+
+def test_world_to_road_near_agrees_with_world_to_road() -> None:
+    """The tracking fast path gives the same coordinates as the full search wherever it answers."""
+    import random
+
+    from simcore.world.opendrive import OpenDrive
+
+    road = OpenDrive.from_file(Path(__file__).resolve().parents[1] / "examples" / "maps" / "highway.xodr")
+    rng = random.Random(3)
+    answered = 0
+    for _ in range(300):
+        s = rng.uniform(0, road.road_length("1"))
+        t = rng.uniform(-12.0, 1.0)
+        pose = road.road_to_world("1", s, t)
+        full = road.world_to_road(pose.x, pose.y)
+        near = road.world_to_road_near(pose.x, pose.y, "1", max(s - rng.uniform(0, 3), 0.0))
+        if near is None:
+            continue
+        answered += 1
+        assert full is not None
+        assert (near.road_id, near.lane_id) == (full.road_id, full.lane_id)
+        assert near.s == pytest.approx(full.s, abs=1e-6) and near.t == pytest.approx(full.t, abs=1e-6)
+    assert answered > 250

@@ -261,6 +261,7 @@ class ScenarioEngine:
         self.root = self._build()
         self.registry = Registry(self.root)
         self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
+        self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
         self._init()
 
     # --- set-up ---------------------------------------------------------------------------------------
@@ -409,6 +410,7 @@ class ScenarioEngine:
     def place(self, body: Body, position: m.Position) -> None:
         """Teleport: pose from the position; road coordinates from the road network when on a road."""
         x, y, z, heading = self.resolve_position(position)
+        self._states.clear()
         body.x, body.y, body.z, body.heading = x, y, z, heading
         body.placed = True
         body.road_id = None
@@ -757,6 +759,7 @@ class ScenarioEngine:
                 self._release(node)
                 self._set(node, Transition.END, State.COMPLETE)
         self._complete_elements()
+        self._states.clear()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         for body in self.bodies.values():
             if body.entity.driver == "sumo" or body.gone:
@@ -785,7 +788,11 @@ class ScenarioEngine:
                 body.odometer += math.hypot(state.x - body.x, state.y - body.y)
                 body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
                 if self.road is not None:
-                    rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
+                    rc = None
+                    if body.road_id is not None:
+                        rc = self.road.world_to_road_near(body.x, body.y, body.road_id, body.s)
+                    if rc is None:
+                        rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
                     if rc is not None:
                         body.road_id, body.lane_id, body.s, body.offset = (
                             rc.road_id,
@@ -805,9 +812,16 @@ class ScenarioEngine:
                 body.standstill_since = None
         self.time = now
         self.step_index += 1
+        self._states.clear()
         return self.frame()
 
     def state_of(self, body: Body) -> EntityState:
+        cached = self._states.get(body.name)
+        if cached is None:
+            cached = self._states[body.name] = self._state_of(body)
+        return cached
+
+    def _state_of(self, body: Body) -> EntityState:
         e = body.entity
         lane = None
         if body.road_id is not None and self.road is not None:

@@ -83,17 +83,19 @@ def lane_shift(road: OpenDrive, road_id: str, s: float, lane_id: int, steps: int
 
 
 def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, float]:
-    """The lane containing lateral position t (closest centre) and the offset from its centre."""
-    best_lane, best_offset = 0, t
-    best = math.inf
-    for lane in road.lane_ids(road_id, s):
-        centre = road.lane_center_t(road_id, lane, s)
-        distance = abs(t - centre)
-        half = road.lane_width(road_id, lane, s) / 2
-        if distance <= half + 1e-9:
-            return lane, t - centre
-        if distance < best:
-            best, best_lane, best_offset = distance, lane, t - centre
+    """The lane containing lateral position t (else the one with the closest centre) and the offset from
+    its centre. One pass over the lane borders at s."""
+    r = road.road(road_id)
+    s = min(max(s, 0.0), r.length)
+    best_lane, best_offset, best = 0, t, math.inf
+    for lane, inner, outer in r.all_borders(s):
+        if lane.id == 0 or inner == outer:
+            continue
+        centre = 0.5 * (inner + outer)
+        if min(inner, outer) - 1e-9 <= t <= max(inner, outer) + 1e-9:
+            return lane.id, t - centre
+        if abs(t - centre) < best:
+            best, best_lane, best_offset = abs(t - centre), lane.id, t - centre
     return best_lane, best_offset
 
 

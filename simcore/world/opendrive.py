@@ -1190,6 +1190,26 @@ class OpenDrive:
                     best = (key, rc)
         return None if best is None else best[1]
 
+    def world_to_road_near(
+        self, x: float, y: float, road_id: str, s_previous: float
+    ) -> RoadCoordinates | None:
+        """Fast path for tracking a moving entity: project onto `road_id` from its previous `s`. Returns None
+        (use :meth:`world_to_road`) when the point is not strictly inside a lane of that road, e.g. after it
+        left the road or where roads overlap in a junction."""
+        road = self.roads.get(road_id)
+        if road is None or road.junction != "-1":
+            return None
+        s, t, along = self._project(road, x, y, min(max(s_previous, 0.0), road.length), 2.0)
+        if road.superelevations:
+            t /= max(math.cos(road.roll(s)), 1e-6)
+        if abs(along) > 1e-6:
+            return None
+        for lane, inner, outer in road.all_borders(s):
+            if abs(outer - inner) > 1e-9 and min(inner, outer) <= t <= max(inner, outer):
+                _, _, h = road.reference_xyh(s)
+                return RoadCoordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
+        return None
+
 
 def load(path: str | Path) -> OpenDrive:
     """Shorthand for :meth:`OpenDrive.from_file`."""
