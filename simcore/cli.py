@@ -275,6 +275,14 @@ def schema() -> None:
     out.print_json(json.dumps(SimulationRun.model_json_schema(by_alias=True)))
 
 
+@app.command()
+def docs() -> None:
+    """Print the SimulationRun field reference (Markdown, generated from the spec models)."""
+    from simcore.docs import reference
+
+    sys.stdout.write(reference())
+
+
 def main() -> None:
     try:
         app()

@@ -33,7 +33,7 @@ def format_validation_error(error: ValidationError) -> str:
         loc = _location(tuple(item["loc"]))
         message = str(item["msg"]).removeprefix("Value error, ")
         if item["type"] == "extra_forbidden":
-            message = "unknown field (check the spelling; fields are camelCase, see `carlos explain`)"
+            message = "unknown field (check the spelling; fields are camelCase: see `carlos docs`)"
         elif item["type"] == "missing":
             message = "required field is missing"
         lines.append(f"{loc}: {message}" if loc else message)
