@@ -217,6 +217,7 @@ def _print_report(report: object) -> None:
         f"[bold {colour}]{status}[/] · {summary['counts']['total']} runs in {report.wall_seconds:.1f} s "
         f"({report.skipped} resumed) · results: {report.output_url}",
         highlight=False,
+        soft_wrap=True,
     )
 
 

@@ -59,7 +59,9 @@ def _default(field: FieldInfo) -> str:
     return f"`{value}`"
 
 
-def _rows(model: type[BaseModel], prefix: str, rows: list[str], seen: set[tuple[type[BaseModel], str]]) -> None:
+def _rows(
+    model: type[BaseModel], prefix: str, rows: list[str], seen: set[tuple[type[BaseModel], str]]
+) -> None:
     if (model, prefix) in seen:
         return
     seen.add((model, prefix))

@@ -34,6 +34,16 @@ __all__ = [
 _TMP_PREFIX = ".carlos-tmp-"
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+#: mode of the files a FileStore writes: 0666 less the process umask, as `open()` would create them
+_FILE_MODE = 0o666 & ~_umask()
+
+
 class StoreError(RuntimeError):
     """An object-store operation failed; the message names the object and the cause (never a secret)."""
 
@@ -129,6 +139,7 @@ class FileStore:
             with os.fdopen(fd, "wb") as f:
                 yield f
                 f.flush()
+                os.chmod(tmp, _FILE_MODE)  # mkstemp makes 0600; results are ordinary files
                 os.fsync(f.fileno())
             os.replace(tmp, target)
         except BaseException as exc:

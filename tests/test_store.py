@@ -279,3 +279,12 @@ def test_s3_unreachable_endpoint(s3_env: S3Server) -> None:
     )
     with pytest.raises(StoreError, match=re.escape("cannot connect to the endpoint http://127.0.0.1:9")):
         store.put_bytes("a.json", b"{}")
+
+
+def test_file_store_writes_ordinary_file_modes(tmp_path: Path) -> None:
+    store = open_store(f"file://{tmp_path}")
+    store.put_bytes("a/b.txt", b"x")
+    mode = (tmp_path / "a" / "b.txt").stat().st_mode & 0o777
+    umask = os.umask(0)
+    os.umask(umask)
+    assert mode == 0o666 & ~umask
