@@ -29,6 +29,8 @@ from simcore.evaluation.report import index_summary
 from simcore.plan import Plan, RunPoint
 from simcore.spec import SimulationRun
 from simcore.store import Store
+from simcore.transport.bus import InProcessBus, Message
+from simcore.transport.world import WorldPublisher
 
 log = logging.getLogger("carlos.run")
 
@@ -149,6 +151,7 @@ def simulate(
         "carlos.versions": versions(),
     }
     metrics = MetricsAccumulator()
+    bus = InProcessBus()
     recorder = None
     try:
         engine = ScenarioEngine(
@@ -161,17 +164,17 @@ def simulate(
                 compression=spec.recording.compression,
                 metadata=metadata,
             )
+            bus.subscribe("*", _record_into(recorder))
+        world = WorldPublisher(bus)
         frame = engine.frame()
         metrics.update(frame)
-        if recorder is not None:
-            recorder.write_frame(frame)
+        world.publish(frame)
         max_steps = round(spec.simulation.max_seconds / spec.simulation.step_seconds)
         reported = 0.0
         while not engine.ended and engine.step_index < max_steps:
             frame = engine.step()
             metrics.update(frame)
-            if recorder is not None:
-                recorder.write_frame(frame)
+            world.publish(frame)
             if progress is not None and frame.time - reported >= 1.0:
                 reported = frame.time
                 progress(point.index, frame.time)
@@ -180,18 +183,12 @@ def simulate(
                     f"run exceeded execution.timeoutSeconds={spec.execution.timeout_seconds} "
                     f"at simulated t={frame.time:.1f} s"
                 )
+        world.publish_status(frame, "ended")
         if recorder is not None:
-            from simcore.transport import messages
-
-            recorder.write(
-                "/carlos/status",
-                "diagnostic_msgs/msg/DiagnosticStatus",
-                messages.status(frame, "ended"),
-                frame.time,
-            )
             recorder.close()
             recorder = None
     finally:
+        bus.close()
         if recorder is not None:
             recorder.abort()
         if sumo is not None:
@@ -200,6 +197,13 @@ def simulate(
     end_reason = engine.ended_by or "maxSeconds"
     result["stopTriggered"] = 1.0 if end_reason == "stopTrigger" else 0.0
     return result, end_reason, engine.time, engine.log
+
+
+def _record_into(recorder: Any) -> Callable[[Message], None]:
+    def record(message: Message) -> None:
+        recorder.write(message.topic, message.typename, message.obj(), message.time_s)
+
+    return record
 
 
 def run_index(

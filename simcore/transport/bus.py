@@ -1,0 +1,104 @@
+"""The topic bus: one interface for every way CARLOS' parts exchange ROS 2 messages.
+
+- `InProcessBus`: the embedded executor's path; subscribers get the message objects, nothing is serialised
+  unless a subscriber asks for CDR bytes (the recorder does).
+- Other implementations (loopback sockets between the pod's roles, DDS via cyclonedds, rclpy in the
+  `ros:jazzy` images) implement the same `Bus` protocol: `advertise` → `Publisher.publish`, `subscribe`.
+
+Topic names and types are DESIGN.md's; messages are rosbags dataclasses of the jazzy type store
+(`simcore.transport.messages.TYPESTORE`).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+
+@dataclass(slots=True)
+class Message:
+    """One message on the bus. `msg` (the object) or `data` (CDR bytes) is set; `cdr()`/`obj()` convert."""
+
+    topic: str
+    typename: str
+    time_s: float
+    msg: Any = None
+    data: bytes | None = None
+
+    def cdr(self) -> bytes:
+        if self.data is None:
+            from simcore.transport.messages import serialize
+
+            self.data = serialize(self.msg)
+        return self.data
+
+    def obj(self) -> Any:
+        if self.msg is None:
+            from simcore.transport.messages import deserialize
+
+            assert self.data is not None
+            self.msg = deserialize(self.data, self.typename)
+        return self.msg
+
+
+Callback = Callable[[Message], None]
+
+
+class Publisher(Protocol):
+    topic: str
+    typename: str
+
+    def publish(self, msg: Any, time_s: float) -> None: ...
+
+
+class Bus(Protocol):
+    def advertise(self, topic: str, typename: str) -> Publisher: ...
+
+    def subscribe(self, pattern: str, callback: Callback) -> None:
+        """Receive every message whose topic matches `pattern` (shell-style glob)."""
+        ...
+
+    def close(self) -> None: ...
+
+
+@dataclass
+class _InProcessPublisher:
+    bus: InProcessBus
+    topic: str
+    typename: str
+
+    def publish(self, msg: Any, time_s: float) -> None:
+        self.bus.dispatch(Message(self.topic, self.typename, time_s, msg=msg))
+
+
+@dataclass
+class InProcessBus:
+    """Synchronous in-process delivery, in subscription order."""
+
+    _subscriptions: list[tuple[str, Callback]] = field(default_factory=list)
+    _routes: dict[str, list[Callback]] = field(default_factory=dict)
+    topics: dict[str, str] = field(default_factory=dict)  # advertised topic → type
+
+    def advertise(self, topic: str, typename: str) -> Publisher:
+        known = self.topics.setdefault(topic, typename)
+        if known != typename:
+            raise ValueError(f"topic {topic} is advertised as {known}, not {typename}")
+        return _InProcessPublisher(self, topic, typename)
+
+    def subscribe(self, pattern: str, callback: Callback) -> None:
+        self._subscriptions.append((pattern, callback))
+        self._routes.clear()
+
+    def dispatch(self, message: Message) -> None:
+        route = self._routes.get(message.topic)
+        if route is None:
+            route = [cb for pattern, cb in self._subscriptions if fnmatch.fnmatchcase(message.topic, pattern)]
+            self._routes[message.topic] = route
+        for callback in route:
+            callback(message)
+
+    def close(self) -> None:
+        self._subscriptions.clear()
+        self._routes.clear()
