@@ -310,6 +310,13 @@ class Execution(Model):
         le=7 * 86_400,
         description="Wall-clock limit of one run; a run past it is an error. Default 3600.",
     )
+    queue_name: DnsLabel | None = Field(
+        None,
+        description=(
+            "Kueue LocalQueue to submit the run's Job to (cluster only): the Job is created suspended with "
+            "the label `kueue.x-k8s.io/queue-name` and Kueue admits it. Default: none (no Kueue)."
+        ),
+    )
 
 
 class SimulationRunSpec(Model):
@@ -334,6 +341,13 @@ class SimulationRunSpec(Model):
     recording: Recording = Field(default_factory=Recording, description="MCAP recording.")
     output: Output = Field(default_factory=Output, description="Where results go.")
     execution: Execution = Field(default_factory=Execution, description="Parallelism, retries, timeouts.")
+    suspend: bool = Field(
+        False,
+        description=(
+            "Cluster only: create the run's Job suspended (no pod starts); set to false to start it. The "
+            "only field of `spec` that may change after creation. Default false."
+        ),
+    )
 
     @model_validator(mode="after")
     def _unique_names(self) -> SimulationRunSpec:
@@ -355,15 +369,42 @@ class Condition(Model):
     last_transition_time: str | None = Field(None, description="When the condition last changed (RFC 3339).")
 
 
+class IndexFailure(Model):
+    """One failing index of a run and why."""
+
+    index: int = Field(description="The run index.")
+    scenario: str | None = Field(None, description="The scenario of the index.")
+    status: str | None = Field(None, description="`failed` (a test failure) or `error`.")
+    reason: str = Field("", description="The failing criteria or the error message.")
+
+
 class SimulationRunStatus(Model):
     """Observed state, written by the operator (or by `carlos run` into the run-level summary)."""
 
-    phase: Literal["Pending", "Running", "Succeeded", "Failed"] | None = Field(None, description="Run phase.")
+    phase: Literal["Pending", "Running", "Succeeded", "Failed", "Suspended"] | None = Field(
+        None, description="Run phase."
+    )
+    progress: str | None = Field(None, description="Finished runs / total, e.g. `12/50`.")
     total: int | None = Field(None, description="Number of runs (scenarios × permutations).")
-    succeeded: int | None = Field(None, description="Runs that finished (passed or failed).")
-    passed: int | None = Field(None, description="Runs whose required criteria passed.")
-    failed: int | None = Field(None, description="Runs whose required criteria failed.")
+    active: int | None = Field(None, description="Runs whose pods are running now.")
+    succeeded: int | None = Field(
+        None, description="Runs that ended with exit code 0 (every required criterion passed)."
+    )
+    failed: int | None = Field(
+        None, description="Runs that ended unsuccessfully (test failure, bad input or error, after retries)."
+    )
+    passed: int | None = Field(None, description="Runs whose summary says passed.")
+    test_failures: int | None = Field(None, description="Runs whose required criteria failed.")
     errors: int | None = Field(None, description="Runs that ended in an error.")
+    start_time: str | None = Field(None, description="When the run's Job started (RFC 3339).")
+    completion_time: str | None = Field(None, description="When the run finished (RFC 3339).")
+    results_url: str | None = Field(
+        None, alias="resultsURL", description="Where the results are: `<output>/<run>/`."
+    )
+    job_name: str | None = Field(None, description="Name of the run's Job.")
+    failures: list[IndexFailure] = Field(
+        default_factory=list, description="The first failing indexes (at most 20) with their reason."
+    )
     conditions: list[Condition] = Field(default_factory=list, description="Status conditions.")
 
 
