@@ -1,0 +1,63 @@
+"""The local executor survives a worker process dying mid-run: the pool is rebuilt, the runs that were in
+flight are retried, nothing already written is lost."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _children(pid: int) -> list[int]:
+    out = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True, check=False).stdout
+    return [int(p) for p in out.split()]
+
+
+def test_a_killed_worker_is_retried_and_the_sweep_completes(tmp_path: Path) -> None:
+    scenario = ROOT / "examples" / "scenarios" / "curve-following.xosc"
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: crash}\n"
+        f"spec:\n  scenarios: [{{name: c, openscenario: {scenario}}}]\n"
+        "  sweep: {matrix: {LeadSpeed: [18.0, 19.0, 20.0, 21.0]}}\n"
+        "  execution: {retries: 2}\n"
+    )
+    out = tmp_path / "out"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "simcore.cli", "run", str(manifest), "-o", f"file://{out}", "-j", "2"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        # wait until a worker is simulating (its run's scratch exists), then kill it the hard way
+        deadline = time.monotonic() + 60
+        victim = None
+        while time.monotonic() < deadline and victim is None:
+            workers = [
+                p for p in _children(process.pid) if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()
+            ]
+            if workers and (out / "crash" / "run.yaml").exists():
+                time.sleep(0.3)
+                victim = workers[0]
+            time.sleep(0.05)
+        assert victim is not None, "no worker process appeared"
+        os.kill(victim, signal.SIGKILL)
+        stdout, stderr = process.communicate(timeout=300)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, stderr
+    assert "retrying" in stderr + stdout or "worker process died" in stderr + stdout
+    summaries = [json.loads((out / "crash" / str(i) / "summary.json").read_text()) for i in range(4)]
+    assert [s["status"] for s in summaries] == ["passed"] * 4
+    assert max(s["attempts"] for s in summaries) >= 2  # at least one run was retried after the crash
+    run_summary = json.loads((out / "crash" / "summary.json").read_text())
+    assert run_summary["counts"]["total"] == 4 and run_summary["status"] == "passed"
