@@ -1,0 +1,98 @@
+"""Live view: a foxglove.sdk.v1 client receives the advertised ROS 2 channels and their messages."""
+
+from __future__ import annotations
+
+import json
+import struct
+import threading
+import time
+from typing import Any
+
+import pytest
+from websockets.sync.client import connect
+
+from simcore.live import LiveServer
+from simcore.transport import messages
+from simcore.transport.bus import InProcessBus
+from simcore.transport.world import WorldPublisher
+from simcore.world.state import BoundingBox, EntityState, WorldFrame
+
+BOX = BoundingBox(1.4, 0.0, 0.75, 4.5, 1.8, 1.5)
+
+
+def frame(step: int) -> WorldFrame:
+    t = step * 0.05
+    cars = tuple(
+        EntityState(name, "vehicle", "car", x0 + 20 * t, y, 0, 0, 0, 0, 20.0, 0, 0, BOX)
+        for name, x0, y in (("Ego", 0.0, -5.25), ("Lead", 30.0, -5.25))
+    )
+    return WorldFrame(step=step, time=t, entities=cars, ego="Ego")
+
+
+def test_foxglove_client_receives_channels_and_messages() -> None:
+    server = LiveServer(port=0, speed=20.0).start()
+    try:
+        bus = InProcessBus()
+        bus.subscribe("*", server)
+        world = WorldPublisher(bus)
+        world.publish(frame(0))  # advertises the channels
+        with connect(server.url, subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
+            channels: dict[str, dict[str, Any]] = {}
+            deadline = time.monotonic() + 10
+            while {"/clock", "/carlos/objects", "/tf"} - set(channels) and time.monotonic() < deadline:
+                reply = ws.recv(timeout=5)
+                if isinstance(reply, str):
+                    message = json.loads(reply)
+                    if message["op"] == "advertise":
+                        channels.update({c["topic"]: c for c in message["channels"]})
+            assert channels["/carlos/objects"]["schemaName"] == "vision_msgs/msg/Detection3DArray"
+            assert channels["/carlos/objects"]["schemaEncoding"] == "ros2msg"
+            assert channels["/clock"]["encoding"] == "cdr"
+            subscriptions = {1: "/clock", 2: "/carlos/objects"}
+            ws.send(
+                json.dumps(
+                    {
+                        "op": "subscribe",
+                        "subscriptions": [
+                            {"id": sid, "channelId": channels[topic]["id"]}
+                            for sid, topic in subscriptions.items()
+                        ],
+                    }
+                )
+            )
+            time.sleep(0.2)
+            started = time.monotonic()
+            publisher = threading.Thread(target=lambda: [world.publish(frame(i)) for i in range(1, 41)])
+            publisher.start()
+            received: dict[str, list[Any]] = {"/clock": [], "/carlos/objects": []}
+            while len(received["/clock"]) < 40 and time.monotonic() - started < 20:
+                data = ws.recv(timeout=10)
+                if isinstance(data, bytes) and data[0] == 0x01:
+                    sid, log_time = struct.unpack_from("<IQ", data, 1)
+                    topic = subscriptions[sid]
+                    msg = messages.deserialize(data[13:], channels[topic]["schemaName"])
+                    received[topic].append((log_time, msg))
+            publisher.join(timeout=10)
+    finally:
+        server.stop()
+    clocks = [m.clock.sec + m.clock.nanosec * 1e-9 for _, m in received["/clock"]]
+    assert clocks == pytest.approx([i * 0.05 for i in range(1, 41)])
+    assert all(len(m.detections) == 2 for _, m in received["/carlos/objects"])
+    assert {d.id for d in received["/carlos/objects"][-1][1].detections} == {"Ego", "Lead"}
+
+
+@pytest.mark.parametrize("speed", [10.0, 40.0])
+def test_publishing_is_paced_to_the_requested_speed(speed: float) -> None:
+    server = LiveServer(port=0, speed=speed).start()
+    try:
+        bus = InProcessBus()
+        bus.subscribe("*", server)
+        world = WorldPublisher(bus)
+        started = time.monotonic()
+        for i in range(41):  # 2 simulated seconds
+            world.publish(frame(i))
+        elapsed = time.monotonic() - started
+    finally:
+        server.stop()
+    assert elapsed >= 2.0 / speed * 0.95
+    assert elapsed < 2.0 / speed + 1.0
