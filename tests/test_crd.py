@@ -1,0 +1,155 @@
+"""The SimulationRun CRD: generated from the spec models, structural, checked in without drift, and the
+example manifests validate against its schema."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import pytest
+import yaml
+from carlos_operator.crd import SPEC_IMMUTABLE_MESSAGE, crd, crd_yaml
+
+from simcore.spec import SimulationRunSpec
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = sorted((ROOT / "examples" / "runs").glob("*.yaml"))
+FORBIDDEN = {"$ref", "$defs", "const", "title", "allOf", "propertyNames", "prefixItems", "examples"}
+
+
+def _schema() -> dict[str, Any]:
+    return crd()["spec"]["versions"][0]["schema"]["openAPIV3Schema"]
+
+
+@pytest.mark.parametrize("path", ["crds/simulationrun.yaml", "helm/carlos/crds/simulationrun.yaml"])
+def test_checked_in_crd_matches_the_models(path: str) -> None:
+    checked_in = ROOT / path
+    assert checked_in.is_file(), f"{path} is missing: run `make crds`"
+    assert checked_in.read_text() == crd_yaml(), f"{path} drifted from simcore/spec.py: run `make crds`"
+
+
+def _walk(node: dict[str, Any], path: str, problems: list[str]) -> None:
+    """Kubernetes' structural-schema rules (apiextensions: 'Specifying a structural schema')."""
+    for key in FORBIDDEN & set(node):
+        problems.append(f"{path}: {key} is not allowed")
+    if "type" not in node and not (
+        node.get("x-kubernetes-int-or-string") or node.get("x-kubernetes-preserve-unknown-fields")
+    ):
+        problems.append(f"{path}: no type")
+    for junctor in ("anyOf", "oneOf"):
+        for option in node.get(junctor, []):
+            if {"type", "description", "default", "additionalProperties", "nullable"} & set(option):
+                problems.append(f"{path}: {junctor} member sets {sorted(option)}")
+    if "properties" in node and "additionalProperties" in node:
+        problems.append(f"{path}: properties and additionalProperties together")
+    if isinstance(node.get("exclusiveMinimum"), (int, float)) and not isinstance(
+        node["exclusiveMinimum"], bool
+    ):
+        problems.append(f"{path}: exclusiveMinimum must be a boolean")
+    if node.get("type") == "array" and "items" not in node:
+        problems.append(f"{path}: array without items")
+    if "default" in node and node.get("type") == "object" and node.get("default") is None:
+        problems.append(f"{path}: null default")
+    if node.get("x-kubernetes-list-type") == "map":
+        required = set(node["items"].get("required", []))
+        for key in node["x-kubernetes-list-map-keys"]:
+            if key not in required:
+                problems.append(f"{path}: list-map key {key} is not required")
+    for name, child in node.get("properties", {}).items():
+        _walk(child, f"{path}.{name}", problems)
+    if isinstance(node.get("additionalProperties"), dict):
+        _walk(node["additionalProperties"], f"{path}.*", problems)
+    if "items" in node:
+        _walk(node["items"], f"{path}[]", problems)
+
+
+def test_schema_is_structural_and_documented() -> None:
+    schema = _schema()
+    problems: list[str] = []
+    _walk(schema, "", problems)
+    assert problems == []
+    missing: list[str] = []
+
+    def described(node: dict[str, Any], path: str) -> None:
+        for name, child in node.get("properties", {}).items():
+            if name != "metadata" and not child.get("description"):
+                missing.append(f"{path}.{name}")
+            described(child, f"{path}.{name}")
+        if "items" in node:
+            described(node["items"], f"{path}[]")
+
+    described(schema["properties"]["spec"], "spec")
+    assert missing == [], "every spec field needs a description for kubectl explain"
+
+
+def test_crd_resource_shape() -> None:
+    resource = crd()
+    spec = resource["spec"]
+    assert resource["metadata"]["name"] == "simulationruns.carlos.dev"
+    assert spec["names"]["shortNames"] == ["simrun", "simruns"]
+    version = spec["versions"][0]
+    assert version["subresources"] == {"status": {}}
+    columns = {c["name"]: c["jsonPath"] for c in version["additionalPrinterColumns"]}
+    assert columns == {
+        "Phase": ".status.phase",
+        "Progress": ".status.progress",
+        "Passed": ".status.passed",
+        "Failed": ".status.failed",
+        "Age": ".metadata.creationTimestamp",
+    }
+    schema = version["schema"]["openAPIV3Schema"]
+    execution = schema["properties"]["spec"]["properties"]["execution"]["properties"]
+    assert execution["retries"]["default"] == 1
+    assert (execution["retries"]["minimum"], execution["retries"]["maximum"]) == (0, 10)
+    step = schema["properties"]["spec"]["properties"]["simulation"]["properties"]["stepSeconds"]
+    assert step["minimum"] == 0 and step["exclusiveMinimum"] is True
+    compression = schema["properties"]["spec"]["properties"]["recording"]["properties"]["compression"]
+    assert compression["enum"] == ["zstd", "lz4", "none"]
+    phases = schema["properties"]["status"]["properties"]["phase"]["enum"]
+    assert set(phases) == {"Pending", "Running", "Succeeded", "Failed", "Suspended"}
+
+
+def test_spec_immutability_rule_covers_every_field_but_suspend() -> None:
+    rules = _schema()["properties"]["spec"]["x-kubernetes-validations"]
+    assert len(rules) == 1 and rules[0]["message"] == SPEC_IMMUTABLE_MESSAGE
+    rule = rules[0]["rule"]
+    for name in SimulationRunSpec.model_json_schema(by_alias=True)["properties"]:
+        if name == "suspend":
+            assert "self.suspend" not in rule
+        else:
+            assert f"self.{name} == oldSelf.{name}" in rule
+
+
+def _validator() -> jsonschema.Draft4Validator:
+    # OpenAPI v3.0's boolean exclusiveMinimum is JSON-schema draft 4's; x-kubernetes-* keys are ignored
+    return jsonschema.Draft4Validator(_schema())
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=[p.name for p in EXAMPLES])
+def test_examples_validate_against_the_crd(path: Path) -> None:
+    manifest = yaml.safe_load(path.read_text())
+    errors = [f"{list(e.absolute_path)}: {e.message}" for e in _validator().iter_errors(manifest)]
+    assert errors == []
+
+
+@pytest.mark.parametrize(
+    ("change", "where"),
+    [
+        (lambda s: s["execution"].update(retries=11), "retries"),
+        (lambda s: s["simulation"].update(stepSeconds=0), "stepSeconds"),
+        (lambda s: s["recording"].update(compression="gzip"), "compression"),
+        (lambda s: s["output"].update(url="ftp://x"), "url"),
+        (lambda s: s.update(scenarios=[]), "scenarios"),
+        (lambda s: s["scenarios"][0].pop("name"), "name"),
+    ],
+)
+def test_the_crd_rejects_invalid_specs(change: Any, where: str) -> None:
+    manifest = yaml.safe_load((ROOT / "examples/runs/automated-testing.yaml").read_text())
+    manifest["spec"].setdefault("execution", {})
+    bad = copy.deepcopy(manifest)
+    change(bad["spec"])
+    errors = list(_validator().iter_errors(bad))
+    assert errors, f"{where}: accepted"
+    assert any(where in [str(p) for p in e.absolute_path] or where in e.message for e in errors)
