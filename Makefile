@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages demo test test-slow lint typecheck bench clean
+.PHONY: install system-packages demo test test-slow lint typecheck bench crds clean
 
 install: $(STAMP)
 
@@ -44,6 +44,12 @@ typecheck: install
 
 bench: install
 	$(PY) bench/simcore.py
+
+# the SimulationRun CRD from simcore/spec.py, for kubectl and for the Helm chart (tests/test_crd.py checks drift)
+crds: install
+	mkdir -p crds helm/carlos/crds
+	$(VENV)/bin/carlos crds > crds/simulationrun.yaml
+	cp crds/simulationrun.yaml helm/carlos/crds/simulationrun.yaml
 
 clean:
 	rm -rf $(VENV) results .pytest_cache .mypy_cache .ruff_cache
