@@ -284,6 +284,92 @@ def docs() -> None:
     sys.stdout.write(reference())
 
 
+@app.command()
+def crds() -> None:
+    """Print the SimulationRun CustomResourceDefinition (YAML, generated from the spec models)."""
+    from carlos_operator.crd import crd_yaml
+
+    sys.stdout.write(crd_yaml())
+
+
+@app.command()
+def pod(
+    role: Annotated[str, typer.Option("--role", help="simcore, bridge or recorder.")],
+) -> None:
+    """Run one role of a SimulationRun pod (the Job's containers). Reads JOB_COMPLETION_INDEX, CARLOS_SPEC,
+    CARLOS_OUTPUT_URL and the AWS_* environment. Exit codes as `carlos run`."""
+    from simcore.pod import main as pod_main
+
+    raise typer.Exit(pod_main(role))
+
+
+@app.command()
+def operator(
+    namespace: Annotated[
+        list[str] | None, typer.Option("--namespace", "-n", help="Watch this namespace (repeatable).")
+    ] = None,
+    all_namespaces: Annotated[
+        bool, typer.Option("--all-namespaces", "-A", help="Watch every namespace (cluster-wide).")
+    ] = False,
+    liveness_port: Annotated[int, typer.Option(help="Port of the liveness endpoint /healthz.")] = 8080,
+    metrics_port: Annotated[int, typer.Option(help="Port of the Prometheus metrics (0: off).")] = 9090,
+) -> None:
+    """Run the Kubernetes operator: SimulationRun → ConfigMap + Indexed Job → status."""
+    from carlos_operator.main import run_operator
+
+    if bool(namespace) == all_namespaces:
+        raise _fail(BadInput("give --namespace NS (repeatable) or --all-namespaces", field="--namespace"))
+    raise typer.Exit(
+        run_operator(
+            namespaces=list(namespace or []),
+            liveness_port=liveness_port,
+            metrics_port=metrics_port,
+        )
+    )
+
+
+@app.command()
+def conformance(
+    directory: Annotated[Path, typer.Argument(help="Directory searched recursively for .xosc scenarios.")],
+    reference: Annotated[
+        Path | None,
+        typer.Option(help="Reference trajectories (<folder>__<name>.csv.gz, e.g. the esmini corpus' reference/)."),
+    ] = None,
+    out_file: Annotated[
+        Path | None, typer.Option("--out", help="Write the table here: .csv or .json (by suffix).")
+    ] = None,
+    cap: Annotated[float, typer.Option(help="Simulated-time cap per scenario (s).", min=0.1)] = 1250.0,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Worker processes.")] = 1,
+) -> None:
+    """Run every scenario under DIRECTORY headless (0.05 s steps) and compare with reference trajectories."""
+    from simcore import conformance as conf
+
+    if not directory.is_dir():
+        raise _fail(BadInput("not a directory", file=str(directory)))
+    if reference is not None and not reference.is_dir():
+        raise _fail(BadInput("reference is not a directory", file=str(reference)))
+    results = conf.run_directory(directory, reference, cap_seconds=cap, jobs=jobs)
+    table = Table(title=f"conformance: {directory}", show_edge=False)
+    for column in ("scenario", "status", "end s", "ref end s", "max RMSE m", "agreed", "message"):
+        table.add_column(column, overflow="fold")
+    for row in conf.iter_rows(results, directory):
+        table.add_row(*row)
+    out.print(table)
+    t = conf.totals(results)
+    out.print(
+        f"{t['scenarios']} scenarios · loaded {t['loaded']} · ran to their own end {t['ended']} · "
+        f"agreed {t['agreed']} of {t['with_reference']} with a reference "
+        f"(RMSE ≤ {conf.RMSE_LIMIT} m, end ±{conf.END_LIMIT} s) · {t['sim_seconds']:.0f} simulated s in "
+        f"{t['wall_seconds']:.1f} s · {t['warnings']} warnings",
+        highlight=False,
+        soft_wrap=True,
+    )
+    if out_file is not None:
+        conf.write_results(results, out_file, directory)
+        if out_file.suffix != ".json":
+            conf.write_results(results, out_file.with_suffix(".json"), directory)
+
+
 def main() -> None:
     try:
         app()
