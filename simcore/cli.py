@@ -333,7 +333,9 @@ def conformance(
     directory: Annotated[Path, typer.Argument(help="Directory searched recursively for .xosc scenarios.")],
     reference: Annotated[
         Path | None,
-        typer.Option(help="Reference trajectories (<folder>__<name>.csv.gz, e.g. the esmini corpus' reference/)."),
+        typer.Option(
+            help="Reference trajectories (<folder>__<name>.csv.gz, e.g. the esmini corpus' reference/)."
+        ),
     ] = None,
     out_file: Annotated[
         Path | None, typer.Option("--out", help="Write the table here: .csv or .json (by suffix).")

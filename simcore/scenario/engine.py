@@ -245,6 +245,7 @@ class ScenarioEngine:
         self.time = 0.0
         self.step_index = 0
         self.log: list[str] = []
+        self.warnings: list[str] = []
         self.ended_by: str | None = None
         self.bodies: dict[str, Body] = {e.name: Body(entity=e) for e in scenario.entities}
         self.ego = ego or _default_ego(scenario)
@@ -669,10 +670,17 @@ class ScenarioEngine:
             self._release(node)
             self._set(node, Transition.END, State.COMPLETE)
 
-    def _evaluate_storyboard(self) -> None:
+    def _check_stop(self) -> bool:
         if self.trigger(self.scenario.stop_trigger):
             self._stop(self.root)
             self.ended_by = "stopTrigger"
+            return True
+        return False
+
+    def _evaluate_storyboard(self) -> None:
+        # the StopTrigger is evaluated at the end of every step, on the state just reached (so a run ends at
+        # the first step where it holds, as esmini does); only the initial state is checked here
+        if self.step_index == 0 and self._check_stop():
             return
         for story in self.root.children:
             for act in story.children:
@@ -813,6 +821,7 @@ class ScenarioEngine:
         self.time = now
         self.step_index += 1
         self._states.clear()
+        self._check_stop()
         return self.frame()
 
     def state_of(self, body: Body) -> EntityState:

@@ -394,3 +394,5 @@ class Scenario:
     stories: tuple[Story, ...]
     stop_trigger: Trigger | None
     parameters: dict[str, bool | int | float | str]
+    #: unsupported elements that do not change motion: "file:line: element: what was ignored"
+    warnings: tuple[str, ...] = ()

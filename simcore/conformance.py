@@ -1,0 +1,416 @@
+"""`carlos conformance DIR`: run every OpenSCENARIO file under DIR headless and compare with reference
+trajectories (the esmini corpus: `reference/<folder>__<name>.csv.gz`, every entity every 0.1 s).
+
+Per scenario: did it load, did it run to its own end (StopTrigger) within the simulated-time cap, and —
+where a reference exists — per entity position RMSE over the common time span and the end time. A scenario
+*agrees* only when every scripted entity (one no controller drives) is within `RMSE_LIMIT` metres and the end
+time within `END_LIMIT` seconds. Numbers are meant to be honest: nothing is skipped silently; a scenario that
+fails to load or crashes counts against every total.
+"""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import json
+import math
+import time
+import traceback
+import xml.etree.ElementTree as ET
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from simcore.errors import BadInput, CarlosError
+
+STEP_SECONDS = 0.05
+REFERENCE_PERIOD = 0.1
+DEFAULT_CAP_SECONDS = 1250.0
+RMSE_LIMIT = 0.5
+END_LIMIT = 0.1
+
+
+@dataclass
+class EntityResult:
+    name: str
+    scripted: bool
+    rmse: float | None  # None: not in the reference or no common samples
+    samples: int
+
+
+@dataclass
+class ScenarioResult:
+    file: str
+    kind: str = "scenario"  # scenario | distribution | catalog
+    status: str = "bad_input"  # bad_input | error | capped | ended
+    loaded: bool = False
+    ended: bool = False
+    sim_seconds: float = 0.0
+    wall_seconds: float = 0.0
+    reference: str | None = None
+    reference_end: float | None = None
+    end_error: float | None = None
+    max_rmse: float | None = None
+    worst_entity: str | None = None
+    agreed: bool = False
+    message: str = ""
+    warnings: list[str] = field(default_factory=list)
+    entities: list[EntityResult] = field(default_factory=list)
+
+
+# --- discovery and references ------------------------------------------------------------------------------
+
+
+def scenario_files(directory: Path) -> list[Path]:
+    """Every .xosc under `directory` that is a scenario or a ParameterValueDistribution (catalogs skipped)."""
+    out = []
+    for path in sorted(directory.rglob("*.xosc")):
+        kind = file_kind(path)
+        if kind in ("scenario", "distribution"):
+            out.append(path)
+    return out
+
+
+def file_kind(path: Path) -> str:
+    """scenario, distribution, catalog or unknown, from the first elements (cheap, no full parse)."""
+    try:
+        head = path.read_bytes()[:65536].decode("utf-8", "replace")
+    except OSError:
+        return "unknown"
+    if "<Catalog " in head or "<Catalog>" in head:
+        return "catalog"
+    if "<ParameterValueDistribution" in head:
+        return "distribution"
+    if "<OpenSCENARIO" in head:
+        return "scenario"
+    return "unknown"
+
+
+def reference_name(path: Path) -> str:
+    return f"{path.parent.name}__{path.stem}.csv.gz"
+
+
+def read_reference(path: Path) -> dict[str, list[tuple[float, float, float]]]:
+    """entity name → [(time, x, y)] from a reference CSV (gzip or plain)."""
+    opener: Callable[..., Any] = gzip.open if path.suffix == ".gz" else open
+    tracks: dict[str, list[tuple[float, float, float]]] = {}
+    with opener(path, "rt", newline="") as handle:
+        for row in csv.DictReader(handle):
+            tracks.setdefault(row["name"], []).append((float(row["time"]), float(row["x"]), float(row["y"])))
+    return tracks
+
+
+def reference_end_times(reference_dir: Path) -> dict[str, float]:
+    """Reference end times by reference file name, from an INDEX.tsv next to the reference directory (the
+    exact end; the CSV only knows it to its 0.1 s sampling)."""
+    out: dict[str, float] = {}
+    for candidate in (reference_dir / "INDEX.tsv", reference_dir.parent / "INDEX.tsv"):
+        if not candidate.is_file():
+            continue
+        with candidate.open(newline="") as handle:
+            for row in csv.DictReader(handle, delimiter="\t"):
+                ref = row.get("reference_csv") or ""
+                value = row.get("esmini_sim_s") or ""
+                if ref and value:
+                    try:
+                        out[Path(ref).name] = float(value)
+                    except ValueError:
+                        continue
+        break
+    return out
+
+
+def controlled_entities(path: Path) -> set[str]:
+    """Entities a controller drives (ObjectController or Assign/ActivateController actions): their motion is
+    the controller's, not the script's, so they are reported but do not decide agreement."""
+    from simcore.scenario.xosc import read_xml
+
+    root = read_xml(path, what="OpenSCENARIO file")
+    out: set[str] = set()
+    for obj in root.iter("ScenarioObject"):
+        oc = obj.find("ObjectController")
+        if oc is not None and (oc.find("Controller") is not None or oc.find("CatalogReference") is not None):
+            out.add(obj.get("name", ""))
+    for private in root.iter("Private"):
+        if _has_controller_action(private):
+            out.add(private.get("entityRef", ""))
+    for group in root.iter("ManeuverGroup"):
+        if _has_controller_action(group):
+            actors = group.find("Actors")
+            if actors is not None:
+                out.update(r.get("entityRef", "") for r in actors.findall("EntityRef"))
+    return out
+
+
+def _has_controller_action(element: ET.Element) -> bool:
+    for action in element.iter("ControllerAction"):
+        if action.find("AssignControllerAction") is not None or action.find("OverrideControllerValueAction"):
+            return True
+    return False
+
+
+# --- running one scenario ----------------------------------------------------------------------------------
+
+
+@dataclass
+class Trace:
+    """Our positions at every REFERENCE_PERIOD of simulated time."""
+
+    tracks: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)
+
+    def add(self, time_s: float, name: str, x: float, y: float) -> None:
+        self.tracks.setdefault(name, []).append((time_s, x, y))
+
+
+def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[ScenarioResult, Trace]:
+    """Load and run one scenario headless; never raises for problems of the scenario itself."""
+    result = ScenarioResult(file=str(path), kind=file_kind(path))
+    trace = Trace()
+    if result.kind != "scenario":
+        result.status = "skipped"
+        result.message = f"{result.kind} file, not a scenario"
+        return result, trace
+    started = time.perf_counter()
+    sumo = None
+    try:
+        from simcore.scenario.engine import ScenarioEngine
+        from simcore.scenario.xosc import load_scenario
+        from simcore.world.opendrive import OpenDrive, OpenDriveError
+
+        scenario = load_scenario(path)
+        result.warnings = list(scenario.warnings)
+        road = None
+        if scenario.road_file is not None and scenario.road_file.suffix == ".xodr":
+            try:
+                road = OpenDrive.from_file(scenario.road_file)
+            except OpenDriveError as exc:
+                raise BadInput(str(exc), file=str(scenario.road_file)) from None
+            except FileNotFoundError:
+                raise BadInput("road network file not found", file=str(scenario.road_file)) from None
+        if any(e.driver == "sumo" for e in scenario.entities) and scenario.road_file is not None:
+            from simcore.world.sumo import SumoWorld, prepare_network
+
+            sumo = SumoWorld(prepare_network(scenario.road_file), STEP_SECONDS, 1)
+        engine = ScenarioEngine(scenario, road=road, sumo=sumo, step_seconds=STEP_SECONDS)
+        result.loaded = True
+        every = round(REFERENCE_PERIOD / STEP_SECONDS)
+        max_steps = round(cap_seconds / STEP_SECONDS)
+        _sample(trace, engine)
+        while not engine.ended and engine.step_index < max_steps:
+            engine.step()
+            if engine.step_index % every == 0:
+                _sample(trace, engine)
+        result.sim_seconds = engine.time
+        result.ended = engine.ended
+        result.status = "ended" if engine.ended else "capped"
+        if not engine.ended:
+            result.message = f"no end within {cap_seconds:g} s of simulated time"
+        result.warnings = list(scenario.warnings) + list(engine.warnings)
+    except CarlosError as exc:
+        result.status = "bad_input" if isinstance(exc, BadInput) and not result.loaded else "error"
+        result.message = str(exc)
+    except Exception as exc:  # a crash is a result of the scenario, counted and shown (one line + where)
+        result.status = "error"
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        result.message = f"{type(exc).__name__}: {exc} ({Path(where.filename).name}:{where.lineno})"
+    finally:
+        if sumo is not None:
+            sumo.close()
+    result.wall_seconds = time.perf_counter() - started
+    return result, trace
+
+
+def _sample(trace: Trace, engine: Any) -> None:
+    t = round(engine.time, 6)
+    for body in engine.bodies.values():
+        if not getattr(body, "gone", False) and getattr(body, "placed", True):
+            trace.add(t, body.name, body.x, body.y)
+
+
+def compare(
+    result: ScenarioResult,
+    trace: Trace,
+    reference: dict[str, list[tuple[float, float, float]]],
+    reference_end: float | None,
+    controlled: set[str],
+) -> None:
+    """Fill the comparison fields of `result` (RMSE per entity over the common time span, end time)."""
+    if reference_end is None:
+        reference_end = max((row[0] for rows in reference.values() for row in rows), default=0.0)
+    result.reference_end = reference_end
+    if not result.loaded:
+        return
+    result.end_error = abs(result.sim_seconds - reference_end)
+    worst: tuple[float, str] | None = None
+    for name, ours in trace.tracks.items():
+        scripted = name not in controlled
+        theirs = reference.get(name)
+        if theirs is None:
+            result.entities.append(EntityResult(name, scripted, None, 0))
+            continue
+        by_time = {round(t / REFERENCE_PERIOD): (x, y) for t, x, y in ours}
+        total, count = 0.0, 0
+        for t, x, y in theirs:
+            mine = by_time.get(round(t / REFERENCE_PERIOD))
+            if mine is None:
+                continue
+            total += (mine[0] - x) ** 2 + (mine[1] - y) ** 2
+            count += 1
+        rmse = math.sqrt(total / count) if count else None
+        result.entities.append(EntityResult(name, scripted, rmse, count))
+        if scripted and rmse is not None and (worst is None or rmse > worst[0]):
+            worst = (rmse, name)
+    scripted_missing = [e for e in result.entities if e.scripted and e.rmse is None and e.name in reference]
+    if worst is not None:
+        result.max_rmse, result.worst_entity = worst
+    result.agreed = (
+        result.ended
+        and result.end_error is not None
+        and result.end_error <= END_LIMIT + 1e-9
+        and not scripted_missing
+        and (worst is None or worst[0] <= RMSE_LIMIT)
+    )
+
+
+# --- the whole directory -----------------------------------------------------------------------------------
+
+
+def _one(args: tuple[str, str | None, float, float | None]) -> ScenarioResult:
+    file, reference_dir, cap, reference_end = args
+    path = Path(file)
+    result, trace = run_scenario(path, cap)
+    if reference_dir is not None and result.kind == "scenario":
+        ref_path = Path(reference_dir) / reference_name(path)
+        if ref_path.is_file():
+            result.reference = ref_path.name
+            try:
+                controlled = controlled_entities(path)
+            except CarlosError:
+                controlled = set()
+            compare(result, trace, read_reference(ref_path), reference_end, controlled)
+    return result
+
+
+def run_directory(
+    directory: Path,
+    reference_dir: Path | None = None,
+    *,
+    cap_seconds: float = DEFAULT_CAP_SECONDS,
+    jobs: int = 1,
+    on_result: Callable[[ScenarioResult], None] | None = None,
+) -> list[ScenarioResult]:
+    files = scenario_files(directory)
+    ends = reference_end_times(reference_dir) if reference_dir is not None else {}
+    tasks = [
+        (str(f), str(reference_dir) if reference_dir else None, cap_seconds, ends.get(reference_name(f)))
+        for f in files
+    ]
+    results: list[ScenarioResult] = []
+    if jobs <= 1:
+        for task in tasks:
+            r = _one(task)
+            results.append(r)
+            if on_result:
+                on_result(r)
+    else:
+        from concurrent.futures import ProcessPoolExecutor
+
+        # one scenario per worker task; libsumo holds one simulation per process, so processes, not threads
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for r in pool.map(_one, tasks):
+                results.append(r)
+                if on_result:
+                    on_result(r)
+    return results
+
+
+def totals(results: list[ScenarioResult]) -> dict[str, Any]:
+    scenarios = [r for r in results if r.kind == "scenario"]
+    with_reference = [r for r in scenarios if r.reference is not None]
+    ended = [r for r in scenarios if r.ended]
+    return {
+        "files": len(results),
+        "scenarios": len(scenarios),
+        "loaded": sum(r.loaded for r in scenarios),
+        "ended": len(ended),
+        "with_reference": len(with_reference),
+        "agreed": sum(r.agreed for r in with_reference),
+        "sim_seconds": round(sum(r.sim_seconds for r in scenarios), 2),
+        "wall_seconds": round(sum(r.wall_seconds for r in scenarios), 2),
+        "warnings": sum(len(r.warnings) for r in scenarios),
+    }
+
+
+def relative_name(result: ScenarioResult, base: Path) -> str:
+    try:
+        return str(Path(result.file).resolve().relative_to(base.resolve()))
+    except ValueError:
+        return result.file
+
+
+def write_results(results: list[ScenarioResult], out: Path, base: Path) -> None:
+    """CSV (one row per file) or JSON (rows, entities and totals), by the file suffix."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if out.suffix == ".json":
+        payload = {
+            "totals": totals(results),
+            "limits": {"rmse_m": RMSE_LIMIT, "end_s": END_LIMIT, "step_s": STEP_SECONDS},
+            "scenarios": [{**asdict(r), "file": relative_name(r, base)} for r in results],
+        }
+        out.write_text(json.dumps(payload, indent=1) + "\n")
+        return
+    buffer = io.StringIO()
+    writer = csv.writer(buffer)
+    writer.writerow(
+        [
+            "file",
+            "kind",
+            "status",
+            "loaded",
+            "ended",
+            "sim_s",
+            "ref_end_s",
+            "end_error_s",
+            "max_rmse_m",
+            "worst_entity",
+            "agreed",
+            "wall_s",
+            "warnings",
+            "message",
+        ]
+    )
+    for r in results:
+        writer.writerow(
+            [
+                relative_name(r, base),
+                r.kind,
+                r.status,
+                int(r.loaded),
+                int(r.ended),
+                f"{r.sim_seconds:.2f}",
+                "" if r.reference_end is None else f"{r.reference_end:.2f}",
+                "" if r.end_error is None else f"{r.end_error:.2f}",
+                "" if r.max_rmse is None else f"{r.max_rmse:.3f}",
+                r.worst_entity or "",
+                int(r.agreed),
+                f"{r.wall_seconds:.3f}",
+                len(r.warnings),
+                r.message,
+            ]
+        )
+    out.write_text(buffer.getvalue())
+
+
+def iter_rows(results: list[ScenarioResult], base: Path) -> Iterator[list[str]]:
+    for r in results:
+        yield [
+            relative_name(r, base),
+            r.status,
+            f"{r.sim_seconds:.2f}" if r.loaded else "",
+            "" if r.reference_end is None else f"{r.reference_end:.2f}",
+            "" if r.max_rmse is None else f"{r.max_rmse:.2f}",
+            "yes" if r.agreed else ("" if r.reference is None else "no"),
+            (r.message[:90] + "…") if len(r.message) > 90 else r.message,
+        ]
