@@ -39,7 +39,8 @@ def test_foxglove_client_receives_channels_and_messages() -> None:
         with connect(server.url, subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
             channels: dict[str, dict[str, Any]] = {}
             deadline = time.monotonic() + 10
-            while {"/clock", "/carlos/objects", "/tf"} - set(channels) and time.monotonic() < deadline:
+            wanted = {"/clock", "/carlos/objects", "/tf", "/carlos/objects/markers"}
+            while wanted - set(channels) and time.monotonic() < deadline:
                 reply = ws.recv(timeout=5)
                 if isinstance(reply, str):
                     message = json.loads(reply)
@@ -48,7 +49,8 @@ def test_foxglove_client_receives_channels_and_messages() -> None:
             assert channels["/carlos/objects"]["schemaName"] == "vision_msgs/msg/Detection3DArray"
             assert channels["/carlos/objects"]["schemaEncoding"] == "ros2msg"
             assert channels["/clock"]["encoding"] == "cdr"
-            subscriptions = {1: "/clock", 2: "/carlos/objects"}
+            assert channels["/carlos/objects/markers"]["schemaName"] == "visualization_msgs/msg/MarkerArray"
+            subscriptions = {1: "/clock", 2: "/carlos/objects", 3: "/carlos/objects/markers"}
             ws.send(
                 json.dumps(
                     {
@@ -64,7 +66,7 @@ def test_foxglove_client_receives_channels_and_messages() -> None:
             started = time.monotonic()
             publisher = threading.Thread(target=lambda: [world.publish(frame(i)) for i in range(1, 41)])
             publisher.start()
-            received: dict[str, list[Any]] = {"/clock": [], "/carlos/objects": []}
+            received: dict[str, list[Any]] = {topic: [] for topic in subscriptions.values()}
             while len(received["/clock"]) < 40 and time.monotonic() - started < 20:
                 data = ws.recv(timeout=10)
                 if isinstance(data, bytes) and data[0] == 0x01:
@@ -79,6 +81,12 @@ def test_foxglove_client_receives_channels_and_messages() -> None:
     assert clocks == pytest.approx([i * 0.05 for i in range(1, 41)])
     assert all(len(m.detections) == 2 for _, m in received["/carlos/objects"])
     assert {d.id for d in received["/carlos/objects"][-1][1].detections} == {"Ego", "Lead"}
+    boxes = received["/carlos/objects/markers"][-1][1].markers
+    assert [m.action for m in boxes] == [3, 0, 0]  # DELETEALL, then one ADD per object
+    lead = next(m for m in boxes if m.text == "Lead")
+    assert (lead.scale.x, lead.scale.y, lead.scale.z) == (4.5, 1.8, 1.5)
+    stamp = lead.header.stamp.sec + lead.header.stamp.nanosec * 1e-9
+    assert lead.pose.position.x == pytest.approx(30.0 + 20 * stamp + 1.4)  # box centre: rear axle + 1.4 m
 
 
 @pytest.mark.parametrize("speed", [10.0, 40.0])
