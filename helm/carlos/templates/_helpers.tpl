@@ -1,0 +1,102 @@
+{{/* Name of the chart, overridable by nothing: the objects are always "carlos"-named. */}}
+{{- define "carlos.name" -}}carlos{{- end -}}
+
+{{/* Full name: the release name, with "-carlos" unless the release name already contains it. */}}
+{{- define "carlos.fullname" -}}
+{{- if contains "carlos" .Release.Name -}}
+{{- .Release.Name | trunc 63 | trimSuffix "-" -}}
+{{- else -}}
+{{- printf "%s-carlos" .Release.Name | trunc 63 | trimSuffix "-" -}}
+{{- end -}}
+{{- end -}}
+
+{{- define "carlos.labels" -}}
+helm.sh/chart: {{ printf "%s-%s" .Chart.Name .Chart.Version | replace "+" "_" }}
+{{ include "carlos.selectorLabels" . }}
+app.kubernetes.io/version: {{ .Chart.AppVersion | quote }}
+app.kubernetes.io/managed-by: {{ .Release.Service }}
+app.kubernetes.io/part-of: carlos
+{{- end -}}
+
+{{- define "carlos.selectorLabels" -}}
+app.kubernetes.io/name: {{ include "carlos.name" . }}
+app.kubernetes.io/instance: {{ .Release.Name }}
+app.kubernetes.io/component: operator
+{{- end -}}
+
+{{- define "carlos.serviceAccountName" -}}
+{{- if .Values.serviceAccount.create -}}
+{{- default (include "carlos.fullname" .) .Values.serviceAccount.name -}}
+{{- else -}}
+{{- required "serviceAccount.name: give the name of an existing ServiceAccount when serviceAccount.create is false" .Values.serviceAccount.name -}}
+{{- end -}}
+{{- end -}}
+
+{{/* An image reference: repository@digest, else repository:tag (tag default: the chart's appVersion).
+     Call with (dict "image" .Values.images.X "root" $). */}}
+{{- define "carlos.image" -}}
+{{- if .image.digest -}}
+{{- printf "%s@%s" .image.repository .image.digest -}}
+{{- else -}}
+{{- printf "%s:%s" .image.repository (default .root.Chart.AppVersion .image.tag) -}}
+{{- end -}}
+{{- end -}}
+
+{{/* The run pods' image pull secrets: the global list plus every run image's own, without repeats. */}}
+{{- define "carlos.runPullSecrets" -}}
+{{- $names := list -}}
+{{- range .Values.imagePullSecrets -}}{{- $names = append $names . -}}{{- end -}}
+{{- range $role := list "simcore" "bridge" "recorder" "detector" -}}
+{{- range (index $.Values.images $role).pullSecrets -}}{{- $names = append $names . -}}{{- end -}}
+{{- end -}}
+{{- $names | uniq | join "," -}}
+{{- end -}}
+
+{{/* The default output URL of runs (empty when no bucket is set). */}}
+{{- define "carlos.defaultOutputURL" -}}
+{{- with .Values.objectStore -}}
+{{- if and (not .bucket) (or .prefix .endpoint .credentialsSecret) -}}
+{{- fail "objectStore: set objectStore.bucket too (prefix, endpoint and credentialsSecret are settings of the default bucket)" -}}
+{{- end -}}
+{{- if .bucket -}}
+{{- if .prefix -}}s3://{{ .bucket }}/{{ .prefix }}{{- else -}}s3://{{ .bucket }}{{- end -}}
+{{- end -}}
+{{- end -}}
+{{- end -}}
+
+{{/*
+RBAC: exactly what the operator touches, nothing more (operator/carlos_operator/rbac.py RBAC_RULES is the
+source; tests/test_helm.py checks that the rendered rules equal it). No wildcards; Secrets are never read.
+*/}}
+{{- define "carlos.namespacedRules" -}}
+- apiGroups: ["carlos.dev"]
+  resources: ["simulationruns"]
+  verbs: ["get", "list", "watch", "patch"]
+- apiGroups: ["carlos.dev"]
+  resources: ["simulationruns/status"]
+  verbs: ["get", "patch", "update"]
+- apiGroups: ["batch"]
+  resources: ["jobs"]
+  verbs: ["get", "list", "watch", "create", "patch"]
+- apiGroups: [""]
+  resources: ["configmaps"]
+  verbs: ["get", "list", "watch", "create"]
+- apiGroups: [""]
+  resources: ["events"]
+  verbs: ["create", "patch"]
+- apiGroups: [""]
+  resources: ["pods"]
+  verbs: ["get", "list"]
+{{- end -}}
+
+{{/* Cluster-scoped reads: the CRD (kopf checks that it is installed); namespaces only when watching all. */}}
+{{- define "carlos.clusterRules" -}}
+- apiGroups: ["apiextensions.k8s.io"]
+  resources: ["customresourcedefinitions"]
+  verbs: ["get", "list", "watch"]
+{{- if not .Values.watchNamespaces }}
+- apiGroups: [""]
+  resources: ["namespaces"]
+  verbs: ["get", "list", "watch"]
+{{- end }}
+{{- end -}}
