@@ -29,7 +29,7 @@ from simcore.evaluation.report import index_summary
 from simcore.plan import Plan, RunPoint
 from simcore.spec import SimulationRun
 from simcore.store import Store
-from simcore.transport.bus import InProcessBus, Message
+from simcore.transport.bus import Bus, InProcessBus, Message
 from simcore.transport.world import WorldPublisher
 
 log = logging.getLogger("carlos.run")
@@ -111,8 +111,11 @@ def simulate(
     *,
     progress: Progress | None = None,
     deadline: float | None = None,
+    bus: Bus | None = None,
 ) -> tuple[dict[str, float], str, float, list[str]]:
-    """Run the simulation of one index, recording into `out_dir/recording.mcap`.
+    """Run the simulation of one index, recording into `out_dir/recording.mcap`. The world is published on
+    `bus` (default: a new in-process bus); whatever subscribed to it before (a live view, another process'
+    transport) receives every message.
 
     Returns (metrics, end reason, simulated seconds, storyboard log)."""
     from simcore.recorder import McapRecorder
@@ -151,7 +154,7 @@ def simulate(
         "carlos.versions": versions(),
     }
     metrics = MetricsAccumulator()
-    bus = InProcessBus()
+    bus = bus if bus is not None else InProcessBus()
     recorder = None
     try:
         engine = ScenarioEngine(
@@ -217,6 +220,7 @@ def run_index(
     final_attempt: bool = True,
     progress: Progress | None = None,
     scratch_root: Path | None = None,
+    bus: Bus | None = None,
 ) -> RunOutcome:
     """Run one index and upload its results; never raises for problems of the run itself (object-store
     failures do raise `StoreError`). An infrastructure error on an attempt that will be retried uploads
@@ -242,7 +246,7 @@ def run_index(
         try:
             scenario_file = resolve_scenario_file(point, base_dir, scratch, store_factory)
             metrics, end_reason, sim_seconds, storyboard_log = simulate(
-                run, point, scenario_file, scratch, progress=progress, deadline=deadline
+                run, point, scenario_file, scratch, progress=progress, deadline=deadline, bus=bus
             )
             log_lines.extend(storyboard_log)
             results = evaluate(criteria, metrics)
