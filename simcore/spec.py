@@ -182,7 +182,7 @@ class Simulation(Model):
     )
 
 
-_CRITERION = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_.]*)\s*(>=|<=|==|!=|>|<)\s*(\S+)\s*$")
+_CRITERION = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_.\-]*)\s*(>=|<=|==|!=|>|<)\s*(\S+)\s*$")
 
 
 def _criterion_from_string(value: Any) -> Any:
@@ -234,12 +234,77 @@ class CriterionModel(Model):
 Criterion = Annotated[CriterionModel, BeforeValidator(_criterion_from_string)]
 
 
+class DetectionEvaluation(Model):
+    """Scoring an object detector under test against a lidar's ground truth (metrics `detection.*`)."""
+
+    sensor: str = Field(
+        description=(
+            "The lidar whose ground truth is the reference, as `ENTITY/SENSOR` (e.g. `Ego/lidar`): its "
+            "`/carlos/<entity>/<sensor>/objects`, in the sensor frame."
+        ),
+        pattern=r"^[^/\s]+/[A-Za-z][A-Za-z0-9_]*$",
+        max_length=200,
+    )
+    topic: str = Field(
+        description=(
+            "The detector's output topic (vision_msgs/Detection3DArray in the sensor frame, header stamp = "
+            "the point cloud's stamp), e.g. `/carlos/sut/detections`."
+        ),
+        pattern=r"^/[A-Za-z0-9_/]+$",
+        max_length=200,
+    )
+    iou: Literal["bev", "3d"] = Field(
+        "bev", description="Overlap measure for matching: bird's-eye-view or 3D IoU. Default bev."
+    )
+    iou_threshold: float = Field(
+        0.3, gt=0, le=1, description="A matched pair with at least this IoU is a true positive. Default 0.3."
+    )
+    min_points: int = Field(
+        5,
+        ge=0,
+        le=100_000,
+        description=(
+            "Ground-truth objects with fewer lidar points are not required (a detection of one is neither "
+            "a true nor a false positive). Default 5."
+        ),
+    )
+    max_range: float = Field(
+        100.0,
+        gt=0,
+        le=1000,
+        description="Objects and detections farther than this (m, BEV) are ignored. Default 100.",
+    )
+    bands: list[Annotated[float, Field(ge=0)]] = Field(
+        default_factory=lambda: [0.0, 30.0, 60.0],
+        description=(
+            "Distance band edges (m): metrics per band are named `detection.recall.0-30m`, … (the last band "
+            "runs to `maxRange`). Default [0, 30, 60]."
+        ),
+        max_length=20,
+    )
+
+    @field_validator("bands")
+    @classmethod
+    def _increasing(cls, bands: list[float]) -> list[float]:
+        if any(b >= a for a, b in zip(bands[1:], bands, strict=False)):
+            raise ValueError("band edges must be strictly increasing")
+        return bands
+
+
 class Evaluation(Model):
     """How a run's verdict is decided."""
 
     criteria: list[Criterion] = Field(
         default_factory=list,
         description="Criteria every run must meet. Default: none (a run that completes without error passes).",
+    )
+    detection: DetectionEvaluation | None = Field(
+        None,
+        description=(
+            "Score an object detector (`systemUnderTest`) against a lidar's ground truth: matching by IoU "
+            "(Hungarian), metrics `detection.precision`, `detection.recall`, `detection.meanIou`, "
+            "`detection.meanCenterError`, per distance band and class. Default: none."
+        ),
     )
 
 
@@ -319,6 +384,170 @@ class Execution(Model):
     )
 
 
+_SENSOR_NAME = r"^[A-Za-z][A-Za-z0-9_]*$"
+
+
+class Mount(Model):
+    """Where a sensor sits on its entity: a pose in `<entity>/base_link` (the reference point; x forward,
+    y left, z up; for vehicles the rear axle on the ground)."""
+
+    x: float = Field(0.0, ge=-100, le=100, description="Forward offset, m. Default 0.")
+    y: float = Field(0.0, ge=-100, le=100, description="Left offset, m. Default 0.")
+    z: float = Field(2.0, ge=-100, le=100, description="Height, m. Default 2.0.")
+    roll: float = Field(0.0, ge=-180, le=180, description="Roll, degrees. Default 0.")
+    pitch: float = Field(0.0, ge=-90, le=90, description="Pitch, degrees (positive: nose down). Default 0.")
+    yaw: float = Field(0.0, ge=-180, le=180, description="Yaw, degrees (positive: to the left). Default 0.")
+
+
+class _SensorBase(Model):
+    name: str = Field(
+        description=(
+            "Sensor name, unique per entity; topics `/carlos/<entity>/<name>/…`, frame `<entity>/<name>`."
+        ),
+        pattern=_SENSOR_NAME,
+        max_length=63,
+    )
+    entity: str | None = Field(
+        None,
+        description="The scenario entity carrying the sensor. Default: the ego (`simulation.ego`).",
+        min_length=1,
+        max_length=200,
+    )
+    mount: Mount = Field(default_factory=Mount, description="Mounting pose on the entity.")
+    range_min: float = Field(
+        0.5, ge=0, le=100, description="Returns closer than this (m) are dropped. Default 0.5."
+    )
+    range_max: float = Field(120.0, gt=0, le=2000, description="Maximum range, m. Default 120.")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> Any:
+        if self.range_min >= self.range_max:
+            raise ValueError(f"rangeMin ({self.range_min}) must be below rangeMax ({self.range_max})")
+        return self
+
+
+class LidarSensor(_SensorBase):
+    """A spinning lidar simulated by raycasting: one sweep per rotation, published as
+    `sensor_msgs/PointCloud2` (x, y, z, intensity, time, object_id, ring, label) on
+    `/carlos/<entity>/<name>/points`, with its ground truth (`…/objects`, `…/objects/info`)."""
+
+    type: Literal["lidar"] = Field(description="`lidar`.")
+    channels: int = Field(32, ge=1, le=256, description="Number of lasers (rings). Default 32.")
+    vertical_angles: list[Annotated[float, Field(ge=-90, le=90)]] | None = Field(
+        None,
+        description=(
+            "Elevation of every channel, degrees (one per channel). Default: `channels` angles spread "
+            "uniformly over `verticalFov`."
+        ),
+        max_length=256,
+    )
+    vertical_fov: tuple[Annotated[float, Field(ge=-90, le=90)], Annotated[float, Field(ge=-90, le=90)]] = (
+        Field(
+            (-25.0, 15.0),
+            description="Lowest and highest elevation, degrees, when `verticalAngles` is not set. Default [-25, 15].",
+        )
+    )
+    horizontal_resolution: int = Field(
+        1024, ge=1, le=16_384, description="Firings per channel per revolution (columns). Default 1024."
+    )
+    horizontal_fov: float = Field(
+        360.0, gt=0, le=360, description="Horizontal field of view, degrees, centred on x. Default 360."
+    )
+    rotation_rate: float = Field(
+        10.0, gt=0, le=100, description="Revolutions per second = point clouds per second (Hz). Default 10."
+    )
+    range_noise: float = Field(
+        0.02, ge=0, le=10, description="Standard deviation of Gaussian range noise, m (seeded). Default 0.02."
+    )
+    dropout: float = Field(
+        0.0, ge=0, le=1, description="Probability that a return is lost (seeded). Default 0."
+    )
+    motion_distortion: bool = Field(
+        False,
+        description=(
+            "Fire every column from the pose the sensor had at its firing time within the sweep (the carrier "
+            "moving with its current speed and yaw rate), points expressed in the frame at the sweep's end, "
+            "`time` field = firing time relative to the stamp. Default false (the whole sweep at the stamp)."
+        ),
+    )
+    ground_truth: bool = Field(
+        True,
+        description=(
+            "Publish the ground-truth object list in the sensor frame (`…/objects`: box, class; "
+            "`…/objects/info`: velocity, lidar points, occlusion ratio). Default true."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _angles(self) -> LidarSensor:
+        if self.vertical_angles is not None and len(self.vertical_angles) != self.channels:
+            raise ValueError(
+                f"verticalAngles has {len(self.vertical_angles)} angles but channels is {self.channels}: "
+                "give one angle per channel"
+            )
+        low, high = self.vertical_fov
+        if low > high:
+            raise ValueError(f"verticalFov [{low}, {high}]: the lowest angle comes first")
+        return self
+
+
+class CameraSensor(_SensorBase):
+    """A pinhole depth and semantic camera simulated by raycasting: `sensor_msgs/Image` depth (32FC1, metres
+    along the optical axis, NaN without a return) on `/carlos/<entity>/<name>/image`, the class of every
+    pixel (mono8, class ids as the lidar labels) on `…/labels`, and `sensor_msgs/CameraInfo` on
+    `…/camera_info`; frame `<entity>/<name>_optical` (z forward, x right, y down)."""
+
+    type: Literal["camera"] = Field(description="`camera`.")
+    width: int = Field(640, ge=1, le=8192, description="Image width, pixels. Default 640.")
+    height: int = Field(480, ge=1, le=8192, description="Image height, pixels. Default 480.")
+    horizontal_fov: float = Field(
+        90.0, gt=1, lt=179, description="Horizontal field of view, degrees. Default 90."
+    )
+    rate: float = Field(10.0, gt=0, le=100, description="Images per second (Hz). Default 10.")
+
+
+Sensor = Annotated[LidarSensor | CameraSensor, Field(discriminator="type")]
+
+
+class SystemUnderTest(Model):
+    """The software under test. It talks to the simulation through topics only.
+
+    Locally (embedded executor) it is an in-process node: `module` names a class `module:Class`, constructed
+    as `Class(bus, **parameters)` before the first frame (the bus has `advertise`/`subscribe`, messages
+    are the ROS 2 types of `simcore.transport.messages.TYPESTORE`), and its `close()`, if it has one, is
+    called after the last frame. On Kubernetes it is a container of the run's pod: `image` and `command`."""
+
+    name: DnsLabel = Field("sut", description="Name in logs and pods. Default `sut`.")
+    module: str | None = Field(
+        None,
+        description="In-process node as `package.module:Class` (local runs), e.g. `examples.detector:Detector`.",
+        pattern=r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*:[A-Za-z_][A-Za-z0-9_]*$",
+        max_length=300,
+    )
+    python_path: list[Annotated[str, Field(min_length=1, max_length=4096)]] = Field(
+        default_factory=list,
+        description=(
+            "Folders (relative to the manifest) put on the Python path before importing `module`. Default: "
+            "none (the working directory is always searched)."
+        ),
+        max_length=20,
+    )
+    parameters: dict[Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")], Any] = Field(
+        default_factory=dict, description="Keyword arguments of the node (JSON values). Default: none."
+    )
+    image: str | None = Field(None, description="Container image (cluster).", min_length=1, max_length=1024)
+    command: list[str] = Field(
+        default_factory=list, description="Container command (cluster). Default: the image's."
+    )
+    args: list[str] = Field(default_factory=list, description="Container arguments (cluster). Default: none.")
+
+    @model_validator(mode="after")
+    def _something_to_run(self) -> SystemUnderTest:
+        if self.module is None and self.image is None:
+            raise ValueError("set 'module' (in-process, local runs) or 'image' (cluster), or both")
+        return self
+
+
 class SimulationRunSpec(Model):
     """What to simulate, how to sweep it, how to judge it and where the results go."""
 
@@ -332,10 +561,17 @@ class SimulationRunSpec(Model):
         default_factory=Sweep, description="The parameter sweep. Default: one run per scenario."
     )
     simulation: Simulation = Field(default_factory=Simulation, description="Time stepping and seed.")
-    sensors: list[dict[str, Any]] = Field(
+    sensors: list[Sensor] = Field(
         default_factory=list,
-        description="Sensors (lidar, camera). Reserved for the sensors feature: a non-empty list is rejected today.",
-        max_length=0,
+        description=(
+            "Sensors (lidar, camera) mounted on scenario entities, simulated by raycasting every frame they "
+            "are due and published as ROS 2 messages. Default: none."
+        ),
+        max_length=64,
+    )
+    system_under_test: SystemUnderTest | None = Field(
+        None,
+        description="The software under test, talking to the simulation through topics only. Default: none.",
     )
     evaluation: Evaluation = Field(default_factory=Evaluation, description="Verdict criteria.")
     recording: Recording = Field(default_factory=Recording, description="MCAP recording.")
@@ -356,6 +592,14 @@ class SimulationRunSpec(Model):
             if scenario.name in seen:
                 raise ValueError(f"scenario name {scenario.name!r} is used twice; names must be unique")
             seen.add(scenario.name)
+        sensors: set[tuple[str | None, str]] = set()
+        for sensor in self.sensors:
+            key = (sensor.entity, sensor.name)
+            if key in sensors:
+                raise ValueError(
+                    f"sensor {sensor.name!r} is defined twice on the same entity; names must be unique"
+                )
+            sensors.add(key)
         return self
 
 
