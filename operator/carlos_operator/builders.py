@@ -1,0 +1,391 @@
+"""Pure builders: a SimulationRun → its ConfigMap and Indexed Job (plain dicts, no I/O, no kopf).
+
+One pod per index (DESIGN.md, pod roles): the simulator core is the main container; the bridge (the pod's
+topic hub) and the recorder are native sidecars, i.e. init containers with `restartPolicy: Always` whose
+startup probes make the kubelet start them in order, each ready before the next starts:
+
+1. `bridge`: listens on 127.0.0.1:`BUS_PORT` (loopback topic transport, simcore/transport/loopback.py);
+   ready when the port accepts connections.
+2. `recorder`: subscribes to every topic through the bridge, then opens 127.0.0.1:`RECORDER_READY_PORT`
+   (its startup probe) — so no message simcore publishes can be missed.
+3. `simcore`: runs the index, publishes the topics and the verdict, waits until the recorder has uploaded
+   the results, and exits with DESIGN.md's exit code, which the Job's podFailurePolicy acts on.
+
+Names are deterministic (`job_name`), every object carries an owner reference to the SimulationRun, so a
+restarted operator adopts what exists and deleting the run deletes them (results in object storage stay).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+import yaml
+
+from simcore.errors import BadInput, ExitCode
+from simcore.plan import Plan
+from simcore.spec import API_GROUP, API_VERSION, KIND, SimulationRun
+
+SPEC_DIR = "/etc/carlos/spec"
+SPEC_FILE = "simulationrun.yaml"
+SCENARIO_DIR = "/etc/carlos/scenarios"
+SCRATCH_DIR = "/scratch"
+BUS_PORT = 7447
+RECORDER_READY_PORT = 7448
+QUEUE_LABEL = "kueue.x-k8s.io/queue-name"
+RUN_LABEL = f"{API_GROUP}/run"
+INDEX_FAILURES_ANNOTATION = "batch.kubernetes.io/job-index-failure-count"
+#: a cluster run without `execution.parallelism` runs this many pods at a time
+DEFAULT_PARALLELISM = 10
+#: a per-pod backstop beyond `execution.timeoutSeconds` (simcore enforces the limit itself)
+POD_DEADLINE_GRACE_S = 300
+UID = 65532  # the images' non-root user
+
+
+def _package_version() -> str:
+    try:
+        return version("carlos")
+    except PackageNotFoundError:
+        return "0.0.0"
+
+
+@dataclass(frozen=True)
+class OperatorSettings:
+    """The operator's configuration (the Helm chart sets these environment variables on its Deployment)."""
+
+    image_simcore: str
+    image_bridge: str
+    image_recorder: str
+    image_pull_secrets: tuple[str, ...] = ()
+    default_output_url: str | None = None
+    default_s3_endpoint: str | None = None
+    default_s3_secret: str | None = None
+    job_ttl_seconds: int = 7 * 86_400
+    extra_labels: dict[str, str] = field(default_factory=dict)
+
+    @classmethod
+    def from_env(cls, env: dict[str, str] | None = None) -> OperatorSettings:
+        env = dict(os.environ if env is None else env)
+        tag = _package_version()
+
+        def image(role: str) -> str:
+            return env.get(f"CARLOS_IMAGE_{role.upper()}") or f"ghcr.io/carlos-sim/carlos-{role}:{tag}"
+
+        secrets = tuple(s.strip() for s in env.get("CARLOS_IMAGE_PULL_SECRETS", "").split(",") if s.strip())
+        ttl = env.get("CARLOS_JOB_TTL_SECONDS", "")
+        return cls(
+            image_simcore=image("simcore"),
+            image_bridge=image("bridge"),
+            image_recorder=image("recorder"),
+            image_pull_secrets=secrets,
+            default_output_url=env.get("CARLOS_DEFAULT_OUTPUT_URL") or None,
+            default_s3_endpoint=env.get("CARLOS_DEFAULT_S3_ENDPOINT") or None,
+            default_s3_secret=env.get("CARLOS_DEFAULT_S3_SECRET") or None,
+            job_ttl_seconds=int(ttl) if ttl.isdigit() else 7 * 86_400,
+        )
+
+
+@dataclass(frozen=True)
+class Output:
+    """Where a run's results go on the cluster, and how to reach the object store."""
+
+    url: str  # the output URL (s3://bucket/prefix)
+    endpoint: str | None
+    region: str | None
+    secret: str | None  # Secret with AWS_ACCESS_KEY_ID / AWS_SECRET_ACCESS_KEY
+
+    @property
+    def results_url(self) -> str:
+        return self.url.rstrip("/")
+
+
+def job_name(run_name: str) -> str:
+    """The Job's (and ConfigMap's) name: `carlos-<run>`, shortened with a hash so that pod hostnames
+    (`<job>-<index>-<suffix>`) stay within 63 characters."""
+    name = f"carlos-{run_name}"
+    if len(name) <= 48:
+        return name
+    digest = hashlib.sha256(run_name.encode()).hexdigest()[:8]
+    return f"{name[:39].rstrip('-')}-{digest}"
+
+
+def owner_reference(body: dict[str, Any]) -> dict[str, Any]:
+    meta = body["metadata"]
+    return {
+        "apiVersion": f"{API_GROUP}/{API_VERSION}",
+        "kind": KIND,
+        "name": meta["name"],
+        "uid": meta["uid"],
+        "controller": True,
+        "blockOwnerDeletion": True,
+    }
+
+
+def resolve_output(run: SimulationRun, settings: OperatorSettings) -> Output:
+    """The output of a cluster run: `spec.output.url` when set, else the operator's default; only s3://
+    (pods are ephemeral). Raises BadInput with the field to fix."""
+    out = run.spec.output
+    url = out.url if "url" in out.model_fields_set else settings.default_output_url
+    if url is None:
+        raise BadInput(
+            "no output on the cluster: set spec.output.url to s3://bucket/prefix (or install the operator "
+            "with a default output, CARLOS_DEFAULT_OUTPUT_URL)",
+            field="spec.output.url",
+        )
+    if not url.startswith("s3://"):
+        raise BadInput(
+            f"{url!r}: on a cluster results go to object storage: use s3://bucket/prefix",
+            field="spec.output.url",
+        )
+    secret = out.credentials_secret_ref.name if out.credentials_secret_ref else settings.default_s3_secret
+    return Output(
+        url=url, endpoint=out.endpoint or settings.default_s3_endpoint, region=out.region, secret=secret
+    )
+
+
+#: Kubernetes' limit on completions of an Indexed Job with backoffLimitPerIndex
+MAX_COMPLETIONS = 100_000
+
+
+def check_cluster_spec(run: SimulationRun) -> None:
+    """What a cluster run needs beyond the models: at most `MAX_COMPLETIONS` runs, and scenarios a pod can
+    reach (s3://, a ConfigMap, or an absolute file:// path inside the image)."""
+    total = len(Plan(run.spec))
+    if total > MAX_COMPLETIONS:
+        raise BadInput(
+            f"{total} runs: a cluster run has at most {MAX_COMPLETIONS:,} (Kubernetes' limit for an Indexed "
+            "Job); split the sweep into several SimulationRuns",
+            field="spec.sweep",
+        )
+    for position, scenario in enumerate(run.spec.scenarios):
+        source = scenario.openscenario
+        if source is None or source.startswith("s3://"):
+            continue
+        if source.startswith("file:///"):
+            continue
+        raise BadInput(
+            f"{source!r}: a pod has no manifest directory; give the scenario as s3://bucket/key, as a "
+            "configMapRef, or as an absolute file:/// path inside the simcore image",
+            field=f"spec.scenarios[{position}].openscenario",
+        )
+
+
+def manifest_yaml(run: SimulationRun) -> str:
+    """The spec as applied (apiVersion, kind, name, spec): what every pod reads. Never the permutations."""
+    document = {
+        "apiVersion": f"{API_GROUP}/{API_VERSION}",
+        "kind": KIND,
+        "metadata": {"name": run.name},
+        "spec": run.spec.model_dump(mode="json", by_alias=True, exclude_none=True),
+    }
+    return yaml.safe_dump(document, sort_keys=False)
+
+
+def _labels(run: SimulationRun, settings: OperatorSettings) -> dict[str, str]:
+    return {
+        "app.kubernetes.io/name": "carlos",
+        "app.kubernetes.io/component": "simulation",
+        "app.kubernetes.io/managed-by": "carlos-operator",
+        RUN_LABEL: run.name,
+        **settings.extra_labels,
+    }
+
+
+def build_configmap(run: SimulationRun, body: dict[str, Any], settings: OperatorSettings) -> dict[str, Any]:
+    return {
+        "apiVersion": "v1",
+        "kind": "ConfigMap",
+        "metadata": {
+            "name": job_name(run.name),
+            "namespace": body["metadata"].get("namespace"),
+            "labels": _labels(run, settings),
+            "ownerReferences": [owner_reference(body)],
+        },
+        "data": {SPEC_FILE: manifest_yaml(run)},
+    }
+
+
+_RESTRICTED_CONTAINER = {
+    "allowPrivilegeEscalation": False,
+    "readOnlyRootFilesystem": True,
+    "runAsNonRoot": True,
+    "capabilities": {"drop": ["ALL"]},
+    "seccompProfile": {"type": "RuntimeDefault"},
+}
+
+
+def _env(run: SimulationRun, output: Output) -> list[dict[str, Any]]:
+    env: list[dict[str, Any]] = [
+        {
+            "name": "JOB_COMPLETION_INDEX",
+            "valueFrom": {
+                "fieldRef": {"fieldPath": "metadata.annotations['batch.kubernetes.io/job-completion-index']"}
+            },
+        },
+        {
+            "name": "CARLOS_INDEX_FAILURES",
+            "valueFrom": {"fieldRef": {"fieldPath": f"metadata.annotations['{INDEX_FAILURES_ANNOTATION}']"}},
+        },
+        {"name": "CARLOS_SPEC", "value": f"{SPEC_DIR}/{SPEC_FILE}"},
+        {"name": "CARLOS_OUTPUT_URL", "value": output.url},
+        {"name": "CARLOS_SCENARIO_DIR", "value": SCENARIO_DIR},
+        {"name": "CARLOS_SCRATCH", "value": SCRATCH_DIR},
+        {"name": "CARLOS_BUS_PORT", "value": str(BUS_PORT)},
+        {"name": "CARLOS_RECORDER_READY_PORT", "value": str(RECORDER_READY_PORT)},
+        {"name": "ROS_DOMAIN_ID", "value": "0"},
+        {"name": "ROS_AUTOMATIC_DISCOVERY_RANGE", "value": "LOCALHOST"},
+        {"name": "HOME", "value": SCRATCH_DIR},
+        {"name": "TMPDIR", "value": "/tmp"},
+    ]
+    if output.endpoint:
+        env.append({"name": "AWS_ENDPOINT_URL", "value": output.endpoint})
+    if output.region:
+        env.append({"name": "AWS_REGION", "value": output.region})
+    return env
+
+
+def _container(
+    role: str, image: str, run: SimulationRun, output: Output, mounts: list[dict[str, Any]]
+) -> dict[str, Any]:
+    container: dict[str, Any] = {
+        "name": role,
+        "image": image,
+        "imagePullPolicy": "IfNotPresent",
+        "args": ["pod", "--role", role],
+        "env": _env(run, output),
+        "volumeMounts": mounts,
+        "securityContext": dict(_RESTRICTED_CONTAINER),
+        "terminationMessagePolicy": "FallbackToLogsOnError",
+    }
+    if output.secret:
+        container["envFrom"] = [{"secretRef": {"name": output.secret}}]
+    return container
+
+
+def _sidecar(container: dict[str, Any], port: int) -> dict[str, Any]:
+    return {
+        **container,
+        "restartPolicy": "Always",
+        "ports": [{"name": "bus" if port == BUS_PORT else "ready", "containerPort": port, "protocol": "TCP"}],
+        "startupProbe": {
+            "tcpSocket": {"port": port},
+            "periodSeconds": 1,
+            "failureThreshold": 120,
+            "timeoutSeconds": 1,
+        },
+    }
+
+
+def scenario_configmaps(run: SimulationRun) -> list[str]:
+    """Names of the ConfigMaps the scenarios come from, in first-use order."""
+    names: dict[str, None] = {}
+    for scenario in run.spec.scenarios:
+        if scenario.config_map_ref is not None:
+            names[scenario.config_map_ref.name] = None
+    return list(names)
+
+
+def build_job(
+    run: SimulationRun, body: dict[str, Any], settings: OperatorSettings, output: Output
+) -> dict[str, Any]:
+    """The run's Indexed Job: one completion per index, Kubernetes doing retries and parallelism."""
+    spec = run.spec
+    total = len(Plan(spec))
+    name = job_name(run.name)
+    parallelism = min(spec.execution.parallelism or DEFAULT_PARALLELISM, total)
+    attempts = spec.execution.retries + 1
+    pod_deadline = spec.execution.timeout_seconds + POD_DEADLINE_GRACE_S
+    waves = math.ceil(total / parallelism)
+    labels = _labels(run, settings)
+    job_labels = dict(labels)
+    if spec.execution.queue_name:
+        job_labels[QUEUE_LABEL] = spec.execution.queue_name
+    mounts = [
+        {"name": "spec", "mountPath": SPEC_DIR, "readOnly": True},
+        {"name": "scratch", "mountPath": SCRATCH_DIR},
+        {"name": "tmp", "mountPath": "/tmp"},
+    ]
+    volumes: list[dict[str, Any]] = [
+        {"name": "spec", "configMap": {"name": name}},
+        {"name": "scratch", "emptyDir": {"sizeLimit": "10Gi"}},
+        {"name": "tmp", "emptyDir": {"medium": "Memory", "sizeLimit": "256Mi"}},
+    ]
+    for position, cm in enumerate(scenario_configmaps(run)):
+        volumes.append({"name": f"scenarios-{position}", "configMap": {"name": cm}})
+        mounts.append(
+            {"name": f"scenarios-{position}", "mountPath": f"{SCENARIO_DIR}/{cm}", "readOnly": True}
+        )
+    simcore = _container("simcore", settings.image_simcore, run, output, mounts)
+    bridge = _sidecar(_container("bridge", settings.image_bridge, run, output, mounts), BUS_PORT)
+    recorder = _sidecar(
+        _container("recorder", settings.image_recorder, run, output, mounts), RECORDER_READY_PORT
+    )
+    pod_spec: dict[str, Any] = {
+        "restartPolicy": "Never",
+        "automountServiceAccountToken": False,
+        "enableServiceLinks": False,
+        "activeDeadlineSeconds": pod_deadline,
+        "terminationGracePeriodSeconds": 60,
+        "securityContext": {
+            "runAsNonRoot": True,
+            "runAsUser": UID,
+            "runAsGroup": UID,
+            "fsGroup": UID,
+            "seccompProfile": {"type": "RuntimeDefault"},
+        },
+        "initContainers": [bridge, recorder],
+        "containers": [simcore],
+        "volumes": volumes,
+    }
+    if settings.image_pull_secrets:
+        pod_spec["imagePullSecrets"] = [{"name": s} for s in settings.image_pull_secrets]
+    exit_codes = {"containerName": "simcore", "operator": "In"}
+    return {
+        "apiVersion": "batch/v1",
+        "kind": "Job",
+        "metadata": {
+            "name": name,
+            "namespace": body["metadata"].get("namespace"),
+            "labels": job_labels,
+            "ownerReferences": [owner_reference(body)],
+        },
+        "spec": {
+            "completionMode": "Indexed",
+            "completions": total,
+            "parallelism": parallelism,
+            "backoffLimitPerIndex": spec.execution.retries,
+            "podFailurePolicy": {
+                "rules": [
+                    # ran and a required criterion failed, or bad input: the index fails, never retried
+                    {
+                        "action": "FailIndex",
+                        "onExitCodes": {
+                            **exit_codes,
+                            "values": [int(ExitCode.FAILED), int(ExitCode.BAD_INPUT)],
+                        },
+                    },
+                    # infrastructure error: counts towards backoffLimitPerIndex (execution.retries)
+                    {
+                        "action": "Count",
+                        "onExitCodes": {**exit_codes, "values": [int(ExitCode.INFRASTRUCTURE)]},
+                    },
+                    # evicted or preempted: not the run's fault, retried without counting
+                    {
+                        "action": "Ignore",
+                        "onPodConditions": [{"type": "DisruptionTarget", "status": "True"}],
+                    },
+                ]
+            },
+            "activeDeadlineSeconds": pod_deadline * waves * attempts + 600,
+            "ttlSecondsAfterFinished": settings.job_ttl_seconds,
+            "suspend": bool(spec.suspend or spec.execution.queue_name),
+            "template": {
+                "metadata": {"labels": labels},
+                "spec": pod_spec,
+            },
+        },
+    }

@@ -1,0 +1,266 @@
+"""Pure parts of the operator: ConfigMap/Job builders, settings and status aggregation."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import pytest
+import yaml
+from carlos_operator.builders import (
+    BUS_PORT,
+    QUEUE_LABEL,
+    RECORDER_READY_PORT,
+    OperatorSettings,
+    build_configmap,
+    build_job,
+    check_cluster_spec,
+    job_name,
+    resolve_output,
+)
+from carlos_operator.status import (
+    Tally,
+    aggregate,
+    count_intervals,
+    format_intervals,
+    iter_intervals,
+    parse_intervals,
+)
+
+from simcore.errors import BadInput
+from simcore.manifest import parse_manifest
+from simcore.spec import SimulationRun
+
+SETTINGS = OperatorSettings.from_env(
+    {
+        "CARLOS_IMAGE_SIMCORE": "reg/simcore:1",
+        "CARLOS_IMAGE_BRIDGE": "reg/bridge:1",
+        "CARLOS_IMAGE_RECORDER": "reg/recorder:1",
+        "CARLOS_IMAGE_PULL_SECRETS": "pull-a, pull-b",
+        "CARLOS_DEFAULT_OUTPUT_URL": "s3://results/runs",
+        "CARLOS_DEFAULT_S3_ENDPOINT": "http://minio:9000",
+        "CARLOS_DEFAULT_S3_SECRET": "s3-creds",
+    }
+)
+
+
+def manifest(**spec: Any) -> dict[str, Any]:
+    base: dict[str, Any] = {
+        "scenarios": [
+            {"name": "a", "openscenario": "s3://bucket/a.xosc"},
+            {"name": "b", "configMapRef": {"name": "scenarios", "key": "b.xosc"}},
+        ],
+        "sweep": {"matrix": {"speed": [10, 20, 30]}, "repetitions": 2},
+        "execution": {"parallelism": 4, "retries": 2, "timeoutSeconds": 600},
+    }
+    base.update(spec)
+    return {
+        "apiVersion": "carlos.dev/v1alpha1",
+        "kind": "SimulationRun",
+        "metadata": {"name": "sweep", "namespace": "sims", "uid": "uid-1"},
+        "spec": base,
+    }
+
+
+def load(body: dict[str, Any]) -> SimulationRun:
+    return parse_manifest(copy.deepcopy(body), source="test")
+
+
+def test_settings_defaults_name_the_package_version() -> None:
+    settings = OperatorSettings.from_env({})
+    assert settings.image_simcore.startswith("ghcr.io/carlos-sim/carlos-simcore:")
+    assert settings.image_bridge.startswith("ghcr.io/carlos-sim/carlos-bridge:")
+    assert settings.image_pull_secrets == ()
+    assert settings.default_output_url is None
+    assert SETTINGS.image_pull_secrets == ("pull-a", "pull-b")
+
+
+def test_configmap_holds_the_spec_not_the_permutations() -> None:
+    body = manifest(sweep={"matrix": {"a": list(range(100)), "b": list(range(500))}})
+    run = load(body)
+    cm = build_configmap(run, body, SETTINGS)
+    assert cm["metadata"]["name"] == job_name("sweep")
+    assert cm["metadata"]["ownerReferences"][0]["uid"] == "uid-1"
+    text = cm["data"]["simulationrun.yaml"]
+    assert len(text) < 10_000  # 2 × 50,000 runs, still a small spec
+    again = parse_manifest(yaml.safe_load(text), source="cm")
+    assert again.spec == run.spec and again.name == "sweep"
+
+
+def test_job_is_an_indexed_job_with_the_failure_policy() -> None:
+    body = manifest()
+    run = load(body)
+    job = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))
+    spec = job["spec"]
+    assert job["metadata"]["name"] == job_name("sweep") and job["metadata"]["namespace"] == "sims"
+    owner = job["metadata"]["ownerReferences"][0]
+    assert owner["kind"] == "SimulationRun" and owner["controller"] is True
+    assert spec["completionMode"] == "Indexed"
+    assert spec["completions"] == 2 * 3 * 2 and spec["parallelism"] == 4
+    assert spec["backoffLimitPerIndex"] == 2
+    assert spec["suspend"] is False
+    assert spec["ttlSecondsAfterFinished"] > 0 and spec["activeDeadlineSeconds"] > 600
+    rules = spec["podFailurePolicy"]["rules"]
+    by_action = {r["action"]: r for r in rules}
+    assert by_action["FailIndex"]["onExitCodes"]["values"] == [1, 2]
+    assert by_action["Count"]["onExitCodes"]["values"] == [3]
+    assert all(r["onExitCodes"]["containerName"] == "simcore" for r in rules if "onExitCodes" in r)
+    pod = spec["template"]["spec"]
+    assert pod["restartPolicy"] == "Never" and pod["automountServiceAccountToken"] is False
+    assert pod["activeDeadlineSeconds"] == 600 + 300
+    assert pod["securityContext"]["runAsNonRoot"] is True
+    assert pod["securityContext"]["seccompProfile"] == {"type": "RuntimeDefault"}
+    assert [c["name"] for c in pod["initContainers"]] == ["bridge", "recorder"]
+    assert [c["name"] for c in pod["containers"]] == ["simcore"]
+    assert pod["imagePullSecrets"] == [{"name": "pull-a"}, {"name": "pull-b"}]
+    ports = {c["name"]: c["startupProbe"]["tcpSocket"]["port"] for c in pod["initContainers"]}
+    assert ports == {"bridge": BUS_PORT, "recorder": RECORDER_READY_PORT}
+    images = {c["name"]: c["image"] for c in [*pod["initContainers"], *pod["containers"]]}
+    assert images == {"bridge": "reg/bridge:1", "recorder": "reg/recorder:1", "simcore": "reg/simcore:1"}
+    volumes = {v["name"]: v for v in pod["volumes"]}
+    assert volumes["spec"]["configMap"]["name"] == job_name("sweep")
+    assert "emptyDir" in volumes["scratch"] and volumes["scenarios-0"]["configMap"]["name"] == "scenarios"
+    for container in [*pod["initContainers"], *pod["containers"]]:
+        assert container["args"] == ["pod", "--role", container["name"]]
+        sc = container["securityContext"]
+        assert sc["readOnlyRootFilesystem"] and not sc["allowPrivilegeEscalation"]
+        assert sc["capabilities"] == {"drop": ["ALL"]} and sc["runAsNonRoot"]
+        assert container["envFrom"] == [{"secretRef": {"name": "s3-creds"}}]
+        env = {e["name"]: e for e in container["env"]}
+        assert not any("SECRET" in name or "ACCESS_KEY" in name for name in env)
+        assert env["CARLOS_OUTPUT_URL"]["value"] == "s3://results/runs"
+        assert env["AWS_ENDPOINT_URL"]["value"] == "http://minio:9000"
+        assert env["CARLOS_SPEC"]["value"] == "/etc/carlos/spec/simulationrun.yaml"
+        assert "job-completion-index" in env["JOB_COMPLETION_INDEX"]["valueFrom"]["fieldRef"]["fieldPath"]
+        mounts = {m["mountPath"] for m in container["volumeMounts"]}
+        assert {"/etc/carlos/spec", "/scratch", "/tmp", "/etc/carlos/scenarios/scenarios"} <= mounts
+    for sidecar in pod["initContainers"]:
+        assert sidecar["restartPolicy"] == "Always"
+
+
+def test_suspend_and_kueue() -> None:
+    body = manifest(suspend=True)
+    run = load(body)
+    assert build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))["spec"]["suspend"] is True
+    body = manifest(execution={"queueName": "team-a"})
+    run = load(body)
+    job = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))
+    assert job["spec"]["suspend"] is True
+    assert job["metadata"]["labels"][QUEUE_LABEL] == "team-a"
+    assert QUEUE_LABEL not in job["spec"]["template"]["metadata"]["labels"]
+
+
+def test_output_and_cluster_checks() -> None:
+    run = load(manifest(output={"url": "s3://own/prefix", "credentialsSecretRef": {"name": "mine"}}))
+    out = resolve_output(run, SETTINGS)
+    assert (out.url, out.secret, out.endpoint) == ("s3://own/prefix", "mine", "http://minio:9000")
+    with pytest.raises(BadInput, match=r"spec.output.url.*s3://"):
+        resolve_output(load(manifest(output={"url": "file:///data"})), SETTINGS)
+    with pytest.raises(BadInput, match="CARLOS_DEFAULT_OUTPUT_URL"):
+        resolve_output(load(manifest()), OperatorSettings.from_env({}))
+    with pytest.raises(BadInput, match=r"spec.scenarios\[0\].openscenario"):
+        check_cluster_spec(load(manifest(scenarios=[{"name": "a", "openscenario": "rel/a.xosc"}])))
+    with pytest.raises(BadInput, match="100,000"):
+        check_cluster_spec(load(manifest(sweep={"matrix": {"a": list(range(1000)), "b": list(range(101))}})))
+    check_cluster_spec(load(manifest()))
+
+
+def test_job_names_are_deterministic_and_short() -> None:
+    long = "a" * 63
+    assert job_name(long) == job_name(long) and len(job_name(long)) <= 48
+    assert job_name(long) != job_name("a" * 62 + "b")
+    assert job_name("run") == "carlos-run"
+
+
+def test_intervals() -> None:
+    assert parse_intervals("0-4,7,9-10") == [(0, 4), (7, 7), (9, 10)]
+    assert count_intervals("0-4,7,9-10") == 8 and count_intervals(None) == 0
+    assert list(iter_intervals("1,3-4")) == [1, 3, 4]
+    assert format_intervals([0, 1, 2, 5, 7, 8]) == "0-2,5,7-8"
+
+
+def summary(index: int, status: str, optional: bool = False) -> dict[str, Any]:
+    return {
+        "index": index,
+        "scenario": "s",
+        "status": status,
+        "optional": optional,
+        "error": "boom" if status == "error" else None,
+        "criteria": [{"name": "minDistance >= 2", "passed": status != "failed", "optional": False}],
+    }
+
+
+def job(
+    completed: str = "", failed: str = "", active: int = 0, finished: str | None = None
+) -> dict[str, Any]:
+    status: dict[str, Any] = {"completedIndexes": completed, "failedIndexes": failed, "active": active}
+    status["startTime"] = "2026-01-01T00:00:00Z"
+    if finished:
+        status["conditions"] = [{"type": finished, "status": "True", "reason": "FailedIndexes"}]
+    return {"spec": {"suspend": False}, "status": status}
+
+
+def test_aggregate_phases_and_counts() -> None:
+    tally = Tally(4)
+    now = "2026-01-01T00:01:00Z"
+    st = aggregate(total=4, job=None, tally=tally, results_url="s3://r/x", now=now)
+    assert st["phase"] == "Pending" and st["progress"] == "0/4"
+    st = aggregate(total=4, job=job(completed="0", active=2), tally=tally, results_url="s3://r/x", now=now)
+    assert st["phase"] == "Running" and st["active"] == 2 and st["succeeded"] == 1
+    tally.record(summary(0, "passed"))
+    tally.record(summary(0, "passed"))  # idempotent
+    tally.record(summary(1, "failed"))
+    tally.record(summary(2, "passed"))
+    finished = job(completed="0,2-3", failed="1", finished="Failed")
+    st = aggregate(total=4, job=finished, tally=tally, results_url="s3://r/x", now=now, previous=st)
+    assert st["phase"] == "Running"  # index 3's summary not read yet
+    assert tally.unknown_among("0,2-3", 10) == [3]
+    tally.record(summary(3, "error"))
+    st = aggregate(total=4, job=finished, tally=tally, results_url="s3://r/x", now=now, previous=st)
+    assert st["phase"] == "Failed"
+    assert (st["passed"], st["testFailures"], st["errors"], st["succeeded"], st["failed"]) == (2, 1, 1, 3, 1)
+    assert [f["index"] for f in st["failures"]] == [1, 3]
+    assert st["failures"][0]["reason"] == "criteria failed: minDistance >= 2"
+    conditions = {c["type"]: c for c in st["conditions"]}
+    assert conditions["Complete"]["status"] == "True" and conditions["Failed"]["reason"] == "TestFailures"
+    assert st["completionTime"] == now and st["startTime"] == "2026-01-01T00:00:00Z"
+
+
+def test_optional_failures_succeed_and_suspended() -> None:
+    tally = Tally(2)
+    tally.record(summary(0, "passed"))
+    tally.record(summary(1, "failed", optional=True))
+    st = aggregate(total=2, job=job("0", "1", finished="Failed"), tally=tally, results_url="", now="t")
+    assert st["phase"] == "Succeeded" and st["testFailures"] == 1
+    suspended = {"spec": {"suspend": True}, "status": {}}
+    assert aggregate(total=2, job=suspended, tally=Tally(2), results_url="", now="t")["phase"] == "Suspended"
+
+
+def test_deadline_failure_reason() -> None:
+    failed = {
+        "spec": {},
+        "status": {
+            "completedIndexes": "0",
+            "conditions": [
+                {"type": "Failed", "status": "True", "reason": "DeadlineExceeded", "message": "m"}
+            ],
+        },
+    }
+    tally = Tally(3)
+    tally.record(summary(0, "passed"))
+    st = aggregate(total=3, job=failed, tally=tally, results_url="", now="t")
+    assert st["phase"] == "Failed"
+    assert {c["type"]: c for c in st["conditions"]}["Failed"]["reason"] == "DeadlineExceeded"
+
+
+def test_aggregation_of_50000_indexes_is_incremental() -> None:
+    total = 50_000
+    tally = Tally(total)
+    completed = "0-49999"
+    pending = tally.unknown_among(completed, 1000)
+    assert pending == list(range(1000))
+    for i in range(total):
+        tally.record(summary(i, "failed" if i % 1000 == 7 else "passed"))
+    st = aggregate(total=total, job=job(completed, finished="Complete"), tally=tally, results_url="", now="t")
+    assert st["testFailures"] == 50 and st["passed"] == total - 50 and len(st["failures"]) == 20
+    assert tally.unknown_among(completed, 10) == []
