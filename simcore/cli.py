@@ -55,6 +55,23 @@ def run(
         bool, typer.Option("--fresh", help="Replace existing results of this run instead of resuming.")
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    live: Annotated[
+        bool,
+        typer.Option(
+            "--live", help="Serve the run live (Foxglove WebSocket on 127.0.0.1), paced to real time."
+        ),
+    ] = False,
+    live_port: Annotated[
+        int, typer.Option("--live-port", min=0, max=65535, help="Port of the live view.")
+    ] = 8765,
+    live_speed: Annotated[
+        float,
+        typer.Option(
+            "--live-speed",
+            min=0.0,
+            help="Simulated seconds per wall second of the live view (0: as fast as possible).",
+        ),
+    ] = 1.0,
 ) -> None:
     """Run every scenario × permutation of a SimulationRun on this machine.
 
@@ -63,10 +80,31 @@ def run(
     from simcore.manifest import load_manifest
     from simcore.plan import Plan
 
+    server = None
     try:
         simulation_run = load_manifest(manifest)
         total = len(Plan(simulation_run.spec))
         _preflight(simulation_run, manifest)
+        bus = None
+        if live:
+            selected = len(set(index)) if index else total
+            if selected != 1:
+                raise BadInput(
+                    f"--live shows one run, and this selects {selected}: choose one with --index N",
+                    field="--live",
+                )
+            from simcore.live import LiveServer
+            from simcore.transport.bus import InProcessBus
+
+            server = LiveServer(port=live_port, speed=live_speed).start()
+            bus = InProcessBus()
+            bus.subscribe("*", server)
+            console.print(
+                f"live view: {server.url} (Foxglove: Open connection → Foxglove WebSocket; "
+                "layout examples/live/foxglove-layout.json)",
+                highlight=False,
+                soft_wrap=True,
+            )
         progress = Progress(
             TextColumn("[bold]{task.description}"),
             BarColumn(),
@@ -127,12 +165,16 @@ def run(
                 fresh=fresh,
                 indexes=list(index) if index else None,
                 events=Events(on_start=on_start, on_progress=on_progress, on_done=on_done, on_retry=on_retry),
+                bus=bus,
             )
     except CarlosError as exc:
         raise _fail(exc) from None
     except KeyboardInterrupt:
         console.print("interrupted: completed runs are kept; run the same command again to resume")
         raise typer.Exit(130) from None
+    finally:
+        if server is not None:
+            server.stop()
     _print_report(report)
     raise typer.Exit(report.exit_code)
 

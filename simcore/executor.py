@@ -29,6 +29,7 @@ from simcore.plan import Plan
 from simcore.runner import RunOutcome, run_index
 from simcore.spec import ScenarioRef, SimulationRun
 from simcore.store import Store, open_store
+from simcore.transport.bus import Bus
 
 _progress_queue: Any = None
 
@@ -130,9 +131,11 @@ def execute(
     fresh: bool = False,
     indexes: list[int] | None = None,
     events: Events | None = None,
+    bus: Bus | None = None,
 ) -> RunReport:
     """Run every index (or `indexes`) of `run`; returns the run-level report. Resumes by default: an index
-    whose summary.json is already in the output (from an interrupted invocation of the same spec) is kept."""
+    whose summary.json is already in the output (from an interrupted invocation of the same spec) is kept.
+    With `bus` (a live view), the runs go one after another in this process and publish on it."""
     events = events or Events()
     spec = run.spec
     url = output_url or spec.output.url
@@ -169,6 +172,8 @@ def execute(
     attempts = dict.fromkeys(todo, 0)
     max_attempts = spec.execution.retries + 1
     pending = list(todo)
+    if bus is not None:
+        _in_process(settings, store, pending, attempts, max_attempts, outcomes, events, bus)
     context = mp.get_context("spawn")
     progress: Any = context.Queue()
     while pending:
@@ -215,6 +220,39 @@ def execute(
         wall_seconds=time.monotonic() - started,
         optional_scenarios=[s for s in spec.scenarios if s.optional],
     )
+
+
+def _in_process(
+    settings: Settings,
+    store: Store,
+    pending: list[int],
+    attempts: dict[int, int],
+    max_attempts: int,
+    outcomes: dict[int, dict[str, Any]],
+    events: Events,
+    bus: Bus,
+) -> None:
+    """Run the pending indexes here, one after another, publishing on `bus` (infrastructure errors retried)."""
+    while pending:
+        index = pending.pop(0)
+        attempts[index] += 1
+        outcome = run_index(
+            settings.run,
+            index,
+            base_dir=settings.base_dir,
+            store=store,
+            store_factory=lambda url: make_store(url, settings),
+            attempt=attempts[index],
+            final_attempt=attempts[index] >= max_attempts,
+            progress=events.on_progress,
+            bus=bus,
+        )
+        if outcome.exit_code == ExitCode.INFRASTRUCTURE and attempts[index] < max_attempts:
+            events.on_retry(index, attempts[index], str(outcome.summary.get("error")))
+            pending.append(index)
+            continue
+        outcomes[index] = outcome.summary
+        events.on_done(outcome)
 
 
 def _submit(

@@ -6,6 +6,7 @@ import json
 import struct
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -104,3 +105,69 @@ def test_publishing_is_paced_to_the_requested_speed(speed: float) -> None:
         server.stop()
     assert elapsed >= 2.0 / speed * 0.95
     assert elapsed < 2.0 / speed + 1.0
+
+
+def test_carlos_run_live_serves_the_run_and_still_writes_results(tmp_path: Path) -> None:
+    import re
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "simcore.cli",
+            "run",
+            str(root / "examples" / "runs" / "prototyping.yaml"),
+            "--live",
+            "--live-port",
+            "0",
+            "--live-speed",
+            "8",
+            "-o",
+            f"file://{tmp_path}",
+        ],
+        cwd=root,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert process.stderr is not None
+        line = process.stderr.readline()
+        match = re.search(r"live view: (ws://127\.0\.0\.1:\d+)", line)
+        assert match, line
+        clocks = 0
+        topics: set[str] = set()
+        with connect(match.group(1), subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
+            subscribed = False
+            deadline = time.monotonic() + 20
+            while clocks < 10 and time.monotonic() < deadline:
+                reply = ws.recv(timeout=10)
+                if isinstance(reply, str):
+                    message = json.loads(reply)
+                    if message["op"] == "advertise":
+                        topics |= {c["topic"] for c in message["channels"]}
+                        clock = next((c for c in message["channels"] if c["topic"] == "/clock"), None)
+                        if clock and not subscribed:
+                            ws.send(
+                                json.dumps(
+                                    {
+                                        "op": "subscribe",
+                                        "subscriptions": [{"id": 1, "channelId": clock["id"]}],
+                                    }
+                                )
+                            )
+                            subscribed = True
+                elif reply[0] == 0x01:
+                    clocks += 1
+        _, stderr = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, stderr
+    assert clocks >= 10
+    assert {"/clock", "/tf", "/carlos/objects", "/carlos/objects/markers", "/carlos/Ego/odometry"} <= topics
+    assert (tmp_path / "prototyping" / "0" / "recording.mcap").is_file()
+    assert (tmp_path / "prototyping" / "summary.json").is_file()
