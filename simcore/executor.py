@@ -24,9 +24,9 @@ from typing import Any
 import yaml
 
 from simcore.errors import BadInput, ExitCode
-from simcore.evaluation.report import index_summary, junit_xml, run_summary
+from simcore.evaluation.report import junit_xml, run_summary
 from simcore.plan import Plan
-from simcore.runner import RunOutcome, run_index
+from simcore.runner import RunOutcome, error_outcome, run_index, summary_bytes
 from simcore.spec import ScenarioRef, SimulationRun
 from simcore.store import Store, open_store
 from simcore.transport.bus import Bus
@@ -73,22 +73,7 @@ def _work(settings: Settings, index: int, attempt: int, final_attempt: bool) -> 
             progress=_report,
         )
     except Exception as exc:  # object store failures: an infrastructure error of this index
-        point = Plan(settings.run.spec)[index]
-        summary = index_summary(
-            index=index,
-            scenario=point.scenario.name,
-            parameters=point.parameters,
-            seed=point.seed,
-            optional=point.scenario.optional,
-            sim_seconds=0.0,
-            wall_seconds=0.0,
-            metrics={},
-            results=[],
-            error=f"{type(exc).__name__}: {exc}",
-            end_reason="error",
-            attempts=attempt,
-        )
-        return RunOutcome(index=index, summary=summary, exit_code=ExitCode.INFRASTRUCTURE)
+        return error_outcome(settings.run, index, attempt, f"{type(exc).__name__}: {exc}")
 
 
 @dataclass
@@ -210,7 +195,7 @@ def execute(
     summary = run_summary(name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted))
     summary["outputUrl"] = store.url_for(name)
     store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
-    store.put_bytes(f"{name}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode())
+    store.put_bytes(f"{name}/summary.json", summary_bytes(summary))
     return RunReport(
         run_name=name,
         output_url=store.url_for(name),
@@ -299,24 +284,8 @@ def _crashed(
         events.on_retry(index, attempts[index], reason)
         pending.append(index)
         return
-    point = Plan(settings.run.spec)[index]
-    summary = index_summary(
-        index=index,
-        scenario=point.scenario.name,
-        parameters=point.parameters,
-        seed=point.seed,
-        optional=point.scenario.optional,
-        sim_seconds=0.0,
-        wall_seconds=0.0,
-        metrics={},
-        results=[],
-        error=reason,
-        end_reason="error",
-        attempts=attempts[index],
-    )
-    store.put_bytes(
-        f"{settings.run.name}/{index}/summary.json",
-        (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode(),
-    )
+    outcome = error_outcome(settings.run, index, attempts[index], reason)
+    summary = outcome.summary
+    store.put_bytes(f"{settings.run.name}/{index}/summary.json", summary_bytes(summary))
     outcomes[index] = summary
-    events.on_done(RunOutcome(index=index, summary=summary, exit_code=ExitCode.INFRASTRUCTURE))
+    events.on_done(outcome)

@@ -29,6 +29,7 @@ from typing import IO, Any, Literal, Self
 from mcap.writer import CompressionType, Writer
 
 from simcore.spec import Recording
+from simcore.store import fsync_dir
 from simcore.transport.messages import frame_messages, msgdef, serialize
 from simcore.world.state import WorldFrame
 
@@ -78,17 +79,6 @@ def _ns(time_s: float) -> int:
     if ns < 0:
         raise RecorderError(f"negative simulation time {time_s}")
     return ns
-
-
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:  # pragma: no cover - platforms without directory fds
-        return
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 class McapRecorder:
@@ -236,7 +226,7 @@ class McapRecorder:
         finally:
             self._file.close()
         os.replace(self.part_path, self.path)
-        _fsync_dir(self.path.parent)
+        fsync_dir(self.path.parent)
 
     def abort(self, *, keep_partial: bool = True) -> None:
         """End without publishing `path`: the partial recording stays as `<path>.part` (finished as far as

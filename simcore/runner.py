@@ -202,6 +202,30 @@ def simulate(
     return result, end_reason, engine.time, engine.log
 
 
+def error_outcome(run: SimulationRun, index: int, attempt: int, message: str) -> RunOutcome:
+    """The outcome of an index that could not run at all (object store down, worker process died)."""
+    point = Plan(run.spec)[index]
+    summary = index_summary(
+        index=index,
+        scenario=point.scenario.name,
+        parameters=point.parameters,
+        seed=point.seed,
+        optional=point.scenario.optional,
+        sim_seconds=0.0,
+        wall_seconds=0.0,
+        metrics={},
+        results=[],
+        error=message,
+        end_reason="error",
+        attempts=attempt,
+    )
+    return RunOutcome(index=index, summary=summary, exit_code=ExitCode.INFRASTRUCTURE)
+
+
+def summary_bytes(summary: dict[str, Any]) -> bytes:
+    return (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
+
+
 def _record_into(recorder: Any) -> Callable[[Message], None]:
     def record(message: Message) -> None:
         recorder.write(message.topic, message.typename, message.obj(), message.time_s)

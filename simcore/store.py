@@ -104,7 +104,8 @@ def open_store(url: str, *, endpoint: str | None = None, region: str | None = No
 # --- file:// --------------------------------------------------------------------------------------------
 
 
-def _fsync_dir(path: Path) -> None:
+def fsync_dir(path: Path) -> None:
+    """Make a rename in `path` durable (fsync of the directory)."""
     try:
         fd = os.open(path, os.O_RDONLY)
     except OSError:  # pragma: no cover - platforms without directory fds
@@ -148,7 +149,7 @@ class FileStore:
             if isinstance(exc, OSError):
                 raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
             raise
-        _fsync_dir(target.parent)
+        fsync_dir(target.parent)
 
     def put_bytes(self, key: str, data: bytes) -> None:
         with self._atomic(key) as f:
