@@ -22,14 +22,14 @@ RUNS = ROOT / "examples" / "runs"
 CARLOS = [sys.executable, "-m", "simcore.cli"]
 
 
-def carlos(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+def carlos(*args: str | Path, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [*CARLOS, *map(str, args)],
         capture_output=True,
         text=True,
         timeout=600,
-        cwd=cwd or ROOT,
-        env={**os.environ, "COLUMNS": "200"},
+        cwd=ROOT,
+        env={**os.environ, "COLUMNS": "200", **(env or {})},
         check=False,
     )
 
@@ -239,15 +239,7 @@ def test_results_go_to_s3_and_scenarios_come_from_s3(s3_server: object, tmp_path
         "  simulation: {maxSeconds: 6}\n",
     )
     # the scenario names its road as ../maps/highway.xodr: resolved within the bucket, as on disk
-    result = subprocess.run(
-        [*CARLOS, "run", str(manifest), "--output", f"s3://{bucket}/results", "-q"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-        env={**os.environ, **env},
-        check=False,
-    )
+    result = carlos("run", manifest, "--output", f"s3://{bucket}/results", "-q", env=env)
     assert result.returncode == 0, result.stderr
     keys = {o["Key"] for o in client.list_objects_v2(Bucket=bucket, Prefix="results/t/")["Contents"]}
     assert {
@@ -274,15 +266,7 @@ def test_results_go_to_s3_and_scenarios_come_from_s3(s3_server: object, tmp_path
         .replace("catalogue/scenarios/braking.xosc", "bad/braking.xosc")
         .replace("name: t", "name: t2")
     )
-    result = subprocess.run(
-        [*CARLOS, "run", str(manifest), "--output", f"s3://{bucket}/results", "-q"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-        env={**os.environ, **env},
-        check=False,
-    )
+    result = carlos("run", manifest, "--output", f"s3://{bucket}/results", "-q", env=env)
     assert result.returncode == 3
     summary = json.loads(client.get_object(Bucket=bucket, Key="results/t2/0/summary.json")["Body"].read())
     assert summary["status"] == "error" and "outside the bucket" in summary["error"]
