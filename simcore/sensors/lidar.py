@@ -1,0 +1,229 @@
+"""A spinning lidar by raycasting (see `simcore.spec.LidarSensor` for the parameters).
+
+Rays are laid out column by column (a column = one firing of every channel at one azimuth), so the rays a
+box can reach are a contiguous run of columns. Column `c` points at azimuth `fov/2 - (c + 0.5) * fov/cols`
+(clockwise from behind for 360°), channel `k` at its elevation; ring = channel index.
+
+Per return: range with seeded Gaussian noise, seeded dropout, intensity = reflectivity of the class hit ×
+|cos(incidence angle)|, the object id (1 + the entity's position in the frame, 0 for the road) and the
+class id (`simcore.sensors.classes`). With motion distortion every column is fired from the pose its
+carrier had at the column's firing time (constant speed and yaw rate over the sweep) and the points are
+expressed in the sensor frame at the stamp (the sweep's end); other entities are taken at the stamp.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from simcore.sensors.scene import Boxes, RoadScene, intersect_box, rotation
+from simcore.spec import LidarSensor
+from simcore.world.state import EntityState
+
+#: PointCloud2 layout of a lidar point (little endian, 28 bytes).
+POINT_DTYPE = np.dtype(
+    {
+        "names": ["x", "y", "z", "intensity", "time", "object_id", "ring", "label"],
+        "formats": ["<f4", "<f4", "<f4", "<f4", "<f4", "<u4", "<u2", "u1"],
+        "offsets": [0, 4, 8, 12, 16, 20, 24, 26],
+        "itemsize": 28,
+    }
+)
+
+
+@dataclass(frozen=True, slots=True)
+class LidarScan:
+    """One sweep: `points` (structured, POINT_DTYPE) in the sensor frame; per box of the frame (entity
+    order) the number of points on it and the number of rays that would hit it were nothing in front."""
+
+    points: np.ndarray
+    object_points: np.ndarray  # (N,) int: points in the cloud (after dropout)
+    visible_rays: np.ndarray  # (N,) int: rays whose first return is the object (before dropout)
+    unoccluded_rays: np.ndarray  # (N,) int: rays that would hit it were nothing in front
+    rays: int
+
+
+def mount_pose(
+    entity: EntityState, mount_rot: np.ndarray, mount_pos: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(rotation, position) of a sensor in the map frame."""
+    r = rotation(entity.heading, entity.pitch, entity.roll)
+    return r @ mount_rot, np.array([entity.x, entity.y, entity.z]) + r @ mount_pos
+
+
+def _angular_interval(angles: np.ndarray) -> tuple[float, float] | None:
+    """Smallest arc (lo, hi), hi >= lo, containing every angle; None when the points surround the origin."""
+    a = np.sort(np.mod(angles, 2 * math.pi))
+    gaps = np.diff(np.concatenate([a, a[:1] + 2 * math.pi]))
+    j = int(np.argmax(gaps))
+    if gaps[j] <= math.pi:
+        return None
+    lo = a[(j + 1) % len(a)]
+    return float(lo), float(lo + 2 * math.pi - gaps[j])
+
+
+class Lidar:
+    """One lidar on one entity. `scan()` casts a full sweep against the road and the boxes."""
+
+    def __init__(self, config: LidarSensor, seed: int) -> None:
+        self.config = config
+        self.channels = config.channels
+        self.columns = config.horizontal_resolution
+        self.period = 1.0 / config.rotation_rate
+        self.fov = math.radians(config.horizontal_fov)
+        self.full_circle = config.horizontal_fov >= 360.0
+        self.col_width = self.fov / self.columns
+        if config.vertical_angles is not None:
+            elev = np.radians(np.asarray(config.vertical_angles, dtype=float))
+        else:
+            low, high = config.vertical_fov
+            elev = (
+                np.radians(np.linspace(low, high, config.channels))
+                if config.channels > 1
+                else np.radians([low])
+            )
+        self.elevations = elev
+        az = self.fov / 2 - (np.arange(self.columns) + 0.5) * self.col_width
+        ce, se = np.cos(elev), np.sin(elev)
+        dirs = np.empty((self.columns, self.channels, 3))
+        dirs[..., 0] = np.cos(az)[:, None] * ce[None, :]
+        dirs[..., 1] = np.sin(az)[:, None] * ce[None, :]
+        dirs[..., 2] = se[None, :]
+        self.dirs = dirs.reshape(-1, 3)  # sensor frame, column-major
+        self.ring = np.tile(np.arange(self.channels, dtype=np.uint16), self.columns)
+        self.column_time = -self.period + (np.arange(self.columns) + 0.5) / self.columns * self.period
+        m = config.mount
+        self.mount_rot = rotation(math.radians(m.yaw), math.radians(m.pitch), math.radians(m.roll))
+        self.mount_pos = np.array([m.x, m.y, m.z])
+        self.rng = np.random.default_rng(seed)
+        self._rays = np.empty((len(self.dirs), 6), np.float32)
+
+    @property
+    def ray_count(self) -> int:
+        return len(self.dirs)
+
+    def _columns_of(self, corners_sensor: np.ndarray, pad: int) -> np.ndarray | None:
+        """Columns whose azimuth can reach the points (sensor frame), or None for every column."""
+        interval = _angular_interval(np.arctan2(corners_sensor[:, 1], corners_sensor[:, 0]))
+        if interval is None:
+            return None
+        lo, hi = interval
+        half = self.fov / 2
+        # column index of azimuth a: (half - a) / w - 0.5 (decreasing in a)
+        if self.full_circle:
+            c0 = math.floor((half - hi) / self.col_width - 0.5) - pad
+            c1 = math.ceil((half - lo) / self.col_width - 0.5) + pad
+            if c1 - c0 + 1 >= self.columns:
+                return None
+            return np.mod(np.arange(c0, c1 + 1), self.columns)
+        # limited fov: azimuths in (-pi, pi]; the arc may wrap
+        cols: list[np.ndarray] = []
+        for shift in (0.0, -2 * math.pi, 2 * math.pi):
+            a_lo, a_hi = max(lo + shift, -half), min(hi + shift, half)
+            if a_lo > a_hi:
+                continue
+            c0 = max(math.floor((half - a_hi) / self.col_width - 0.5) - pad, 0)
+            c1 = min(math.ceil((half - a_lo) / self.col_width - 0.5) + pad, self.columns - 1)
+            if c0 <= c1:
+                cols.append(np.arange(c0, c1 + 1))
+        if not cols:
+            return np.zeros(0, dtype=np.int64)
+        return np.unique(np.concatenate(cols))
+
+    def scan(self, road: RoadScene, boxes: Boxes, carrier: EntityState, carrier_index: int) -> LidarScan:
+        cfg = self.config
+        rot, pos = mount_pose(carrier, self.mount_rot, self.mount_pos)
+        n_rays = len(self.dirs)
+        distort = cfg.motion_distortion and (carrier.speed != 0.0 or carrier.yaw_rate != 0.0)
+        if distort:
+            # per column: the carrier's pose at the column's firing time (constant speed and yaw rate)
+            tau = self.column_time
+            heading = carrier.heading + carrier.yaw_rate * tau
+            vx, vy = carrier.velocity
+            rots = np.stack([rotation(float(h), carrier.pitch, carrier.roll) for h in heading])  # (C,3,3)
+            base = np.stack(
+                [carrier.x + vx * tau, carrier.y + vy * tau, np.full_like(tau, carrier.z)], axis=1
+            )
+            col_rot = rots @ self.mount_rot
+            col_pos = base + rots @ self.mount_pos
+            d = self.dirs.reshape(self.columns, self.channels, 3)
+            dirs_world = np.einsum("cij,ckj->cki", col_rot, d).reshape(-1, 3)
+            origins = np.repeat(col_pos, self.channels, axis=0)
+        else:
+            dirs_world = self.dirs @ rot.T
+            origins = np.broadcast_to(pos, dirs_world.shape)
+        rays = self._rays
+        rays[:, :3] = origins
+        rays[:, 3:] = dirs_world
+        t, normals, classes = road.cast(rays)
+        t = t.astype(np.float64)
+        object_id = np.zeros(n_rays, np.uint32)
+        nbox = len(boxes.names)
+        unoccluded = np.zeros(nbox, np.int64)
+        reach = cfg.range_max
+        if nbox:
+            rel = boxes.centers - pos
+            radius = np.linalg.norm(boxes.half, axis=1)
+            near = np.linalg.norm(rel, axis=1) - radius <= reach
+            if distort:
+                shift = np.hypot(*carrier.velocity) * self.period
+            for i in np.flatnonzero(near):
+                if i == carrier_index:
+                    continue  # a sensor does not see its own carrier
+                corners = (boxes.corners(int(i)) - pos) @ rot
+                pad = 1
+                if distort:
+                    dist = max(float(np.linalg.norm(rel[i])) - float(radius[i]), 0.5)
+                    pad += math.ceil((shift / dist + abs(carrier.yaw_rate) * self.period) / self.col_width)
+                cols = self._columns_of(corners, pad)
+                if cols is None:
+                    idx = np.arange(n_rays)
+                else:
+                    idx = (cols[:, None] * self.channels + np.arange(self.channels)[None, :]).ravel()
+                if not len(idx):
+                    continue
+                o = origins[idx] if distort else pos
+                tb, nb = intersect_box(
+                    o, dirs_world[idx], boxes.centers[i], boxes.rotations[i], boxes.half[i]
+                )
+                in_range = (tb >= cfg.range_min) & (tb <= cfg.range_max)
+                unoccluded[i] = int(np.count_nonzero(in_range))
+                closer = tb < t[idx]
+                if np.any(closer):
+                    sel = idx[closer]
+                    t[sel] = tb[closer]
+                    normals[sel] = nb[closer]
+                    classes[sel] = boxes.classes[i]
+                    object_id[sel] = boxes.ids[i]
+        valid = (t >= cfg.range_min) & (t <= cfg.range_max)
+        visible = np.bincount(object_id[valid], minlength=nbox + 1)[1 : nbox + 1]
+        if cfg.dropout > 0.0:
+            valid &= self.rng.random(n_rays) >= cfg.dropout
+        idx = np.flatnonzero(valid)
+        rng_t = t[idx]
+        if cfg.range_noise > 0.0:
+            rng_t = np.maximum(rng_t + self.rng.normal(0.0, cfg.range_noise, len(idx)), 0.0)
+        dw = dirs_world[idx]
+        cos_inc = np.abs(np.einsum("ij,ij->i", dw, normals[idx]))
+        cls = classes[idx]
+        points = np.empty(len(idx), POINT_DTYPE)
+        if distort:
+            world = origins[idx] + dw * rng_t[:, None]
+            local = (world - pos) @ rot
+            points["time"] = np.repeat(self.column_time, self.channels)[idx]
+        else:
+            local = self.dirs[idx] * rng_t[:, None]
+            points["time"] = 0.0
+        points["x"] = local[:, 0]
+        points["y"] = local[:, 1]
+        points["z"] = local[:, 2]
+        points["intensity"] = road.reflectivity[cls] * cos_inc
+        points["object_id"] = object_id[idx]
+        points["ring"] = self.ring[idx]
+        points["label"] = cls
+        counts = np.bincount(points["object_id"], minlength=nbox + 1)[1 : nbox + 1]
+        return LidarScan(
+            points=points, object_points=counts, visible_rays=visible, unoccluded_rays=unoccluded, rays=n_rays
+        )

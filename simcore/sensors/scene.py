@@ -1,0 +1,207 @@
+"""What the sensors see: the road surface and every entity as an oriented box.
+
+- The road surface is triangulated once per road network from the sampled lane borders of every lane with
+  a width (`OpenDrive.sample_lane_boundaries`): lanes, not an infinite plane. It is the static part of the
+  scene, one open3d `RaycastingScene` (Embree BVH) built once. Each triangle carries its class (`road` for
+  drivable lanes, `roadside`/`sidewalk` for the others).
+- Entities are oriented boxes with their OpenSCENARIO bounding boxes, refreshed every frame from the
+  `WorldFrame` into a few numpy arrays (no BVH rebuild). Rays are intersected with them exactly (slab test
+  in the box frame), but only the rays whose direction can reach a box: each sensor narrows every box to
+  the ray columns (lidar azimuths, camera pixel columns/rows) its corners span, so the cost scales with
+  what the box covers, not with the scan size. That also gives each box's unoccluded ray count
+  (occlusion ratio) for free.
+
+A sensor never sees the entity it is mounted on (its own box is left out of its scans).
+Static scenery (OpenDRIVE `<objects>`) is not modelled: the parser ignores it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from simcore.sensors.classes import CLASS_IDS, REFLECTIVITY, entity_class, lane_class
+from simcore.world.opendrive import DRIVING_LANE_TYPES, OpenDrive
+from simcore.world.state import WorldFrame
+
+FloatArray = np.ndarray
+
+
+def rotation(yaw: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
+    """Rotation matrix of the intrinsic z-y'-x'' rotation (yaw, pitch, roll): columns are the rotated axes."""
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cr, sr = math.cos(roll), math.sin(roll)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def road_mesh(road: OpenDrive, step: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices (V, 3) float32, triangles (T, 3) uint32, triangle classes (T,) uint8) of the road surface:
+    two triangles per lane and sample interval, degenerate (zero-width) ones dropped."""
+    verts: list[np.ndarray] = []
+    tris: list[np.ndarray] = []
+    classes: list[np.ndarray] = []
+    base = 0
+    for road_id in sorted(road.roads):
+        for lane in road.sample_lane_boundaries(road_id, step=step):
+            n = len(lane.s)
+            if n < 2:
+                continue
+            width = np.linalg.norm(lane.outer - lane.inner, axis=1)
+            if not np.any(width > 1e-3):
+                continue
+            v = np.concatenate([lane.inner, lane.outer])  # inner 0..n-1, outer n..2n-1
+            k = np.arange(n - 1)
+            a = np.stack([k, k + n, k + 1], axis=1)
+            b = np.stack([k + 1, k + n, k + 1 + n], axis=1)
+            t = np.concatenate([a, b])
+            # drop triangles whose interval has zero width at both ends (zero area)
+            keep = np.concatenate([(width[:-1] > 1e-3) | (width[1:] > 1e-3)] * 2)
+            t = t[keep]
+            if not len(t):
+                continue
+            cls = CLASS_IDS[lane_class(lane.lane_type, lane.lane_type.lower() in DRIVING_LANE_TYPES)]
+            verts.append(v)
+            tris.append(t + base)
+            classes.append(np.full(len(t), cls, dtype=np.uint8))
+            base += len(v)
+    if not verts:
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint32), np.zeros(0, np.uint8)
+    return (
+        np.concatenate(verts).astype(np.float32),
+        np.concatenate(tris).astype(np.uint32),
+        np.concatenate(classes),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class Boxes:
+    """Every entity of one frame as an oriented box (world frame), in the frame's entity order.
+
+    `ids` are the object ids of the labels: 1 + the entity's position in the frame (0 = no object)."""
+
+    names: tuple[str, ...]
+    ids: np.ndarray  # (N,) uint32
+    classes: np.ndarray  # (N,) uint8
+    class_names: tuple[str, ...]
+    centers: np.ndarray  # (N, 3)
+    rotations: np.ndarray  # (N, 3, 3) columns: the box's forward, left, up axes
+    half: np.ndarray  # (N, 3) half length, width, height
+    yaws: np.ndarray  # (N,)
+    velocities: np.ndarray  # (N, 3) world frame
+
+    @classmethod
+    def of(cls, frame: WorldFrame) -> Boxes:
+        n = len(frame.entities)
+        centers = np.zeros((n, 3))
+        rots = np.zeros((n, 3, 3))
+        half = np.zeros((n, 3))
+        yaws = np.zeros(n)
+        vel = np.zeros((n, 3))
+        classes = np.zeros(n, np.uint8)
+        names = []
+        class_names = []
+        for i, e in enumerate(frame.entities):
+            r = rotation(e.heading, e.pitch, e.roll)
+            rots[i] = r
+            centers[i] = (e.x, e.y, e.z) + r @ (e.bbox.center_x, e.bbox.center_y, e.bbox.center_z)
+            half[i] = (e.bbox.length / 2, e.bbox.width / 2, e.bbox.height / 2)
+            yaws[i] = e.heading
+            vel[i] = r[:, 0] * e.speed
+            name = entity_class(e.object_type, e.category)
+            classes[i] = CLASS_IDS[name]
+            names.append(e.name)
+            class_names.append(name)
+        return cls(
+            names=tuple(names),
+            ids=np.arange(1, n + 1, dtype=np.uint32),
+            classes=classes,
+            class_names=tuple(class_names),
+            centers=centers,
+            rotations=rots,
+            half=half,
+            yaws=yaws,
+            velocities=vel,
+        )
+
+    def corners(self, i: int) -> np.ndarray:
+        """The 8 corners (8, 3) of box `i` in the world frame."""
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+        return self.centers[i] + (signs * self.half[i]) @ self.rotations[i].T
+
+
+def intersect_box(
+    origins: np.ndarray, dirs: np.ndarray, center: np.ndarray, rot: np.ndarray, half: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ray/oriented-box intersection (slab test). `origins` (M, 3) or (3,), `dirs` (M, 3) unit vectors.
+
+    Returns (t (M,) with inf where the ray misses or starts inside the box, world normals (M, 3) of the
+    faces hit)."""
+    o = (origins - center) @ rot  # into the box frame
+    d = dirs @ rot
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        t1 = (-half - o) * inv
+        t2 = (half - o) * inv
+    near = np.minimum(t1, t2)
+    far = np.maximum(t1, t2)
+    near = np.where(np.isnan(near), -np.inf, near)
+    far = np.where(np.isnan(far), np.inf, far)
+    axis = np.argmax(near, axis=1)
+    tmin = np.take_along_axis(near, axis[:, None], axis=1)[:, 0]
+    tmax = far.min(axis=1)
+    hit = (tmax >= tmin) & (tmin > 0.0)
+    t = np.where(hit, tmin, np.inf)
+    rows = np.arange(len(d))
+    local_normal = np.zeros_like(d)
+    local_normal[rows, axis] = -np.sign(d[rows, axis])
+    return t, local_normal @ rot.T
+
+
+class RoadScene:
+    """The static road surface as an open3d RaycastingScene (built once per road network)."""
+
+    def __init__(self, road: OpenDrive | None, step: float = 1.0) -> None:
+        import open3d as o3d  # heavy: only where the sensors are used
+
+        self._o3d = o3d
+        self.scene: Any = o3d.t.geometry.RaycastingScene()
+        if road is not None:
+            vertices, triangles, self.triangle_classes = road_mesh(road, step)
+        else:
+            vertices, triangles = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint32)
+            self.triangle_classes = np.zeros(0, np.uint8)
+        self.triangle_count = len(triangles)
+        if len(triangles):
+            self.scene.add_triangles(
+                o3d.core.Tensor.from_numpy(np.ascontiguousarray(vertices)),
+                o3d.core.Tensor.from_numpy(np.ascontiguousarray(triangles)),
+            )
+        refl = np.zeros(256, np.float32)
+        for cid, value in REFLECTIVITY.items():
+            refl[cid] = value
+        self.reflectivity = refl
+
+    def cast(self, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cast rays (M, 6) float32 (origin, unit direction) against the road.
+
+        Returns (t (M,) float32, inf on a miss; normals (M, 3) float32; classes (M,) uint8, 0 on a miss)."""
+        m = len(rays)
+        if self.triangle_count == 0:
+            return np.full(m, np.inf, np.float32), np.zeros((m, 3), np.float32), np.zeros(m, np.uint8)
+        out = self.scene.cast_rays(self._o3d.core.Tensor.from_numpy(np.ascontiguousarray(rays, np.float32)))
+        t = out["t_hit"].numpy()
+        prim = out["primitive_ids"].numpy()
+        hit = np.isfinite(t)
+        classes = np.zeros(m, np.uint8)
+        classes[hit] = self.triangle_classes[prim[hit]]
+        return t, out["primitive_normals"].numpy(), classes
