@@ -1,0 +1,441 @@
+"""The roles of a SimulationRun pod: `carlos pod --role simcore|bridge|recorder` (DESIGN.md, pod roles).
+
+Each role is its own process (its own container on a cluster); they talk over the pod's loopback through
+the topic hub of simcore/transport/loopback.py:
+
+- `bridge` (first sidecar): runs the hub on 127.0.0.1:`CARLOS_BUS_PORT` until SIGTERM. (The ROS 2 / DDS
+  side of the bridge is a later issue.)
+- `recorder` (second sidecar): subscribes to every topic, then opens 127.0.0.1:`CARLOS_RECORDER_READY_PORT`
+  for its startup probe. It writes the MCAP while the run goes on. When simcore's verdict arrives (the final
+  `/carlos/status` message, whose values carry the index summary as JSON) — or on SIGTERM — it closes the
+  MCAP with everything received, uploads `recording.mcap` and `log.txt` to `<output>/<run>/<index>/`, then
+  `summary.json` last, and reports on `/carlos/recorder/status` (`uploaded` or `error`).
+- `simcore` (main container): runs the index (simcore.runner.simulate) publishing on the hub, judges it,
+  publishes the verdict, waits for the recorder's report and exits with DESIGN.md's code: 0 passed,
+  1 test failure, 2 bad input, 3 infrastructure error (also when the results could not be uploaded).
+
+An infrastructure error on an attempt that Kubernetes will retry (`CARLOS_INDEX_FAILURES`, from the pod's
+`batch.kubernetes.io/job-index-failure-count` annotation, below `execution.retries`) uploads the log but
+no summary, so the index does not look complete.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import socket
+import tempfile
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from simcore.errors import BadInput, CarlosError, ExitCode
+from simcore.transport.bus import Bus, Callback, Message, Publisher
+
+log = logging.getLogger("carlos.pod")
+
+STATUS_TOPIC = "/carlos/status"
+STATUS_TYPE = "diagnostic_msgs/msg/DiagnosticStatus"
+RECORDER_TOPIC = "/carlos/recorder/status"
+SUMMARY_KEY = "summary"
+ROLES = ("simcore", "bridge", "recorder")
+
+
+@dataclass(frozen=True)
+class PodEnv:
+    """The environment every role reads (set by the Job's pod template)."""
+
+    index: int
+    spec_path: Path
+    output_url: str
+    failures: int  # earlier failed attempts of this index
+    bus_port: int
+    ready_port: int
+    scratch: Path
+    scenario_dir: Path
+    upload_timeout: float
+
+    @classmethod
+    def from_env(cls, env: dict[str, str] | None = None) -> PodEnv:
+        env = dict(os.environ if env is None else env)
+
+        def number(name: str, default: int | None = None) -> int:
+            raw = env.get(name, "")
+            if raw == "" and default is not None:
+                return default
+            try:
+                value = int(raw)
+            except ValueError:
+                raise BadInput(
+                    f"{name}={raw!r} is not a non-negative integer" if raw else f"{name} is not set",
+                    field=name,
+                ) from None
+            if value < 0:
+                raise BadInput(f"{name}={raw!r} is not a non-negative integer", field=name)
+            return value
+
+        spec = env.get("CARLOS_SPEC", "")
+        if not spec:
+            raise BadInput("CARLOS_SPEC (path of the mounted SimulationRun) is not set", field="CARLOS_SPEC")
+        output = env.get("CARLOS_OUTPUT_URL", "")
+        if not output:
+            raise BadInput("CARLOS_OUTPUT_URL is not set", field="CARLOS_OUTPUT_URL")
+        return cls(
+            index=number("JOB_COMPLETION_INDEX"),
+            spec_path=Path(spec),
+            output_url=output,
+            failures=number("CARLOS_INDEX_FAILURES", 0),
+            bus_port=number("CARLOS_BUS_PORT", 7447),
+            ready_port=number("CARLOS_RECORDER_READY_PORT", 7448),
+            scratch=Path(env.get("CARLOS_SCRATCH") or tempfile.gettempdir()),
+            scenario_dir=Path(env.get("CARLOS_SCENARIO_DIR") or "/etc/carlos/scenarios"),
+            upload_timeout=float(env.get("CARLOS_UPLOAD_TIMEOUT") or 900),
+        )
+
+
+def _load(env: PodEnv) -> Any:
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan
+
+    run = load_manifest(env.spec_path)
+    total = len(Plan(run.spec))
+    if env.index >= total:
+        raise BadInput(
+            f"JOB_COMPLETION_INDEX={env.index} is out of range 0..{total - 1}", field="JOB_COMPLETION_INDEX"
+        )
+    return run
+
+
+def _store(env: PodEnv, run: Any, url: str | None = None) -> Any:
+    from simcore.store import open_store
+
+    return open_store(
+        url or env.output_url,
+        endpoint=os.environ.get("AWS_ENDPOINT_URL") or run.spec.output.endpoint,
+        region=os.environ.get("AWS_REGION") or run.spec.output.region,
+    )
+
+
+def _status_message(state: str, time_s: float, values: dict[str, str]) -> Any:
+    from simcore.transport.messages import DiagnosticStatus, KeyValue
+
+    return DiagnosticStatus(
+        level=DiagnosticStatus.ERROR if state in ("error", "failed") else DiagnosticStatus.OK,
+        name="carlos",
+        message=state,
+        hardware_id="",
+        values=[KeyValue(key="state", value=state), *(KeyValue(key=k, value=v) for k, v in values.items())],
+    )
+
+
+def _values(msg: Any) -> dict[str, str]:
+    return {kv.key: kv.value for kv in msg.values}
+
+
+class _Borrowed:
+    """A bus lent to `simulate`, which closes the bus it is given: here closing is the owner's business."""
+
+    def __init__(self, bus: Bus) -> None:
+        self._bus = bus
+
+    def advertise(self, topic: str, typename: str) -> Publisher:
+        return self._bus.advertise(topic, typename)
+
+    def subscribe(self, pattern: str, callback: Callback) -> None:
+        self._bus.subscribe(pattern, callback)
+
+    def close(self) -> None:
+        pass
+
+
+def _on_sigterm(handler: Callable[[], None]) -> None:
+    def handle(signum: int, frame: Any) -> None:
+        handler()
+
+    signal.signal(signal.SIGTERM, handle)
+
+
+# --- bridge ----------------------------------------------------------------------------------------------
+
+
+def run_bridge(env: PodEnv) -> int:
+    from simcore.transport.loopback import LoopbackHub
+
+    stop = threading.Event()
+    _on_sigterm(stop.set)
+    hub = LoopbackHub("127.0.0.1", env.bus_port).start()
+    log.info("bridge: topic hub on 127.0.0.1:%d", hub.port)
+    try:
+        while not stop.wait(1.0):
+            pass
+    finally:
+        hub.close()
+    log.info("bridge: %d messages relayed", hub.relayed)
+    return 0
+
+
+# --- simcore ---------------------------------------------------------------------------------------------
+
+
+def run_simcore(env: PodEnv) -> int:
+    from simcore.evaluation.criteria import CriterionResult, evaluate
+    from simcore.evaluation.report import index_summary
+    from simcore.plan import Plan
+    from simcore.runner import resolve_scenario_file, simulate
+    from simcore.transport.loopback import LoopbackBus, LoopbackError
+
+    started = time.monotonic()
+    run = _load(env)
+    spec = run.spec
+    point = Plan(spec)[env.index]
+    attempt = env.failures + 1
+    final_attempt = attempt > spec.execution.retries
+    try:
+        bus = LoopbackBus("127.0.0.1", env.bus_port, connect_timeout=60.0)
+    except LoopbackError as exc:
+        print(f"error: {exc}", flush=True)
+        return int(ExitCode.INFRASTRUCTURE)
+    report: dict[str, str] = {}
+    reported = threading.Event()
+
+    def on_report(message: Message) -> None:
+        report.update(_values(message.obj()))
+        reported.set()
+
+    bus.subscribe(RECORDER_TOPIC, on_report)
+    criteria = [*spec.evaluation.criteria, *point.scenario.criteria]
+    metrics: dict[str, float] = {}
+    results: list[CriterionResult] = []
+    error: str | None = None
+    end_reason = "error"
+    sim_seconds = 0.0
+    exit_code = ExitCode.PASSED
+    log_lines = [
+        f"carlos pod simcore: run {run.name} index {env.index} attempt {attempt}: "
+        f"scenario {point.scenario.name}, seed {point.seed}",
+        f"parameters: {json.dumps(point.parameters, sort_keys=True)}",
+    ]
+    # the recorder role records; simulate must not write a second MCAP
+    quiet = run.model_copy(
+        update={
+            "spec": spec.model_copy(
+                update={"recording": spec.recording.model_copy(update={"enabled": False})}
+            )
+        }
+    )
+    env.scratch.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="simcore-", dir=env.scratch) as scratch_name:
+        scratch = Path(scratch_name)
+        try:
+            ref = point.scenario
+            if ref.config_map_ref is not None:
+                scenario_file = env.scenario_dir / ref.config_map_ref.name / ref.config_map_ref.key
+                if not scenario_file.is_file():
+                    raise BadInput(
+                        f"{scenario_file} is not mounted (ConfigMap {ref.config_map_ref.name!r}, key "
+                        f"{ref.config_map_ref.key!r})",
+                        field=f"spec.scenarios[{ref.name}].configMapRef",
+                    )
+            else:
+                scenario_file = resolve_scenario_file(
+                    point, Path("/"), scratch, lambda url: _store(env, run, url)
+                )
+            metrics, end_reason, sim_seconds, storyboard = simulate(
+                quiet,
+                point,
+                scenario_file,
+                scratch,
+                deadline=started + spec.execution.timeout_seconds,
+                bus=_Borrowed(bus),
+            )
+            log_lines.extend(storyboard)
+            results = evaluate(criteria, metrics)
+        except CarlosError as exc:
+            error = str(exc)
+            exit_code = exc.exit_code
+            log_lines.append(f"error: {error}")
+        except Exception as exc:  # a crash of the simulator: an infrastructure error of this index
+            error = f"{type(exc).__name__}: {exc}"
+            exit_code = ExitCode.INFRASTRUCTURE
+            log_lines.append("error: " + error)
+            log_lines.append(traceback.format_exc())
+    summary = index_summary(
+        index=env.index,
+        scenario=point.scenario.name,
+        parameters=point.parameters,
+        seed=point.seed,
+        optional=point.scenario.optional,
+        sim_seconds=sim_seconds,
+        wall_seconds=time.monotonic() - started,
+        metrics=metrics,
+        results=results,
+        error=error,
+        end_reason=end_reason if error is None else "error",  # type: ignore[arg-type]
+        attempts=attempt,
+    )
+    if error is None and summary["status"] == "failed":
+        exit_code = ExitCode.FAILED
+    log_lines.append(f"status: {summary['status']} (exit code {int(exit_code)})")
+    print("\n".join(log_lines), flush=True)
+    write_summary = not (exit_code == ExitCode.INFRASTRUCTURE and not final_attempt)
+    verdict = _status_message(
+        "error" if error is not None else "ended",
+        sim_seconds,
+        {
+            SUMMARY_KEY: json.dumps(summary, sort_keys=True),
+            "log": "\n".join(log_lines) + "\n",
+            "exitCode": str(int(exit_code)),
+            "writeSummary": "true" if write_summary else "false",
+        },
+    )
+    bus.advertise(STATUS_TOPIC, STATUS_TYPE).publish(verdict, sim_seconds)
+    if not reported.wait(env.upload_timeout):
+        print(f"error: the recorder did not report its upload within {env.upload_timeout:.0f} s", flush=True)
+        bus.close()
+        return int(ExitCode.INFRASTRUCTURE)
+    bus.close()
+    if report.get("state") != "uploaded":
+        print(f"error: the recorder failed: {report.get('error', 'unknown error')}", flush=True)
+        return int(ExitCode.INFRASTRUCTURE)
+    return int(exit_code)
+
+
+# --- recorder --------------------------------------------------------------------------------------------
+
+
+class _ReadyPort:
+    """Accepts (and closes) connections on the startup-probe port."""
+
+    def __init__(self, port: int) -> None:
+        self.server = socket.create_server(("127.0.0.1", port))
+        threading.Thread(target=self._serve, name="ready-port", daemon=True).start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                conn, _ = self.server.accept()
+            except OSError:
+                return
+            conn.close()
+
+    def close(self) -> None:
+        self.server.close()
+
+
+def run_recorder(env: PodEnv) -> int:
+    from simcore.recorder import McapRecorder
+    from simcore.runner import versions
+    from simcore.transport.loopback import LoopbackBus
+
+    run = _load(env)
+    spec = run.spec
+    from simcore.plan import Plan
+
+    point = Plan(spec)[env.index]
+    store = _store(env, run)
+    prefix = f"{run.name}/{env.index}"
+    env.scratch.mkdir(parents=True, exist_ok=True)
+    workdir = Path(tempfile.mkdtemp(prefix="recorder-", dir=env.scratch))
+    lock = threading.Lock()
+    verdict: dict[str, str] = {}
+    done = threading.Event()
+    stop = threading.Event()
+    recorder: McapRecorder | None = None
+    if spec.recording.enabled:
+        import yaml
+
+        recorder = McapRecorder.for_recording(
+            workdir / "recording.mcap",
+            spec.recording,
+            metadata={
+                "carlos.spec": {
+                    "manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))
+                },
+                "carlos.run": {
+                    "run": run.name,
+                    "index": str(env.index),
+                    "scenario": point.scenario.name,
+                    "parameters": json.dumps(point.parameters, sort_keys=True),
+                    "seed": str(point.seed),
+                    "stepSeconds": repr(spec.simulation.step_seconds),
+                    "attempt": str(env.failures + 1),
+                },
+                "carlos.versions": versions(),
+            },
+        )
+
+    def on_message(message: Message) -> None:
+        with lock:
+            if recorder is not None and not done.is_set() and recorder.wants(message.topic):
+                recorder.write(message.topic, message.typename, message.obj(), message.time_s)
+            if message.topic == STATUS_TOPIC:
+                values = _values(message.obj())
+                if SUMMARY_KEY in values:
+                    verdict.update(values)
+                    done.set()
+
+    _on_sigterm(stop.set)
+    bus = LoopbackBus("127.0.0.1", env.bus_port, connect_timeout=60.0, on_disconnect=stop.set)
+    bus.subscribe("*", on_message)
+    ready = _ReadyPort(env.ready_port)
+    log.info("recorder: subscribed, ready on 127.0.0.1:%d", env.ready_port)
+    while not done.is_set() and not stop.is_set():
+        done.wait(0.2)
+    with lock:  # no message is written after this point; everything received is in the file
+        done.set()
+        if recorder is not None:
+            recorder.close()
+    state, error = "uploaded", ""
+    try:
+        mcap = workdir / "recording.mcap"
+        if mcap.is_file():
+            store.put_file(f"{prefix}/recording.mcap", mcap)
+        if verdict:
+            store.put_bytes(f"{prefix}/log.txt", verdict.get("log", "").encode())
+            if verdict.get("writeSummary") == "true":
+                summary = json.loads(verdict[SUMMARY_KEY])
+                store.put_bytes(
+                    f"{prefix}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
+                )
+        else:
+            store.put_bytes(
+                f"{prefix}/log.txt",
+                f"recorder: terminated before the end of the run (attempt {env.failures + 1})\n".encode(),
+            )
+    except Exception as exc:  # the object store failed: simcore turns this into exit code 3
+        state, error = "error", f"{type(exc).__name__}: {exc}"
+        print(f"recorder: upload failed: {error}", flush=True)
+    if verdict and not stop.is_set():
+        bus.advertise(RECORDER_TOPIC, STATUS_TYPE).publish(
+            _status_message(state, 0.0, {"error": error} if error else {}), 0.0
+        )
+    # a native sidecar is restarted when it exits while the pod runs: stay until the pod stops us
+    while not stop.is_set():
+        stop.wait(0.5)
+    ready.close()
+    bus.close()
+    return 0 if state == "uploaded" else int(ExitCode.INFRASTRUCTURE)
+
+
+def main(role: str) -> int:
+    """Run `role`; returns the process exit code. Never raises for CARLOS' own errors."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if role not in ROLES:
+        print(f"error: --role: {role!r} is not one of {', '.join(ROLES)}", flush=True)
+        return int(ExitCode.BAD_INPUT)
+    try:
+        env = PodEnv.from_env()
+        if role == "bridge":
+            return run_bridge(env)
+        if role == "recorder":
+            return run_recorder(env)
+        return run_simcore(env)
+    except CarlosError as exc:
+        print(f"error: {exc}", flush=True)
+        return int(exc.exit_code)

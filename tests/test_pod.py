@@ -1,0 +1,149 @@
+"""The pod roles as separate processes (bridge hub, recorder, simcore) over loopback TCP, run by the test
+kubelet from the operator's own pod template, with results in the real S3 server."""
+
+from __future__ import annotations
+
+import base64
+import json
+import threading
+from pathlib import Path
+from typing import Any
+
+import pytest
+from carlos_operator.builders import OperatorSettings, build_configmap, build_job, resolve_output
+from mcap.reader import make_reader
+
+from simcore.manifest import parse_manifest
+from simcore.store import open_store
+from simcore.transport.bus import Message
+from simcore.transport.loopback import LoopbackBus, LoopbackHub
+from tests.kubelet import Kubelet
+from tests.s3server import S3Server
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIO = (ROOT / "examples/scenarios/braking.xosc").as_uri()
+
+
+def body(name: str, bucket: str, criteria: list[str], **extra: Any) -> dict[str, Any]:
+    return {
+        "apiVersion": "carlos.dev/v1alpha1",
+        "kind": "SimulationRun",
+        "metadata": {"name": name, "namespace": "default", "uid": f"uid-{name}"},
+        "spec": {
+            "scenarios": [{"name": "braking", "openscenario": SCENARIO}],
+            "sweep": {"matrix": {"Speed": [15.0, 20.0]}},
+            "simulation": {"stepSeconds": 0.1, "maxSeconds": 4},
+            "evaluation": {"criteria": criteria},
+            "output": {"url": f"s3://{bucket}/pods", "credentialsSecretRef": {"name": "s3"}},
+            **extra,
+        },
+    }
+
+
+def kubelet_for(manifest: dict[str, Any], s3: S3Server, tmp_path: Path) -> tuple[Kubelet, dict[str, Any]]:
+    run = parse_manifest(json.loads(json.dumps(manifest)), source="test")
+    settings = OperatorSettings.from_env({"CARLOS_DEFAULT_S3_ENDPOINT": s3.endpoint})
+    output = resolve_output(run, settings)
+    cm = build_configmap(run, manifest, settings)
+    job = build_job(run, manifest, settings, output)
+    secret = {
+        "AWS_ACCESS_KEY_ID": base64.b64encode(s3.access_key.encode()).decode(),
+        "AWS_SECRET_ACCESS_KEY": base64.b64encode(s3.secret_key.encode()).decode(),
+    }
+    kubelet = Kubelet(
+        configmaps={cm["metadata"]["name"]: cm["data"]},
+        secrets={"s3": secret},
+        workdir=tmp_path,
+        extra_env={"AWS_REGION": s3.region},
+    )
+    return kubelet, job["spec"]["template"]["spec"]
+
+
+def results_store(s3: S3Server, monkeypatch: pytest.MonkeyPatch) -> Any:
+    for key, value in s3.env().items():
+        monkeypatch.setenv(key, value)
+    return open_store(f"s3://{s3.bucket}/pods", endpoint=s3.endpoint, region=s3.region)
+
+
+def test_hub_relays_in_order_between_processes_and_acknowledges_subscriptions() -> None:
+    from simcore.transport.messages import TYPESTORE
+
+    Clock = TYPESTORE.types["rosgraph_msgs/msg/Clock"]
+    Time = TYPESTORE.types["builtin_interfaces/msg/Time"]
+    hub = LoopbackHub("127.0.0.1", 0).start()
+    try:
+        received: list[Message] = []
+        got_all = threading.Event()
+
+        def on_clock(message: Message) -> None:
+            received.append(message)
+            if len(received) == 500:
+                got_all.set()
+
+        subscriber = LoopbackBus("127.0.0.1", hub.port)
+        subscriber.subscribe("/cl*", on_clock)
+        other: list[str] = []
+        subscriber.subscribe("/nothing", lambda m: other.append(m.topic))
+        publisher = LoopbackBus("127.0.0.1", hub.port)
+        own: list[float] = []
+        publisher.subscribe("/clock", lambda m: own.append(m.time_s))
+        clock = publisher.advertise("/clock", "rosgraph_msgs/msg/Clock")
+        for i in range(500):
+            clock.publish(Clock(clock=Time(sec=i, nanosec=0)), float(i))
+        assert got_all.wait(10)
+        assert [m.time_s for m in received] == [float(i) for i in range(500)]
+        assert [m.obj().clock.sec for m in received[:3]] == [0, 1, 2]
+        assert own == [float(i) for i in range(500)]  # own publications reach own subscriptions once
+        assert other == []
+        publisher.close()
+        subscriber.close()
+    finally:
+        hub.close()
+
+
+@pytest.mark.s3
+def test_pod_roles_run_an_index_and_upload_results(
+    s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    manifest = body("pod-pass", s3_server.bucket, ["simSeconds <= 100"])
+    kubelet, pod = kubelet_for(manifest, s3_server, tmp_path)
+    result = kubelet.run_pod(pod, index=1)
+    assert result.exit_codes == {"simcore": 0, "bridge": 0, "recorder": 0}, result.logs
+    store = results_store(s3_server, monkeypatch)
+    keys = set(store.list("pod-pass/1/"))
+    assert {"pod-pass/1/recording.mcap", "pod-pass/1/summary.json", "pod-pass/1/log.txt"} <= keys
+    summary = json.loads(store.get_bytes("pod-pass/1/summary.json"))
+    assert summary["index"] == 1 and summary["status"] == "passed"
+    assert summary["parameters"] == {"Speed": 20.0}
+    recording = tmp_path / "recording.mcap"
+    recording.write_bytes(store.get_bytes("pod-pass/1/recording.mcap"))
+    with recording.open("rb") as f:
+        reader = make_reader(f)
+        topics = {channel.topic for channel in reader.get_summary().channels.values()}
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert {"/clock", "/tf", "/carlos/objects", "/carlos/status"} <= topics
+    assert metadata["carlos.run"]["index"] == "1"
+    assert "Speed" in metadata["carlos.run"]["parameters"]
+
+
+@pytest.mark.s3
+def test_a_test_failure_exits_1_and_bad_input_exits_2(
+    s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    manifest = body("pod-fail", s3_server.bucket, ["minDistance >= 10000"])
+    kubelet, pod = kubelet_for(manifest, s3_server, tmp_path)
+    result = kubelet.run_pod(pod, index=0)
+    assert result.exit_codes["simcore"] == 1, result.logs
+    store = results_store(s3_server, monkeypatch)
+    summary = json.loads(store.get_bytes("pod-fail/0/summary.json"))
+    assert summary["status"] == "failed"
+    assert summary["criteria"][0]["passed"] is False
+
+    bad = body("pod-bad", s3_server.bucket, [])
+    bad["spec"]["scenarios"][0]["openscenario"] = "file:///nonexistent/scenario.xosc"
+    kubelet, pod = kubelet_for(bad, s3_server, tmp_path)
+    result = kubelet.run_pod(pod, index=0)
+    assert result.exit_codes["simcore"] == 2, result.logs
+    assert "nonexistent" in result.logs["simcore"]
+    summary = json.loads(store.get_bytes("pod-bad/0/summary.json"))
+    assert summary["status"] == "error"
