@@ -14,7 +14,10 @@ from typing import TYPE_CHECKING, Any
 
 from simcore.errors import BadInput, SimulationError
 from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
+from simcore.scenario import actions as extra_actions
 from simcore.scenario import model as m
+from simcore.scenario import paths
+from simcore.scenario.actions import Runtime
 from simcore.scenario.motion import (
     Body,
     advance_on_road,
@@ -49,17 +52,8 @@ def compare(rule: str, a: Any, b: Any) -> bool:
 # --- action runtimes --------------------------------------------------------------------------------------
 
 
-class ActionRuntime:
+class ActionRuntime(Runtime):
     domain = "other"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body) -> None:
-        self.engine = engine
-        self.actor = actor
-        self.done = False
-
-    def start(self) -> None: ...
-
-    def step(self, dt: float) -> None: ...
 
 
 class SpeedRuntime(ActionRuntime):
@@ -205,12 +199,17 @@ class TeleportRuntime(ActionRuntime):
         self.done = True
 
 
-def make_runtime(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> ActionRuntime:
+def make_runtime(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> Runtime:
+    other = extra_actions.make(engine, actor, action)
+    if other is not None:
+        return other
     if isinstance(action, m.SpeedAction):
         return SpeedRuntime(engine, actor, action)
     if isinstance(action, m.LaneChangeAction):
         return LaneChangeRuntime(engine, actor, action)
-    return TeleportRuntime(engine, actor, action)
+    if isinstance(action, m.TeleportAction):
+        return TeleportRuntime(engine, actor, action)
+    raise BadInput(f"{type(action).__name__} is not supported", file=engine.source)
 
 
 # --- conditions -------------------------------------------------------------------------------------------
@@ -259,6 +258,9 @@ class ScenarioEngine:
                     field="RoadNetwork/LogicFile",
                 )
         self.conditions: dict[int, ConditionState] = {}
+        self.parameter_values: dict[str, Any] = dict(scenario.parameters)
+        self.variables: dict[str, Any] = dict(scenario.variables)
+        self.added_later = _added_later(scenario)
         self.root = self._build()
         self.registry = Registry(self.root)
         self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
@@ -291,15 +293,27 @@ class ScenarioEngine:
     def _init(self) -> None:
         # teleports first (other init actions may refer to positions of entities placed here)
         ordered = sorted(self.scenario.init, key=lambda i: not isinstance(i.action, m.TeleportAction))
+        self.init_runtimes: list[Runtime] = []
         for item in ordered:
+            if not item.entity:
+                self._global_action(item.action)  # type: ignore[arg-type]
+                continue
             body = self.bodies[item.entity]
-            runtime = make_runtime(self, body, item.action)
+            runtime = make_runtime(self, body, item.action)  # type: ignore[arg-type]
             if isinstance(item.action, m.SpeedAction):
                 # initial speed: reached at once (esmini and ScenarioRunner do the same for Init)
                 body.speed = runtime.target() if isinstance(runtime, SpeedRuntime) else body.speed
-            else:
+            elif isinstance(item.action, m.TeleportAction | m.AssignRouteAction | m.NoMotionAction):
                 runtime.start()
+            else:
+                # an Init action with duration (a trajectory, a distance to keep) runs from the first step
+                self.init_runtimes.append(runtime)
+        for runtime in self.init_runtimes:
+            runtime.start()
         for body in self.bodies.values():
+            if not body.placed and body.name in self.added_later:
+                body.gone = True
+                body.placed = True
             if not body.placed:
                 raise BadInput(
                     f"entity {body.name!r} has no initial position (add a TeleportAction to Init)",
@@ -373,6 +387,28 @@ class ScenarioEngine:
                 r = need_road()
                 pose = r.road_to_world(position.road_id, position.s, position.t)
                 return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
+            if isinstance(position, m.TrajectoryPosition):
+                base_pose = (0.0, 0.0, 0.0, 0.0)
+                if for_body is not None:
+                    base_pose = (for_body.x, for_body.y, for_body.z, for_body.heading)
+                path = paths.sample(position.trajectory, self.resolve_position, base_pose)
+                x, y, z, h = path.at(position.s)
+                x -= position.t * math.sin(h)
+                y += position.t * math.cos(h)
+                return x, y, z, wrap_angle(orient(h, position.orientation))
+            if isinstance(position, m.RoutePosition):
+                if position.entity is not None:
+                    ref = self.body(position.entity)
+                    return ref.x, ref.y, ref.z, orient(ref.heading, position.orientation)
+                r = need_road()
+                assert position.route is not None
+                road_id, s_on, direction = self._route_point(position.route, position.path_s or 0.0)
+                if position.lane_id is not None:
+                    pose = r.lane_to_world(road_id, position.lane_id, s_on, position.lane_offset)
+                else:
+                    pose = r.road_to_world(road_id, s_on, position.t)
+                base = pose.heading + (math.pi if direction < 0 else 0.0)
+                return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
             ref = self.body(position.entity)
             if isinstance(position, m.RelativeWorldPosition):
                 return (
@@ -408,12 +444,43 @@ class ScenarioEngine:
             raise BadInput(f"{type(position).__name__}: {exc}", file=self.source) from None
         raise BadInput(f"position {type(position).__name__} is not supported", file=self.source)
 
+    def _route_point(self, route: m.Route, path_s: float) -> tuple[str, float, int]:
+        """(road, s, direction) `path_s` metres along a route from its first waypoint."""
+        road = self.road
+        assert road is not None
+        points = []
+        for waypoint in route.waypoints:
+            x, y, _, h = self.resolve_position(waypoint.position)
+            rc = road.world_to_road(x, y, None, road_hint=getattr(waypoint.position, "road_id", None))
+            if rc is None:
+                raise BadInput(f"route {route.name!r}: a waypoint is on no road", file=self.source)
+            points.append((rc, 1 if math.cos(h - rc.heading) >= 0 else -1))
+        first, direction = points[0]
+        legs: list[tuple[str, int]] = [(first.road_id, direction)]
+        for rc, _ in points[1:]:
+            leg = paths.plan(road, legs[-1], rc.road_id)
+            if leg is None:
+                raise BadInput(f"route {route.name!r}: no way to road {rc.road_id}", file=self.source)
+            legs.extend(leg[1:])
+        s_on = first.s
+        remaining = path_s
+        for i, (road_id, d) in enumerate(legs):
+            length = road.road_length(road_id)
+            if i > 0:
+                s_on = 0.0 if d > 0 else length
+            room = (length - s_on) if d > 0 else s_on
+            if remaining <= room or i == len(legs) - 1:
+                return road_id, min(max(s_on + d * remaining, 0.0), length), d
+            remaining -= room
+        return legs[-1][0], s_on, legs[-1][1]
+
     def place(self, body: Body, position: m.Position) -> None:
         """Teleport: pose from the position; road coordinates from the road network when on a road."""
-        x, y, z, heading = self.resolve_position(position)
+        x, y, z, heading = self.resolve_position(position, body)
         self._states.clear()
         body.x, body.y, body.z, body.heading = x, y, z, heading
         body.placed = True
+        body.mover = None
         body.road_id = None
         if self.road is not None:
             hint = getattr(position, "road_id", None)
@@ -427,6 +494,107 @@ class ScenarioEngine:
                     body.offset = position.offset
         if self.sumo is not None and self.step_index > 0:
             self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+
+    def track_road(self, body: Body, lock_lane: bool = False) -> None:
+        """Road coordinates of a body moved freely (a trajectory): its lane, s and offset from x/y. With
+        `lock_lane` the body follows that lane afterwards, in the direction it is heading."""
+        self._states.clear()
+        if self.road is None:
+            return
+        rc = None
+        if body.road_id is not None:
+            rc = self.road.world_to_road_near(body.x, body.y, body.road_id, body.s)
+        if rc is None:
+            rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
+        if rc is None:
+            body.road_id = None
+            return
+        body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
+        body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
+        if lock_lane:
+            body.lateral_velocity = 0.0
+
+    def shift_along(self, body: Body, distance: float) -> None:
+        """Move a body `distance` metres along its lane (or its heading off road) at once."""
+        if abs(distance) < 1e-12:
+            return
+        if self.road is not None and body.road_id is not None and body.mover is None:
+            if distance >= 0:
+                advance_on_road(self.road, body, distance, self.time)
+            else:
+                body.direction = -body.direction
+                advance_on_road(self.road, body, -distance, self.time)
+                body.direction = -body.direction
+                update_pose_from_road(self.road, body)
+        else:
+            body.x += distance * math.cos(body.heading)
+            body.y += distance * math.sin(body.heading)
+        self._states.clear()
+
+    def distance_to(self, body: Body, target: tuple[float, float, float, float]) -> float:
+        """Distance still to travel to a position: along the road when both are on the same road."""
+        x, y, _, _ = target
+        if self.road is not None and body.road_id is not None:
+            rc = self.road.world_to_road(x, y, None, road_hint=body.road_id)
+            if rc is not None and rc.road_id == body.road_id:
+                return max((rc.s - body.s) * body.direction, 0.0)
+        return math.hypot(x - body.x, y - body.y)
+
+    def plan_route(self, body: Body, targets: list[m.Position]) -> list[tuple[str, int]]:
+        """The roads (id, direction) a body drives through to pass every target position in order."""
+        road = self.road
+        if road is None or body.road_id is None:
+            return []
+        state = (body.road_id, body.direction)
+        out: list[tuple[str, int]] = []
+        for position in targets:
+            x, y, _, _ = self.resolve_position(position)
+            hint = getattr(position, "road_id", None)
+            rc = road.world_to_road(x, y, None, road_hint=hint)
+            if rc is None:
+                continue
+            if state[0] == rc.road_id and not out:
+                continue
+            leg = paths.plan(road, state, rc.road_id)
+            if leg is None:
+                self.warnings.append(
+                    f"{self.source}: route of {body.name!r}: no way found to road {rc.road_id}"
+                )
+                continue
+            out.extend(leg[1:])
+            state = leg[-1]
+        return out
+
+    def _global_action(self, action: m.GlobalAction) -> None:
+        if isinstance(action, m.ParameterSetAction | m.ParameterModifyAction):
+            store = self.variables if action.variable else self.parameter_values
+            if action.name not in store:
+                kind = "variable" if action.variable else "parameter"
+                raise BadInput(f"{kind} {action.name!r} is not declared", file=self.source)
+            old = store[action.name]
+            if isinstance(action, m.ParameterSetAction):
+                new: Any = action.value
+                if isinstance(old, bool):
+                    new = action.value.lower() in ("true", "1")
+                elif isinstance(old, int):
+                    new = int(float(action.value))
+                elif isinstance(old, float):
+                    new = float(action.value)
+            else:
+                base = float(old)
+                new = base + action.value if action.rule == "add" else base * action.value
+                if isinstance(old, int) and not isinstance(old, bool) and new == int(new):
+                    new = int(new)
+            store[action.name] = new
+            self.log.append(f"t={self.time:.2f} {action.name} := {new}")
+        elif isinstance(action, m.AddEntityAction):
+            body = self.body(action.entity)
+            body.gone = False
+            self.place(body, action.position)
+        elif isinstance(action, m.DeleteEntityAction):
+            body = self.body(action.entity)
+            body.gone = True
+            self._states.clear()
 
     # --- SUMO hooks -----------------------------------------------------------------------------------
 
@@ -475,9 +643,13 @@ class ScenarioEngine:
                     file=self.source,
                 )
             return any(node.is_(c.state, self.step_index) for node in nodes)
-        value = self.scenario.parameters.get(c.name)
+        if isinstance(c, m.UnsupportedCondition):
+            return False
+        store = self.variables if isinstance(c, m.VariableCondition) else self.parameter_values
+        value = store.get(c.name)
         if value is None:
-            raise BadInput(f"ParameterCondition on undeclared parameter {c.name!r}", file=self.source)
+            kind = "VariableCondition" if isinstance(c, m.VariableCondition) else "ParameterCondition"
+            raise BadInput(f"{kind} on undeclared name {c.name!r}", file=self.source)
         if isinstance(value, bool):
             return compare(c.rule, value, c.value.lower() == "true")
         if isinstance(value, int | float):
@@ -532,7 +704,42 @@ class ScenarioEngine:
             if gap <= 0 or closing <= 1e-6:
                 return compare(c.rule, math.inf, c.value)
             return compare(c.rule, gap / closing, c.value)
+        if isinstance(c, m.OffroadCondition):
+            if body.road_id is None:
+                since = body.extra.setdefault("offroad_since", self.time)
+                return self.time - since >= c.duration - 1e-9
+            body.extra.pop("offroad_since", None)
+            return False
+        if isinstance(c, m.RelativeClearanceCondition):
+            return self._clearance(c, body)
+        if isinstance(c, m.UnsupportedCondition):
+            return False
         raise BadInput(f"condition {type(c).__name__} is not supported", file=self.source)
+
+    def _clearance(self, c: m.RelativeClearanceCondition, body: Body) -> bool:
+        """True when the lanes and distances given are free of the listed (else of all) entities."""
+        others = [self.body(n) for n in c.entities] if c.entities else list(self.bodies.values())
+        occupied = False
+        for other in others:
+            if other is body or other.gone:
+                continue
+            lon = self.relative_distance(body, other, "longitudinal", True, signed=True)
+            if not (-c.distance_backward <= lon <= c.distance_forward):
+                continue
+            if c.lanes is not None and self.road is not None and body.road_id is not None:
+                if other.road_id != body.road_id:
+                    continue
+                lanes = sorted(self.road.lane_ids(body.road_id, body.s))
+                if other.lane_id not in lanes or body.lane_id not in lanes:
+                    continue
+                d_lane = (lanes.index(other.lane_id) - lanes.index(body.lane_id)) * body.direction
+                if not c.opposite_lanes and other.direction != body.direction:
+                    continue
+                if not (c.lanes[0] <= d_lane <= c.lanes[1]):
+                    continue
+            occupied = True
+            break
+        return (not occupied) if c.free_space else occupied
 
     def relative_distance(self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False) -> float:
         """Distance from a to b in a's frame (longitudinal: along a's heading; lateral: across it)."""
@@ -650,6 +857,8 @@ class ScenarioEngine:
     def _start_action(self, node: Node, actors: tuple[str, ...]) -> None:
         action: m.Action = node.definition
         if action.private is None:
+            if action.global_action is not None:
+                self._global_action(action.global_action)
             self._set(node, Transition.END, State.COMPLETE)
             return
         runtimes = []
@@ -759,8 +968,13 @@ class ScenarioEngine:
         self._evaluate_storyboard()
         previous_speed = {name: b.speed for name, b in self.bodies.items()}
         previous_heading = {name: b.heading for name, b in self.bodies.items()}
+        if self.init_runtimes:
+            for runtime in self.init_runtimes:
+                if not runtime.done:
+                    runtime.step(dt)
+            self.init_runtimes = [r for r in self.init_runtimes if not r.done]
         for node in {id(n): n for n in self.running.values()}.values():
-            runtimes: list[ActionRuntime] = node.runtime or []
+            runtimes: list[Runtime] = node.runtime or []
             for runtime in runtimes:
                 runtime.step(dt)
             if runtimes and all(r.done for r in runtimes):
@@ -773,12 +987,15 @@ class ScenarioEngine:
             if body.entity.driver == "sumo" or body.gone:
                 continue
             distance = body.speed * dt
-            if self.road is not None and body.road_id is not None:
+            if body.mover is not None:
+                body.mover.move(dt, now)
+            elif self.road is not None and body.road_id is not None:
                 advance_on_road(self.road, body, distance, now)
             else:
                 body.x += distance * math.cos(body.heading)
                 body.y += distance * math.sin(body.heading)
-            body.odometer += abs(distance)
+            if body.mover is None:
+                body.odometer += abs(distance)
             if self.sumo is not None:
                 self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
         if self.sumo is not None:
@@ -864,6 +1081,20 @@ class ScenarioEngine:
     @property
     def ended(self) -> bool:
         return self.ended_by is not None
+
+
+def _added_later(scenario: m.Scenario) -> set[str]:
+    """Entities an AddEntityAction brings in (they may have no initial position)."""
+    out: set[str] = set()
+    for story in scenario.stories:
+        for act in story.acts:
+            for group in act.groups:
+                for maneuver in group.maneuvers:
+                    for event in maneuver.events:
+                        for action in event.actions:
+                            if isinstance(action.global_action, m.AddEntityAction):
+                                out.add(action.global_action.entity)
+    return out
 
 
 def _default_ego(scenario: m.Scenario) -> str:

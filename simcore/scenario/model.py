@@ -125,6 +125,27 @@ class RelativeObjectPosition:
     orientation: Orientation | None = None
 
 
+@dataclass(frozen=True)
+class RoutePosition:
+    """A position along a route: `route` is resolved when used (the route of `entity` or an inline one)."""
+
+    route: Route | None
+    entity: str | None  # InRoutePosition/FromCurrentEntity: the entity's current position
+    path_s: float | None = None  # PositionInRoadCoordinates/pathS
+    t: float = 0.0
+    lane_id: int | None = None  # PositionInLaneCoordinates
+    lane_offset: float = 0.0
+    orientation: Orientation | None = None
+
+
+@dataclass(frozen=True)
+class TrajectoryPosition:
+    trajectory: Trajectory
+    s: float
+    t: float = 0.0
+    orientation: Orientation | None = None
+
+
 Position = (
     WorldPosition
     | LanePosition
@@ -133,7 +154,76 @@ Position = (
     | RelativeRoadPosition
     | RelativeWorldPosition
     | RelativeObjectPosition
+    | RoutePosition
+    | TrajectoryPosition
 )
+
+
+# --- routes and trajectories -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    position: Position
+    strategy: str = "shortest"
+
+
+@dataclass(frozen=True)
+class Route:
+    name: str
+    closed: bool
+    waypoints: tuple[Waypoint, ...]
+
+
+@dataclass(frozen=True)
+class Vertex:
+    position: Position
+    time: float | None = None
+
+
+@dataclass(frozen=True)
+class Polyline:
+    vertices: tuple[Vertex, ...]
+
+
+@dataclass(frozen=True)
+class ClothoidSegment:
+    curvature_start: float
+    curvature_end: float
+    length: float
+    start: Position | None = None  # None: where the previous segment (or the entity) is
+    h_offset: float = 0.0
+    time_start: float | None = None
+    time_end: float | None = None
+
+
+@dataclass(frozen=True)
+class Clothoid:
+    segments: tuple[ClothoidSegment, ...]
+
+
+@dataclass(frozen=True)
+class ControlPoint:
+    position: Position
+    time: float | None = None
+    weight: float = 1.0
+
+
+@dataclass(frozen=True)
+class Nurbs:
+    order: int
+    control_points: tuple[ControlPoint, ...]
+    knots: tuple[float, ...]
+
+
+TrajectoryShape = Polyline | Clothoid | Nurbs
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    name: str
+    closed: bool
+    shape: TrajectoryShape
 
 
 # --- actions -------------------------------------------------------------------------------------------
@@ -191,7 +281,155 @@ class TeleportAction:
     domain = "teleport"
 
 
-PrivateAction = SpeedAction | LaneChangeAction | TeleportAction
+@dataclass(frozen=True)
+class LaneOffsetAction:
+    shape: Shape
+    max_lateral_acc: float | None
+    offset: float  # target lane offset (m, + left of the lane centre in the travel direction)
+    entity: str | None = None  # RelativeTargetLaneOffset: relative to this entity's offset
+    continuous: bool = False
+    domain = "lateral"
+
+
+@dataclass(frozen=True)
+class DynamicConstraints:
+    max_acceleration: float | None = None
+    max_deceleration: float | None = None
+    max_speed: float | None = None
+
+
+@dataclass(frozen=True)
+class LongitudinalDistanceAction:
+    entity: str
+    distance: float | None
+    time_gap: float | None
+    freespace: bool
+    continuous: bool
+    displacement: str  # trailingReferencedEntity | leadingReferencedEntity | any
+    constraints: DynamicConstraints | None
+    domain = "longitudinal"
+
+
+@dataclass(frozen=True)
+class LateralDistanceAction:
+    entity: str
+    distance: float
+    freespace: bool
+    continuous: bool
+    displacement: str  # leftToReferencedEntity | rightToReferencedEntity | any
+    constraints: DynamicConstraints | None
+    domain = "lateral"
+
+
+@dataclass(frozen=True)
+class SpeedProfileEntry:
+    speed: float
+    time: float | None
+
+
+@dataclass(frozen=True)
+class SpeedProfileAction:
+    entity: str | None  # speeds relative to this entity's speed when given
+    following_mode: str  # position | follow
+    entries: tuple[SpeedProfileEntry, ...]
+    constraints: DynamicConstraints | None
+    max_jerk: float | None = None
+    domain = "longitudinal"
+
+
+@dataclass(frozen=True)
+class FollowTrajectoryAction:
+    trajectory: Trajectory
+    timing: Literal["none", "absolute", "relative"]
+    scale: float = 1.0
+    offset: float = 0.0
+    initial_distance_offset: float = 0.0
+    following_mode: str = "position"
+    domain = "lateral"
+
+
+@dataclass(frozen=True)
+class AssignRouteAction:
+    route: Route
+    domain = "route"
+
+
+@dataclass(frozen=True)
+class AcquirePositionAction:
+    position: Position
+    domain = "route"
+
+
+@dataclass(frozen=True)
+class SynchronizeAction:
+    master: str
+    master_position: Position
+    position: Position
+    master_tolerance: float = 0.0
+    tolerance: float = 0.0
+    final_speed: float | None = None  # AbsoluteSpeed
+    final_relative: tuple[str, float, str] | None = None  # (entity, value, delta|factor) steady state
+    domain = "longitudinal"
+
+
+@dataclass(frozen=True)
+class NoMotionAction:
+    """Recorded, no effect on motion: lights, visibility, appearance, controllers CARLOS does not model."""
+
+    kind: str
+    domain = "none"
+
+
+PrivateAction = (
+    SpeedAction
+    | LaneChangeAction
+    | TeleportAction
+    | LaneOffsetAction
+    | LongitudinalDistanceAction
+    | LateralDistanceAction
+    | SpeedProfileAction
+    | FollowTrajectoryAction
+    | AssignRouteAction
+    | AcquirePositionAction
+    | SynchronizeAction
+    | NoMotionAction
+)
+
+
+@dataclass(frozen=True)
+class ParameterSetAction:
+    name: str
+    value: str
+    variable: bool = False  # VariableSetAction
+
+
+@dataclass(frozen=True)
+class ParameterModifyAction:
+    name: str
+    rule: Literal["add", "multiply"]
+    value: float
+    variable: bool = False
+
+
+@dataclass(frozen=True)
+class AddEntityAction:
+    entity: str
+    position: Position
+
+
+@dataclass(frozen=True)
+class DeleteEntityAction:
+    entity: str
+
+
+@dataclass(frozen=True)
+class NoMotionGlobalAction:
+    kind: str
+
+
+GlobalAction = (
+    ParameterSetAction | ParameterModifyAction | AddEntityAction | DeleteEntityAction | NoMotionGlobalAction
+)
 
 
 # --- conditions ----------------------------------------------------------------------------------------
@@ -295,6 +533,35 @@ class EndOfRoadCondition:
     duration: float
 
 
+@dataclass(frozen=True)
+class VariableCondition:
+    name: str
+    value: str
+    rule: Rule
+
+
+@dataclass(frozen=True)
+class RelativeClearanceCondition:
+    entities: tuple[str, ...]
+    free_space: bool  # True: the checked area must be free
+    distance_forward: float
+    distance_backward: float
+    opposite_lanes: bool
+    lanes: tuple[int, int] | None  # (from, to) relative lanes
+
+
+@dataclass(frozen=True)
+class OffroadCondition:
+    duration: float
+
+
+@dataclass(frozen=True)
+class UnsupportedCondition:
+    """A condition CARLOS does not evaluate: always false (it is warned about at load)."""
+
+    kind: str
+
+
 EntityCondition = (
     RelativeDistanceCondition
     | SpeedCondition
@@ -308,8 +575,17 @@ EntityCondition = (
     | StandStillCondition
     | CollisionCondition
     | EndOfRoadCondition
+    | RelativeClearanceCondition
+    | OffroadCondition
+    | UnsupportedCondition
 )
-ValueCondition = SimulationTimeCondition | StoryboardElementStateCondition | ParameterCondition
+ValueCondition = (
+    SimulationTimeCondition
+    | StoryboardElementStateCondition
+    | ParameterCondition
+    | VariableCondition
+    | UnsupportedCondition
+)
 
 
 @dataclass(frozen=True)
@@ -336,7 +612,8 @@ class Trigger:
 @dataclass(frozen=True)
 class Action:
     name: str
-    private: PrivateAction | None  # None for global actions not modelled yet
+    private: PrivateAction | None
+    global_action: GlobalAction | None = None
 
 
 @dataclass(frozen=True)
@@ -379,8 +656,8 @@ class Story:
 
 @dataclass(frozen=True)
 class InitAction:
-    entity: str
-    action: PrivateAction
+    entity: str  # "" for a global action
+    action: PrivateAction | GlobalAction
 
 
 @dataclass(frozen=True)
@@ -394,5 +671,6 @@ class Scenario:
     stories: tuple[Story, ...]
     stop_trigger: Trigger | None
     parameters: dict[str, bool | int | float | str]
+    variables: dict[str, bool | int | float | str] = field(default_factory=dict)
     #: unsupported elements that do not change motion: "file:line: element: what was ignored"
     warnings: tuple[str, ...] = ()

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from simcore.scenario import model as m
 
@@ -63,6 +63,8 @@ class Body:
     placed: bool = False
     gone: bool = False  # left the SUMO network
     extra: dict[str, float] = field(default_factory=dict)
+    mover: Any = None  # a runtime that moves the entity itself (a trajectory) instead of lane following
+    route: list[tuple[str, int]] = field(default_factory=list)  # roads ahead (id, direction) of a route
 
     @property
     def name(self) -> str:
@@ -121,7 +123,7 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
         # past the end of this road: continue on the successor
         overshoot = (target - length) if target > length else -target
         edge_s = length if target > length else 0.0
-        nxt = road.successor(body.road_id, body.lane_id, body.direction)
+        nxt = next_road(road, body)
         if nxt is None:
             body.s = edge_s
             if body.end_of_road_since is None:
@@ -132,6 +134,26 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
         body.s = 0.0 if direction > 0 else road.road_length(road_id)
         remaining = overshoot * scale
     update_pose_from_road(road, body)
+
+
+def next_road(road: OpenDrive, body: Body) -> tuple[str, int, int] | None:
+    """Where a body goes at the end of its road: along its route when it has one, else straight on."""
+    assert body.road_id is not None
+    while body.route and body.route[0][0] == body.road_id:
+        body.route.pop(0)
+    if body.route:
+        want_road, want_dir = body.route[0]
+        options = road.connections(body.road_id, body.lane_id, body.direction)
+        chosen = [o for o in options if o[0] == want_road and o[2] == want_dir]
+        if not chosen:
+            # the route turns from another lane: take the connection from the nearest lane that has one
+            others = [o for o in road.connections(body.road_id, None, body.direction) if o[0] == want_road]
+            chosen = sorted(others, key=lambda o: abs(o[1] - body.lane_id))
+        if chosen:
+            body.route.pop(0)
+            return chosen[0]
+        body.route.clear()
+    return road.successor(body.road_id, body.lane_id, body.direction)
 
 
 def update_pose_from_road(road: OpenDrive, body: Body) -> None:

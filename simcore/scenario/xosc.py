@@ -17,14 +17,31 @@ from defusedxml import DefusedXmlException
 
 from simcore.errors import BadInput
 from simcore.scenario import model as m
-from simcore.scenario.parameters import Declaration, ParameterError, ParamValue, declare, resolve
+from simcore.scenario.parameters import Declaration, ParameterError, ParamValue, convert, declare, resolve
 
 MAX_SCENARIO_BYTES = 32 * 1024 * 1024
 T = TypeVar("T")
 
 
-def read_xml(path: Path, *, what: str, max_bytes: int = MAX_SCENARIO_BYTES) -> ET.Element:
-    """Parse an untrusted XML file safely; errors name the file."""
+class _LineBuilder(ET.TreeBuilder):
+    """A tree builder that remembers the source line of every element (for warnings and errors)."""
+
+    def __init__(self, lines: dict[int, int]) -> None:
+        super().__init__()
+        self.lines = lines
+        self.parser: Any = None
+
+    def start(self, tag: Any, attrs: Any) -> ET.Element:
+        element = super().start(tag, attrs)
+        if self.parser is not None:
+            self.lines[id(element)] = int(self.parser.parser.CurrentLineNumber)
+        return element
+
+
+def read_xml(
+    path: Path, *, what: str, max_bytes: int = MAX_SCENARIO_BYTES, lines: dict[int, int] | None = None
+) -> ET.Element:
+    """Parse an untrusted XML file safely; errors name the file. `lines` (given): element id → line."""
     try:
         size = path.stat().st_size
     except FileNotFoundError:
@@ -32,7 +49,14 @@ def read_xml(path: Path, *, what: str, max_bytes: int = MAX_SCENARIO_BYTES) -> E
     if size > max_bytes:
         raise BadInput(f"{what} is {size} bytes; at most {max_bytes} are allowed", file=str(path))
     try:
-        return SafeET.parse(str(path)).getroot()
+        if lines is None:
+            return SafeET.parse(str(path)).getroot()
+        builder = _LineBuilder(lines)
+        parser = SafeET.DefusedXMLParser(target=builder)
+        builder.parser = parser
+        parser.feed(path.read_bytes())
+        root: ET.Element = parser.close()
+        return root
     except DefusedXmlException as exc:
         raise BadInput(
             f"{what} uses forbidden XML constructs ({type(exc).__name__})", file=str(path)
@@ -49,11 +73,28 @@ class _Reader:
         self.overrides = dict(overrides)
         self.scopes: list[dict[str, ParamValue]] = [{}]
         self.where: list[str] = []
+        self.lines: dict[int, int] = {}
+        self.warnings: list[str] = []
+        self.catalogs: dict[str, Path] = {}
+        self._catalog_files: dict[Path, ET.Element | None] = {}
+        self.variables: dict[str, ParamValue] = {}
+
+    def line(self, element: ET.Element | None) -> int | None:
+        return None if element is None else self.lines.get(id(element))
+
+    def warn(self, message: str, element: ET.Element | None = None) -> None:
+        """An unsupported element that does not change motion: the run goes on, the warning names it."""
+        line = self.line(element)
+        where = "/".join(self.where + ([element.tag] if element is not None else []))
+        text = f"{self.path}{':' + str(line) if line else ''}: {where}: {message}"
+        if text not in self.warnings:
+            self.warnings.append(text)
 
     # -- errors and scopes --
     def fail(self, message: str, element: ET.Element | None = None) -> BadInput:
         where = "/".join(self.where + ([element.tag] if element is not None else []))
-        return BadInput(message, file=str(self.path), field=where or None)
+        line = self.line(element)
+        return BadInput(message, file=f"{self.path}:{line}" if line else str(self.path), field=where or None)
 
     @property
     def values(self) -> dict[str, ParamValue]:
@@ -146,10 +187,12 @@ def load_scenario(path: str | Path, overrides: Mapping[str, ParamValue] | None =
     """Parse an OpenSCENARIO file. `overrides` replace declared parameter defaults; a name the file does not
     declare is bad input (a typo in a sweep must not silently do nothing)."""
     path = Path(path)
-    root = read_xml(path, what="OpenSCENARIO file")
+    lines: dict[int, int] = {}
+    root = read_xml(path, what="OpenSCENARIO file", lines=lines)
     if root.tag != "OpenSCENARIO":
         raise BadInput(f"root element is <{root.tag}>, expected <OpenSCENARIO>", file=str(path))
     reader = _Reader(path, overrides or {})
+    reader.lines = lines
     header = root.find("FileHeader")
     version = "1.0"
     description = ""
@@ -171,7 +214,9 @@ def load_scenario(path: str | Path, overrides: Mapping[str, ParamValue] | None =
             raise BadInput("this is a ParameterValueDistribution, not a scenario", file=str(path))
         raise BadInput("no <Storyboard>: not an OpenSCENARIO scenario", file=str(path))
     reader.push_declarations(root, reader.overrides)
+    _variables(reader, root)
     catalogs = _catalog_dirs(reader, root)
+    reader.catalogs = catalogs
     road_file = None
     network = root.find("RoadNetwork")
     if network is not None:
@@ -194,6 +239,8 @@ def load_scenario(path: str | Path, overrides: Mapping[str, ParamValue] | None =
         stories=stories,
         stop_trigger=_trigger(reader, stop) if stop is not None else None,
         parameters=dict(reader.scopes[1]),
+        variables=dict(reader.variables),
+        warnings=tuple(reader.warnings),
     )
     _check_references(scenario, names)
     return scenario
@@ -249,30 +296,40 @@ def _catalog_dirs(reader: _Reader, root: ET.Element) -> dict[str, Path]:
 
 
 def _catalog_entry(
-    reader: _Reader, ref: ET.Element, catalogs: dict[str, Path], kind: str
+    reader: _Reader, ref: ET.Element, catalogs: dict[str, Path], kind: str | tuple[str, ...]
 ) -> tuple[ET.Element, dict[str, ParamValue]]:
+    """The catalog entry a CatalogReference names (searched in the catalog locations of `kind`, then in all
+    locations), with its parameter assignments."""
     catalog_name = reader.attr(ref, "catalogName")
     entry_name = reader.attr(ref, "entryName")
-    directory = catalogs.get(kind)
-    if directory is None:
-        raise reader.fail(
-            f"CatalogReference to {catalog_name}/{entry_name} but no {kind}Catalog location", ref
-        )
+    kinds = (kind,) if isinstance(kind, str) else kind
     assignments: dict[str, ParamValue] = {}
     block = ref.find("ParameterAssignments")
     if block is not None:
         for item in block.findall("ParameterAssignment"):
-            assignments[reader.attr(item, "parameterRef").lstrip("$")] = reader.attr(item, "value")
-    files = sorted(directory.glob("*.xosc")) if directory.is_dir() else []
-    for file in files:
-        root = read_xml(file, what="catalog")
-        catalog = root.find("Catalog")
-        if catalog is None or catalog.get("name") != catalog_name:
-            continue
-        for entry in catalog:
-            if entry.get("name") == entry_name:
-                return entry, assignments
-    raise reader.fail(f"catalog entry {catalog_name}/{entry_name} not found under {directory}", ref)
+            name = item.get("parameterRef") or ""
+            if not name:
+                raise reader.fail("ParameterAssignment without parameterRef", item)
+            assignments[name.lstrip("$")] = reader.attr(item, "value")
+    directories = [catalogs[k] for k in kinds if k in catalogs]
+    directories += [d for k, d in catalogs.items() if k not in kinds]
+    if not directories:
+        raise reader.fail(
+            f"CatalogReference to {catalog_name}/{entry_name} but no {kinds[0]}Catalog location", ref
+        )
+    for directory in dict.fromkeys(directories):
+        files = sorted(directory.glob("*.xosc")) if directory.is_dir() else []
+        for file in files:
+            if file not in reader._catalog_files:
+                root = read_xml(file, what="catalog")
+                reader._catalog_files[file] = root.find("Catalog")
+            catalog = reader._catalog_files[file]
+            if catalog is None or catalog.get("name") != catalog_name:
+                continue
+            for entry in catalog:
+                if entry.get("name") == entry_name:
+                    return entry, assignments
+    raise reader.fail(f"catalog entry {catalog_name}/{entry_name} not found under {directories[0]}", ref)
 
 
 def _entities(reader: _Reader, element: ET.Element, catalogs: dict[str, Path]) -> list[m.Entity]:
@@ -293,10 +350,11 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         raise reader.fail("a ScenarioObject needs a Vehicle, Pedestrian, MiscObject or CatalogReference", obj)
     pushed = False
     if body.tag == "CatalogReference":
-        entry, assignments = _catalog_entry(reader, body, catalogs, "Vehicle")
+        entry, assignments = _catalog_entry(reader, body, catalogs, ("Vehicle", "Pedestrian", "MiscObject"))
         if entry.tag not in ("Vehicle", "Pedestrian", "MiscObject"):
-            entry2, assignments = _catalog_entry(reader, body, catalogs, entry.tag)
-            entry = entry2
+            raise reader.fail(
+                f"catalog entry is a {entry.tag}, not a Vehicle, Pedestrian or MiscObject", body
+            )
         reader.push_declarations(entry, assignments)
         pushed = True
         body = entry
@@ -341,10 +399,7 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
     controller: dict[str, str] = {}
     oc = obj.find("ObjectController")
     if oc is not None:
-        ctrl = oc.find("Controller")
-        if ctrl is not None:
-            controller = _properties(reader, ctrl)
-            controller.setdefault("name", reader.attr(ctrl, "name", ""))
+        controller = _controller(reader, oc)
     return m.Entity(
         name=name,
         object_type=object_type,  # type: ignore[arg-type]
@@ -354,6 +409,34 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         properties=properties,
         controller=controller,
     )
+
+
+def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
+    """The properties of the Controller (inline or from a catalog) under `parent`; a controller CARLOS does
+    not model is warned about (the entity then follows the scenario's actions, as under the default one)."""
+    ctrl = parent.find("Controller")
+    pushed = False
+    if ctrl is None:
+        ref = parent.find("CatalogReference")
+        if ref is None:
+            return {}
+        ctrl, assignments = _catalog_entry(reader, ref, reader.catalogs, "Controller")
+        reader.push_declarations(ctrl, assignments)
+        pushed = True
+    try:
+        properties = _properties(reader, ctrl)
+        properties.setdefault("name", reader.attr(ctrl, "name", ""))
+    finally:
+        if pushed:
+            reader.pop()
+    kind = properties.get("esminiController", properties.get("name", ""))
+    if properties.get("carlos.driver") != "sumo" and kind not in ("", "DefaultController"):
+        reader.warn(
+            f"controller {kind!r} is not modelled: the entity follows the scenario's actions "
+            "(default controller)",
+            parent,
+        )
+    return properties
 
 
 def _properties(reader: _Reader, element: ET.Element) -> dict[str, str]:
@@ -377,9 +460,11 @@ def _init(reader: _Reader, init: ET.Element) -> list[m.InitAction]:
             out.append(
                 m.InitAction(entity=entity, action=reader.within(private, entity, _private, reader, action))
             )
-    for other in actions:
-        if other.tag == "GlobalAction":
-            raise reader.fail("GlobalAction in Init is not supported yet", other)
+    for other in actions.findall("GlobalAction"):
+        action = reader.within(other, None, _global, reader, other)
+        out.append(m.InitAction(entity="", action=action))
+    for other in actions.findall("UserDefinedAction"):
+        reader.warn("UserDefinedAction is ignored", other)
     return out
 
 
@@ -412,25 +497,33 @@ def _group(reader: _Reader, group: ET.Element) -> m.ManeuverGroup:
     if actors_el is not None:
         select = reader.boolean(actors_el, "selectTriggeringEntities", False)
         actors = tuple(reader.attr(r, "entityRef") for r in actors_el.findall("EntityRef"))
-    if group.find("CatalogReference") is not None:
-        raise reader.fail("Maneuver catalog references are not supported yet", group)
+    maneuvers = [reader.within(mv, mv.get("name"), _maneuver, reader, mv) for mv in group.findall("Maneuver")]
+    for ref in group.findall("CatalogReference"):
+        entry, assignments = _catalog_entry(reader, ref, reader.catalogs, "Maneuver")
+        if entry.tag != "Maneuver":
+            raise reader.fail(f"catalog entry is a {entry.tag}, not a Maneuver", ref)
+        reader.push_declarations(entry, assignments)
+        try:
+            maneuvers.append(reader.within(entry, entry.get("name"), _maneuver, reader, entry, False))
+        finally:
+            reader.pop()
     return m.ManeuverGroup(
         name=reader.attr(group, "name"),
         maximum_execution_count=reader.integer(group, "maximumExecutionCount", 1),
         actors=actors,
         select_triggering_entities=select,
-        maneuvers=tuple(
-            reader.within(mv, mv.get("name"), _maneuver, reader, mv) for mv in group.findall("Maneuver")
-        ),
+        maneuvers=tuple(maneuvers),
     )
 
 
-def _maneuver(reader: _Reader, maneuver: ET.Element) -> m.Maneuver:
-    reader.push_declarations(maneuver)
+def _maneuver(reader: _Reader, maneuver: ET.Element, declare: bool = True) -> m.Maneuver:
+    if declare:
+        reader.push_declarations(maneuver)
     try:
         events = tuple(reader.within(e, e.get("name"), _event, reader, e) for e in maneuver.findall("Event"))
     finally:
-        reader.pop()
+        if declare:
+            reader.pop()
     return m.Maneuver(name=reader.attr(maneuver, "name"), events=events)
 
 
@@ -443,12 +536,18 @@ def _event(reader: _Reader, event: ET.Element) -> m.Event:
     for action in event.findall("Action"):
         name = reader.attr(action, "name")
         private = action.find("PrivateAction")
-        if private is None:
-            inner = reader.only_child(action)
-            raise reader.fail(
-                f"action {name!r}: {inner.tag}/{reader.only_child(inner).tag} is not supported yet", action
+        if private is not None:
+            actions.append(
+                m.Action(name=name, private=reader.within(action, name, _private, reader, private))
             )
-        actions.append(m.Action(name=name, private=reader.within(action, name, _private, reader, private)))
+            continue
+        inner = reader.only_child(action)
+        if inner.tag == "GlobalAction":
+            g = reader.within(action, name, _global, reader, inner)
+            actions.append(m.Action(name=name, private=None, global_action=g))
+        else:
+            reader.within(action, name, reader.warn, f"{inner.tag} is ignored", inner)
+            actions.append(m.Action(name=name, private=None))
     return m.Event(
         name=reader.attr(event, "name"),
         priority=priority,  # type: ignore[arg-type]
@@ -461,22 +560,421 @@ def _event(reader: _Reader, event: ET.Element) -> m.Event:
 # --- actions ----------------------------------------------------------------------------------------------
 
 
+_NO_MOTION = {
+    "VisibilityAction": "changes what sensors see, not motion",
+    "AppearanceAction": "lights and animations change no motion here",
+    "LightStateAction": "lights change no motion here",
+    "AnimationAction": "animations change no motion here",
+    "TrailerAction": "trailers are not modelled (the towing entity moves as scripted)",
+}
+
+
 def _private(reader: _Reader, element: ET.Element) -> m.PrivateAction:
     inner = reader.only_child(element)
-    if inner.tag == "TeleportAction":
+    tag = inner.tag
+    if tag == "TeleportAction":
         return m.TeleportAction(position=_position(reader, reader.child(inner, "Position")))
-    if inner.tag == "LongitudinalAction":
+    if tag == "LongitudinalAction":
         action = reader.only_child(inner)
         if action.tag == "SpeedAction":
             return _speed_action(reader, action)
-        raise reader.fail(f"LongitudinalAction/{action.tag} is not supported yet", action)
-    if inner.tag == "LateralAction":
+        if action.tag == "LongitudinalDistanceAction":
+            return _longitudinal_distance(reader, action)
+        if action.tag == "SpeedProfileAction":
+            return _speed_profile(reader, action)
+        raise reader.fail(f"LongitudinalAction/{action.tag} is not supported", action)
+    if tag == "LateralAction":
         action = reader.only_child(inner)
         if action.tag == "LaneChangeAction":
             return _lane_change(reader, action)
-        raise reader.fail(f"LateralAction/{action.tag} is not supported yet", action)
+        if action.tag == "LaneOffsetAction":
+            return _lane_offset(reader, action)
+        if action.tag == "LateralDistanceAction":
+            return m.LateralDistanceAction(
+                entity=reader.attr(action, "entityRef"),
+                distance=reader.num(action, "distance", 0.0),
+                freespace=_freespace(reader, action),
+                continuous=reader.boolean(action, "continuous", False),
+                displacement=reader.attr(action, "displacement", "any"),
+                constraints=_constraints(reader, action.find("DynamicConstraints")),
+            )
+        raise reader.fail(f"LateralAction/{action.tag} is not supported", action)
+    if tag == "RoutingAction":
+        action = reader.only_child(inner)
+        if action.tag == "AssignRouteAction":
+            return m.AssignRouteAction(route=_route_or_ref(reader, action))
+        if action.tag == "FollowTrajectoryAction":
+            return _follow_trajectory(reader, action)
+        if action.tag == "AcquirePositionAction":
+            return m.AcquirePositionAction(position=_position(reader, reader.child(action, "Position")))
+        raise reader.fail(f"RoutingAction/{action.tag} is not supported", action)
+    if tag == "SynchronizeAction":
+        return _synchronize(reader, inner)
+    if tag in ("ControllerAction", "ActivateControllerAction"):
+        return _controller_action(reader, inner)
+    if tag in _NO_MOTION:
+        detail = reader.only_child(inner).tag if len(inner) and tag != "VisibilityAction" else ""
+        kind = f"{tag}/{detail}" if detail else tag
+        reader.warn(f"{kind} is recorded only: {_NO_MOTION[tag]}", inner)
+        return m.NoMotionAction(kind)
+    raise reader.fail(f"{tag} is not supported", inner)
+
+
+def _controller_action(reader: _Reader, inner: ET.Element) -> m.PrivateAction:
+    if inner.tag == "ActivateControllerAction":
+        return m.NoMotionAction("ActivateControllerAction")
+    for child in inner:
+        if child.tag == "AssignControllerAction":
+            properties = _controller(reader, child)
+            if properties.get("carlos.driver") == "sumo":
+                raise reader.fail(
+                    "the SUMO driver can only be given in the entity's ObjectController, not assigned later",
+                    child,
+                )
+        elif child.tag.startswith("Override"):
+            reader.warn(f"{child.tag} is ignored (no driver model to override)", child)
+    return m.NoMotionAction("ControllerAction")
+
+
+def _global(reader: _Reader, element: ET.Element) -> m.GlobalAction:
+    inner = reader.only_child(element)
+    tag = inner.tag
+    if tag in ("ParameterAction", "VariableAction"):
+        variable = tag == "VariableAction"
+        name = (inner.get("variableRef") if variable else inner.get("parameterRef")) or ""
+        if not name:
+            raise reader.fail("parameterRef/variableRef is required", inner)
+        body = reader.only_child(inner)
+        if body.tag == "SetAction":
+            return m.ParameterSetAction(
+                name=name.lstrip("$"), value=reader.attr(body, "value"), variable=variable
+            )
+        if body.tag == "ModifyAction":
+            rule = reader.only_child(reader.child(body, "Rule"))
+            kinds = {"AddValue": "add", "MultiplyByValue": "multiply"}
+            if rule.tag not in kinds:
+                raise reader.fail(f"unknown modify rule <{rule.tag}>", rule)
+            return m.ParameterModifyAction(
+                name=name.lstrip("$"),
+                rule=kinds[rule.tag],
+                value=reader.num(rule, "value"),
+                variable=variable,  # type: ignore[arg-type]
+            )
+        raise reader.fail(f"unknown {tag} <{body.tag}>", body)
+    if tag in ("ParameterSetAction", "VariableSetAction"):
+        variable = tag == "VariableSetAction"
+        name = (inner.get("variableRef") if variable else inner.get("parameterRef")) or ""
+        return m.ParameterSetAction(
+            name=name.lstrip("$"), value=reader.attr(inner, "value"), variable=variable
+        )
+    if tag in ("ParameterModifyAction", "VariableModifyAction"):
+        variable = tag == "VariableModifyAction"
+        name = (inner.get("variableRef") if variable else inner.get("parameterRef")) or ""
+        rule = reader.only_child(reader.child(inner, "Rule"))
+        kinds = {"AddValue": "add", "MultiplyByValue": "multiply"}
+        if rule.tag not in kinds:
+            raise reader.fail(f"unknown modify rule <{rule.tag}>", rule)
+        return m.ParameterModifyAction(
+            name=name.lstrip("$"),
+            rule=kinds[rule.tag],
+            value=reader.num(rule, "value"),
+            variable=variable,  # type: ignore[arg-type]
+        )
+    if tag == "EntityAction":
+        entity = reader.attr(inner, "entityRef")
+        body = reader.only_child(inner)
+        if body.tag == "AddEntityAction":
+            return m.AddEntityAction(
+                entity=entity, position=_position(reader, reader.child(body, "Position"))
+            )
+        if body.tag == "DeleteEntityAction":
+            return m.DeleteEntityAction(entity=entity)
+        raise reader.fail(f"unknown EntityAction <{body.tag}>", body)
+    if tag == "EnvironmentAction":
+        reader.warn(
+            "EnvironmentAction is recorded only (weather and time of day change no motion here)", inner
+        )
+        return m.NoMotionGlobalAction(tag)
     detail = reader.only_child(inner).tag if len(inner) else ""
-    raise reader.fail(f"{inner.tag}{'/' + detail if detail else ''} is not supported yet", inner)
+    kind = f"{tag}/{detail}" if detail else tag
+    if tag in ("InfrastructureAction", "TrafficAction", "SetMonitorAction"):
+        reader.warn(f"{kind} is not modelled: ignored (it moves no scripted entity)", inner)
+        return m.NoMotionGlobalAction(kind)
+    raise reader.fail(f"GlobalAction/{kind} is not supported", inner)
+
+
+def _constraints(reader: _Reader, element: ET.Element | None) -> m.DynamicConstraints | None:
+    if element is None:
+        return None
+    return m.DynamicConstraints(
+        max_acceleration=reader.opt_num(element, "maxAcceleration"),
+        max_deceleration=reader.opt_num(element, "maxDeceleration"),
+        max_speed=reader.opt_num(element, "maxSpeed"),
+    )
+
+
+def _longitudinal_distance(reader: _Reader, action: ET.Element) -> m.LongitudinalDistanceAction:
+    distance = reader.opt_num(action, "distance")
+    time_gap = reader.opt_num(action, "timeGap")
+    if (distance is None) == (time_gap is None):
+        raise reader.fail("give exactly one of distance and timeGap", action)
+    return m.LongitudinalDistanceAction(
+        entity=reader.attr(action, "entityRef"),
+        distance=distance,
+        time_gap=time_gap,
+        freespace=_freespace(reader, action),
+        continuous=reader.boolean(action, "continuous", False),
+        displacement=reader.attr(action, "displacement", "trailingReferencedEntity"),
+        constraints=_constraints(reader, action.find("DynamicConstraints")),
+    )
+
+
+def _speed_profile(reader: _Reader, action: ET.Element) -> m.SpeedProfileAction:
+    entries = tuple(
+        m.SpeedProfileEntry(speed=reader.num(e, "speed"), time=reader.opt_num(e, "time"))
+        for e in action.findall("SpeedProfileEntry")
+    )
+    if not entries:
+        raise reader.fail("SpeedProfileAction needs at least one SpeedProfileEntry", action)
+    dc = action.find("DynamicConstraints")
+    return m.SpeedProfileAction(
+        entity=action.get("entityRef") and reader.attr(action, "entityRef"),
+        following_mode=reader.attr(action, "followingMode", "follow"),
+        entries=entries,
+        constraints=_constraints(reader, dc),
+        max_jerk=None if dc is None else reader.opt_num(dc, "maxAccelerationRate"),
+    )
+
+
+def _lane_offset(reader: _Reader, action: ET.Element) -> m.LaneOffsetAction:
+    dyn = reader.child(action, "LaneOffsetActionDynamics")
+    shape = reader.attr(dyn, "dynamicsShape", "linear")
+    if shape not in ("linear", "cubic", "sinusoidal", "step"):
+        raise reader.fail(f"dynamicsShape={shape!r}: expected linear, cubic, sinusoidal or step", dyn)
+    target = reader.only_child(reader.child(action, "LaneOffsetTarget"))
+    entity = None
+    if target.tag == "RelativeTargetLaneOffset":
+        entity = reader.attr(target, "entityRef")
+    elif target.tag != "AbsoluteTargetLaneOffset":
+        raise reader.fail(f"unknown lane offset target <{target.tag}>", target)
+    return m.LaneOffsetAction(
+        shape=shape,  # type: ignore[arg-type]
+        max_lateral_acc=reader.opt_num(dyn, "maxLateralAcc"),
+        offset=reader.num(target, "value"),
+        entity=entity,
+        continuous=reader.boolean(action, "continuous", False),
+    )
+
+
+def _synchronize(reader: _Reader, action: ET.Element) -> m.SynchronizeAction:
+    final_speed = None
+    final_relative = None
+    fs = action.find("FinalSpeed")
+    if fs is not None:
+        body = reader.only_child(fs)
+        if body.tag == "AbsoluteSpeed":
+            final_speed = reader.num(body, "value")
+        elif body.tag == "RelativeSpeedToMaster":
+            final_relative = (
+                reader.attr(action, "masterEntityRef"),
+                reader.num(body, "value"),
+                reader.attr(body, "speedTargetValueType", "delta"),
+            )
+        else:
+            raise reader.fail(f"unknown final speed <{body.tag}>", body)
+    return m.SynchronizeAction(
+        master=reader.attr(action, "masterEntityRef"),
+        master_position=_position(reader, reader.child(action, "TargetPositionMaster")),
+        position=_position(reader, reader.child(action, "TargetPosition")),
+        master_tolerance=reader.num(action, "targetToleranceMaster", 0.0),
+        tolerance=reader.num(action, "targetTolerance", 0.0),
+        final_speed=final_speed,
+        final_relative=final_relative,
+    )
+
+
+def _route_or_ref(reader: _Reader, parent: ET.Element) -> m.Route:
+    route = parent.find("Route")
+    if route is not None:
+        return _route(reader, route)
+    ref = parent.find("CatalogReference")
+    if ref is None:
+        raise reader.fail("a Route or a CatalogReference to one is required", parent)
+    entry, assignments = _catalog_entry(reader, ref, reader.catalogs, "Route")
+    if entry.tag != "Route":
+        raise reader.fail(f"catalog entry is a {entry.tag}, not a Route", ref)
+    reader.push_declarations(entry, assignments)
+    try:
+        return _route(reader, entry, False)
+    finally:
+        reader.pop()
+
+
+def _route(reader: _Reader, route: ET.Element, declare: bool = True) -> m.Route:
+    if declare:
+        reader.push_declarations(route)
+    try:
+        waypoints = tuple(
+            m.Waypoint(
+                position=_position(reader, reader.child(w, "Position")),
+                strategy=reader.attr(w, "routeStrategy", "shortest"),
+            )
+            for w in route.findall("Waypoint")
+        )
+        if len(waypoints) < 2:
+            raise reader.fail("a Route needs at least two waypoints", route)
+        return m.Route(
+            name=reader.attr(route, "name", ""),
+            closed=reader.boolean(route, "closed", False),
+            waypoints=waypoints,
+        )
+    finally:
+        if declare:
+            reader.pop()
+
+
+def _trajectory_or_ref(reader: _Reader, parent: ET.Element) -> m.Trajectory:
+    holder = parent.find("TrajectoryRef")
+    if holder is None:
+        holder = parent  # OpenSCENARIO 1.0: Trajectory or CatalogReference directly
+    trajectory = holder.find("Trajectory")
+    if trajectory is not None:
+        return _trajectory(reader, trajectory)
+    ref = holder.find("CatalogReference")
+    if ref is None:
+        raise reader.fail("a Trajectory or a CatalogReference to one is required", parent)
+    entry, assignments = _catalog_entry(reader, ref, reader.catalogs, "Trajectory")
+    if entry.tag != "Trajectory":
+        raise reader.fail(f"catalog entry is a {entry.tag}, not a Trajectory", ref)
+    reader.push_declarations(entry, assignments)
+    try:
+        return _trajectory(reader, entry, False)
+    finally:
+        reader.pop()
+
+
+def _trajectory(reader: _Reader, element: ET.Element, declare: bool = True) -> m.Trajectory:
+    if declare:
+        reader.push_declarations(element)
+    try:
+        shape_el = reader.only_child(reader.child(element, "Shape"))
+        shape: m.TrajectoryShape
+        if shape_el.tag == "Polyline":
+            vertices = tuple(
+                m.Vertex(
+                    position=_position(reader, reader.child(v, "Position")), time=reader.opt_num(v, "time")
+                )
+                for v in shape_el.findall("Vertex")
+            )
+            if not vertices:
+                raise reader.fail("a Polyline needs at least one Vertex", shape_el)
+            shape = m.Polyline(vertices)
+        elif shape_el.tag == "Clothoid":
+            position = shape_el.find("Position")
+            k = reader.num(shape_el, "curvature")
+            k_dot = reader.opt_num(shape_el, "curvaturePrime")
+            if k_dot is None:
+                k_dot = reader.num(shape_el, "curvatureDot", 0.0)
+            length = reader.num(shape_el, "length")
+            shape = m.Clothoid(
+                (
+                    m.ClothoidSegment(
+                        curvature_start=k,
+                        curvature_end=k + k_dot * length,
+                        length=length,
+                        start=_position(reader, position) if position is not None else None,
+                        time_start=reader.opt_num(shape_el, "startTime"),
+                        time_end=reader.opt_num(shape_el, "stopTime"),
+                    ),
+                )
+            )
+        elif shape_el.tag == "ClothoidSpline":
+            segments = []
+            for seg in shape_el.findall("ClothoidSplineSegment"):
+                start = seg.find("PositionStart")
+                segments.append(
+                    m.ClothoidSegment(
+                        curvature_start=reader.num(seg, "curvatureStart"),
+                        curvature_end=reader.num(seg, "curvatureEnd"),
+                        length=reader.num(seg, "length"),
+                        start=_position(reader, start) if start is not None else None,
+                        h_offset=reader.num(seg, "hOffset", 0.0),
+                    )
+                )
+            if not segments:
+                raise reader.fail("a ClothoidSpline needs at least one segment", shape_el)
+            shape = m.Clothoid(tuple(segments))
+        elif shape_el.tag == "Nurbs":
+            points = tuple(
+                m.ControlPoint(
+                    position=_position(reader, reader.child(c, "Position")),
+                    time=reader.opt_num(c, "time"),
+                    weight=reader.num(c, "weight", 1.0),
+                )
+                for c in shape_el.findall("ControlPoint")
+            )
+            knots = tuple(reader.num(k, "value") for k in shape_el.findall("Knot"))
+            order = reader.integer(shape_el, "order")
+            if order < 1 or len(points) < order or len(knots) != len(points) + order:
+                raise reader.fail(
+                    f"Nurbs of order {order} with {len(points)} control points needs "
+                    f"{len(points) + order} knots, has {len(knots)}",
+                    shape_el,
+                )
+            shape = m.Nurbs(order=order, control_points=points, knots=knots)
+        else:
+            raise reader.fail(f"trajectory shape <{shape_el.tag}> is not supported", shape_el)
+        return m.Trajectory(
+            name=reader.attr(element, "name", ""),
+            closed=reader.boolean(element, "closed", False),
+            shape=shape,
+        )
+    finally:
+        if declare:
+            reader.pop()
+
+
+def _follow_trajectory(reader: _Reader, action: ET.Element) -> m.FollowTrajectoryAction:
+    trajectory = _trajectory_or_ref(reader, action)
+    timing: str = "none"
+    scale, offset = 1.0, 0.0
+    ref = action.find("TimeReference")
+    if ref is not None:
+        body = reader.only_child(ref)
+        if body.tag == "Timing":
+            timing = reader.attr(body, "domainAbsoluteRelative")
+            if timing not in ("absolute", "relative"):
+                raise reader.fail(f"domainAbsoluteRelative={timing!r}: expected absolute or relative", body)
+            scale = reader.num(body, "scale", 1.0)
+            offset = reader.num(body, "offset", 0.0)
+    mode_el = action.find("TrajectoryFollowingMode")
+    mode = reader.attr(mode_el, "followingMode", "position") if mode_el is not None else "position"
+    if mode == "follow":
+        reader.warn("followingMode=follow is run as position (no steering model): motion is exact", mode_el)
+    return m.FollowTrajectoryAction(
+        trajectory=trajectory,
+        timing=timing,  # type: ignore[arg-type]
+        scale=scale,
+        offset=offset,
+        initial_distance_offset=reader.num(action, "initialDistanceOffset", 0.0),
+        following_mode=mode,
+    )
+
+
+def _variables(reader: _Reader, root: ET.Element) -> None:
+    block = root.find("VariableDeclarations")
+    if block is None:
+        return
+    for item in block.findall("VariableDeclaration"):
+        name = item.get("name")
+        if not name:
+            raise reader.fail("VariableDeclaration without a name", item)
+        try:
+            reader.variables[name] = convert(
+                reader.attr(item, "value"), item.get("variableType", "string"), name=name
+            )
+        except ParameterError as exc:
+            raise reader.fail(str(exc), item) from None
 
 
 def _dynamics(reader: _Reader, element: ET.Element) -> m.TransitionDynamics:
@@ -603,7 +1101,40 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
             dz=reader.num(p, "dz", 0.0),
             orientation=_orientation(reader, p),
         )
-    raise reader.fail(f"position type <{p.tag}> is not supported yet", p)
+    if p.tag == "RoutePosition":
+        ref = reader.child(p, "RouteRef")
+        route = _route_or_ref(reader, ref)
+        in_route = reader.only_child(reader.child(p, "InRoutePosition"))
+        if in_route.tag == "FromCurrentEntity":
+            return m.RoutePosition(
+                route=route, entity=reader.attr(in_route, "entityRef"), orientation=_orientation(reader, p)
+            )
+        if in_route.tag == "FromRoadCoordinates":
+            return m.RoutePosition(
+                route=route,
+                entity=None,
+                path_s=reader.num(in_route, "pathS"),
+                t=reader.num(in_route, "t", 0.0),
+                orientation=_orientation(reader, p),
+            )
+        if in_route.tag == "FromLaneCoordinates":
+            return m.RoutePosition(
+                route=route,
+                entity=None,
+                path_s=reader.num(in_route, "pathS"),
+                lane_id=reader.integer(in_route, "laneId"),
+                lane_offset=reader.num(in_route, "laneOffset", 0.0),
+                orientation=_orientation(reader, p),
+            )
+        raise reader.fail(f"unknown InRoutePosition <{in_route.tag}>", in_route)
+    if p.tag == "TrajectoryPosition":
+        return m.TrajectoryPosition(
+            trajectory=_trajectory_or_ref(reader, reader.child(p, "TrajectoryRef")),
+            s=reader.num(p, "s"),
+            t=reader.num(p, "t", 0.0),
+            orientation=_orientation(reader, p),
+        )
+    raise reader.fail(f"position type <{p.tag}> is not supported", p)
 
 
 # --- triggers and conditions -----------------------------------------------------------------------------
@@ -674,7 +1205,21 @@ def _value_condition(reader: _Reader, c: ET.Element) -> m.ValueCondition:
             value=reader.attr(c, "value"),
             rule=_rule(reader, c),
         )
-    raise reader.fail(f"ByValueCondition/{c.tag} is not supported yet", c)
+    if c.tag == "VariableCondition":
+        return m.VariableCondition(
+            name=reader.attr(c, "variableRef").lstrip("$"),
+            value=reader.attr(c, "value"),
+            rule=_rule(reader, c),
+        )
+    if c.tag in (
+        "TrafficSignalCondition",
+        "TrafficSignalControllerCondition",
+        "UserDefinedValueCondition",
+        "TimeOfDayCondition",
+    ):
+        reader.warn(f"{c.tag} is not evaluated: it never holds", c)
+        return m.UnsupportedCondition(c.tag)
+    raise reader.fail(f"ByValueCondition/{c.tag} is not supported", c)
 
 
 def _freespace(reader: _Reader, c: ET.Element) -> bool:
@@ -737,4 +1282,22 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
     if tag == "CollisionCondition":
         ref = c.find("EntityRef")
         return m.CollisionCondition(entity=reader.attr(ref, "entityRef") if ref is not None else None)
-    raise reader.fail(f"EntityCondition/{tag} is not supported yet", c)
+    if tag == "OffroadCondition":
+        return m.OffroadCondition(duration=reader.num(c, "duration"))
+    if tag == "RelativeClearanceCondition":
+        lanes = None
+        rng = c.find("RelativeLaneRange")
+        if rng is not None:
+            lanes = (reader.integer(rng, "from", -99), reader.integer(rng, "to", 99))
+        return m.RelativeClearanceCondition(
+            entities=tuple(reader.attr(r, "entityRef") for r in c.findall("EntityRef")),
+            free_space=reader.boolean(c, "freeSpace", True),
+            distance_forward=reader.num(c, "distanceForward", 0.0),
+            distance_backward=reader.num(c, "distanceBackward", 0.0),
+            opposite_lanes=reader.boolean(c, "oppositeLanes", False),
+            lanes=lanes,
+        )
+    if tag in ("AngleCondition", "RelativeAngleCondition"):
+        reader.warn(f"{tag} is not evaluated: it never holds", c)
+        return m.UnsupportedCondition(tag)
+    raise reader.fail(f"EntityCondition/{tag} is not supported", c)

@@ -1022,6 +1022,37 @@ class OpenDrive:
                     return conn.connecting_road, to, 1 if conn.contact_point == "start" else -1
         return None
 
+    def connections(
+        self, road_id: str, lane_id: int | None, s_direction: int
+    ) -> list[tuple[str, int, int]]:
+        """Every way on from the end of ``road_id`` in ``s_direction`` (all junction connections, not only the
+        first): ``(road_id, lane_id, new_s_direction)``. ``lane_id`` None: from any lane of the road."""
+        road = self.road(road_id)
+        link = road.successor if s_direction > 0 else road.predecessor
+        if link is None:
+            return []
+        out: list[tuple[str, int, int]] = []
+        if link.element_type == "road":
+            if link.element_id not in self.roads:
+                return []
+            sec = road.lane_sections[-1] if s_direction > 0 else road.lane_sections[0]
+            lanes = [ln for ln in sec.left + sec.right if lane_id is None or ln.id == lane_id]
+            for lane in lanes:
+                target = lane.successor if s_direction > 0 else lane.predecessor
+                if target is not None:
+                    out.append((link.element_id, target, 1 if link.contact_point == "start" else -1))
+            return out
+        junction = self.junctions.get(link.element_id)
+        if junction is None:
+            return []
+        for conn in junction.connections:
+            if conn.incoming_road != road.id or conn.connecting_road not in self.roads:
+                continue
+            for frm, to in conn.lane_links:
+                if lane_id is None or frm == lane_id:
+                    out.append((conn.connecting_road, to, 1 if conn.contact_point == "start" else -1))
+        return out
+
     # ---------------------------------------------------------------- sampling
     def sample_lane_boundaries(self, road_id: str, step: float = 1.0) -> list[LaneBoundary]:
         """Inner/outer border points of every lane (not lane 0) of each lane section, every ``step`` m or less.

@@ -1,0 +1,234 @@
+"""Geometry of trajectories (polyline, clothoid / clothoid spline, NURBS) as dense sampled paths, and route
+planning over the OpenDRIVE road graph."""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from simcore.scenario import model as m
+
+if TYPE_CHECKING:
+    from simcore.world.opendrive import OpenDrive
+
+#: world (x, y, z, heading) of a position, resolved when the action starts
+Resolver = Callable[[m.Position], tuple[float, float, float, float]]
+
+CLOTHOID_STEP = 0.05  # m between clothoid samples
+NURBS_SAMPLES_PER_POINT = 60
+
+
+@dataclass
+class SampledPath:
+    """A path sampled densely: cumulative length `s`, points, headings, optional times."""
+
+    s: list[float]
+    x: list[float]
+    y: list[float]
+    z: list[float]
+    h: list[float]
+    t: list[float] | None  # trajectory time at each sample (None: no timing)
+
+    @property
+    def length(self) -> float:
+        return self.s[-1]
+
+    def at(self, s: float) -> tuple[float, float, float, float]:
+        """(x, y, z, heading) at arc length s (clamped)."""
+        if s <= 0.0:
+            return self.x[0], self.y[0], self.z[0], self.h[0]
+        if s >= self.s[-1]:
+            return self.x[-1], self.y[-1], self.z[-1], self.h[-1]
+        i = bisect.bisect_right(self.s, s) - 1
+        seg = self.s[i + 1] - self.s[i]
+        f = (s - self.s[i]) / seg if seg > 0 else 0.0
+        dh = (self.h[i + 1] - self.h[i] + math.pi) % (2 * math.pi) - math.pi
+        return (
+            self.x[i] + f * (self.x[i + 1] - self.x[i]),
+            self.y[i] + f * (self.y[i + 1] - self.y[i]),
+            self.z[i] + f * (self.z[i + 1] - self.z[i]),
+            self.h[i] + f * dh,
+        )
+
+    def s_at_time(self, time: float) -> float:
+        """Arc length where the path is at trajectory time `time` (times must be non-decreasing)."""
+        assert self.t is not None
+        ts = self.t
+        if time <= ts[0]:
+            return 0.0
+        if time >= ts[-1]:
+            return self.s[-1]
+        i = bisect.bisect_right(ts, time) - 1
+        span = ts[i + 1] - ts[i]
+        f = (time - ts[i]) / span if span > 0 else 1.0
+        return self.s[i] + f * (self.s[i + 1] - self.s[i])
+
+
+def _from_points(points: list[tuple[float, float, float]], times: list[float] | None) -> SampledPath:
+    xs, ys, zs, ss, hs = [], [], [], [], []
+    kept_times: list[float] = []
+    total = 0.0
+    for i, (x, y, z) in enumerate(points):
+        if xs:
+            d = math.hypot(x - xs[-1], y - ys[-1])
+            if d < 1e-9:
+                continue
+            total += d
+        xs.append(x)
+        ys.append(y)
+        zs.append(z)
+        ss.append(total)
+        if times is not None:
+            kept_times.append(times[i])
+    if len(xs) == 1:
+        hs = [0.0]
+    else:
+        seg = [math.atan2(ys[i + 1] - ys[i], xs[i + 1] - xs[i]) for i in range(len(xs) - 1)]
+        hs = [*seg, seg[-1]]
+    return SampledPath(ss, xs, ys, zs, hs, kept_times if times is not None else None)
+
+
+def polyline(shape: m.Polyline, resolve: Resolver) -> tuple[SampledPath, float | None]:
+    """The polyline as a path (segment headings) and the heading of its first vertex."""
+    points, times = [], []
+    first_heading = None
+    for vertex in shape.vertices:
+        x, y, z, h = resolve(vertex.position)
+        if first_heading is None:
+            first_heading = h
+        points.append((x, y, z))
+        times.append(vertex.time if vertex.time is not None else math.nan)
+    timed = all(not math.isnan(t) for t in times)
+    path = _from_points(points, times if timed else None)
+    if len(path.x) == 1:
+        path.h = [first_heading or 0.0]
+    return path, first_heading
+
+
+def clothoid(
+    shape: m.Clothoid, resolve: Resolver, start_pose: tuple[float, float, float, float]
+) -> SampledPath:
+    xs, ys, zs, hs, ss = [], [], [], [], []
+    times: list[float] = []
+    timed = all(seg.time_start is not None and seg.time_end is not None for seg in shape.segments)
+    x, y, z, h = start_pose
+    total = 0.0
+    for seg in shape.segments:
+        if seg.start is not None:
+            x, y, z, h = resolve(seg.start)
+        h += seg.h_offset
+        n = max(math.ceil(seg.length / CLOTHOID_STEP), 1)
+        step = seg.length / n
+        k_dot = (seg.curvature_end - seg.curvature_start) / seg.length if seg.length > 0 else 0.0
+        h0 = h
+        for i in range(n + 1):
+            u = i * step
+            if i > 0:
+                # exact heading; position by the midpoint rule over one small step
+                um = u - step / 2
+                hm = h0 + seg.curvature_start * um + 0.5 * k_dot * um * um
+                x += step * math.cos(hm)
+                y += step * math.sin(hm)
+                total += step
+            elif xs:
+                continue  # the segment starts where the previous one ended
+            xs.append(x)
+            ys.append(y)
+            zs.append(z)
+            hs.append(h0 + seg.curvature_start * u + 0.5 * k_dot * u * u)
+            ss.append(total)
+            if timed:
+                assert seg.time_start is not None and seg.time_end is not None
+                f = u / seg.length if seg.length > 0 else 1.0
+                times.append(seg.time_start + f * (seg.time_end - seg.time_start))
+        h = h0 + seg.curvature_start * seg.length + 0.5 * k_dot * seg.length**2
+    return SampledPath(ss, xs, ys, zs, hs, times if timed else None)
+
+
+def _basis(knots: tuple[float, ...], order: int, i: int, u: float) -> float:
+    """Cox–de Boor B-spline basis N_{i,order}(u) (order = degree + 1)."""
+    if order == 1:
+        last = u >= knots[-1] and knots[i] < knots[i + 1] and knots[i + 1] == knots[-1]
+        return 1.0 if (knots[i] <= u < knots[i + 1]) or last else 0.0
+    out = 0.0
+    d1 = knots[i + order - 1] - knots[i]
+    if d1 > 0:
+        out += (u - knots[i]) / d1 * _basis(knots, order - 1, i, u)
+    d2 = knots[i + order] - knots[i + 1]
+    if d2 > 0:
+        out += (knots[i + order] - u) / d2 * _basis(knots, order - 1, i + 1, u)
+    return out
+
+
+def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
+    pts = [resolve(c.position) for c in shape.control_points]
+    weights = [c.weight for c in shape.control_points]
+    times = [c.time for c in shape.control_points]
+    timed = all(t is not None for t in times)
+    knots = shape.knots
+    u0, u1 = knots[shape.order - 1], knots[len(pts)]
+    n = max(NURBS_SAMPLES_PER_POINT * len(pts), 2)
+    out_pts: list[tuple[float, float, float]] = []
+    out_t: list[float] = []
+    for j in range(n + 1):
+        u = u0 + (u1 - u0) * j / n
+        num_x = num_y = num_z = num_t = den = 0.0
+        for i, (px, py, pz, _) in enumerate(pts):
+            b = _basis(knots, shape.order, i, u) * weights[i]
+            if b == 0.0:
+                continue
+            num_x += b * px
+            num_y += b * py
+            num_z += b * pz
+            if timed:
+                num_t += b * float(times[i] or 0.0)
+            den += b
+        if den <= 0:
+            continue
+        out_pts.append((num_x / den, num_y / den, num_z / den))
+        out_t.append(num_t / den)
+    return _from_points(out_pts, out_t if timed else None)
+
+
+def sample(
+    trajectory: m.Trajectory, resolve: Resolver, start_pose: tuple[float, float, float, float]
+) -> SampledPath:
+    shape = trajectory.shape
+    if isinstance(shape, m.Polyline):
+        return polyline(shape, resolve)[0]
+    if isinstance(shape, m.Clothoid):
+        return clothoid(shape, resolve, start_pose)
+    return nurbs(shape, resolve)
+
+
+# --- routes ----------------------------------------------------------------------------------------------
+
+State = tuple[str, int]  # (road id, travel direction along s)
+
+
+def plan(road: OpenDrive, start: State, goal_road: str, max_roads: int = 200) -> list[State] | None:
+    """The shortest sequence of roads (by count, then length) from `start` to `goal_road`, inclusive."""
+    if start[0] == goal_road:
+        return [start]
+    previous: dict[State, State | None] = {start: None}
+    queue: deque[State] = deque([start])
+    while queue and len(previous) < max_roads * 4:
+        current = queue.popleft()
+        for nxt_road, _lane, nxt_dir in road.connections(current[0], None, current[1]):
+            state = (nxt_road, nxt_dir)
+            if state in previous:
+                continue
+            previous[state] = current
+            if nxt_road == goal_road:
+                out = [state]
+                back = previous[state]
+                while back is not None:
+                    out.append(back)
+                    back = previous[back]
+                return out[::-1]
+            queue.append(state)
+    return None
