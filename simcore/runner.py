@@ -112,10 +112,15 @@ def simulate(
     progress: Progress | None = None,
     deadline: float | None = None,
     bus: Bus | None = None,
+    base_dir: Path | None = None,
 ) -> tuple[dict[str, float], str, float, list[str]]:
     """Run the simulation of one index, recording into `out_dir/recording.mcap`. The world is published on
     `bus` (default: a new in-process bus); whatever subscribed to it before (a live view, another process'
     transport) receives every message.
+
+    Sensors (`spec.sensors`) run every frame they are due; the system under test (`spec.systemUnderTest`,
+    its `pythonPath` relative to `base_dir`) runs on the same bus; `spec.evaluation.detection` adds the
+    `detection.*` metrics.
 
     Returns (metrics, end reason, simulated seconds, storyboard log)."""
     from simcore.recorder import McapRecorder
@@ -156,6 +161,7 @@ def simulate(
     metrics = MetricsAccumulator()
     bus = bus if bus is not None else InProcessBus()
     recorder = None
+    perception = None
     try:
         engine = ScenarioEngine(
             scenario, road=road, sumo=sumo, step_seconds=spec.simulation.step_seconds, ego=spec.simulation.ego
@@ -169,15 +175,25 @@ def simulate(
             )
             bus.subscribe("*", _record_into(recorder))
         world = WorldPublisher(bus)
+        if spec.sensors or spec.system_under_test is not None or spec.evaluation.detection is not None:
+            from simcore.sensors.loop import PerceptionLoop
+
+            perception = PerceptionLoop(
+                spec, bus, road=road, road_file=scenario.road_file, seed=point.seed, base_dir=base_dir
+            )
         frame = engine.frame()
         metrics.update(frame)
         world.publish(frame)
+        if perception is not None:
+            perception.step(frame)
         max_steps = round(spec.simulation.max_seconds / spec.simulation.step_seconds)
         reported = 0.0
         while not engine.ended and engine.step_index < max_steps:
             frame = engine.step()
             metrics.update(frame)
             world.publish(frame)
+            if perception is not None:
+                perception.step(frame)
             if progress is not None and frame.time - reported >= 1.0:
                 reported = frame.time
                 progress(point.index, frame.time)
@@ -186,11 +202,15 @@ def simulate(
                     f"run exceeded execution.timeoutSeconds={spec.execution.timeout_seconds} "
                     f"at simulated t={frame.time:.1f} s"
                 )
+        if perception is not None:
+            perception.close()
         world.publish_status(frame, "ended")
         if recorder is not None:
             recorder.close()
             recorder = None
     finally:
+        if perception is not None:
+            perception.close()
         bus.close()
         if recorder is not None:
             recorder.abort()
@@ -199,6 +219,8 @@ def simulate(
     result = metrics.result()
     end_reason = engine.ended_by or "maxSeconds"
     result["stopTriggered"] = 1.0 if end_reason == "stopTrigger" else 0.0
+    if perception is not None:
+        result.update(perception.metrics())
     return result, end_reason, engine.time, engine.log
 
 
@@ -270,7 +292,14 @@ def run_index(
         try:
             scenario_file = resolve_scenario_file(point, base_dir, scratch, store_factory)
             metrics, end_reason, sim_seconds, storyboard_log = simulate(
-                run, point, scenario_file, scratch, progress=progress, deadline=deadline, bus=bus
+                run,
+                point,
+                scenario_file,
+                scratch,
+                progress=progress,
+                deadline=deadline,
+                bus=bus,
+                base_dir=base_dir,
             )
             log_lines.extend(storyboard_log)
             results = evaluate(criteria, metrics)
