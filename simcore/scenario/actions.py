@@ -63,6 +63,7 @@ class FollowTrajectoryRuntime(Runtime):
         if timed:
             self.s = self.path.s_at_time(self._trajectory_time(self.engine.time))
         a.mover = self
+        a.placed = True
         self._pose(self.s)
 
     def _trajectory_time(self, now: float) -> float:

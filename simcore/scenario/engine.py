@@ -314,6 +314,14 @@ class ScenarioEngine:
             if not body.placed and body.name in self.added_later:
                 body.gone = True
                 body.placed = True
+            if not body.placed and body.entity.controller:
+                # an entity a controller of another tool populates (esmini's SUMO traffic): not in the world
+                self.warnings.append(
+                    f"{self.source}: entity {body.name!r} has no initial position and is driven by controller "
+                    f"{body.entity.controller.get('name', '')!r}: it stays out of the world"
+                )
+                body.gone = True
+                body.placed = True
             if not body.placed:
                 raise BadInput(
                     f"entity {body.name!r} has no initial position (add a TeleportAction to Init)",
@@ -694,6 +702,14 @@ class ScenarioEngine:
         if isinstance(c, m.TimeHeadwayCondition):
             other = self.body(c.entity)
             gap = self.relative_distance(body, other, "longitudinal", c.freespace, signed=True)
+            if gap <= 0 or body.speed <= 1e-6:
+                return compare(c.rule, math.inf, c.value)
+            return compare(c.rule, gap / body.speed, c.value)
+        if isinstance(c, m.TimeToCollisionCondition) and c.position is not None:
+            x, y, _, _ = self.resolve_position(c.position)
+            gap = math.cos(body.heading) * (x - body.x) + math.sin(body.heading) * (y - body.y)
+            if c.freespace:
+                gap -= body.entity.box.center_x + body.entity.box.length / 2
             if gap <= 0 or body.speed <= 1e-6:
                 return compare(c.rule, math.inf, c.value)
             return compare(c.rule, gap / body.speed, c.value)

@@ -516,6 +516,7 @@ class TimeToCollisionCondition:
     freespace: bool
     value: float
     rule: Rule
+    position: Position | None = None  # to a position instead of an entity
 
 
 @dataclass(frozen=True)

@@ -146,6 +146,8 @@ def evaluate_expression(text: str, values: Mapping[str, ParamValue]) -> ParamVal
                 return value
             if node.id in ("true", "false"):
                 return node.id == "true"
+            if node.id in ("pi", "PI"):  # esmini's constant; not in the standard's grammar
+                return math.pi
             raise ParameterError(f"expression ${{{text}}}: unknown name {node.id!r}")
         if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
             return _BINARY[type(node.op)](walk(node.left), walk(node.right))

@@ -110,11 +110,18 @@ class _Reader:
                 name = item.get("name")
                 if not name:
                     raise self.fail("ParameterDeclaration without a name", item)
-                declarations.append(
-                    Declaration(
-                        name=name, type=item.get("parameterType", "string"), value=item.get("value", "")
-                    )
-                )
+                kind = item.get("parameterType", "string")
+                value = item.get("value", "")
+                if kind in ("double", "integer", "int", "unsignedInt", "unsignedShort") and value[:1] != "$":
+                    try:
+                        float(value)
+                    except ValueError:
+                        self.warn(
+                            f"parameter {name!r} is declared {kind} but its value {value!r} is not a number: kept as a string",
+                            item,
+                        )
+                        kind = "string"
+                declarations.append(Declaration(name=name, type=kind, value=value))
         try:
             self.scopes.append(declare(declarations, self.values, overrides))
         except ParameterError as exc:
@@ -133,6 +140,16 @@ class _Reader:
         try:
             return resolve(raw, self.values)
         except ParameterError as exc:
+            if name == "name" and raw.startswith("${"):
+                # a name built by string concatenation (esmini's extension): parameters substituted, joined
+                parts = [p.strip() for p in raw[2:-1].split("+")]
+                out = []
+                for part in parts:
+                    try:
+                        out.append(resolve(part, self.values))
+                    except ParameterError:
+                        out.append(part)
+                return " ".join(out)
             raise self.fail(f"{name}={raw!r}: {exc}", element) from None
 
     def num(self, element: ET.Element, name: str, default: float | None = None) -> float:
@@ -270,7 +287,8 @@ def _check_references(scenario: m.Scenario, names: set[str]) -> None:
             )
 
     for item in scenario.init:
-        check(item.entity, "Storyboard/Init")
+        if item.entity:
+            check(item.entity, "Storyboard/Init")
     for story in scenario.stories:
         for act in story.acts:
             for group in act.groups:
@@ -324,7 +342,8 @@ def _catalog_entry(
                 root = read_xml(file, what="catalog")
                 reader._catalog_files[file] = root.find("Catalog")
             catalog = reader._catalog_files[file]
-            if catalog is None or catalog.get("name") != catalog_name:
+            # by the catalog's name, or by its file name (esmini accepts both)
+            if catalog is None or catalog_name not in (catalog.get("name"), file.stem):
                 continue
             for entry in catalog:
                 if entry.get("name") == entry_name:
@@ -986,7 +1005,8 @@ def _dynamics(reader: _Reader, element: ET.Element) -> m.TransitionDynamics:
         raise reader.fail(f"dynamicsDimension={dimension!r}: expected time, distance or rate", element)
     value = reader.num(element, "value")
     if value < 0:
-        raise reader.fail(f"value={value} must not be negative", element)
+        reader.warn(f"value={value} is negative: its magnitude is used", element)
+        value = -value
     return m.TransitionDynamics(shape=shape, dimension=dimension, value=value)  # type: ignore[arg-type]
 
 
@@ -1048,6 +1068,13 @@ def _orientation(reader: _Reader, element: ET.Element) -> m.Orientation | None:
     )
 
 
+def _road_id(raw: str) -> str:
+    """A road id from a double parameter ("1.0") names road "1"."""
+    if raw.endswith(".0") and raw[:-2].lstrip("-").isdigit():
+        return raw[:-2]
+    return raw
+
+
 def _position(reader: _Reader, element: ET.Element) -> m.Position:
     p = reader.only_child(element)
     if p.tag == "WorldPosition":
@@ -1061,7 +1088,7 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
         )
     if p.tag == "LanePosition":
         return m.LanePosition(
-            road_id=reader.attr(p, "roadId"),
+            road_id=_road_id(reader.attr(p, "roadId")),
             lane_id=reader.integer(p, "laneId"),
             s=reader.num(p, "s"),
             offset=reader.num(p, "offset", 0.0),
@@ -1069,7 +1096,7 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
         )
     if p.tag == "RoadPosition":
         return m.RoadPosition(
-            road_id=reader.attr(p, "roadId"),
+            road_id=_road_id(reader.attr(p, "roadId")),
             s=reader.num(p, "s"),
             t=reader.num(p, "t"),
             orientation=_orientation(reader, p),
@@ -1265,8 +1292,14 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
         entity = c.get("entityRef")
         if tag == "TimeToCollisionCondition":
             target_el = reader.only_child(reader.child(c, "TimeToCollisionConditionTarget"))
-            if target_el.tag != "EntityRef":
-                raise reader.fail("TimeToCollisionCondition to a position is not supported yet", target_el)
+            if target_el.tag == "Position":
+                return m.TimeToCollisionCondition(
+                    entity="",
+                    freespace=_freespace(reader, c),
+                    value=reader.num(c, "value"),
+                    rule=_rule(reader, c),
+                    position=_position(reader, target_el),
+                )
             entity = reader.attr(target_el, "entityRef")
         cls: Any = m.TimeHeadwayCondition if tag == "TimeHeadwayCondition" else m.TimeToCollisionCondition
         return cls(
