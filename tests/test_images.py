@@ -1,0 +1,367 @@
+"""The container images (images/*/Dockerfile), checked without a Docker engine (there is none on CI): every
+image the chart names has a Dockerfile; every entrypoint resolves to a real `carlos` command, pod role or
+module; bases are pinned; the user is non-root (the chart's uid); nothing is downloaded but from package
+registries; the build context (.dockerignore) holds what the Dockerfiles copy and nothing private; the slim
+images really leave out only what their role never imports.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shlex
+import subprocess
+import sys
+import textwrap
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+IMAGES = ROOT / "images"
+CHART = ROOT / "helm" / "carlos"
+RUN_AS_USER = 10001
+
+
+@dataclass
+class Stage:
+    base: str
+    name: str | None
+    instructions: list[tuple[str, str]] = field(default_factory=list)
+
+
+@dataclass
+class Dockerfile:
+    path: Path
+    args: dict[str, str]
+    stages: list[Stage]
+
+    @property
+    def final(self) -> Stage:
+        return self.stages[-1]
+
+    def last(self, instruction: str) -> str | None:
+        values = [v for i, v in self.final.instructions if i == instruction]
+        return values[-1] if values else None
+
+
+def parse_dockerfile(path: Path) -> Dockerfile:
+    """Instructions per stage (continuation lines joined, comments dropped); ARGs before the first FROM."""
+    lines: list[str] = []
+    pending = ""
+    for raw in path.read_text().splitlines():
+        stripped = raw.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        if stripped.endswith("\\"):
+            pending += stripped[:-1] + " "
+            continue
+        lines.append(pending + stripped)
+        pending = ""
+    assert not pending, f"{path}: dangling line continuation"
+    args: dict[str, str] = {}
+    stages: list[Stage] = []
+    for line in lines:
+        instruction, _, value = line.partition(" ")
+        instruction = instruction.upper()
+        if instruction == "FROM":
+            parts = value.split()
+            name = parts[2] if len(parts) >= 3 and parts[1].upper() == "AS" else None
+            stages.append(Stage(base=parts[0], name=name))
+        elif not stages:
+            assert instruction == "ARG", f"{path}: {instruction} before FROM"
+            key, _, default = value.partition("=")
+            args[key] = default
+        else:
+            stages[-1].instructions.append((instruction, value.strip()))
+    assert stages, f"{path}: no FROM"
+    return Dockerfile(path=path, args=args, stages=stages)
+
+
+def exec_form(path: Path, value: str | None) -> list[str]:
+    assert value is not None
+    try:
+        parsed = json.loads(value)
+    except json.JSONDecodeError:
+        pytest.fail(f"{path}: ENTRYPOINT/CMD must be in exec (JSON) form, got {value!r}")
+    assert isinstance(parsed, list) and all(isinstance(p, str) for p in parsed)
+    return parsed
+
+
+def dockerfiles() -> dict[str, Path]:
+    return {p.parent.name: p for p in sorted(IMAGES.glob("*/Dockerfile"))}
+
+
+def chart_images() -> dict[str, dict[str, str]]:
+    values = yaml.safe_load((CHART / "values.yaml").read_text())
+    images: dict[str, dict[str, str]] = values["images"]
+    return images
+
+
+def test_every_image_the_chart_references_has_a_dockerfile() -> None:
+    names = set(chart_images())
+    assert names == set(dockerfiles()), (
+        "helm values `images` and images/*/Dockerfile must list the same images"
+    )
+    for name, image in chart_images().items():
+        assert image["repository"].rsplit("/", 1)[-1] == f"carlos-{name}", "make images tags carlos-<name>"
+    makefile = (ROOT / "Makefile").read_text()
+    listed = re.search(r"^IMAGES := (.+)$", makefile, re.M)
+    assert listed and set(listed.group(1).split()) == names
+
+
+@pytest.mark.parametrize("name", sorted(dockerfiles()))
+def test_dockerfile_is_pinned_non_root_and_downloads_nothing(name: str) -> None:
+    dockerfile = parse_dockerfile(dockerfiles()[name])
+    stage_names = {s.name for s in dockerfile.stages if s.name}
+    for stage in dockerfile.stages:
+        base = stage.base
+        match = re.fullmatch(r"\$\{(\w+)\}", base)
+        if match:
+            base = dockerfile.args[match.group(1)]
+        if base in stage_names:
+            continue
+        # pinned: a digest, a numbered tag, or (the official ROS images have no numbered tags) the ROS
+        # distribution and the Ubuntu release both named
+        pinned = (
+            "@sha256:" in base
+            or re.search(r":[^:]*\d", base)
+            or re.fullmatch(r"ros:jazzy-[a-z-]+-noble", base)
+        )
+        assert pinned, f"{name}: unpinned base image {base!r}"
+        assert not base.endswith(":latest")
+        for instruction, value in stage.instructions:
+            assert instruction != "ADD", f"{name}: ADD (use COPY; no remote URLs)"
+            if instruction == "RUN":
+                assert not re.search(r"\b(curl|wget|git clone)\b|https?://", value), (
+                    f"{name}: a build-time download outside the package registries: {value!r}"
+                )
+    assert len(dockerfile.stages) >= 2, f"{name}: multi-stage (the build stage's pip and sources stay behind)"
+    user = dockerfile.last("USER")
+    assert user is not None, f"{name}: the final stage sets no USER"
+    assert user.split(":")[0] == str(RUN_AS_USER), f"{name}: USER must be the chart's runAsUser {RUN_AS_USER}"
+    runs = " ".join(v for i, v in dockerfile.final.instructions if i == "RUN")
+    assert f"--uid {RUN_AS_USER}" in runs, f"{name}: create the user with uid {RUN_AS_USER}"
+    assert "build-essential" not in runs and " gcc" not in runs, f"{name}: no compilers in the final image"
+
+
+def _cli_command() -> object:
+    import typer.main
+
+    from simcore.cli import app
+
+    return typer.main.get_command(app)
+
+
+@pytest.mark.parametrize("name", sorted(dockerfiles()))
+def test_entrypoint_resolves_to_a_real_command(name: str) -> None:
+    path = dockerfiles()[name]
+    dockerfile = parse_dockerfile(path)
+    argv = exec_form(path, dockerfile.last("ENTRYPOINT")) + exec_form(path, dockerfile.last("CMD"))
+    if argv[0] == "carlos":
+        group = _cli_command()
+        sub = group.commands.get(argv[1])  # type: ignore[attr-defined]
+        assert sub is not None, f"{name}: `carlos {argv[1]}` does not exist"
+        ctx = sub.make_context(argv[1], argv[2:])  # parses the options exactly as the container will
+        if argv[1] == "pod":
+            from simcore.pod import ROLES
+
+            assert ctx.params["role"] == name, f"{name}: runs role {ctx.params['role']!r}"
+            assert name in ROLES
+        else:
+            assert argv[1] == name == "operator"
+            assert ctx.params["all_namespaces"] is True
+        if name == "bridge":  # `carlos` on PATH is the wrapper that sources ROS 2
+            wrapper = IMAGES / "bridge" / "carlos-ros.sh"
+            copies = [v for i, v in dockerfile.final.instructions if i == "COPY"]
+            assert any("images/bridge/carlos-ros.sh /usr/local/bin/carlos" in c for c in copies)
+            text = wrapper.read_text()
+            assert 'source "/opt/ros/' in text and 'exec /opt/venv/bin/carlos "$@"' in text
+            subprocess.run(["bash", "-n", str(wrapper)], check=True)
+    else:
+        assert argv[:2] == ["python", "-m"], f"{name}: entrypoint is `carlos …` or `python -m MODULE`"
+        module = argv[2]
+        module_path = ROOT.joinpath(*module.split("."))
+        if name == "detector" and not module_path.exists():
+            pytest.skip("examples/detector is not there yet (the detector issue)")
+        assert (module_path / "__main__.py").is_file() or module_path.with_suffix(".py").is_file(), (
+            f"{name}: module {module} has no __main__.py"
+        )
+        workdir = dockerfile.last("WORKDIR")
+        assert workdir == "/opt/carlos", "python -m examples.… runs from /opt/carlos"
+
+
+def _ignore_regex(pattern: str) -> re.Pattern[str]:
+    """A .dockerignore pattern (Go filepath.Match plus `**`) as a regular expression."""
+    out = ""
+    i = 0
+    while i < len(pattern):
+        if pattern.startswith("**/", i):
+            out += "(?:.*/)?"
+            i += 3
+        elif pattern.startswith("**", i):
+            out += ".*"
+            i += 2
+        elif pattern[i] == "*":
+            out += "[^/]*"
+            i += 1
+        elif pattern[i] == "?":
+            out += "[^/]"
+            i += 1
+        else:
+            out += re.escape(pattern[i])
+            i += 1
+    return re.compile(out)
+
+
+def dockerignored(path: str, patterns: list[str]) -> bool:
+    """Docker's .dockerignore rule: the last pattern matching the path or one of its parents wins."""
+    parts = path.strip("/").split("/")
+    candidates = ["/".join(parts[: i + 1]) for i in range(len(parts))]
+    excluded = False
+    for raw in patterns:
+        negate = raw.startswith("!")
+        pattern = raw[1:] if negate else raw
+        pattern = pattern.strip("/")
+        regex = _ignore_regex(pattern)
+        if any(regex.fullmatch(c) for c in candidates):
+            excluded = not negate
+    return excluded
+
+
+def test_dockerignore_keeps_what_the_images_copy_and_nothing_private() -> None:
+    patterns = [
+        line.strip()
+        for line in (ROOT / ".dockerignore").read_text().splitlines()
+        if line.strip() and not line.strip().startswith("#")
+    ]
+    for name, path in dockerfiles().items():
+        for stage in parse_dockerfile(path).stages:
+            for instruction, value in stage.instructions:
+                if instruction != "COPY" or "--from=" in value:
+                    continue
+                sources = [s for s in shlex.split(value) if not s.startswith("--")][:-1]
+                for source in sources:
+                    if name == "detector" and source.startswith("examples/detector"):
+                        continue  # built only once the detector exists
+                    assert (ROOT / source).exists(), f"{name}: COPY {source}: no such file"
+                    assert not dockerignored(source, patterns), (
+                        f"{name}: COPY {source} is excluded by .dockerignore"
+                    )
+    for private in (
+        ".venv/bin/python",
+        ".git/config",
+        "results/x/summary.json",
+        ".tools/bin/helm",
+        "simcore/__pycache__/spec.cpython-311.pyc",
+        "tests/test_helm.py",
+        ".env",
+    ):
+        assert dockerignored(private, patterns), f"{private} would be sent to the Docker build"
+    assert not dockerignored("simcore/spec.py", patterns)
+    assert not dockerignored("examples/scenarios/cut-in.xosc", patterns)
+
+
+def test_simcore_image_installs_the_system_libraries_sumo_and_open3d_load() -> None:
+    """The same Debian libraries as `make install` (the Makefile's SYSTEM_PACKAGES)."""
+    listed = re.search(r"^SYSTEM_PACKAGES := (.+)$", (ROOT / "Makefile").read_text(), re.M)
+    assert listed
+    for name in ("simcore", "detector"):
+        runs = " ".join(v for i, v in parse_dockerfile(dockerfiles()[name]).final.instructions if i == "RUN")
+        missing = [p for p in listed.group(1).split() if p not in runs.split()]
+        assert not missing, f"images/{name}/Dockerfile does not install {missing}"
+
+
+def test_simcore_image_ships_the_examples_the_notes_use() -> None:
+    copies = [v for i, v in parse_dockerfile(dockerfiles()["simcore"]).final.instructions if i == "COPY"]
+    assert "examples/ /opt/carlos/examples/" in copies
+
+
+def test_requirements_script_leaves_out_only_what_is_asked() -> None:
+    script = IMAGES / "requirements.py"
+    result = subprocess.run(
+        [sys.executable, str(script), "--without", "eclipse-sumo", "libsumo", "sumolib", "open3d-cpu"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    lines = result.stdout.splitlines()
+    import tomllib
+
+    dependencies = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
+    assert len(lines) == len(dependencies) - 4
+    assert not any(re.match(r"(eclipse-sumo|libsumo|sumolib|open3d-cpu)\b", line) for line in lines)
+    assert any(line.startswith("kopf") for line in lines) and any(
+        line.startswith("pydantic") for line in lines
+    )
+    bad = subprocess.run([sys.executable, str(script), "--without", "open3d"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "not a dependency" in bad.stderr and "open3d" in bad.stderr
+
+
+def _without_flags(name: str) -> set[str]:
+    runs = " ".join(v for i, v in parse_dockerfile(dockerfiles()[name]).stages[0].instructions if i == "RUN")
+    match = re.search(r"requirements\.py((?: --without(?: [\w.-]+)+)?)", runs)
+    assert match, f"{name}: the build stage does not install from images/requirements.py"
+    return set(match.group(1).replace("--without", "").split())
+
+
+BLOCK_MODULES = {
+    "eclipse-sumo": ["sumo", "traci"],
+    "libsumo": ["libsumo"],
+    "sumolib": ["sumolib"],
+    "open3d-cpu": ["open3d"],
+}
+
+
+def _imports_without(blocked: list[str], statements: str) -> subprocess.CompletedProcess[str]:
+    code = textwrap.dedent(
+        f"""
+        import importlib.abc, sys
+        BLOCKED = {blocked!r}
+        class Block(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path=None, target=None):
+                if name.split(".")[0] in BLOCKED:
+                    raise ImportError(f"{{name}} is not in this image")
+                return None
+        sys.meta_path.insert(0, Block())
+        """
+    ) + textwrap.dedent(statements)
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+
+
+def test_operator_image_needs_no_sumo_and_no_open3d() -> None:
+    left_out = _without_flags("operator")
+    assert left_out == {"eclipse-sumo", "libsumo", "sumolib", "open3d-cpu"}
+    blocked = [m for d in left_out for m in BLOCK_MODULES[d]]
+    result = _imports_without(
+        blocked,
+        """
+        import pkgutil, importlib
+        import carlos_operator
+        for module in pkgutil.iter_modules(carlos_operator.__path__):
+            importlib.import_module("carlos_operator." + module.name)
+        import typer.main
+        from simcore.cli import app
+        command = typer.main.get_command(app)
+        command.commands["operator"].make_context("operator", ["--all-namespaces"])
+        command.commands["crds"].callback()
+        print("ok")
+        """,
+    )
+    assert result.returncode == 0 and result.stdout.rstrip().endswith("ok"), result.stderr[-3000:]
+
+
+def test_recorder_and_bridge_images_need_no_open3d() -> None:
+    for name in ("recorder", "bridge"):
+        assert _without_flags(name) == {"open3d-cpu"}, name
+    result = _imports_without(
+        BLOCK_MODULES["open3d-cpu"],
+        """
+        import simcore.pod, simcore.recorder, simcore.runner, simcore.store, simcore.transport.loopback
+        import simcore.transport.messages
+        print("ok")
+        """,
+    )
+    assert result.returncode == 0 and result.stdout.rstrip().endswith("ok"), result.stderr[-3000:]
