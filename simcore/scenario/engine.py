@@ -258,6 +258,7 @@ class ScenarioEngine:
                     field="RoadNetwork/LogicFile",
                 )
         self.conditions: dict[int, ConditionState] = {}
+        self.owner: Body | None = None  # the actor whose action runs now ("$owner")
         self.parameter_values: dict[str, Any] = dict(scenario.parameters)
         self.variables: dict[str, Any] = dict(scenario.variables)
         self.added_later = _added_later(scenario)
@@ -323,13 +324,17 @@ class ScenarioEngine:
                 body.gone = True
                 body.placed = True
             if not body.placed:
-                raise BadInput(
-                    f"entity {body.name!r} has no initial position (add a TeleportAction to Init)",
-                    file=self.source,
-                    field="Storyboard/Init",
+                # placed later by a TeleportAction (until then not in the world)
+                self.warnings.append(
+                    f"{self.source}: Storyboard/Init: entity {body.name!r} has no initial position: "
+                    "it is out of the world until an action places it"
                 )
+                body.gone = True
+                body.placed = True
         if self.sumo is not None:
             for body in self.bodies.values():
+                if body.gone:
+                    continue
                 e = body.entity
                 self.sumo.add_vehicle(
                     body.name,
@@ -353,6 +358,8 @@ class ScenarioEngine:
     # --- positions ------------------------------------------------------------------------------------
 
     def body(self, name: str) -> Body:
+        if name == "$owner" and self.owner is not None:  # esmini's name for the actor of the action
+            return self.owner
         try:
             return self.bodies[name]
         except KeyError:
@@ -488,6 +495,7 @@ class ScenarioEngine:
         self._states.clear()
         body.x, body.y, body.z, body.heading = x, y, z, heading
         body.placed = True
+        body.gone = False
         body.mover = None
         body.road_id = None
         if self.road is not None:
@@ -500,7 +508,7 @@ class ScenarioEngine:
                 if isinstance(position, m.LanePosition):
                     body.road_id, body.lane_id, body.s = position.road_id, position.lane_id, position.s
                     body.offset = position.offset
-        if self.sumo is not None and self.step_index > 0:
+        if self.sumo is not None and self.step_index > 0 and self.sumo.has(body.name):
             self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
 
     def track_road(self, body: Body, lock_lane: bool = False) -> None:
@@ -702,8 +710,9 @@ class ScenarioEngine:
         if isinstance(c, m.TimeHeadwayCondition):
             other = self.body(c.entity)
             gap = self.relative_distance(body, other, "longitudinal", c.freespace, signed=True)
-            if gap <= 0 or body.speed <= 1e-6:
-                return compare(c.rule, math.inf, c.value)
+            if body.speed <= 1e-6:
+                return compare(c.rule, math.inf if gap > 0 else -math.inf, c.value)
+            # signed: an entity behind has a negative headway (as esmini measures it)
             return compare(c.rule, gap / body.speed, c.value)
         if isinstance(c, m.TimeToCollisionCondition) and c.position is not None:
             x, y, _, _ = self.resolve_position(c.position)
@@ -881,6 +890,7 @@ class ScenarioEngine:
         for actor_name in actors:
             body = self.body(actor_name)
             runtime = make_runtime(self, body, action.private)
+            self.owner = body
             key = (actor_name, runtime.domain)
             previous = self.running.get(key)
             if previous is not None and previous is not node:
@@ -992,6 +1002,7 @@ class ScenarioEngine:
         for node in {id(n): n for n in self.running.values()}.values():
             runtimes: list[Runtime] = node.runtime or []
             for runtime in runtimes:
+                self.owner = runtime.actor
                 runtime.step(dt)
             if runtimes and all(r.done for r in runtimes):
                 self._release(node)
@@ -1012,7 +1023,7 @@ class ScenarioEngine:
                 body.y += distance * math.sin(body.heading)
             if body.mover is None:
                 body.odometer += abs(distance)
-            if self.sumo is not None:
+            if self.sumo is not None and self.sumo.has(body.name):
                 self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
         if self.sumo is not None:
             self.sumo.step()

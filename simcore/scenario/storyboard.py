@@ -74,4 +74,18 @@ class Registry:
             self.by_key.setdefault((node.kind, node.name), []).append(node)
 
     def find(self, kind: str, name: str) -> list[Node]:
-        return self.by_key.get((kind, name), [])
+        found = self.by_key.get((kind, name), [])
+        if found or "::" not in name:
+            return found
+        # a qualified name (esmini's "Event::Action"): the last part, whose ancestors carry the others
+        parts = name.split("::")
+        out = []
+        for node in self.by_key.get((kind, parts[-1]), []):
+            ancestors = []
+            parent = node.parent
+            while parent is not None:
+                ancestors.append(parent.name)
+                parent = parent.parent
+            if all(p in ancestors for p in parts[:-1]):
+                out.append(node)
+        return out

@@ -1289,7 +1289,7 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
         )
     if tag in ("TimeHeadwayCondition", "TimeToCollisionCondition"):
         target = c
-        entity = c.get("entityRef")
+        entity = reader.attr(c, "entityRef") if c.get("entityRef") is not None else None
         if tag == "TimeToCollisionCondition":
             target_el = reader.only_child(reader.child(c, "TimeToCollisionConditionTarget"))
             if target_el.tag == "Position":

@@ -255,6 +255,9 @@ class SumoWorld:
         except Exception as exc:
             raise SimulationError(f"SUMO could not place {name!r} at ({x:.2f}, {y:.2f}): {exc}") from exc
 
+    def has(self, name: str) -> bool:
+        return name in self._front
+
     def set_desired_speed(self, name: str, speed: float) -> None:
         self._sumo.vehicle.setMaxSpeed(name, max(speed, 0.01))
 
