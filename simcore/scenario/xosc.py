@@ -140,7 +140,7 @@ class _Reader:
         try:
             return resolve(raw, self.values)
         except ParameterError as exc:
-            if name == "name" and raw.startswith("${"):
+            if name in ("name", "storyboardElementRef") and raw.startswith("${"):
                 # a name built by string concatenation (esmini's extension): parameters substituted, joined
                 parts = [p.strip() for p in raw[2:-1].split("+")]
                 out = []
