@@ -304,7 +304,7 @@ def build_job(
     job_labels = dict(labels)
     if spec.execution.queue_name:
         job_labels[QUEUE_LABEL] = spec.execution.queue_name
-    mounts = [
+    mounts: list[dict[str, Any]] = [
         {"name": "spec", "mountPath": SPEC_DIR, "readOnly": True},
         {"name": "scratch", "mountPath": SCRATCH_DIR},
         {"name": "tmp", "mountPath": "/tmp"},

@@ -1,0 +1,514 @@
+"""The reconciler: level-based, idempotent, one work queue for every SimulationRun the operator sees.
+
+kopf delivers the watch events (handlers.py); this module does the work on a pool of threads:
+
+- `ensure`: validate the spec (invalid → `Accepted=False` with the reason and a Warning event, nothing
+  created); write `run.yaml` to the object store; create the ConfigMap and the Indexed Job under
+  deterministic names with owner references. A 409 means the object exists: it is adopted when its owner is
+  this run, so a restarted operator never creates a second Job. A run whose status is terminal is left
+  alone (its Job may be gone after `ttlSecondsAfterFinished`).
+- `reconcile`: read the per-index summaries the Job reports finished and not yet counted (at most
+  `batch` per pass, in parallel), aggregate the status (status.py), patch it when it changed, post events
+  on transitions, and when every index is final write the run-level `summary.json` and `junit.xml`.
+
+Runs are re-queued when their Job changes (watch events) and every `resync` seconds while not terminal.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+from carlos_operator import metrics
+from carlos_operator.builders import (
+    OperatorSettings,
+    Output,
+    build_configmap,
+    build_job,
+    check_cluster_spec,
+    job_name,
+    manifest_yaml,
+    resolve_output,
+)
+from carlos_operator.kube import Conflict, Kube, NotFound, now_rfc3339
+from carlos_operator.status import TERMINAL_PHASES, Tally, aggregate, job_finished
+from simcore.errors import BadInput, CarlosError
+from simcore.evaluation.report import index_summary, junit_xml, run_summary
+from simcore.manifest import parse_manifest
+from simcore.plan import Plan
+from simcore.spec import SimulationRun
+
+log = logging.getLogger("carlos.operator")
+
+Key = tuple[str, str]  # (namespace, name)
+
+
+class Rejected(Exception):
+    """The run cannot be accepted: `reason` (CamelCase) and a message naming the field to fix."""
+
+    def __init__(self, reason: str, message: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+        self.message = message
+
+
+@dataclass
+class RunState:
+    """What the controller remembers of one run (rebuilt from the cluster and the store after a restart)."""
+
+    body: dict[str, Any]
+    uid: str
+    run: SimulationRun | None = None
+    output: Output | None = None
+    tally: Tally | None = None
+    store: Any = None
+    ensured: bool = False
+    last_status: dict[str, Any] = field(default_factory=dict)
+
+
+def _store_for(kube: Kube, namespace: str, output: Output) -> Any:
+    """The object store of a run's output, with the credentials of its Secret (or the operator's own)."""
+    from simcore.store import S3Store
+
+    bucket, _, prefix = output.url.removeprefix("s3://").partition("/")
+    if output.secret:
+        try:
+            creds = kube.read_secret_data(namespace, output.secret)
+        except NotFound:
+            raise Rejected(
+                "SecretNotFound",
+                f"spec.output.credentialsSecretRef: Secret {output.secret!r} not found in namespace {namespace!r}",
+            ) from None
+        return _s3_with_credentials(bucket, prefix, output, creds)
+    return S3Store(bucket, prefix, endpoint=output.endpoint, region=output.region)
+
+
+def _s3_with_credentials(bucket: str, prefix: str, output: Output, creds: dict[str, str]) -> Any:
+    """An S3Store with a run's own credentials. S3Store takes credentials from the process environment;
+    a run's Secret must not go there (other runs use other Secrets), so its client is built here."""
+    import boto3
+    from boto3.s3.transfer import TransferConfig
+    from botocore.config import Config
+
+    from simcore.store import S3Store
+
+    access_key = creds.get("AWS_ACCESS_KEY_ID")
+    secret_key = creds.get("AWS_SECRET_ACCESS_KEY")
+    if not access_key or not secret_key:
+        raise Rejected(
+            "SecretIncomplete",
+            f"spec.output.credentialsSecretRef: Secret {output.secret!r} needs the keys AWS_ACCESS_KEY_ID and "
+            "AWS_SECRET_ACCESS_KEY",
+        )
+    store = S3Store.__new__(S3Store)
+    store.bucket = bucket
+    store.prefix = prefix.strip("/")
+    store.endpoint = output.endpoint or creds.get("AWS_ENDPOINT_URL") or None
+    store.region = output.region or creds.get("AWS_REGION") or "us-east-1"
+    token = creds.get("AWS_SESSION_TOKEN") or None
+    store._secrets = tuple(s for s in (secret_key, token) if s)
+    session = boto3.session.Session(
+        aws_access_key_id=access_key,
+        aws_secret_access_key=secret_key,
+        aws_session_token=token,
+        region_name=store.region,
+    )
+    config = Config(
+        retries={"mode": "standard", "max_attempts": 5},
+        connect_timeout=10.0,
+        read_timeout=60.0,
+        s3={"addressing_style": "path"} if store.endpoint else {},
+        max_pool_connections=32,
+    )
+    store._client = session.client("s3", endpoint_url=store.endpoint, config=config)
+    store._transfer = TransferConfig(max_concurrency=4)
+    return store
+
+
+class Controller:
+    def __init__(
+        self,
+        kube: Kube,
+        settings: OperatorSettings,
+        *,
+        workers: int = 4,
+        resync: float = 10.0,
+        batch: int = 500,
+        store_factory: Callable[[Kube, str, Output], Any] = _store_for,
+    ) -> None:
+        self.kube = kube
+        self.settings = settings
+        self.resync = resync
+        self.batch = batch
+        self.store_factory = store_factory
+        self.runs: dict[Key, RunState] = {}
+        self.jobs: dict[Key, dict[str, Any]] = {}  # (namespace, job name) → Job
+        self._lock = threading.Lock()
+        self._queue: list[Key] = []
+        self._queued: set[Key] = set()
+        self._busy: set[Key] = set()
+        self._wake = threading.Condition(self._lock)
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._fetch = ThreadPoolExecutor(max_workers=16, thread_name_prefix="carlos-s3")
+        self.workers = workers
+
+    # --- events (from kopf's watch streams) ------------------------------------------------------------
+
+    def observe_run(self, event_type: str, body: dict[str, Any]) -> None:
+        meta = body.get("metadata", {})
+        key = (meta.get("namespace") or "", meta.get("name") or "")
+        with self._lock:
+            if event_type == "DELETED":
+                self.runs.pop(key, None)
+                return
+            state = self.runs.get(key)
+            if state is None or state.uid != meta.get("uid"):
+                state = self.runs[key] = RunState(body=body, uid=str(meta.get("uid")))
+            else:
+                state.body = body
+        self.enqueue(key)
+
+    def observe_job(self, event_type: str, body: dict[str, Any]) -> None:
+        meta = body.get("metadata", {})
+        namespace = meta.get("namespace") or ""
+        with self._lock:
+            if event_type == "DELETED":
+                self.jobs.pop((namespace, meta.get("name")), None)
+            else:
+                self.jobs[(namespace, meta.get("name"))] = body
+        for owner in meta.get("ownerReferences") or []:
+            if owner.get("kind") == "SimulationRun":
+                self.enqueue((namespace, owner.get("name")))
+
+    # --- queue ----------------------------------------------------------------------------------------
+
+    def enqueue(self, key: Key) -> None:
+        with self._wake:
+            if key not in self._queued:
+                self._queued.add(key)
+                self._queue.append(key)
+                self._wake.notify()
+
+    def start(self) -> None:
+        for i in range(self.workers):
+            thread = threading.Thread(target=self._work, name=f"carlos-reconcile-{i}", daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        thread = threading.Thread(target=self._resync_loop, name="carlos-resync", daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+    def stop(self) -> None:
+        self._stop.set()
+        with self._wake:
+            self._wake.notify_all()
+        for thread in self._threads:
+            thread.join(timeout=10)
+        self._fetch.shutdown(wait=False, cancel_futures=True)
+
+    def _resync_loop(self) -> None:
+        while not self._stop.wait(self.resync):
+            with self._lock:
+                keys = [k for k, s in self.runs.items() if s.last_status.get("phase") not in TERMINAL_PHASES]
+            for key in keys:
+                self.enqueue(key)
+
+    def _next(self) -> Key | None:
+        with self._wake:
+            while not self._stop.is_set():
+                for position, key in enumerate(self._queue):
+                    if key not in self._busy:
+                        del self._queue[position]
+                        self._queued.discard(key)
+                        self._busy.add(key)
+                        return key
+                self._wake.wait(1.0)
+        return None
+
+    def _work(self) -> None:
+        while True:
+            key = self._next()
+            if key is None:
+                return
+            started = time.perf_counter()
+            try:
+                self.reconcile(key)
+            except Exception as exc:
+                metrics.ERRORS.labels(kind=type(exc).__name__).inc()
+                log.exception("reconciling %s/%s failed; retrying", *key)
+                threading.Timer(5.0, self.enqueue, args=(key,)).start()
+            finally:
+                metrics.RECONCILE_SECONDS.observe(time.perf_counter() - started)
+                with self._wake:
+                    self._busy.discard(key)
+                    self._wake.notify()
+
+    # --- reconciliation -------------------------------------------------------------------------------
+
+    def reconcile(self, key: Key) -> None:
+        with self._lock:
+            state = self.runs.get(key)
+        if state is None:
+            return
+        body = state.body
+        status = dict(body.get("status") or {})
+        if not state.last_status and status:
+            state.last_status = status
+        if _condition(status, "Accepted") == "False":
+            return  # rejected: nothing to do until a new run (the spec is immutable)
+        if not state.ensured:
+            try:
+                self.ensure(state)
+            except Rejected as exc:
+                self._reject(state, exc.reason, exc.message)
+                return
+        if (
+            state.last_status.get("phase") in TERMINAL_PHASES
+            and state.tally is not None
+            and state.tally.finalized
+        ):
+            return
+        self._update_status(key, state)
+
+    def _reject(self, state: RunState, reason: str, message: str) -> None:
+        now = now_rfc3339()
+        status = {
+            "phase": "Failed",
+            "conditions": [
+                {
+                    "type": "Accepted",
+                    "status": "False",
+                    "reason": reason,
+                    "message": message,
+                    "lastTransitionTime": now,
+                }
+            ],
+        }
+        meta = state.body["metadata"]
+        self.kube.patch_run_status(meta.get("namespace"), meta["name"], status)
+        state.last_status = status
+        self.kube.event(state.body, "Warning", reason, message)
+        metrics.set_phase(state.uid, "Failed")
+        log.info("rejected %s/%s: %s", meta.get("namespace"), meta["name"], message)
+
+    def ensure(self, state: RunState) -> None:
+        body = state.body
+        meta = body["metadata"]
+        namespace = meta.get("namespace") or "default"
+        document = {k: body[k] for k in ("apiVersion", "kind", "metadata", "spec") if k in body}
+        try:
+            run = parse_manifest(json.loads(json.dumps(document)), source=f"{namespace}/{meta['name']}")
+            check_cluster_spec(run)
+            output = resolve_output(run, self.settings)
+        except CarlosError as exc:
+            raise Rejected("InvalidSpec", str(exc)) from None
+        state.run, state.output = run, output
+        total = len(Plan(run.spec))
+        if state.tally is None or state.tally.total != total:
+            state.tally = Tally(total)
+        state.store = self.store_factory(self.kube, namespace, output)
+        if state.last_status.get("phase") in TERMINAL_PHASES:
+            state.ensured = True  # finished earlier (its Job may be gone): adopt, create nothing
+            return
+        spec_bytes = manifest_yaml(run).encode()
+        run_yaml = f"{run.name}/run.yaml"
+        if state.store.exists(run_yaml):
+            if state.store.get_bytes(run_yaml) != spec_bytes:
+                raise Rejected(
+                    "ResultsExist",
+                    f"results for run {run.name!r} already exist at {state.store.url_for(run.name)} with a "
+                    "different spec: choose another metadata.name (or metadata.generateName)",
+                )
+        else:
+            state.store.put_bytes(run_yaml, spec_bytes)
+        cm = build_configmap(run, body, self.settings)
+        try:
+            self.kube.create_configmap(namespace, cm)
+        except Conflict:
+            self._check_owned(self.kube.read_configmap(namespace, cm["metadata"]["name"]), state, "ConfigMap")
+        job = build_job(run, body, self.settings, output)
+        created = False
+        try:
+            job = self.kube.create_job(namespace, job)
+            created = True
+        except Conflict:
+            job = self.kube.read_job(namespace, job["metadata"]["name"])
+            self._check_owned(job, state, "Job")
+        with self._lock:
+            self.jobs.setdefault((namespace, job["metadata"]["name"]), job)
+        state.ensured = True
+        if created:
+            metrics.JOBS_CREATED.inc()
+            self.kube.event(
+                body,
+                "Normal",
+                "JobCreated",
+                f"Job {job['metadata']['name']} with {total} runs (parallelism {job['spec']['parallelism']})",
+            )
+            log.info("created Job %s/%s (%d runs)", namespace, job["metadata"]["name"], total)
+        else:
+            log.info("adopted Job %s/%s", namespace, job["metadata"]["name"])
+
+    def _check_owned(self, obj: dict[str, Any], state: RunState, what: str) -> None:
+        owners = obj.get("metadata", {}).get("ownerReferences") or []
+        if not any(o.get("uid") == state.uid for o in owners):
+            raise Rejected(
+                "NameConflict",
+                f"{what} {obj['metadata']['name']!r} exists and belongs to something else: delete it or "
+                "rename the run",
+            )
+
+    def _job(self, state: RunState) -> dict[str, Any] | None:
+        assert state.run is not None
+        meta = state.body["metadata"]
+        namespace = meta.get("namespace") or "default"
+        name = job_name(state.run.name)
+        with self._lock:
+            job = self.jobs.get((namespace, name))
+        if job is None:
+            try:
+                job = self.kube.read_job(namespace, name)
+            except NotFound:
+                return None
+        owners = job.get("metadata", {}).get("ownerReferences") or []
+        return job if any(o.get("uid") == state.uid for o in owners) else None
+
+    def _update_status(self, key: Key, state: RunState) -> None:
+        assert state.run is not None and state.tally is not None and state.output is not None
+        run, tally = state.run, state.tally
+        job = self._job(state)
+        suspend = bool(run.spec.suspend or run.spec.execution.queue_name)
+        if (
+            job is not None
+            and not run.spec.execution.queue_name
+            and bool(job.get("spec", {}).get("suspend")) != suspend
+            and not job_finished(job)
+        ):
+            job = self.kube.patch_job(key[0], job["metadata"]["name"], {"spec": {"suspend": suspend}})
+        job_status = (job or {}).get("status") or {}
+        for intervals in (job_status.get("completedIndexes"), job_status.get("failedIndexes")):
+            todo = tally.unknown_among(intervals, self.batch)
+            for summary in self._fetch.map(lambda i: self._summary(state, i), todo):
+                tally.record(summary)
+        if job is None and state.last_status.get("phase") in TERMINAL_PHASES:
+            tally.finalized = True  # finished and its Job expired: keep the recorded status
+            return
+        previous = state.last_status
+        status = aggregate(
+            total=tally.total,
+            job=job,
+            tally=tally,
+            results_url=state.store.url_for(run.name),
+            now=now_rfc3339(),
+            previous=previous,
+        )
+        status["jobName"] = job_name(run.name)
+        if status["phase"] in TERMINAL_PHASES and not tally.finalized:
+            self._finalize(state, job)
+            tally.finalized = True
+        if _comparable(status) != _comparable(previous):
+            meta = state.body["metadata"]
+            self.kube.patch_run_status(meta.get("namespace"), meta["name"], status)
+            if status["phase"] != previous.get("phase"):
+                self._transition(state, previous.get("phase"), status)
+            state.last_status = status
+        metrics.set_phase(state.uid, status["phase"])
+
+    def _transition(self, state: RunState, before: str | None, status: dict[str, Any]) -> None:
+        phase = status["phase"]
+        counts = f"{status['passed']} passed, {status['testFailures']} failed, {status['errors']} errors"
+        if phase == "Running":
+            self.kube.event(state.body, "Normal", "Running", f"runs started ({status['progress']})")
+        elif phase == "Suspended":
+            self.kube.event(state.body, "Normal", "Suspended", "the Job is suspended")
+        elif phase == "Succeeded":
+            self.kube.event(state.body, "Normal", "Succeeded", f"{counts}; results: {status['resultsURL']}")
+        elif phase == "Failed":
+            self.kube.event(state.body, "Warning", "Failed", f"{counts}; results: {status['resultsURL']}")
+
+    def _summary(self, state: RunState, index: int) -> dict[str, Any]:
+        from simcore.store import NotFoundError
+
+        assert state.run is not None
+        try:
+            return dict(json.loads(state.store.get_bytes(f"{state.run.name}/{index}/summary.json")))
+        except NotFoundError:
+            return _missing_summary(
+                state.run, index, "the pod ended without writing its summary (see its logs)"
+            )
+
+    def _finalize(self, state: RunState, job: dict[str, Any] | None) -> None:
+        """Write the run-level summary.json and junit.xml (streamed: never all summaries in memory)."""
+        assert state.run is not None and state.tally is not None
+        run, tally = state.run, state.tally
+
+        def summaries() -> Iterator[dict[str, Any]]:
+            chunk = 256
+            for start in range(0, tally.total, chunk):
+                indexes = range(start, min(start + chunk, tally.total))
+                for index, summary in zip(
+                    indexes, self._fetch.map(lambda i: self._maybe(state, i), indexes), strict=True
+                ):
+                    if summary is not None:
+                        yield summary
+                    elif tally.known(index):
+                        yield _missing_summary(run, index, "the pod ended without writing its summary")
+
+        summary = run_summary(run.name, summaries(), total=tally.total)
+        summary["outputUrl"] = state.store.url_for(run.name)
+        state.store.put_bytes(f"{run.name}/junit.xml", junit_xml(run.name, summaries()).encode())
+        state.store.put_bytes(
+            f"{run.name}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
+        )
+
+    def _maybe(self, state: RunState, index: int) -> dict[str, Any] | None:
+        from simcore.store import NotFoundError
+
+        assert state.run is not None
+        try:
+            return dict(json.loads(state.store.get_bytes(f"{state.run.name}/{index}/summary.json")))
+        except NotFoundError:
+            return None
+
+
+def _missing_summary(run: SimulationRun, index: int, reason: str) -> dict[str, Any]:
+    point = Plan(run.spec)[index]
+    return index_summary(
+        index=index,
+        scenario=point.scenario.name,
+        parameters=point.parameters,
+        seed=point.seed,
+        optional=point.scenario.optional,
+        sim_seconds=0.0,
+        wall_seconds=0.0,
+        metrics={},
+        results=[],
+        error=reason,
+        end_reason="error",
+    )
+
+
+def _condition(status: dict[str, Any], kind: str) -> str | None:
+    for condition in status.get("conditions") or []:
+        if condition.get("type") == kind:
+            return str(condition.get("status"))
+    return None
+
+
+def _comparable(status: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in status.items() if k != "conditions"} | {
+        "conditions": [
+            (c.get("type"), c.get("status"), c.get("reason"), c.get("message"))
+            for c in status.get("conditions") or []
+        ]
+    }
+
+
+__all__ = ["BadInput", "Controller", "Rejected"]

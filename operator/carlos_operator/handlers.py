@@ -1,0 +1,85 @@
+"""kopf handlers (thin): watch events in, the controller (controller.py) does the work.
+
+Only event handlers: kopf keeps no handler state on the SimulationRuns and adds no finalizer, so deleting a
+run never waits for the operator (owner references delete its Job and ConfigMap), and a restarted operator
+simply sees every run again (kopf lists them first) and the controller adopts what exists.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from typing import Any
+
+import kopf
+
+from carlos_operator import metrics
+from carlos_operator.builders import RUN_LABEL, OperatorSettings
+from carlos_operator.controller import Controller
+from carlos_operator.kube import Kube
+from simcore.spec import API_GROUP, API_VERSION
+
+PLURAL = "simulationruns"
+_controller: Controller | None = None
+
+
+def _float_env(name: str, default: float) -> float:
+    try:
+        return float(os.environ.get(name) or default)
+    except ValueError:
+        return default
+
+
+def _plain(body: Any) -> dict[str, Any]:
+    return dict(json.loads(json.dumps(dict(body), default=str)))
+
+
+@kopf.on.startup()
+def startup(
+    settings: kopf.OperatorSettings, logger: logging.Logger | logging.LoggerAdapter[Any], **_: Any
+) -> None:
+    global _controller
+    # without these, kopf's watch streams can hang forever on a silently dropped connection
+    settings.watching.server_timeout = int(_float_env("CARLOS_WATCH_SERVER_TIMEOUT", 300))
+    settings.watching.client_timeout = _float_env("CARLOS_WATCH_CLIENT_TIMEOUT", 330)
+    settings.watching.connect_timeout = 30
+    settings.networking.request_timeout = 60
+    settings.peering.standalone = True
+    settings.posting.level = logging.WARNING
+    settings.execution.max_workers = 8
+    _controller = Controller(
+        Kube(),
+        OperatorSettings.from_env(),
+        resync=_float_env("CARLOS_RESYNC_SECONDS", 10.0),
+        workers=int(_float_env("CARLOS_RECONCILE_WORKERS", 4)),
+    )
+    _controller.start()
+    logger.info("carlos operator started")
+
+
+@kopf.on.cleanup()
+def cleanup(**_: Any) -> None:
+    global _controller
+    if _controller is not None:
+        _controller.stop()
+        _controller = None
+
+
+@kopf.on.event(API_GROUP, API_VERSION, PLURAL)
+def run_event(type: str | None, body: kopf.Body, **_: Any) -> None:
+    if _controller is not None:
+        _controller.observe_run(type or "ADDED", _plain(body))
+        if type == "DELETED":
+            metrics.forget(str(body.get("metadata", {}).get("uid")))
+
+
+@kopf.on.event("batch", "v1", "jobs", labels={RUN_LABEL: kopf.PRESENT})
+def job_event(type: str | None, body: kopf.Body, **_: Any) -> None:
+    if _controller is not None:
+        _controller.observe_job(type or "ADDED", _plain(body))
+
+
+@kopf.on.probe(id="simulationruns")
+def known_runs(**_: Any) -> int:
+    return len(_controller.runs) if _controller is not None else 0

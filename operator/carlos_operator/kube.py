@@ -1,0 +1,154 @@
+"""The few Kubernetes API calls the controller makes (the `kubernetes` client, plain dicts in and out).
+
+Configuration: in-cluster (service account) when available, else the kubeconfig (KUBECONFIG). Every call
+here needs a rule in `rbac.RBAC_RULES`.
+"""
+
+from __future__ import annotations
+
+import base64
+import contextlib
+import datetime as dt
+import json
+import threading
+import uuid
+from typing import Any
+
+from kubernetes import client, config
+from kubernetes.client.rest import ApiException
+
+from simcore.spec import API_GROUP, API_VERSION, KIND
+
+PLURAL = "simulationruns"
+
+
+class Conflict(Exception):
+    """The object exists already (HTTP 409)."""
+
+
+class NotFound(Exception):
+    """The object does not exist (HTTP 404)."""
+
+
+def _raise(exc: ApiException) -> None:
+    if exc.status == 409:
+        raise Conflict(str(exc.reason)) from None
+    if exc.status == 404:
+        raise NotFound(str(exc.reason)) from None
+    raise exc
+
+
+def _json(response: Any) -> dict[str, Any]:
+    data = response.data
+    return json.loads(data) if data else {}
+
+
+def _any(body: dict[str, Any]) -> Any:
+    """The client's typed signatures take model objects; it serialises plain dicts the same way."""
+    return body
+
+
+def now_rfc3339() -> str:
+    return dt.datetime.now(tz=dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+class Kube:
+    """Thread-safe thin wrapper (the underlying ApiClient pools its connections)."""
+
+    def __init__(self, api_client: client.ApiClient | None = None) -> None:
+        if api_client is None:
+            try:
+                config.load_incluster_config()
+            except config.ConfigException:
+                config.load_kube_config()
+            api_client = client.ApiClient()
+        self.api_client = api_client
+        self.core = client.CoreV1Api(api_client)
+        self.batch = client.BatchV1Api(api_client)
+        self.custom = client.CustomObjectsApi(api_client)
+        self._lock = threading.Lock()
+
+    # ConfigMaps and Jobs
+    def create_configmap(self, namespace: str, body: dict[str, Any]) -> dict[str, Any]:
+        try:
+            return _json(
+                self.core.create_namespaced_config_map(namespace, _any(body), _preload_content=False)
+            )
+        except ApiException as exc:
+            _raise(exc)
+            raise
+
+    def read_configmap(self, namespace: str, name: str) -> dict[str, Any]:
+        try:
+            return _json(self.core.read_namespaced_config_map(name, namespace, _preload_content=False))
+        except ApiException as exc:
+            _raise(exc)
+            raise
+
+    def create_job(self, namespace: str, body: dict[str, Any]) -> dict[str, Any]:
+        try:
+            return _json(self.batch.create_namespaced_job(namespace, _any(body), _preload_content=False))
+        except ApiException as exc:
+            _raise(exc)
+            raise
+
+    def read_job(self, namespace: str, name: str) -> dict[str, Any]:
+        try:
+            return _json(self.batch.read_namespaced_job(name, namespace, _preload_content=False))
+        except ApiException as exc:
+            _raise(exc)
+            raise
+
+    def patch_job(self, namespace: str, name: str, patch: dict[str, Any]) -> dict[str, Any]:
+        try:
+            return _json(self.batch.patch_namespaced_job(name, namespace, patch, _preload_content=False))
+        except ApiException as exc:
+            _raise(exc)
+            raise
+
+    # Secrets (the object-store credentials a run names)
+    def read_secret_data(self, namespace: str, name: str) -> dict[str, str]:
+        try:
+            secret = _json(self.core.read_namespaced_secret(name, namespace, _preload_content=False))
+        except ApiException as exc:
+            _raise(exc)
+            raise
+        return {k: base64.b64decode(v).decode() for k, v in (secret.get("data") or {}).items()}
+
+    # SimulationRun status and events
+    def patch_run_status(self, namespace: str, name: str, status: dict[str, Any]) -> None:
+        try:
+            self.custom.patch_namespaced_custom_object_status(
+                API_GROUP, API_VERSION, namespace, PLURAL, name, {"status": status}, _preload_content=False
+            )
+        except ApiException as exc:
+            _raise(exc)
+
+    def event(self, run: dict[str, Any], kind: str, reason: str, message: str) -> None:
+        meta = run["metadata"]
+        stamp = now_rfc3339()
+        body = {
+            "apiVersion": "v1",
+            "kind": "Event",
+            "metadata": {
+                "name": f"{meta['name']}.{uuid.uuid4().hex[:16]}",
+                "namespace": meta.get("namespace"),
+            },
+            "involvedObject": {
+                "apiVersion": f"{API_GROUP}/{API_VERSION}",
+                "kind": KIND,
+                "name": meta["name"],
+                "namespace": meta.get("namespace"),
+                "uid": meta.get("uid"),
+            },
+            "type": kind,
+            "reason": reason,
+            "message": message[:1024],
+            "source": {"component": "carlos-operator"},
+            "reportingComponent": "carlos-operator",
+            "firstTimestamp": stamp,
+            "lastTimestamp": stamp,
+            "count": 1,
+        }
+        with contextlib.suppress(ApiException):  # events are best effort
+            self.core.create_namespaced_event(meta.get("namespace"), _any(body), _preload_content=False)
