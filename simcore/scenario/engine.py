@@ -79,7 +79,11 @@ class SpeedRuntime(ActionRuntime):
         target = self.target()
         dv = abs(target - self.v0)
         if dyn.dimension == "rate":
-            self.duration = dv / dyn.value * shape_peak_rate_factor(dyn.shape) if dyn.value > 0 else 0.0
+            # the rate is bounded by the vehicle's performance (as esmini does)
+            perf = self.actor.entity.performance
+            limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
+            rate = min(dyn.value, limit) if limit > 0 else dyn.value
+            self.duration = dv / rate * shape_peak_rate_factor(dyn.shape) if rate > 0 else 0.0
         elif dyn.dimension == "distance":
             # every shape is symmetric, so the mean speed over the transition is (v0 + v1) / 2: the
             # transition covers `value` metres in this time (as esmini does)
@@ -1010,6 +1014,10 @@ class ScenarioEngine:
             if body.entity.driver == "sumo" or body.gone:
                 continue
             distance = body.speed * dt
+            if body.lateral_velocity != 0.0 and body.mover is None:
+                # the entity moves at its speed along its path: a lateral motion takes its share of it
+                lateral = min(abs(body.lateral_velocity), abs(body.speed))
+                distance = math.copysign(math.sqrt(body.speed**2 - lateral**2), body.speed) * dt
             if body.mover is not None:
                 body.mover.move(dt, now)
             elif self.road is not None and body.road_id is not None:

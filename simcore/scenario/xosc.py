@@ -504,7 +504,7 @@ def _act(reader: _Reader, act: ET.Element) -> m.Act:
         groups=tuple(
             reader.within(g, g.get("name"), _group, reader, g) for g in act.findall("ManeuverGroup")
         ),
-        start_trigger=_trigger(reader, start) if start is not None else None,
+        start_trigger=_start_trigger(reader, start),
         stop_trigger=_trigger(reader, stop) if stop is not None else None,
     )
 
@@ -572,7 +572,7 @@ def _event(reader: _Reader, event: ET.Element) -> m.Event:
         priority=priority,  # type: ignore[arg-type]
         maximum_execution_count=reader.integer(event, "maximumExecutionCount", 1),
         actions=tuple(actions),
-        start_trigger=_trigger(reader, start) if start is not None else None,
+        start_trigger=_start_trigger(reader, start),
     )
 
 
@@ -1181,6 +1181,14 @@ def _trigger(reader: _Reader, element: ET.Element) -> m.Trigger:
     for group in element.findall("ConditionGroup"):
         groups.append(tuple(_condition(reader, c) for c in group.findall("Condition")))
     return m.Trigger(groups=tuple(g for g in groups if g))
+
+
+def _start_trigger(reader: _Reader, element: ET.Element | None) -> m.Trigger | None:
+    """A StartTrigger; an empty one (no condition) starts at once, as esmini does (None)."""
+    if element is None:
+        return None
+    trigger = _trigger(reader, element)
+    return trigger if trigger.groups else None
 
 
 def _condition(reader: _Reader, element: ET.Element) -> m.Condition:
