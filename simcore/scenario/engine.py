@@ -730,7 +730,7 @@ class ScenarioEngine:
                 return compare(c.rule, math.inf, c.value)
             return compare(c.rule, gap / closing, c.value)
         if isinstance(c, m.OffroadCondition):
-            if body.road_id is None:
+            if body.road_id is None or self._outside_driving_lanes(body):
                 since = body.extra.setdefault("offroad_since", self.time)
                 return self.time - since >= c.duration - 1e-9
             body.extra.pop("offroad_since", None)
@@ -740,6 +740,19 @@ class ScenarioEngine:
         if isinstance(c, m.UnsupportedCondition):
             return False
         raise BadInput(f"condition {type(c).__name__} is not supported", file=self.source)
+
+    def _outside_driving_lanes(self, body: Body) -> bool:
+        """The reference point is beyond every driving lane of its road (off the road)."""
+        road = self.road
+        if road is None or body.road_id is None:
+            return True
+        r = road.road(body.road_id)
+        s = min(max(body.s, 0.0), r.length)
+        t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
+        for lane, inner, outer in r.all_borders(s):
+            if lane.id != 0 and lane.type == "driving" and min(inner, outer) <= t <= max(inner, outer):
+                return False
+        return True
 
     def _clearance(self, c: m.RelativeClearanceCondition, body: Body) -> bool:
         """True when the lanes and distances given are free of the listed (else of all) entities."""
