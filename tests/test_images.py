@@ -365,3 +365,20 @@ def test_recorder_and_bridge_images_need_no_open3d() -> None:
         """,
     )
     assert result.returncode == 0 and result.stdout.rstrip().endswith("ok"), result.stderr[-3000:]
+
+
+def test_github_workflow_builds_every_image_and_runs_the_tests() -> None:
+    workflow = yaml.safe_load((ROOT / ".github" / "workflows" / "images.yml").read_text())
+    jobs = workflow["jobs"]
+    assert set(jobs["images"]["strategy"]["matrix"]["image"]) == set(dockerfiles())
+    build = next(
+        s for s in jobs["images"]["steps"] if s.get("uses", "").startswith("docker/build-push-action")
+    )
+    assert build["with"]["file"] == "images/${{ matrix.image }}/Dockerfile"
+    assert build["with"]["context"] == "."
+    assert jobs["images"]["needs"] == "test"
+    assert any("make test" in s.get("run", "") for s in jobs["test"]["steps"])
+    for job in jobs.values():
+        for step in job["steps"]:
+            if "uses" in step:
+                assert re.search(r"@v\d+$", step["uses"]), f"unpinned action {step['uses']}"
