@@ -199,7 +199,7 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
         max_steps = round(cap_seconds / STEP_SECONDS)
         _sample(trace, engine)
         while not engine.ended and engine.step_index < max_steps:
-            engine.step()
+            engine.advance()
             if engine.step_index % every == 0:
                 _sample(trace, engine)
         result.sim_seconds = engine.time

@@ -1003,6 +1003,11 @@ class ScenarioEngine:
 
     def step(self) -> WorldFrame:
         """Advance one step; returns the frame at the new time."""
+        self.advance()
+        return self.frame()
+
+    def advance(self) -> None:
+        """Advance one step without building the frame (headless runs that read the bodies directly)."""
         dt = self.dt
         self._evaluate_storyboard()
         previous_speed = {name: b.speed for name, b in self.bodies.items()}
@@ -1083,7 +1088,6 @@ class ScenarioEngine:
         self.step_index += 1
         self._states.clear()
         self._check_stop()
-        return self.frame()
 
     def state_of(self, body: Body) -> EntityState:
         cached = self._states.get(body.name)

@@ -108,12 +108,10 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
     for _ in range(16):  # at most this many road changes in one step
         t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
         # metres along the lane per unit of s (curvature makes lanes longer or shorter than the reference line)
-        eps = 0.05
-        length = road.road_length(body.road_id)
-        s_probe = min(max(body.s, 0.0), max(length - eps, 0.0))
-        a = road.road_to_world(body.road_id, s_probe, t)
-        b = road.road_to_world(body.road_id, min(s_probe + eps, length), t)
-        scale = math.hypot(b.x - a.x, b.y - a.y) / eps if length > eps else 1.0
+        r = road.road(body.road_id)
+        length = r.length
+        # a curve parallel to the reference line at distance t has length (1 - κ t) per unit of s
+        scale = abs(1.0 - r.curvature(min(max(body.s, 0.0), length)) * t)
         ds = remaining / max(scale, 1e-6)
         target = body.s + body.direction * ds
         if 0.0 <= target <= length:
