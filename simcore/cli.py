@@ -384,6 +384,10 @@ def conformance(
     ] = None,
     cap: Annotated[float, typer.Option(help="Simulated-time cap per scenario (s).", min=0.1)] = 1250.0,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Worker processes.")] = 1,
+    include: Annotated[
+        list[str] | None,
+        typer.Option("--include", "-k", help="Only files whose relative path matches this glob (repeatable)."),
+    ] = None,
 ) -> None:
     """Run every scenario under DIRECTORY headless (0.05 s steps) and compare with reference trajectories."""
     from simcore import conformance as conf
@@ -392,7 +396,7 @@ def conformance(
         raise _fail(BadInput("not a directory", file=str(directory)))
     if reference is not None and not reference.is_dir():
         raise _fail(BadInput("reference is not a directory", file=str(reference)))
-    results = conf.run_directory(directory, reference, cap_seconds=cap, jobs=jobs)
+    results = conf.run_directory(directory, reference, cap_seconds=cap, jobs=jobs, include=include)
     table = Table(title=f"conformance: {directory}", show_edge=False)
     for column in ("scenario", "status", "end s", "ref end s", "max RMSE m", "agreed", "message"):
         table.add_column(column, overflow="fold")

@@ -63,10 +63,13 @@ class ScenarioResult:
 # --- discovery and references ------------------------------------------------------------------------------
 
 
-def scenario_files(directory: Path) -> list[Path]:
-    """Every .xosc under `directory` that is a scenario or a ParameterValueDistribution (catalogs skipped)."""
+def scenario_files(directory: Path, include: list[str] | None = None) -> list[Path]:
+    """Every .xosc under `directory` that is a scenario or a ParameterValueDistribution (catalogs skipped);
+    with `include`, only those whose path relative to `directory` matches one of the glob patterns."""
     out = []
     for path in sorted(directory.rglob("*.xosc")):
+        if include and not any(path.relative_to(directory).match(p) for p in include):
+            continue
         kind = file_kind(path)
         if kind in ("scenario", "distribution"):
             out.append(path)
@@ -299,9 +302,10 @@ def run_directory(
     *,
     cap_seconds: float = DEFAULT_CAP_SECONDS,
     jobs: int = 1,
+    include: list[str] | None = None,
     on_result: Callable[[ScenarioResult], None] | None = None,
 ) -> list[ScenarioResult]:
-    files = scenario_files(directory)
+    files = scenario_files(directory, include)
     ends = reference_end_times(reference_dir) if reference_dir is not None else {}
     tasks = [
         (str(f), str(reference_dir) if reference_dir else None, cap_seconds, ends.get(reference_name(f)))

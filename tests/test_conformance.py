@@ -1,0 +1,134 @@
+"""`carlos conformance`: running a directory of scenarios and comparing with reference trajectories."""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from simcore import conformance
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS = ROOT.parent / "shared" / "corpus" / "esmini"
+
+SCENARIO = """<?xml version="1.0"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="1" date="2024-01-01T00:00:00" description="t" author="t"/>
+  <Entities>
+    <ScenarioObject name="Car">
+      <Vehicle name="car" vehicleCategory="car">
+        <BoundingBox><Center x="1.4" y="0" z="0.8"/><Dimensions width="2" length="4.5" height="1.5"/></BoundingBox>
+        <Performance maxSpeed="50" maxAcceleration="5" maxDeceleration="10"/>
+        <Axles>
+          <FrontAxle maxSteering="0.5" wheelDiameter="0.6" trackWidth="1.8" positionX="2.8" positionZ="0.3"/>
+          <RearAxle maxSteering="0" wheelDiameter="0.6" trackWidth="1.8" positionX="0" positionZ="0.3"/>
+        </Axles>
+      </Vehicle>
+    </ScenarioObject>
+  </Entities>
+  <Storyboard>
+    <Init><Actions><Private entityRef="Car">
+      <PrivateAction><TeleportAction><Position><WorldPosition x="0" y="0" h="0"/></Position></TeleportAction></PrivateAction>
+      <PrivateAction><LongitudinalAction><SpeedAction>
+        <SpeedActionDynamics dynamicsShape="step" value="0" dynamicsDimension="time"/>
+        <SpeedActionTarget><AbsoluteTargetSpeed value="10"/></SpeedActionTarget>
+      </SpeedAction></LongitudinalAction></PrivateAction>
+    </Private></Actions></Init>
+    <StopTrigger><ConditionGroup><Condition name="end" delay="0" conditionEdge="none">
+      <ByValueCondition><SimulationTimeCondition value="2" rule="greaterThan"/></ByValueCondition>
+    </Condition></ConditionGroup></StopTrigger>
+  </Storyboard>
+</OpenSCENARIO>
+"""
+
+
+def write_reference(path: Path, shift: float, end: float = 2.0) -> None:
+    rows = ["time,id,name,x,y,z,h,p,r,speed,roadId,laneId,s,t,offset"]
+    for k in range(round(end / 0.1) + 1):
+        t = k * 0.1
+        rows.append(f"{t:.4f},0,Car,{10 * t + shift:.4f},0,0,0,0,0,10,0,0,0,0,0")
+    with gzip.open(path, "wt") as handle:
+        handle.write("\n".join(rows) + "\n")
+
+
+@pytest.fixture
+def suite(tmp_path: Path) -> tuple[Path, Path]:
+    scenarios = tmp_path / "scenarios" / "set"
+    scenarios.mkdir(parents=True)
+    (scenarios / "straight.xosc").write_text(SCENARIO)
+    (scenarios / "broken.xosc").write_text("<OpenSCENARIO><Storyboard></OpenSCENARIO>")
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    return scenarios.parent, reference
+
+
+def test_agreement_needs_position_and_end_time(suite: tuple[Path, Path]) -> None:
+    scenarios, reference = suite
+    write_reference(reference / "set__straight.csv.gz", shift=0.0, end=2.05)
+    results = {Path(r.file).name: r for r in conformance.run_directory(scenarios, reference)}
+    good = results["straight.xosc"]
+    assert good.loaded and good.ended and good.agreed
+    assert good.sim_seconds == pytest.approx(2.05)  # the first step where t > 2 holds
+    assert good.max_rmse is not None and good.max_rmse < 1e-6
+    bad = results["broken.xosc"]
+    assert bad.status == "bad_input" and not bad.loaded and "not well-formed" in bad.message
+    totals = conformance.totals(list(results.values()))
+    assert (totals["scenarios"], totals["loaded"], totals["ended"], totals["agreed"]) == (2, 1, 1, 1)
+
+    # 0.6 m off everywhere: over the 0.5 m limit
+    write_reference(reference / "set__straight.csv.gz", shift=0.6, end=2.05)
+    shifted = conformance.run_directory(scenarios, reference, include=["*/straight.xosc"])[0]
+    assert shifted.max_rmse == pytest.approx(0.6, abs=1e-6) and not shifted.agreed
+
+    # the right track but the reference ended 0.55 s later: the end time disagrees
+    write_reference(reference / "set__straight.csv.gz", shift=0.0, end=2.6)
+    late = conformance.run_directory(scenarios, reference, include=["*/straight.xosc"])[0]
+    assert late.max_rmse is not None and late.max_rmse < 1e-6
+    assert late.end_error == pytest.approx(0.55, abs=1e-6) and not late.agreed
+
+
+def test_command_prints_totals_and_writes_csv_and_json(suite: tuple[Path, Path], tmp_path: Path) -> None:
+    scenarios, reference = suite
+    write_reference(reference / "set__straight.csv.gz", shift=0.0, end=2.05)
+    out = tmp_path / "out" / "table.csv"
+    proc = subprocess.run(
+        [sys.executable, "-m", "simcore.cli", "conformance", str(scenarios), "--reference", str(reference)]
+        + ["--out", str(out)],
+        capture_output=True,
+        text=True,
+        check=False,
+        cwd=ROOT,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "loaded 1" in proc.stdout and "agreed 1 of 1" in proc.stdout
+    rows = {r["file"]: r for r in csv.DictReader(out.open())}
+    assert rows["set/straight.xosc"]["agreed"] == "1"
+    assert rows["set/broken.xosc"]["status"] == "bad_input"
+    payload = json.loads(out.with_suffix(".json").read_text())
+    assert payload["totals"]["agreed"] == 1
+
+
+@pytest.mark.skipif(not CORPUS.is_dir(), reason="esmini corpus not present")
+def test_corpus_subset_agrees_with_esmini() -> None:
+    """A few corpus scenarios covering lane changes, speed shapes, trajectories, catalogs and headway
+    triggers: each loads, ends on its own and agrees with esmini."""
+    subset = [
+        "xosc/cut-in.xosc",
+        "xosc/cut-in_simple.xosc",
+        "xosc/acc-test.xosc",
+        "xosc/lane-change_trajectory_wp.xosc",
+        "xosc/slow-lead-vehicle.xosc",
+        "xosc/straight_500m.xosc",
+    ]
+    results = conformance.run_directory(
+        CORPUS / "resources", CORPUS / "reference", include=subset, cap_seconds=60
+    )
+    assert len(results) == len(subset)
+    for r in results:
+        assert r.loaded and r.ended, (r.file, r.message)
+        assert r.agreed, (r.file, r.max_rmse, r.worst_entity, r.end_error)
