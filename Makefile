@@ -45,6 +45,12 @@ typecheck: install
 bench: install
 	$(PY) bench/simcore.py
 
+CORPUS ?= ../shared/corpus/esmini
+# the whole esmini corpus against its reference trajectories (table + CSV/JSON under results/), then the speed bench
+conformance: install
+	$(VENV)/bin/carlos conformance $(CORPUS)/resources --reference $(CORPUS)/reference --out results/conformance.csv -j $(NPROC)
+	$(PY) bench/conformance.py $(CORPUS)
+
 # the SimulationRun CRD from simcore/spec.py, for kubectl and for the Helm chart (tests/test_crd.py checks drift)
 crds: install
 	mkdir -p crds helm/carlos/crds
