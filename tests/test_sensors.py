@@ -1,0 +1,400 @@
+"""Sensors: road mesh, lidar geometry, noise, dropout, intensity, labels, occlusion, motion distortion,
+camera, ground truth, ROS 2 messages, scheduling and the spec models."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from simcore.errors import BadInput
+from simcore.sensors import ros
+from simcore.sensors.camera import Camera
+from simcore.sensors.classes import CLASS_IDS
+from simcore.sensors.lidar import Lidar
+from simcore.sensors.rig import SensorRig, ground_truth
+from simcore.sensors.scene import Boxes, RoadScene, intersect_box, road_mesh, rotation
+from simcore.spec import CameraSensor, LidarSensor, SimulationRunSpec
+from simcore.transport.bus import InProcessBus, Message
+from simcore.transport.messages import deserialize, serialize
+from simcore.world.opendrive import OpenDrive
+from simcore.world.state import BoundingBox, EntityState, WorldFrame
+
+ROOT = Path(__file__).resolve().parent.parent
+HIGHWAY = ROOT / "examples" / "maps" / "highway.xodr"
+CAR = BoundingBox(1.4, 0.0, 0.75, 4.5, 1.8, 1.5)
+
+# A straight road along x: 2 lanes of 3.5 m right of the reference line (y from -7 to 0), 200 m long.
+STRAIGHT = """<?xml version="1.0"?>
+<OpenDRIVE><header revMajor="1" revMinor="6" name="straight"/>
+<road id="1" length="200" junction="-1"><link/>
+<planView><geometry s="0" x="0" y="0" hdg="0" length="200"><line/></geometry></planView>
+<lanes><laneSection s="0"><center><lane id="0" type="none"/></center>
+<right>
+<lane id="-1" type="driving"><width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane>
+<lane id="-2" type="shoulder"><width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane>
+</right></laneSection></lanes></road></OpenDRIVE>
+"""
+
+
+@pytest.fixture(scope="module")
+def straight() -> RoadScene:
+    return RoadScene(OpenDrive.from_string(STRAIGHT))
+
+
+def car(
+    name: str, x: float, y: float, heading: float = 0.0, speed: float = 0.0, yaw_rate: float = 0.0
+) -> EntityState:
+    return EntityState(name, "vehicle", "car", x, y, 0.0, heading, 0.0, 0.0, speed, 0.0, yaw_rate, CAR)
+
+
+def lidar(**kw: object) -> Lidar:
+    cfg = {"type": "lidar", "name": "lidar", "range_noise": 0.0, **kw}
+    return Lidar(LidarSensor.model_validate(cfg), seed=1)
+
+
+def frame(*entities: EntityState, time: float = 0.0) -> WorldFrame:
+    return WorldFrame(0, time, tuple(entities), ego=entities[0].name)
+
+
+# --- scene -------------------------------------------------------------------------------------------
+
+
+def test_road_mesh_covers_the_lanes_and_nothing_else(straight: RoadScene) -> None:
+    xs = np.linspace(1, 199, 50)
+    ys = np.array([-6.9, -5.0, -1.0, -0.1, 0.5, 3.0, -7.5])
+    gx, gy = np.meshgrid(xs, ys)
+    rays = np.zeros((gx.size, 6), np.float32)
+    rays[:, 0], rays[:, 1], rays[:, 2] = gx.ravel(), gy.ravel(), 10.0
+    rays[:, 5] = -1.0
+    t, _, classes = straight.cast(rays)
+    on_road = (gy.ravel() > -7.0) & (gy.ravel() < 0.0)
+    assert np.all(np.isfinite(t[on_road])) and np.allclose(t[on_road], 10.0, atol=1e-4)
+    assert np.all(np.isinf(t[~on_road])), "beyond the outer lanes there is no ground (not an infinite plane)"
+    driving = on_road & (gy.ravel() > -3.5)
+    assert set(classes[driving]) == {CLASS_IDS["road"]}
+    assert set(classes[on_road & ~driving]) == {CLASS_IDS["roadside"]}
+
+
+def test_highway_mesh_follows_the_curve() -> None:
+    road = OpenDrive.from_file(HIGHWAY)
+    _vertices, triangles, classes = road_mesh(road)
+    assert len(triangles) > 1000 and len(classes) == len(triangles)
+    scene = RoadScene(road)
+    # the lane centre of lane -2 in the curve is on the surface; 30 m off it is not
+    for s in (700.0, 1500.0):
+        p = road.lane_to_world("1", -2, s)
+        ray = np.array([[p.x, p.y, p.z + 5, 0, 0, -1]], np.float32)
+        t, _, cls = scene.cast(ray)
+        assert t[0] == pytest.approx(5.0, abs=1e-3) and cls[0] == CLASS_IDS["road"]
+        ray[0, 0] += 30 * -math.sin(p.heading)
+        ray[0, 1] += 30 * math.cos(p.heading)
+        assert np.isinf(scene.cast(ray)[0][0])
+
+
+def test_ray_box_intersection_is_exact() -> None:
+    rot = rotation(0.3)
+    center = np.array([10.0, 2.0, 1.0])
+    half = np.array([2.0, 1.0, 0.5])
+    # rays from the origin to points on the box surface hit them
+    rng = np.random.default_rng(0)
+    local = rng.uniform(-1, 1, (200, 3)) * half
+    face = rng.integers(0, 3, 200)
+    local[np.arange(200), face] = -half[face]  # faces facing away from +x... any face
+    world = center + local @ rot.T
+    origin = np.array([0.0, 0.0, 1.0])
+    dirs = (world - origin) / np.linalg.norm(world - origin, axis=1, keepdims=True)
+    t, normals = intersect_box(origin, dirs, center, rot, half)
+    hit = np.isfinite(t)
+    p = origin + dirs[hit] * t[hit, None]
+    inside = np.abs((p - center) @ rot) <= half + 1e-9
+    assert hit.sum() > 100 and np.all(inside)
+    assert np.all(t[hit] <= np.linalg.norm(world - origin, axis=1)[hit] + 1e-9), "first hit, not a later one"
+    assert np.allclose(np.linalg.norm(normals[hit], axis=1), 1.0)
+    # from inside the box nothing is hit
+    t_in, _ = intersect_box(center, dirs, center, rot, half)
+    assert np.all(np.isinf(t_in))
+
+
+# --- lidar -------------------------------------------------------------------------------------------
+
+
+def test_lidar_points_lie_on_the_box_and_the_road(straight: RoadScene) -> None:
+    ego, other = car("Ego", 50, -1.75), car("Other", 70, -5.25, heading=0.2)
+    f = frame(ego, other)
+    boxes = Boxes.of(f)
+    sensor = lidar(channels=32, horizontal_resolution=720)
+    scan = sensor.scan(straight, boxes, ego, 0)
+    p = scan.points
+    assert scan.rays == 32 * 720
+    rot, pos = rotation(0.0), np.array([50, -1.75, 2.0])
+    world = pos + np.stack([p["x"], p["y"], p["z"]], axis=1).astype(float) @ rot.T
+    on_box = p["object_id"] == 2
+    assert on_box.sum() > 50 and scan.object_points[1] == on_box.sum()
+    assert np.all(p["label"][on_box] == CLASS_IDS["car"])
+    local = (world[on_box] - boxes.centers[1]) @ boxes.rotations[1]
+    assert np.all(np.abs(local) <= boxes.half[1] + 1e-3)
+    ground = p["label"] == CLASS_IDS["road"]
+    assert np.allclose(world[ground, 2], 0.0, atol=1e-3)
+    assert np.all(p["object_id"][~on_box] == 0), "the carrier does not see itself"
+    ranges = np.linalg.norm(np.stack([p["x"], p["y"], p["z"]], axis=1), axis=1)
+    assert ranges.min() >= 0.5 - 1e-6 and ranges.max() <= 120 + 1e-6
+    # every ring is at its elevation
+    elev = np.degrees(np.arcsin(p["z"] / ranges))
+    assert np.allclose(elev, np.linspace(-25, 15, 32)[p["ring"]], atol=1e-3)
+
+
+def test_vertical_angles_fov_and_range_limits(straight: RoadScene) -> None:
+    ego = car("Ego", 50, -1.75)
+    sensor = lidar(
+        channels=3,
+        vertical_angles=[-10.0, -5.0, -2.0],
+        horizontal_resolution=360,
+        horizontal_fov=90,
+        range_max=30,
+    )
+    scan = sensor.scan(straight, Boxes.of(frame(ego)), ego, 0)
+    p = scan.points
+    azimuth = np.degrees(np.arctan2(p["y"], p["x"]))
+    assert np.all(np.abs(azimuth) <= 45.0 + 1e-3)
+    # the -2° ring reaches the ground at 2 m / tan(2°) = 57 m: beyond rangeMax, so it returns nothing
+    assert set(np.unique(p["ring"])) == {0, 1}
+    assert np.linalg.norm(np.stack([p["x"], p["y"], p["z"]], axis=1), axis=1).max() <= 30 + 1e-6
+
+
+def test_range_noise_is_seeded_and_has_the_configured_spread(straight: RoadScene) -> None:
+    ego = car("Ego", 50, -1.75)
+    boxes = Boxes.of(frame(ego))
+    cfg = LidarSensor(type="lidar", name="l", channels=16, vertical_fov=(-25, -10), range_noise=0.05)
+    exact = Lidar(cfg.model_copy(update={"range_noise": 0.0}), seed=3).scan(straight, boxes, ego, 0).points
+    a = Lidar(cfg, seed=3).scan(straight, boxes, ego, 0).points
+    b = Lidar(cfg, seed=3).scan(straight, boxes, ego, 0).points
+    c = Lidar(cfg, seed=4).scan(straight, boxes, ego, 0).points
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a["x"], c["x"])
+
+    def ranges(p: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(np.stack([p["x"], p["y"], p["z"]], axis=1).astype(float), axis=1)
+
+    error = ranges(a) - ranges(exact)
+    assert abs(error.mean()) < 0.005 and error.std() == pytest.approx(0.05, rel=0.1)
+
+
+def test_dropout_loses_the_configured_share(straight: RoadScene) -> None:
+    ego = car("Ego", 50, -1.75)
+    boxes = Boxes.of(frame(ego))
+    full = lidar(channels=16, vertical_fov=(-25, -10)).scan(straight, boxes, ego, 0)
+    dropped = lidar(channels=16, vertical_fov=(-25, -10), dropout=0.3).scan(straight, boxes, ego, 0)
+    assert len(dropped.points) / len(full.points) == pytest.approx(0.7, abs=0.02)
+
+
+def test_intensity_falls_with_the_incidence_angle(straight: RoadScene) -> None:
+    ego = car("Ego", 50, -1.75)
+    p = lidar(channels=32).scan(straight, Boxes.of(frame(ego)), ego, 0).points
+    road = p[p["label"] == CLASS_IDS["road"]]
+    ranges = np.hypot(road["x"], road["y"])
+    near, far = road[ranges < 6], road[ranges > 20]
+    # the road is hit steeply nearby and at grazing angles far away; intensity = reflectivity × cos
+    assert near["intensity"].mean() > 2 * far["intensity"].mean()
+    cos = 2.0 / np.linalg.norm(np.stack([road["x"], road["y"], road["z"]], axis=1), axis=1)
+    assert np.allclose(road["intensity"], 0.12 * cos, atol=1e-4)
+
+
+def test_occlusion_and_ground_truth_in_the_sensor_frame(straight: RoadScene) -> None:
+    ego, front, hidden = car("Ego", 50, -1.75), car("Front", 60, -1.75), car("Hidden", 75, -1.75)
+    beside = car("Beside", 70, -5.25)
+    f = frame(ego, front, hidden, beside)
+    boxes = Boxes.of(f)
+    sensor = lidar(channels=64, mount={"x": 1.4, "z": 1.8, "yaw": 90.0})
+    scan = sensor.scan(straight, boxes, ego, 0)
+    objects = {o["name"]: o for o in ground_truth(sensor, boxes, f, 0, scan)}
+    assert set(objects) == {"Front", "Hidden", "Beside"}
+    assert objects["Front"]["occlusion"] == pytest.approx(0.0, abs=1e-9)
+    assert objects["Hidden"]["occlusion"] > 0.5
+    assert objects["Front"]["points"] > objects["Hidden"]["points"]
+    # the sensor looks to the left (yaw 90°): the car ahead is on its right (-y), 10 m away
+    c = objects["Front"]["center"]
+    assert c == pytest.approx([0.0, -10.0, -1.05], abs=1e-9)
+    yaw = math.atan2(objects["Front"]["rotation"][1, 0], objects["Front"]["rotation"][0, 0])
+    assert yaw == pytest.approx(-math.pi / 2)
+
+
+def test_ground_truth_velocity_is_in_the_sensor_frame(straight: RoadScene) -> None:
+    ego, other = car("Ego", 50, -1.75, speed=10), car("Other", 70, -1.75, heading=0.1, speed=20)
+    f = frame(ego, other)
+    boxes = Boxes.of(f)
+    sensor = lidar(mount={"yaw": 90.0})
+    obj = ground_truth(sensor, boxes, f, 0, sensor.scan(straight, boxes, ego, 0))[0]
+    assert obj["velocity"] == pytest.approx([20 * math.sin(0.1), -20 * math.cos(0.1), 0.0])
+
+
+def test_motion_distortion_fires_columns_from_earlier_poses(straight: RoadScene) -> None:
+    ego, ahead = car("Ego", 50, -1.75, speed=30.0), car("Ahead", 70, -1.75)
+    f = frame(ego, ahead)
+    boxes = Boxes.of(f)
+    plain = lidar(channels=32).scan(straight, boxes, ego, 0).points
+    moving = lidar(channels=32, motion_distortion=True).scan(straight, boxes, ego, 0).points
+    assert np.all(plain["time"] == 0.0)
+    assert moving["time"].min() >= -0.1 - 1e-9 and moving["time"].max() <= 0.0
+
+    # the sweep starts and ends behind (azimuth ±180°, clockwise): behind-left is fired first (≈ -0.1 s, when
+    # the carrier was 3 m further back), behind-right last (≈ 0 s)
+    def ring0_behind(p: np.ndarray, left: bool) -> np.ndarray:
+        side = (p["y"] > 0) & (p["y"] < 0.5) if left else (p["y"] < 0) & (p["y"] > -0.5)
+        return p[(p["ring"] == 0) & (p["x"] < 0) & side & (p["label"] == CLASS_IDS["road"])]
+
+    first, last = ring0_behind(moving, True), ring0_behind(moving, False)
+    assert first["time"].mean() < -0.09 and last["time"].mean() > -0.01
+    # the ground hit by the same ray lies 3 m further back when fired 0.1 s earlier at 30 m/s
+    assert first["x"].mean() == pytest.approx(ring0_behind(plain, True)["x"].mean() - 3.0, abs=0.1)
+    assert last["x"].mean() == pytest.approx(ring0_behind(plain, False)["x"].mean(), abs=0.1)
+    # the geometry stays right: points on the static car ahead lie on its surface in the end frame
+    world = np.array([50.0, -1.75, 2.0]) + np.stack([moving["x"], moving["y"], moving["z"]], axis=1).astype(
+        float
+    )
+    on = moving["object_id"] == 2
+    local = (world[on] - boxes.centers[1]) @ boxes.rotations[1]
+    assert on.sum() > 20 and np.all(np.abs(local) <= boxes.half[1] + 1e-3)
+
+
+# --- camera ------------------------------------------------------------------------------------------
+
+
+def test_camera_depth_and_labels(straight: RoadScene) -> None:
+    ego, ahead = car("Ego", 50, -1.75), car("Ahead", 60, -1.75)
+    boxes = Boxes.of(frame(ego, ahead))
+    cam = Camera(
+        CameraSensor(
+            type="camera", name="cam", width=64, height=48, horizontal_fov=90, mount={"x": 2.0, "z": 1.0}
+        )
+    )
+    image = cam.capture(straight, boxes, ego, 0)
+    assert image.depth.shape == (48, 64) and image.labels.dtype == np.uint8
+    # the rear face of the car ahead is at x = 60 + 1.4 - 2.25 = 59.15, the camera at 52.0: depth 7.15
+    assert image.depth[24, 32] == pytest.approx(7.15, abs=1e-3)
+    assert image.labels[24, 32] == CLASS_IDS["car"] and image.object_ids[24, 32] == 2
+    # depth is along the optical axis: the whole rear face has the same depth
+    face = image.object_ids == 2
+    assert np.allclose(image.depth[face & (np.abs(image.depth - 7.15) < 0.01)], 7.15, atol=1e-3)
+    # the bottom rows see the road, the top rows the sky
+    assert (
+        image.labels[-1, 32] == CLASS_IDS["road"] and np.isnan(image.depth[0, 0]) and image.labels[0, 0] == 0
+    )
+    assert cam.fx == pytest.approx(32.0)
+
+
+# --- messages and the rig ----------------------------------------------------------------------------
+
+
+def test_pointcloud2_round_trip(straight: RoadScene) -> None:
+    ego, other = car("Ego", 50, -1.75), car("Other", 65, -1.75)
+    points = lidar(channels=16).scan(straight, Boxes.of(frame(ego, other)), ego, 0).points
+    msg = ros.pointcloud2(points, 1.5, "Ego/lidar")
+    back = deserialize(serialize(msg), ros.POINTCLOUD2)
+    assert [f.name for f in back.fields] == ["x", "y", "z", "intensity", "time", "object_id", "ring", "label"]
+    assert (
+        back.header.frame_id == "Ego/lidar"
+        and back.header.stamp.sec == 1
+        and back.header.stamp.nanosec == 500_000_000
+    )
+    assert back.point_step == 28 and back.width == len(points)
+    assert np.array_equal(ros.read_pointcloud2(back), points)
+
+
+def _rig(sensors: list[dict[str, object]], road: OpenDrive | None) -> tuple[SensorRig, list[Message]]:
+    spec = SimulationRunSpec.model_validate(
+        {"scenarios": [{"name": "s", "openscenario": "x.xosc"}], "sensors": sensors}
+    )
+    bus = InProcessBus()
+    seen: list[Message] = []
+    bus.subscribe("*", seen.append)
+    return SensorRig(spec.sensors, road, bus, seed=0), seen
+
+
+def test_rig_publishes_at_the_sensor_rates() -> None:
+    rig, seen = _rig(
+        [
+            {"type": "lidar", "name": "top", "channels": 8, "rotationRate": 10},
+            {"type": "camera", "name": "front", "width": 16, "height": 8, "rate": 5, "mount": {"x": 3}},
+        ],
+        OpenDrive.from_string(STRAIGHT),
+    )
+    for step in range(21):  # 1 s at 0.05 s
+        rig.step(
+            WorldFrame(step, step * 0.05, (car("Ego", 50 + step, -1.75), car("B", 80, -1.75)), ego="Ego")
+        )
+    topics = [m.topic for m in seen]
+    assert topics.count("/tf_static") == 1
+    assert topics.count("/carlos/Ego/top/points") == 11  # t = 0, 0.1, …, 1.0
+    assert topics.count("/carlos/Ego/top/objects") == 11
+    assert topics.count("/carlos/Ego/front/image") == 6  # t = 0, 0.2, …, 1.0
+    assert topics.count("/carlos/Ego/front/camera_info") == 6
+    assert topics.count("/carlos/Ego/top/label_info") == 1
+    stamps = [m.time_s for m in seen if m.topic == "/carlos/Ego/top/points"]
+    assert stamps == pytest.approx([0.1 * k for k in range(11)])
+    tf = next(m.msg for m in seen if m.topic == "/tf_static")
+    frames = {(t.header.frame_id, t.child_frame_id) for t in tf.transforms}
+    assert frames == {
+        ("Ego/base_link", "Ego/top"),
+        ("Ego/base_link", "Ego/front"),
+        ("Ego/front", "Ego/front_optical"),
+    }
+    for m in seen:  # every message serialises
+        assert deserialize(serialize(m.msg), m.typename) is not None
+
+
+def test_rig_refuses_an_unknown_carrier() -> None:
+    rig, _ = _rig([{"type": "lidar", "name": "top", "entity": "Nobody"}], None)
+    with pytest.raises(BadInput, match=r"Nobody.*not an entity") as info:
+        rig.step(WorldFrame(0, 0.0, (car("Ego", 0, 0),), ego="Ego"))
+    assert "spec.sensors[0].entity" in str(info.value)
+
+
+# --- spec --------------------------------------------------------------------------------------------
+
+
+def _spec(**spec: object) -> SimulationRunSpec:
+    return SimulationRunSpec.model_validate({"scenarios": [{"name": "s", "openscenario": "x.xosc"}], **spec})
+
+
+def test_spec_sensor_models() -> None:
+    spec = _spec(sensors=[{"type": "lidar", "name": "lidar"}, {"type": "camera", "name": "cam"}])
+    assert isinstance(spec.sensors[0], LidarSensor) and isinstance(spec.sensors[1], CameraSensor)
+    assert spec.sensors[0].channels == 32 and spec.sensors[0].rotation_rate == 10.0
+    bad = [
+        ([{"type": "radar", "name": "r"}], "radar"),
+        ([{"type": "lidar", "name": "l", "channels": 2, "verticalAngles": [1.0]}], "one angle per channel"),
+        ([{"type": "lidar", "name": "l", "rangeMin": 10, "rangeMax": 5}], "rangeMin"),
+        ([{"type": "lidar", "name": "l", "verticalFov": [10, -10]}], "lowest angle comes first"),
+        ([{"type": "lidar", "name": "l"}, {"type": "camera", "name": "l"}], "defined twice"),
+        ([{"type": "lidar", "name": "l", "channel": 3}], "channel"),
+        ([{"type": "lidar", "name": "bad name"}], "pattern"),
+    ]
+    for sensors, message in bad:
+        with pytest.raises(ValidationError, match=message):
+            _spec(sensors=sensors)
+
+
+def test_spec_system_under_test_and_detection() -> None:
+    spec = _spec(
+        systemUnderTest={"module": "examples.detector:Detector", "parameters": {"min_points": 3}},
+        evaluation={
+            "detection": {"sensor": "Ego/lidar", "topic": "/carlos/sut/detections"},
+            "criteria": ["detection.recall.0-30m >= 0.9"],
+        },
+    )
+    assert spec.system_under_test is not None and spec.system_under_test.name == "sut"
+    assert spec.evaluation.criteria[0].metric == "detection.recall.0-30m"
+    assert spec.evaluation.detection is not None and spec.evaluation.detection.bands == [0.0, 30.0, 60.0]
+    with pytest.raises(ValidationError, match="set 'module'"):
+        _spec(systemUnderTest={"name": "x"})
+    with pytest.raises(ValidationError, match="pattern"):
+        _spec(systemUnderTest={"module": "no-colon"})
+    with pytest.raises(ValidationError, match="strictly increasing"):
+        _spec(evaluation={"detection": {"sensor": "Ego/lidar", "topic": "/d", "bands": [0, 50, 30]}})
+    assert _spec(
+        systemUnderTest={"image": "registry/detector:1", "command": ["python", "-m", "x"]}
+    ).system_under_test
