@@ -429,7 +429,7 @@ def test_ci_script_errors_and_timeouts_are_infrastructure_failures(tmp_path: Pat
 
 def test_ci_script_refuses_a_manifest_without_generate_name(tmp_path: Path) -> None:
     manifest = tmp_path / "named.yaml"
-    manifest.write_text((GITOPS / "runs" / "nightly-cut-in-2026-11-22.yaml").read_text())
+    manifest.write_text((GITOPS / "runs" / "cut-in-sweep-v1.yaml").read_text())
     result, calls, _ = run_ci_script(tmp_path, {}, manifest=manifest)
     assert result.returncode == 2 and "generateName" in result.stderr
     assert calls == []

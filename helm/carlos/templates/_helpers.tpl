@@ -65,38 +65,35 @@ app.kubernetes.io/component: operator
 {{- end -}}
 
 {{/*
-RBAC: exactly what the operator touches, nothing more (operator/carlos_operator/rbac.py RBAC_RULES is the
-source; tests/test_helm.py checks that the rendered rules equal it). No wildcards; Secrets are never read.
+RBAC: exactly what the operator touches, nothing more. The source is operator/carlos_operator/rbac.py
+(NAMESPACED_RULES, CLUSTER_RULES); tests/test_helm.py checks that the rendered rules equal it. No wildcards.
+Secrets: `get` only (the object-store credentials a run names, to read its per-index summaries and write
+the run summary); never list or watch.
 */}}
 {{- define "carlos.namespacedRules" -}}
 - apiGroups: ["carlos.dev"]
   resources: ["simulationruns"]
-  verbs: ["get", "list", "watch", "patch"]
+  verbs: ["get", "list", "watch"]
 - apiGroups: ["carlos.dev"]
   resources: ["simulationruns/status"]
-  verbs: ["get", "patch", "update"]
+  verbs: ["patch"]
 - apiGroups: ["batch"]
   resources: ["jobs"]
   verbs: ["get", "list", "watch", "create", "patch"]
 - apiGroups: [""]
   resources: ["configmaps"]
-  verbs: ["get", "list", "watch", "create"]
+  verbs: ["get", "create"]
+- apiGroups: [""]
+  resources: ["secrets"]
+  verbs: ["get"]
 - apiGroups: [""]
   resources: ["events"]
-  verbs: ["create", "patch"]
-- apiGroups: [""]
-  resources: ["pods"]
-  verbs: ["get", "list"]
+  verbs: ["create"]
 {{- end -}}
 
-{{/* Cluster-scoped reads: the CRD (kopf checks that it is installed); namespaces only when watching all. */}}
+{{/* Cluster-scoped, in both modes: kopf lists and watches namespaces to serve the ones it is given. */}}
 {{- define "carlos.clusterRules" -}}
-- apiGroups: ["apiextensions.k8s.io"]
-  resources: ["customresourcedefinitions"]
-  verbs: ["get", "list", "watch"]
-{{- if not .Values.watchNamespaces }}
 - apiGroups: [""]
   resources: ["namespaces"]
   verbs: ["get", "list", "watch"]
-{{- end }}
 {{- end -}}
