@@ -268,7 +268,7 @@ def test_simcore_image_installs_the_system_libraries_sumo_and_open3d_load() -> N
     """The same Debian libraries as `make install` (the Makefile's SYSTEM_PACKAGES)."""
     listed = re.search(r"^SYSTEM_PACKAGES := (.+)$", (ROOT / "Makefile").read_text(), re.M)
     assert listed
-    for name in ("simcore", "detector"):
+    for name in ("simcore",):
         runs = " ".join(v for i, v in parse_dockerfile(dockerfiles()[name]).final.instructions if i == "RUN")
         missing = [p for p in listed.group(1).split() if p not in runs.split()]
         assert not missing, f"images/{name}/Dockerfile does not install {missing}"
@@ -347,6 +347,30 @@ def test_operator_image_needs_no_sumo_and_no_open3d() -> None:
         command = typer.main.get_command(app)
         command.commands["operator"].make_context("operator", ["--all-namespaces"])
         command.commands["crds"].callback()
+        print("ok")
+        """,
+    )
+    assert result.returncode == 0 and result.stdout.rstrip().endswith("ok"), result.stderr[-3000:]
+
+
+def test_detector_image_needs_no_sumo_and_no_open3d() -> None:
+    if not (ROOT / "examples" / "detector").is_dir():
+        pytest.skip("examples/detector is not there yet (the detector issue)")
+    left_out = _without_flags("detector")
+    assert left_out == {"eclipse-sumo", "libsumo", "sumolib", "open3d-cpu"}
+    result = _imports_without(
+        [m for d in left_out for m in BLOCK_MODULES[d]],
+        """
+        import pkgutil, importlib, runpy, sys
+        import examples.detector
+        for module in pkgutil.iter_modules(examples.detector.__path__):
+            importlib.import_module("examples.detector." + module.name)
+        import simcore.transport.loopback
+        sys.argv = ["examples.detector", "--help"]
+        try:
+            runpy.run_module("examples.detector", run_name="__main__")
+        except SystemExit as exc:
+            assert exc.code in (0, None), exc.code
         print("ok")
         """,
     )
