@@ -58,6 +58,12 @@ def startup(
     logger.info("carlos operator started")
 
 
+@kopf.on.login()
+def login(**kwargs: Any) -> kopf.ConnectionInfo | None:
+    """The service account in a pod, else the kubeconfig (KUBECONFIG), as the controller's client."""
+    return kopf.login_with_service_account(**kwargs) or kopf.login_with_kubeconfig(**kwargs)
+
+
 @kopf.on.cleanup()
 def cleanup(**_: Any) -> None:
     global _controller

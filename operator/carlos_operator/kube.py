@@ -10,6 +10,7 @@ import base64
 import contextlib
 import datetime as dt
 import json
+import os
 import threading
 import uuid
 from typing import Any
@@ -60,7 +61,8 @@ class Kube:
             try:
                 config.load_incluster_config()
             except config.ConfigException:
-                config.load_kube_config()
+                # KUBECONFIG at call time (the client reads it once, at import)
+                config.load_kube_config(config_file=os.environ.get("KUBECONFIG") or None)
             api_client = client.ApiClient()
         self.api_client = api_client
         self.core = client.CoreV1Api(api_client)

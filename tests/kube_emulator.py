@@ -1,0 +1,380 @@
+"""A Kubernetes API for the operator tests: kmock's KubernetesEmulator with its known gaps filled, run on
+a background event loop, plus a Job controller + kubelet that runs each index's pod as local processes.
+
+Gaps of kmock 0.8 filled here (test side only):
+- objects get `uid`, `creationTimestamp`, `generation` and a `resourceVersion` that grows with every
+  change (kopf's and the kubernetes client's consistency checks need them); create answers 201;
+- the resources are registered for discovery (kind, namespaced, status subresource);
+- kmock misparses the cluster-scoped Namespace paths (`GET /api/v1/namespaces`): these tests run kopf
+  cluster-wide (`--all-namespaces`), which does not list Namespaces.
+No garbage collector: owner references are asserted, not acted on.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import datetime as dt
+import itertools
+import os
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import aiohttp.web
+import kmock
+from kmock._internal import enums, rendering
+
+from tests.kubelet import Kubelet
+
+RESOURCES = {
+    "carlos.dev/v1alpha1/simulationruns": kmock.ResourceInfo(
+        kind="SimulationRun",
+        namespaced=True,
+        singular="simulationrun",
+        subresources={"status"},
+        verbs={"get", "list", "watch", "create", "patch", "update", "delete"},
+    ),
+    "batch/v1/jobs": kmock.ResourceInfo(
+        kind="Job",
+        namespaced=True,
+        singular="job",
+        subresources={"status"},
+        verbs={"get", "list", "watch", "create", "patch"},
+    ),
+    "v1/configmaps": kmock.ResourceInfo(
+        kind="ConfigMap", namespaced=True, singular="configmap", verbs={"get", "create"}
+    ),
+    "v1/secrets": kmock.ResourceInfo(
+        kind="Secret", namespaced=True, singular="secret", verbs={"get", "create"}
+    ),
+    "v1/events": kmock.ResourceInfo(kind="Event", namespaced=True, singular="event", verbs={"create"}),
+    "v1/namespaces": kmock.ResourceInfo(
+        kind="Namespace", namespaced=False, singular="namespace", verbs={"get", "list"}
+    ),
+}
+
+
+def _now() -> str:
+    return dt.datetime.now(tz=dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+class CarlosEmulator(kmock.KubernetesEmulator):
+    """KubernetesEmulator + uid, creationTimestamp, generation, growing resourceVersion, 201 on create."""
+
+    _versions = itertools.count(1)
+
+    async def _handle(self, request: rendering.Request) -> aiohttp.web.StreamResponse:
+        if request.resource is not None and isinstance(request.data, dict):
+            if request.action == enums.action.CREATE:
+                meta = request.data.setdefault("metadata", {})
+                if not meta.get("name") and meta.get("generateName"):
+                    meta["name"] = meta["generateName"] + uuid.uuid4().hex[:5]
+                meta.setdefault("namespace", request.namespace)
+                meta["uid"] = str(uuid.uuid4())
+                meta["creationTimestamp"] = _now()
+                meta["generation"] = 1
+                meta["resourceVersion"] = str(next(self._versions))
+            elif request.action == enums.action.UPDATE:
+                meta = request.data.setdefault("metadata", {})
+                meta["resourceVersion"] = str(next(self._versions))
+        response = await super()._handle(request)
+        if request.action == enums.action.CREATE and response.status == 200 and not response.prepared:
+            response.set_status(201)
+        return response
+
+
+def write_kubeconfig(path: Path, url: str) -> Path:
+    path.write_text(
+        f"""apiVersion: v1
+kind: Config
+clusters: [{{name: emulator, cluster: {{server: "{url}"}}}}]
+users: [{{name: tester, user: {{token: test-token}}}}]
+contexts: [{{name: emulator, context: {{cluster: emulator, user: tester, namespace: default}}}}]
+current-context: emulator
+"""
+    )
+    return path
+
+
+class Cluster:
+    """The emulator (and, on demand, the operator) on a background event loop."""
+
+    def __init__(self) -> None:
+        self.loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self.loop.run_forever, name="emulator-loop", daemon=True)
+        self._thread.start()
+        self.emulator: CarlosEmulator | None = None
+        self._server: Any = None
+        self._operator: Any = None
+        self._stop: asyncio.Event | None = None
+        self.url = ""
+
+    def _run(self, coro: Any, timeout: float = 60) -> Any:
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+
+    def start(self) -> str:
+        async def start() -> str:
+            self.emulator = CarlosEmulator()
+            await self.emulator.__aenter__()
+            for key, info in RESOURCES.items():
+                self.emulator.resources[key] = info
+            self._server = kmock.Server(self.emulator)
+            await self._server.__aenter__()
+            return str(self.emulator.url).rstrip("/")
+
+        self.url = self._run(start())
+        return self.url
+
+    def start_operator(self) -> None:
+        import carlos_operator.handlers  # noqa: F401 - registers the handlers
+        import kopf
+
+        async def start() -> None:
+            self._stop = asyncio.Event()
+            self._operator = asyncio.ensure_future(
+                kopf.operator(clusterwide=True, standalone=True, stop_flag=self._stop)
+            )
+
+        self._run(start())
+
+    def stop_operator(self) -> None:
+        if self._operator is None:
+            return
+
+        async def stop() -> None:
+            assert self._stop is not None
+            self._stop.set()
+            try:
+                await asyncio.wait_for(self._operator, 30)
+            except (TimeoutError, asyncio.CancelledError):
+                self._operator.cancel()
+
+        self._run(stop())
+        self._operator = None
+
+    def objects(self, plural: str) -> list[dict[str, Any]]:
+        assert self.emulator is not None
+        out = []
+        for (resource, _ns, _name), obj in list(self.emulator.objects.items()):
+            if resource.plural == plural and not obj.deleted:
+                out.append(dict(obj.raw))
+        return out
+
+    def close(self) -> None:
+        self.stop_operator()
+
+        async def stop() -> None:
+            if self._server is not None:
+                await self._server.__aexit__(None, None, None)
+            if self.emulator is not None:
+                await self.emulator.__aexit__(None, None, None)
+
+        try:
+            self._run(stop())
+        finally:
+            self.loop.call_soon_threadsafe(self.loop.stop)
+            self._thread.join(10)
+
+
+@contextmanager
+def cluster(tmp_path: Path) -> Iterator[Cluster]:
+    c = Cluster()
+    try:
+        c.start()
+        yield c
+    finally:
+        c.close()
+
+
+@dataclass
+class JobRunner:
+    """The Job controller and kubelet: runs the indexes of each Job in the cluster as local pods (test
+    kubelet), honouring parallelism, podFailurePolicy and backoffLimitPerIndex, and writes the Job status
+    (completedIndexes, failedIndexes, active, conditions) as Kubernetes does."""
+
+    kube: Any  # carlos_operator.kube.Kube
+    workdir: Path
+    extra_env: dict[str, str] = field(default_factory=dict)
+    crash_first_attempt: set[int] = field(default_factory=set)  # indexes whose first simcore is killed
+    attempts: dict[tuple[str, int], int] = field(default_factory=dict)
+    _seen: set[str] = field(default_factory=set)
+    _stop: threading.Event = field(default_factory=threading.Event)
+    _threads: list[threading.Thread] = field(default_factory=list)
+    errors: list[BaseException] = field(default_factory=list)
+
+    def start(self) -> JobRunner:
+        thread = threading.Thread(target=self._watch, name="job-runner", daemon=True)
+        thread.start()
+        self._threads.append(thread)
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(60)
+
+    def _watch(self) -> None:
+        while not self._stop.is_set():
+            try:
+                jobs = self.kube.batch.list_job_for_all_namespaces(_preload_content=False)
+                import json
+
+                for job in json.loads(jobs.data).get("items", []):
+                    uid = job["metadata"]["uid"]
+                    if uid in self._seen or job["spec"].get("suspend"):
+                        continue
+                    self._seen.add(uid)
+                    thread = threading.Thread(target=self._run_job, args=(job,), daemon=True)
+                    thread.start()
+                    self._threads.append(thread)
+            except Exception as exc:  # surfaced by the tests
+                self.errors.append(exc)
+            self._stop.wait(0.2)
+
+    def _patch_status(self, job: dict[str, Any], status: dict[str, Any]) -> None:
+        meta = job["metadata"]
+        self.kube.batch.patch_namespaced_job_status(
+            meta["name"], meta["namespace"], {"status": status}, _preload_content=False
+        )
+
+    def _run_job(self, job: dict[str, Any]) -> None:
+        try:
+            self._run_job_inner(job)
+        except BaseException as exc:
+            self.errors.append(exc)
+
+    def _run_job_inner(self, job: dict[str, Any]) -> None:
+        from carlos_operator.status import format_intervals
+
+        meta, spec = job["metadata"], job["spec"]
+        namespace = meta["namespace"]
+        pod = spec["template"]["spec"]
+        configmaps = {}
+        for volume in pod.get("volumes", []):
+            if "configMap" in volume:
+                name = volume["configMap"]["name"]
+                configmaps[name] = self.kube.read_configmap(namespace, name).get("data", {})
+        secrets = {}
+        for container in [*pod.get("initContainers", []), *pod["containers"]]:
+            for source in container.get("envFrom", []):
+                name = source["secretRef"]["name"]
+                data = self.kube.read_secret_data(namespace, name)
+                secrets[name] = {k: base64.b64encode(v.encode()).decode() for k, v in data.items()}
+        rules = spec.get("podFailurePolicy", {}).get("rules", [])
+        limit = int(spec.get("backoffLimitPerIndex", 0))
+        lock = threading.Lock()
+        completed: list[int] = []
+        failed: list[int] = []
+        active = [0]
+        counts = {"succeeded": 0, "failed": 0}
+        started = _now()
+
+        def publish() -> None:
+            with lock:
+                status = {
+                    "startTime": started,
+                    "active": active[0],
+                    "completedIndexes": format_intervals(sorted(completed)),
+                    "failedIndexes": format_intervals(sorted(failed)),
+                    "succeeded": counts["succeeded"],
+                    "failed": counts["failed"],
+                }
+            self._patch_status(job, status)
+
+        def run_index(index: int) -> None:
+            failures = 0
+            while True:
+                key = (meta["uid"], index)
+                self.attempts[key] = self.attempts.get(key, 0) + 1
+
+                def on_start(name: str, proc: Any, key: tuple[str, int] = key) -> None:
+                    if name == "simcore" and index in self.crash_first_attempt and self.attempts[key] == 1:
+                        time.sleep(0.5)
+                        proc.kill()
+
+                kubelet = Kubelet(
+                    configmaps=configmaps,
+                    secrets=secrets,
+                    workdir=self.workdir,
+                    extra_env=self.extra_env,
+                    on_start=on_start,
+                )
+                with lock:
+                    active[0] += 1
+                publish()
+                result = kubelet.run_pod(pod, index=index, failures=failures)
+                code = result.exit_codes["simcore"]
+                exit_code = 128 + 9 if code < 0 else code
+                with lock:
+                    active[0] -= 1
+                    if exit_code == 0:
+                        counts["succeeded"] += 1
+                        completed.append(index)
+                        break
+                    counts["failed"] += 1
+                action = "Count"
+                for rule in rules:
+                    codes = rule.get("onExitCodes")
+                    if codes and codes.get("operator") == "In" and exit_code in codes.get("values", []):
+                        action = rule["action"]
+                        break
+                if action == "FailIndex" or (action == "Count" and failures + 1 > limit):
+                    with lock:
+                        failed.append(index)
+                    break
+                if action == "Count":
+                    failures += 1
+            publish()
+
+        with ThreadPoolExecutor(max_workers=int(spec.get("parallelism") or 1)) as pool:
+            list(pool.map(run_index, range(int(spec["completions"]))))
+        publish()
+        finished = "Failed" if failed else "Complete"
+        condition = {
+            "type": finished,
+            "status": "True",
+            "reason": "FailedIndexes" if failed else "",
+            "lastTransitionTime": _now(),
+        }
+        if finished == "Failed":
+            conditions = [condition]
+        else:
+            conditions = [
+                {"type": "SuccessCriteriaMet", "status": "True", "lastTransitionTime": _now()},
+                condition,
+            ]
+        status: dict[str, Any] = {"conditions": conditions}
+        if finished == "Complete":
+            status["completionTime"] = _now()
+        self._patch_status(job, status)
+
+
+def wait_for(predicate: Any, timeout: float, what: str, interval: float = 0.2) -> Any:
+    deadline = time.monotonic() + timeout
+    last = None
+    while time.monotonic() < deadline:
+        last = predicate()
+        if last:
+            return last
+        time.sleep(interval)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what} (last: {last!r})")
+
+
+def operator_env(s3_endpoint: str) -> dict[str, str]:
+    return {
+        "CARLOS_DEFAULT_S3_ENDPOINT": s3_endpoint,
+        "CARLOS_RESYNC_SECONDS": "0.5",
+        "CARLOS_IMAGE_SIMCORE": "local/simcore:test",
+        "CARLOS_IMAGE_BRIDGE": "local/bridge:test",
+        "CARLOS_IMAGE_RECORDER": "local/recorder:test",
+    }
+
+
+__all__ = ["Cluster", "JobRunner", "cluster", "operator_env", "os", "wait_for", "write_kubeconfig"]

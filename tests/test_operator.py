@@ -1,0 +1,213 @@
+"""The operator end to end against kmock's Kubernetes emulator: SimulationRun → ConfigMap + Indexed Job →
+pods run by the test kubelet as local processes → results in the real S3 server → status."""
+
+from __future__ import annotations
+
+import base64
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from carlos_operator.builders import job_name
+from carlos_operator.kube import Kube
+
+from tests.kube_emulator import Cluster, JobRunner, cluster, operator_env, wait_for, write_kubeconfig
+from tests.s3server import S3Server
+
+pytestmark = [pytest.mark.s3, pytest.mark.timeout(300)]
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIO = (ROOT / "examples/scenarios/braking.xosc").as_uri()
+GROUP, VERSION, PLURAL = "carlos.dev", "v1alpha1", "simulationruns"
+
+
+def manifest(name: str, bucket: str, criteria: list[str], speeds: list[float], **spec: Any) -> dict[str, Any]:
+    return {
+        "apiVersion": "carlos.dev/v1alpha1",
+        "kind": "SimulationRun",
+        "metadata": {"name": name, "namespace": "default"},
+        "spec": {
+            "scenarios": [{"name": "braking", "openscenario": SCENARIO}],
+            "sweep": {"matrix": {"Speed": speeds}},
+            "simulation": {"stepSeconds": 0.1, "maxSeconds": 3},
+            "evaluation": {"criteria": criteria},
+            "output": {"url": f"s3://{bucket}/operator", "credentialsSecretRef": {"name": "s3"}},
+            "execution": {"parallelism": 2, "retries": 1},
+            **spec,
+        },
+    }
+
+
+@pytest.fixture
+def env(
+    s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> Iterator[tuple[Cluster, Kube]]:
+    with cluster(tmp_path) as c:
+        monkeypatch.setenv("KUBECONFIG", str(write_kubeconfig(tmp_path / "kubeconfig", c.url)))
+        for key, value in operator_env(s3_server.endpoint).items():
+            monkeypatch.setenv(key, value)
+        for key in ("AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY", "AWS_ENDPOINT_URL"):
+            monkeypatch.delenv(key, raising=False)  # the operator must use the run's Secret
+        kube = Kube()
+        secret = {
+            "apiVersion": "v1",
+            "kind": "Secret",
+            "metadata": {"name": "s3", "namespace": "default"},
+            "data": {
+                "AWS_ACCESS_KEY_ID": base64.b64encode(s3_server.access_key.encode()).decode(),
+                "AWS_SECRET_ACCESS_KEY": base64.b64encode(s3_server.secret_key.encode()).decode(),
+            },
+        }
+        kube.core.create_namespaced_secret("default", secret, _preload_content=False)
+        try:
+            yield c, kube
+        finally:
+            c.stop_operator()
+
+
+def create(kube: Kube, body: dict[str, Any]) -> None:
+    kube.custom.create_namespaced_custom_object(
+        GROUP, VERSION, "default", PLURAL, body, _preload_content=False
+    )
+
+
+def status(kube: Kube, name: str) -> dict[str, Any]:
+    raw = kube.custom.get_namespaced_custom_object(
+        GROUP, VERSION, "default", PLURAL, name, _preload_content=False
+    )
+    return dict(json.loads(raw.data).get("status") or {})
+
+
+def terminal(kube: Kube, name: str) -> dict[str, Any] | None:
+    st = status(kube, name)
+    return st if st.get("phase") in ("Succeeded", "Failed") else None
+
+
+def results(s3: S3Server, monkeypatch: pytest.MonkeyPatch) -> Any:
+    from simcore.store import open_store
+
+    for key, value in s3.env().items():
+        monkeypatch.setenv(key, value)
+    return open_store(f"s3://{s3.bucket}/operator", endpoint=s3.endpoint, region=s3.region)
+
+
+def runner(kube: Kube, s3: S3Server, tmp_path: Path, **kw: Any) -> JobRunner:
+    return JobRunner(kube=kube, workdir=tmp_path, extra_env={"AWS_REGION": s3.region}, **kw).start()
+
+
+def test_run_succeeds_end_to_end(
+    env: tuple[Cluster, Kube], s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    c, kube = env
+    c.start_operator()
+    jobs = runner(kube, s3_server, tmp_path)
+    try:
+        create(kube, manifest("e2e-pass", s3_server.bucket, ["simSeconds <= 100"], [10.0, 15.0, 20.0]))
+        st = wait_for(lambda: terminal(kube, "e2e-pass"), 180, "a terminal phase")
+    finally:
+        jobs.stop()
+    assert jobs.errors == []
+    assert st["phase"] == "Succeeded", st
+    assert (st["total"], st["succeeded"], st["failed"], st["passed"], st["testFailures"], st["errors"]) == (
+        3,
+        3,
+        0,
+        3,
+        0,
+        0,
+    )
+    assert st["progress"] == "3/3" and st["resultsURL"].endswith("/operator/e2e-pass")
+    conditions = {x["type"]: x for x in st["conditions"]}
+    assert conditions["Accepted"]["status"] == "True" and conditions["Complete"]["status"] == "True"
+    assert st.get("completionTime") and st.get("startTime")
+    # one ConfigMap and one Indexed Job, owned by the run
+    jobs_seen = [j for j in c.objects("jobs") if j["metadata"]["name"] == job_name("e2e-pass")]
+    assert len(jobs_seen) == 1
+    job = jobs_seen[0]
+    assert job["spec"]["completionMode"] == "Indexed" and job["spec"]["completions"] == 3
+    run_uid = kube.custom.get_namespaced_custom_object(GROUP, VERSION, "default", PLURAL, "e2e-pass")[
+        "metadata"
+    ]["uid"]
+    assert job["metadata"]["ownerReferences"][0]["uid"] == run_uid
+    assert [m["metadata"]["name"] for m in c.objects("configmaps")] == [job_name("e2e-pass")]
+    store = results(s3_server, monkeypatch)
+    keys = set(store.list("e2e-pass/"))
+    for index in range(3):
+        assert {f"e2e-pass/{index}/recording.mcap", f"e2e-pass/{index}/summary.json"} <= keys
+    assert {"e2e-pass/run.yaml", "e2e-pass/summary.json", "e2e-pass/junit.xml"} <= keys
+    summary = json.loads(store.get_bytes("e2e-pass/summary.json"))
+    assert summary["counts"]["passed"] == 3 and summary["status"] == "passed"
+    assert "<testcase" in store.get_bytes("e2e-pass/junit.xml").decode()
+    reasons = {e.get("reason") for e in c.objects("events")}
+    assert {"JobCreated", "Succeeded"} <= reasons
+
+
+def test_failing_index_and_crashing_container(
+    env: tuple[Cluster, Kube], s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    c, kube = env
+    c.start_operator()
+    # Ego drives at the swept Speed: 'maxSpeed <= 16' fails index 2 (30 m/s) only, a test failure (exit 1).
+    # Index 0's first simcore container is killed: an infrastructure failure, retried.
+    jobs = runner(kube, s3_server, tmp_path, crash_first_attempt={0})
+    try:
+        create(kube, manifest("e2e-mixed", s3_server.bucket, ["maxSpeed <= 16"], [10.0, 15.0, 30.0]))
+        st = wait_for(lambda: terminal(kube, "e2e-mixed"), 180, "a terminal phase")
+    finally:
+        jobs.stop()
+    assert jobs.errors == []
+    assert st["phase"] == "Failed", st
+    assert (st["succeeded"], st["failed"], st["passed"], st["testFailures"], st["errors"]) == (2, 1, 2, 1, 0)
+    assert [f["index"] for f in st["failures"]] == [2]
+    assert "maxSpeed" in st["failures"][0]["reason"]
+    assert {x["type"]: x for x in st["conditions"]}["Failed"]["reason"] == "TestFailures"
+    uid = c.objects("jobs")[0]["metadata"]["uid"]
+    assert jobs.attempts[(uid, 0)] == 2  # crashed once, retried
+    assert jobs.attempts[(uid, 2)] == 1  # a test failure is never retried
+    store = results(s3_server, monkeypatch)
+    assert json.loads(store.get_bytes("e2e-mixed/0/summary.json"))["attempts"] == 2
+    junit = store.get_bytes("e2e-mixed/junit.xml").decode()
+    assert "<failure" in junit
+
+
+def test_operator_restart_adopts_the_job(
+    env: tuple[Cluster, Kube], s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    c, kube = env
+    c.start_operator()
+    create(kube, manifest("e2e-restart", s3_server.bucket, [], [10.0, 15.0]))
+    wait_for(lambda: c.objects("jobs"), 30, "the Job")
+    c.stop_operator()
+    jobs = runner(kube, s3_server, tmp_path)
+    try:
+        wait_for(
+            lambda: c.objects("jobs")[0].get("status", {}).get("completedIndexes"), 120, "a finished index"
+        )
+        assert status(kube, "e2e-restart").get("phase") != "Succeeded"  # the operator was down
+        c.start_operator()
+        st = wait_for(lambda: terminal(kube, "e2e-restart"), 180, "a terminal phase")
+    finally:
+        jobs.stop()
+    assert st["phase"] == "Succeeded" and st["passed"] == 2
+    assert len(c.objects("jobs")) == 1
+    assert len(c.objects("configmaps")) == 1
+
+
+def test_invalid_spec_is_not_accepted(env: tuple[Cluster, Kube], s3_server: S3Server) -> None:
+    c, kube = env
+    c.start_operator()
+    bad = manifest("e2e-bad", s3_server.bucket, [], [10.0])
+    bad["spec"]["scenarios"][0]["openscenario"] = "relative/path.xosc"
+    create(kube, bad)
+    typo = manifest("e2e-typo", s3_server.bucket, [], [10.0])
+    typo["spec"]["simulation"]["stepSecond"] = 0.1
+    create(kube, typo)
+    for name, words in (("e2e-bad", "spec.scenarios[0].openscenario"), ("e2e-typo", "stepSecond")):
+        st = wait_for(lambda n=name: status(kube, n).get("conditions"), 30, f"{name}'s conditions")
+        accepted = {x["type"]: x for x in st}["Accepted"]
+        assert accepted["status"] == "False" and accepted["reason"] == "InvalidSpec"
+        assert words in accepted["message"]
+    assert c.objects("jobs") == [] and c.objects("configmaps") == []
+    assert any(e.get("reason") == "InvalidSpec" and e.get("type") == "Warning" for e in c.objects("events"))
