@@ -262,6 +262,7 @@ class ScenarioEngine:
                     field="RoadNetwork/LogicFile",
                 )
         self.conditions: dict[int, ConditionState] = {}
+        self._target_roads: dict[tuple[float, float, str], Any] = {}
         self.owner: Body | None = None  # the actor whose action runs now ("$owner")
         self.parameter_values: dict[str, Any] = dict(scenario.parameters)
         self.variables: dict[str, Any] = dict(scenario.variables)
@@ -335,6 +336,10 @@ class ScenarioEngine:
                 )
                 body.gone = True
                 body.placed = True
+        if self.sumo is not None and not any(b.entity.driver == "sumo" for b in self.bodies.values()):
+            # nothing reads SUMO back: no entity is SUMO-driven, so it is not stepped at all (placing every
+            # scripted entity every step would cost two libsumo calls per entity for nothing)
+            self.sumo = None
         if self.sumo is not None:
             for body in self.bodies.values():
                 if body.gone:
@@ -551,7 +556,10 @@ class ScenarioEngine:
         """Distance still to travel to a position: along the road when both are on the same road."""
         x, y, _, _ = target
         if self.road is not None and body.road_id is not None:
-            rc = self.road.world_to_road(x, y, None, road_hint=body.road_id)
+            key = (x, y, body.road_id)
+            if key not in self._target_roads:  # targets are fixed: map each to the road once
+                self._target_roads[key] = self.road.world_to_road(x, y, None, road_hint=body.road_id)
+            rc = self._target_roads[key]
             if rc is not None and rc.road_id == body.road_id:
                 return max((rc.s - body.s) * body.direction, 0.0)
         return math.hypot(x - body.x, y - body.y)

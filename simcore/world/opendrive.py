@@ -501,7 +501,20 @@ class Road:
         return secs[max(i, 0)]
 
     def side_borders(self, s: float, side: int) -> list[tuple[Lane, float, float]]:
-        """``(lane, t_inner, t_outer)`` for the lanes of ``side`` at ``s``, innermost first."""
+        """``(lane, t_inner, t_outer)`` for the lanes of ``side`` at ``s``, innermost first (memoised: the
+        same road position is asked for several times per simulation step; callers must not mutate)."""
+        cache: dict[tuple[float, int], list[tuple[Lane, float, float]]] | None = self.__dict__.get("_borders")
+        if cache is None:
+            cache = self.__dict__["_borders"] = {}
+        hit = cache.get((s, side))
+        if hit is not None:
+            return hit
+        if len(cache) > 256:
+            cache.clear()
+        out = cache[(s, side)] = self._side_borders(s, side)
+        return out
+
+    def _side_borders(self, s: float, side: int) -> list[tuple[Lane, float, float]]:
         sec = self.section_at(s, side)
         ds = s - sec.s
         off = self.lane_offset(s)
