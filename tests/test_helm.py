@@ -61,13 +61,14 @@ def helm_binary() -> Path:
     if os.environ.get("HELM"):
         return Path(os.environ["HELM"])
     target = TOOLS / "helm"
-    if target.exists():
+    # executable = complete: get-helm writes the file, then makes it executable
+    if os.access(target, os.X_OK):
         return target
     TOOLS.mkdir(parents=True, exist_ok=True)
     get_helm = ROOT.parent / "shared" / "tools" / "get-helm"
     with open(TOOLS.parent / "get-helm.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        if target.exists():
+        if os.access(target, os.X_OK):
             return target
         if get_helm.exists():
             subprocess.run([str(get_helm), str(TOOLS)], check=True, timeout=600, stdout=subprocess.DEVNULL)
