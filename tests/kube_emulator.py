@@ -113,7 +113,6 @@ class Cluster:
         self.emulator: CarlosEmulator | None = None
         self._server: Any = None
         self._operator: Any = None
-        self._stop: asyncio.Event | None = None
         self.url = ""
 
     def _run(self, coro: Any, timeout: float = 60) -> Any:
@@ -133,30 +132,28 @@ class Cluster:
         return self.url
 
     def start_operator(self) -> None:
+        """kopf on its own thread and event loop (it waits for every task of its loop when stopping)."""
         import carlos_operator.handlers  # noqa: F401 - registers the handlers
         import kopf
 
-        async def start() -> None:
-            self._stop = asyncio.Event()
-            self._operator = asyncio.ensure_future(
-                kopf.operator(clusterwide=True, standalone=True, stop_flag=self._stop)
-            )
+        stop = threading.Event()
 
-        self._run(start())
+        def run() -> None:
+            settings = kopf.OperatorSettings()
+            settings.queueing.idle_timeout = 0.5  # per-object workers exit soon: a quick shutdown
+            settings.queueing.exit_timeout = 0.5
+            asyncio.run(kopf.operator(clusterwide=True, standalone=True, stop_flag=stop, settings=settings))
+
+        thread = threading.Thread(target=run, name="operator", daemon=True)
+        thread.start()
+        self._operator = (thread, stop)
 
     def stop_operator(self) -> None:
         if self._operator is None:
             return
-
-        async def stop() -> None:
-            assert self._stop is not None
-            self._stop.set()
-            try:
-                await asyncio.wait_for(self._operator, 30)
-            except (TimeoutError, asyncio.CancelledError):
-                self._operator.cancel()
-
-        self._run(stop())
+        thread, stop = self._operator
+        stop.set()
+        thread.join(30)
         self._operator = None
 
     def objects(self, plural: str) -> list[dict[str, Any]]:
