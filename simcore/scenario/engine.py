@@ -714,10 +714,15 @@ class ScenarioEngine:
             return compare(c.rule, distance, c.value)
         if isinstance(c, m.RelativeDistanceCondition):
             other = self.body(c.entity)
-            return compare(c.rule, self.relative_distance(body, other, c.distance_type, c.freespace), c.value)
+            distance = self.relative_distance(
+                body, other, c.distance_type, c.freespace, system=c.coordinate_system
+            )
+            return compare(c.rule, distance, c.value)
         if isinstance(c, m.TimeHeadwayCondition):
             other = self.body(c.entity)
-            gap = self.relative_distance(body, other, "longitudinal", c.freespace, signed=True)
+            gap = self.relative_distance(
+                body, other, "longitudinal", c.freespace, signed=True, system=c.coordinate_system
+            )
             if body.speed <= 1e-6:
                 return compare(c.rule, math.inf if gap > 0 else -math.inf, c.value)
             # signed: an entity behind has a negative headway (as esmini measures it)
@@ -787,8 +792,24 @@ class ScenarioEngine:
             break
         return (not occupied) if c.free_space else occupied
 
-    def relative_distance(self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False) -> float:
-        """Distance from a to b in a's frame (longitudinal: along a's heading; lateral: across it)."""
+    def relative_distance(
+        self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False, system: str = "entity"
+    ) -> float:
+        """Distance from a to b in a's frame (longitudinal: along a's heading; lateral: across it). In road
+        or lane coordinates on one road, longitudinal is the difference of s (as esmini measures it)."""
+        if (
+            system in ("road", "lane")
+            and kind == "longitudinal"
+            and a.road_id is not None
+            and a.road_id == b.road_id
+        ):
+            # along the road, positive in a's travel direction
+            ds = (b.s + b.entity.box.center_x * b.direction) - (a.s + a.entity.box.center_x * a.direction)
+            ds *= a.direction
+            if freespace:
+                extent = (a.entity.box.length + b.entity.box.length) / 2
+                ds = math.copysign(max(abs(ds) - extent, 0.0), ds)
+            return ds if signed else abs(ds)
         sa, sb = self.state_of(a), self.state_of(b)
         if kind in ("euclidianDistance", "cartesianDistance"):
             if freespace:
@@ -819,7 +840,8 @@ class ScenarioEngine:
     def _condition(self, cond: m.Condition, triggering: list[str]) -> bool:
         state = self.conditions.setdefault(id(cond), ConditionState(cond))
         value = self._value(cond, triggering)
-        previous = state.previous if state.previous is not None else False
+        # an edge needs a change: the first evaluation only records the value (as esmini does)
+        previous = state.previous if state.previous is not None else value
         state.previous = value
         if cond.edge == "rising":
             fired = value and not previous

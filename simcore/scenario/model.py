@@ -462,6 +462,7 @@ class RelativeDistanceCondition:
     freespace: bool
     value: float
     rule: Rule
+    coordinate_system: str = "entity"  # entity | road | lane | trajectory
 
 
 @dataclass(frozen=True)
@@ -508,6 +509,7 @@ class TimeHeadwayCondition:
     freespace: bool
     value: float
     rule: Rule
+    coordinate_system: str = "entity"  # entity | road | lane | trajectory
 
 
 @dataclass(frozen=True)
@@ -516,6 +518,7 @@ class TimeToCollisionCondition:
     freespace: bool
     value: float
     rule: Rule
+    coordinate_system: str = "entity"
     position: Position | None = None  # to a position instead of an entity
 
 

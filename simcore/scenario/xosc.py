@@ -1273,6 +1273,7 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
             freespace=_freespace(reader, c),
             value=reader.num(c, "value"),
             rule=_rule(reader, c),
+            coordinate_system=reader.attr(c, "coordinateSystem", "entity"),
         )
     if tag == "SpeedCondition":
         return m.SpeedCondition(value=reader.num(c, "value"), rule=_rule(reader, c))
@@ -1315,6 +1316,7 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
             freespace=_freespace(reader, c),
             value=reader.num(c, "value"),
             rule=_rule(reader, c),
+            coordinate_system=reader.attr(c, "coordinateSystem", "entity"),
         )
     if tag == "StandStillCondition":
         return m.StandStillCondition(duration=reader.num(c, "duration"))
