@@ -280,8 +280,12 @@ class DetectionEvaluator:
             self.add_frame(time, objects, self._points.get(stamp, {}), self._detections.get(stamp, []))
 
     def result(self) -> dict[str, float]:
-        """The `detection.*` metrics over every sweep with ground truth."""
+        """The `detection.*` metrics over every sweep with ground truth received from the bus."""
         self._collect()
+        return self._result_from_frames()
+
+    def _result_from_frames(self) -> dict[str, float]:
+        """The metrics over the frames added so far (`add_frame`)."""
         cfg = self.config
         edges = [*cfg.bands, cfg.max_range]
         bands = [(lo, hi) for lo, hi in itertools.pairwise(edges) if lo < cfg.max_range]

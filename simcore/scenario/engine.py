@@ -401,7 +401,8 @@ class ScenarioEngine:
                 r = need_road()
                 pose = r.lane_to_world(position.road_id, position.lane_id, position.s, position.offset)
                 # relative orientation is relative to the lane's driving direction (as esmini does)
-                base = pose.heading + (math.pi if position.lane_id > 0 else 0.0)
+                backward = r.drives_backward(position.road_id, position.lane_id)
+                base = pose.heading + (math.pi if backward else 0.0)
                 return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
             if isinstance(position, m.RoadPosition):
                 r = need_road()

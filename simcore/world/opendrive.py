@@ -433,6 +433,7 @@ class Road:
     predecessor: RoadLink | None = None
     successor: RoadLink | None = None
     superelevations: list[Poly3] = field(default_factory=list)
+    rule: str = "RHT"  # traffic rule: RHT (right-hand traffic) or LHT
 
     def __post_init__(self) -> None:
         self._gstarts = [g.s for g in self.geometries]
@@ -792,8 +793,20 @@ def _parse_road(ctx: _Ctx, el: Element) -> Road:
         succ = _parse_link(ctx, link.find("successor"))
         ctx.parts.pop()
     ctx.parts.pop()
+    rule = (el.get("rule") or "RHT").strip().upper()
     return Road(
-        rid, el.get("name") or "", length, junction, geoms, elevs, offsets, sections, pred, succ, supers
+        rid,
+        el.get("name") or "",
+        length,
+        junction,
+        geoms,
+        elevs,
+        offsets,
+        sections,
+        pred,
+        succ,
+        supers,
+        "LHT" if rule == "LHT" else "RHT",
     )
 
 
@@ -961,6 +974,10 @@ class OpenDrive:
         t = self.lane_center_t(road_id, lane_id, s) + offset
         x, y, z, h = road.world_xyz(s, t)
         return Pose(x, y, z, h + self._lane_slope_angle(road, lane_id, s, t))
+
+    def drives_backward(self, road_id: str, lane_id: int) -> bool:
+        """Whether traffic in the lane travels toward decreasing s (left lanes in right-hand traffic)."""
+        return (lane_id > 0) != (self.road(road_id).rule == "LHT")
 
     def lane_heading(self, road_id: str, lane_id: int, s: float) -> float:
         """Heading (toward increasing ``s``) of the lane centre line at ``s``."""
