@@ -40,6 +40,7 @@ SETTINGS = OperatorSettings.from_env(
         "CARLOS_DEFAULT_OUTPUT_URL": "s3://results/runs",
         "CARLOS_DEFAULT_S3_ENDPOINT": "http://minio:9000",
         "CARLOS_DEFAULT_S3_SECRET": "s3-creds",
+        "CARLOS_IMAGE_BRIDGE_PULL_POLICY": "Always",
     }
 )
 
@@ -117,6 +118,8 @@ def test_job_is_an_indexed_job_with_the_failure_policy() -> None:
     assert ports == {"bridge": BUS_PORT, "recorder": RECORDER_READY_PORT}
     images = {c["name"]: c["image"] for c in [*pod["initContainers"], *pod["containers"]]}
     assert images == {"bridge": "reg/bridge:1", "recorder": "reg/recorder:1", "simcore": "reg/simcore:1"}
+    policies = {c["name"]: c["imagePullPolicy"] for c in [*pod["initContainers"], *pod["containers"]]}
+    assert policies == {"bridge": "Always", "recorder": "IfNotPresent", "simcore": "IfNotPresent"}
     volumes = {v["name"]: v for v in pod["volumes"]}
     assert volumes["spec"]["configMap"]["name"] == job_name("sweep")
     assert "emptyDir" in volumes["scratch"] and volumes["scenarios-0"]["configMap"]["name"] == "scenarios"

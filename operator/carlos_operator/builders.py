@@ -65,6 +65,7 @@ class OperatorSettings:
     default_s3_endpoint: str | None = None
     default_s3_secret: str | None = None
     job_ttl_seconds: int = 7 * 86_400
+    pull_policies: dict[str, str] = field(default_factory=dict)  # role → imagePullPolicy
     extra_labels: dict[str, str] = field(default_factory=dict)
 
     @classmethod
@@ -77,7 +78,13 @@ class OperatorSettings:
 
         secrets = tuple(s.strip() for s in env.get("CARLOS_IMAGE_PULL_SECRETS", "").split(",") if s.strip())
         ttl = env.get("CARLOS_JOB_TTL_SECONDS", "")
+        policies = {
+            role: env[f"CARLOS_IMAGE_{role.upper()}_PULL_POLICY"]
+            for role in ("simcore", "bridge", "recorder")
+            if env.get(f"CARLOS_IMAGE_{role.upper()}_PULL_POLICY") in ("Always", "IfNotPresent", "Never")
+        }
         return cls(
+            pull_policies=policies,
             image_simcore=image("simcore"),
             image_bridge=image("bridge"),
             image_recorder=image("recorder"),
@@ -249,12 +256,12 @@ def _env(run: SimulationRun, output: Output) -> list[dict[str, Any]]:
 
 
 def _container(
-    role: str, image: str, run: SimulationRun, output: Output, mounts: list[dict[str, Any]]
+    role: str, settings: OperatorSettings, run: SimulationRun, output: Output, mounts: list[dict[str, Any]]
 ) -> dict[str, Any]:
     container: dict[str, Any] = {
         "name": role,
-        "image": image,
-        "imagePullPolicy": "IfNotPresent",
+        "image": getattr(settings, f"image_{role}"),
+        "imagePullPolicy": settings.pull_policies.get(role, "IfNotPresent"),
         "args": ["pod", "--role", role],
         "env": _env(run, output),
         "volumeMounts": mounts,
@@ -319,11 +326,9 @@ def build_job(
         mounts.append(
             {"name": f"scenarios-{position}", "mountPath": f"{SCENARIO_DIR}/{cm}", "readOnly": True}
         )
-    simcore = _container("simcore", settings.image_simcore, run, output, mounts)
-    bridge = _sidecar(_container("bridge", settings.image_bridge, run, output, mounts), BUS_PORT)
-    recorder = _sidecar(
-        _container("recorder", settings.image_recorder, run, output, mounts), RECORDER_READY_PORT
-    )
+    simcore = _container("simcore", settings, run, output, mounts)
+    bridge = _sidecar(_container("bridge", settings, run, output, mounts), BUS_PORT)
+    recorder = _sidecar(_container("recorder", settings, run, output, mounts), RECORDER_READY_PORT)
     pod_spec: dict[str, Any] = {
         "restartPolicy": "Never",
         "automountServiceAccountToken": False,
