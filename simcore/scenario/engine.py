@@ -306,9 +306,14 @@ class ScenarioEngine:
                 continue
             body = self.bodies[item.entity]
             runtime = make_runtime(self, body, item.action)  # type: ignore[arg-type]
-            if isinstance(item.action, m.SpeedAction):
-                # initial speed: reached at once (esmini and ScenarioRunner do the same for Init)
+            if isinstance(item.action, m.SpeedAction) and (
+                item.action.dynamics.shape == "step" or item.action.dynamics.value == 0
+            ):
+                # initial speed with a step: reached at once
                 body.speed = runtime.target() if isinstance(runtime, SpeedRuntime) else body.speed
+            elif isinstance(item.action, m.SpeedAction):
+                # with a transition shape the speed changes over time from the start, as in a story
+                self.init_runtimes.append(runtime)
             elif isinstance(item.action, m.TeleportAction | m.AssignRouteAction | m.NoMotionAction):
                 runtime.start()
             else:
