@@ -3,7 +3,7 @@
 Topic in: `sensor_msgs/PointCloud2` (x, y, z fields; anything else is ignored); topic out:
 `vision_msgs/Detection3DArray` in the cloud's frame, with the cloud's stamp. Pipeline (`detect`): range
 crop, RANSAC ground plane removal, Euclidean clustering (BEV, k-d tree + connected components), oriented
-box fit (minimum-area rectangle of the cluster's convex hull, completed to the class's prior size away
+box fit (L-shape fitting by the closeness criterion, completed to the class's prior size away
 from the sensor when only part of the object is visible), classification by size.
 
 It is the user's own software, kept apart from the simulator: it imports no `simcore` module except the

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import ConvexHull, QhullError, cKDTree
+from scipy.spatial import cKDTree
 
 
 @dataclass(frozen=True)
@@ -20,9 +20,11 @@ class DetectorParams:
     ransac_iterations: int = 80
     ransac_sample: int = 4000  # points the plane is searched on
     cluster_tolerance: float = 0.8  # m, BEV distance that links two points into one cluster …
-    cluster_tolerance_per_m: float = 0.05  # … growing with range (sparser returns far away) …
-    max_cluster_tolerance: float = 1.8  # … up to this
+    cluster_tolerance_per_m: float = 0.12  # … along the line of sight, growing with range (sparser returns) …
+    cluster_tolerance_across_per_m: float = 0.02  # … across it …
+    max_cluster_tolerance: float = 3.0  # … up to this
     min_points: int = 5  # points a cluster needs to be reported
+    merge_margin: float = 0.5  # m: a cluster centred this close to a vehicle's box is part of it
     keep_unknown: bool = False  # report clusters whose size fits no class (as "unknown")
     seed: int = 0
 
@@ -47,6 +49,8 @@ class Box:
     label: str
     score: float
     points: int
+    cluster_x: float = 0.0  # centroid of the cluster's points (BEV)
+    cluster_y: float = 0.0
 
 
 def fit_ground(xyz: np.ndarray, params: DetectorParams) -> np.ndarray | None:
@@ -95,10 +99,13 @@ def cluster(
     per_m: float = 0.0,
     max_tolerance: float | None = None,
     cell: float = 0.2,
+    across_per_m: float = 0.02,
 ) -> np.ndarray:
-    """Euclidean clustering in BEV: labels (N,) of the connected components of the graph linking points
-    closer than max(tolerance, per_m × range) (at most `max_tolerance`). The points are first reduced to
-    the occupied cells of a `cell`-sized grid (a cell's points share its label)."""
+    """Euclidean clustering in BEV: labels (N,) of the connected components of the graph linking two
+    points whose separation along the line of sight is within max(tolerance, per_m × range) (at most
+    `max_tolerance`: returns get sparse along the line of sight far away and on grazing surfaces) and
+    across it within max(tolerance, across_per_m × range). The points are first reduced to the occupied
+    cells of a `cell`-sized grid (a cell's points share its label)."""
     if len(xy) == 0:
         return np.zeros(0, dtype=np.int64)
     keys = np.floor(xy / cell).astype(np.int64)
@@ -107,38 +114,42 @@ def cluster(
     top = max(tolerance, max_tolerance or tolerance)
     pairs = cKDTree(centres).query_pairs(top, output_type="ndarray")
     if len(pairs) and top > tolerance:
+        i, j = pairs[:, 0], pairs[:, 1]
         rng = np.hypot(centres[:, 0], centres[:, 1])
-        limit = np.clip(per_m * np.minimum(rng[pairs[:, 0]], rng[pairs[:, 1]]), tolerance, top)
-        gap = np.linalg.norm(centres[pairs[:, 0]] - centres[pairs[:, 1]], axis=1)
-        pairs = pairs[gap <= limit]
+        near = np.minimum(rng[i], rng[j])
+        sight = (centres[i] + centres[j]) / 2
+        sight /= np.maximum(np.linalg.norm(sight, axis=1, keepdims=True), 1e-9)
+        delta = centres[i] - centres[j]
+        along = np.abs(np.einsum("ij,ij->i", delta, sight))
+        across = np.abs(delta[:, 0] * sight[:, 1] - delta[:, 1] * sight[:, 0])
+        limit_along = np.clip(per_m * near, tolerance, top)
+        limit_across = np.clip(across_per_m * near, tolerance, top)
+        pairs = pairs[(along / limit_along) ** 2 + (across / limit_across) ** 2 <= 1.0]
     n = len(centres)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
     return labels[inverse.reshape(-1)]
 
 
-def min_area_rectangle(xy: np.ndarray) -> tuple[np.ndarray, float, float, float]:
-    """(centre (2,), extent along the axis, extent across it, axis angle) of the smallest rectangle."""
-    try:
-        hull = xy[ConvexHull(xy).vertices] if len(xy) >= 3 else xy
-    except QhullError:  # collinear or duplicate points
-        hull = xy
-    best: tuple[float, np.ndarray, float, float, float] | None = None
-    edges = np.diff(np.vstack([hull, hull[:1]]), axis=0)
-    angles = np.unique(np.mod(np.arctan2(edges[:, 1], edges[:, 0]), math.pi / 2))
-    if len(angles) == 0:
-        angles = np.array([0.0])
-    for a in angles:
-        c, s = math.cos(a), math.sin(a)
-        u = hull @ np.array([c, s])
-        v = hull @ np.array([-s, c])
-        area = (u.max() - u.min()) * (v.max() - v.min())
-        if best is None or area < best[0]:
-            centre_uv = np.array([(u.max() + u.min()) / 2, (v.max() + v.min()) / 2])
-            centre = np.array([c * centre_uv[0] - s * centre_uv[1], s * centre_uv[0] + c * centre_uv[1]])
-            best = (area, centre, u.max() - u.min(), v.max() - v.min(), float(a))
-    assert best is not None
-    return best[1], best[2], best[3], best[4]
+def l_shape_rectangle(xy: np.ndarray, step_deg: float = 1.0) -> tuple[np.ndarray, float, float, float]:
+    """(centre (2,), extent along the axis, extent across it, axis angle) of the rectangle that fits the
+    points best by the closeness criterion of L-shape fitting (Zhang et al., 2017): over axis angles in
+    [0°, 90°), the sum over points of 1 / (distance to the nearest rectangle edge)."""
+    angles = np.radians(np.arange(0.0, 90.0, step_deg))
+    e1 = np.stack([np.cos(angles), np.sin(angles)])  # (2, A)
+    e2 = np.stack([-np.sin(angles), np.cos(angles)])
+    c1 = xy @ e1  # (N, A)
+    c2 = xy @ e2
+    d1 = np.minimum(c1.max(axis=0) - c1, c1 - c1.min(axis=0))
+    d2 = np.minimum(c2.max(axis=0) - c2, c2 - c2.min(axis=0))
+    closeness = (1.0 / np.maximum(np.minimum(d1, d2), 0.05)).sum(axis=0)
+    k = int(np.argmax(closeness))
+    a = float(angles[k])
+    u0, u1 = c1[:, k].min(), c1[:, k].max()
+    v0, v1 = c2[:, k].min(), c2[:, k].max()
+    cu, cv = (u0 + u1) / 2, (v0 + v1) / 2
+    c, s = math.cos(a), math.sin(a)
+    return np.array([c * cu - s * cv, s * cu + c * cv]), float(u1 - u0), float(v1 - v0), a
 
 
 def classify(length: float, width: float, height: float) -> str:
@@ -163,7 +174,7 @@ def _complete(centre: np.ndarray, extent: float, axis: np.ndarray, prior: float)
 def fit_box(points: np.ndarray, ground: np.ndarray) -> Box:
     """An oriented box around a cluster (sensor frame), completed to its class's prior size."""
     xy = points[:, :2]
-    centre, du, dv, angle = min_area_rectangle(xy)
+    centre, du, dv, angle = l_shape_rectangle(xy)
     axis_u = np.array([math.cos(angle), math.sin(angle)])
     axis_v = np.array([-axis_u[1], axis_u[0]])
     a, b, c, d = ground
@@ -198,6 +209,8 @@ def fit_box(points: np.ndarray, ground: np.ndarray) -> Box:
         label=label,
         score=min(1.0, len(points) / 50.0),
         points=len(points),
+        cluster_x=float(xy[:, 0].mean()),
+        cluster_y=float(xy[:, 1].mean()),
     )
 
 
@@ -214,9 +227,13 @@ def detect(xyz: np.ndarray, params: DetectorParams | None = None) -> list[Box]:
     height = xyz @ ground[:3] + ground[3]
     objects = xyz[(height > params.ground_threshold) & (height < params.max_height)]
     labels = cluster(
-        objects[:, :2], params.cluster_tolerance, params.cluster_tolerance_per_m, params.max_cluster_tolerance
+        objects[:, :2],
+        params.cluster_tolerance,
+        params.cluster_tolerance_per_m,
+        params.max_cluster_tolerance,
+        across_per_m=params.cluster_tolerance_across_per_m,
     )
-    boxes = []
+    candidates = []
     for k in np.unique(labels):
         pts = objects[labels == k]
         if len(pts) < params.min_points:
@@ -224,5 +241,36 @@ def detect(xyz: np.ndarray, params: DetectorParams | None = None) -> list[Box]:
         box = fit_box(pts, ground)
         if box.label == "unknown" and not params.keep_unknown:
             continue
-        boxes.append(box)
+        candidates.append(box)
+    # a fragment of a vehicle (its roof beyond an unsampled stretch, a sparse side) lies within the
+    # vehicle's completed box: keep the box with the most points
+    boxes: list[Box] = []
+    for box in sorted(candidates, key=lambda b: -b.points):
+        owner = next(
+            (
+                k
+                for k, kept in enumerate(boxes)
+                if kept.label in ("car", "truck")
+                and _inside(box.cluster_x, box.cluster_y, kept, params.merge_margin)
+            ),
+            None,
+        )
+        if owner is None:
+            boxes.append(box)
+            continue
+        kept = boxes[owner]  # the fragment's points belong to it: it may be taller than its own points said
+        if box.height > kept.height:
+            bottom = kept.z - kept.height / 2
+            boxes[owner] = replace(
+                kept, z=bottom + box.height / 2, height=box.height, points=kept.points + box.points
+            )
+        else:
+            boxes[owner] = replace(kept, points=kept.points + box.points)
     return boxes
+
+
+def _inside(x: float, y: float, box: Box, margin: float) -> bool:
+    c, s = math.cos(box.yaw), math.sin(box.yaw)
+    u = (x - box.x) * c + (y - box.y) * s
+    v = -(x - box.x) * s + (y - box.y) * c
+    return abs(u) <= box.length / 2 + margin and abs(v) <= box.width / 2 + margin
