@@ -104,7 +104,12 @@ class SpeedRuntime(ActionRuntime):
     def _continuous(self) -> bool:
         return isinstance(self.action.target, m.RelativeTargetSpeed) and self.action.target.continuous
 
-    def _set(self, speed: float) -> None:
+    def _set(self, speed: float, dt: float | None = None) -> None:
+        if dt:
+            # the vehicle's performance bounds the acceleration (as esmini does)
+            perf = self.actor.entity.performance
+            v = self.actor.speed
+            speed = min(max(speed, v - perf.max_deceleration * dt), v + perf.max_acceleration * dt)
         self.actor.speed = speed
 
     def step(self, dt: float) -> None:
@@ -118,9 +123,9 @@ class SpeedRuntime(ActionRuntime):
         dyn = self.action.dynamics
         progress = self.elapsed / max(self.duration, 1e-9)
         target = self.target()
-        self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress))
+        self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress), dt)
         if progress >= 1.0 - 1e-9:
-            self._set(target)
+            self._set(target, dt)
             self.done = not self._continuous
 
 
@@ -729,9 +734,10 @@ class ScenarioEngine:
             gap = self.relative_distance(
                 body, other, "longitudinal", c.freespace, signed=True, system=c.coordinate_system
             )
-            if body.speed <= 1e-6:
-                return compare(c.rule, math.inf if gap > 0 else -math.inf, c.value)
-            # signed: an entity behind has a negative headway (as esmini measures it)
+            if gap <= 0:  # no headway to an entity behind: the condition does not hold (as in esmini)
+                return False
+            if body.speed <= 1e-6:  # standing still: infinite headway
+                return compare(c.rule, math.inf, c.value)
             return compare(c.rule, gap / body.speed, c.value)
         if isinstance(c, m.TimeToCollisionCondition) and c.position is not None:
             x, y, _, _ = self.resolve_position(c.position)
