@@ -53,6 +53,11 @@ class FollowTrajectoryRuntime(Runtime):
 
     def start(self) -> None:
         a = self.actor
+        end = a.extra.get("trajectory_end_time")
+        if end is not None and self.engine.time - end <= 2 * self.engine.dt + 1e-9:
+            # chained trajectories: the next starts with the heading the previous one ended with (lane
+            # following in between would have turned the entity back to the road's heading)
+            a.heading = a.extra["trajectory_end_heading"]
         self.path = paths.sample(
             self.action.trajectory, self.engine.resolve_position, (a.x, a.y, a.z, a.heading)
         )
@@ -103,6 +108,8 @@ class FollowTrajectoryRuntime(Runtime):
 
     def finish(self) -> None:
         a = self.actor
+        a.extra["trajectory_end_time"] = self.engine.time + self.engine.dt
+        a.extra["trajectory_end_heading"] = a.heading
         if a.mover is self:
             a.mover = None
         self.engine.track_road(a, lock_lane=True)
