@@ -252,7 +252,9 @@ class LongitudinalDistanceRuntime(Runtime):
     def step(self, dt: float) -> None:
         a = self.actor
         ref = self.engine.body(self.action.entity)
-        gap = self.engine.relative_distance(a, ref, "longitudinal", self.action.freespace, signed=True)
+        gap = self.engine.relative_distance(
+            a, ref, "longitudinal", self.action.freespace, signed=True, system=self.action.coordinate_system
+        )
         ahead = self.action.displacement != "leadingReferencedEntity"
         if self.action.displacement == "any":
             ahead = gap >= 0

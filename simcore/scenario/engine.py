@@ -815,11 +815,14 @@ class ScenarioEngine:
             and a.road_id is not None
             and a.road_id == b.road_id
         ):
-            # along the road, positive in a's travel direction
-            ds = (b.s + b.entity.box.center_x * b.direction) - (a.s + a.entity.box.center_x * a.direction)
-            ds *= a.direction
+            # along the road between reference points, positive in a's travel direction
+            ds = (b.s - a.s) * a.direction
             if freespace:
-                extent = (a.entity.box.length + b.entity.box.length) / 2
+                ba, bb = a.entity.box, b.entity.box
+                if ds >= 0:  # b ahead: a's front to b's rear
+                    extent = (ba.center_x + ba.length / 2) - (bb.center_x - bb.length / 2)
+                else:
+                    extent = (bb.center_x + bb.length / 2) - (ba.center_x - ba.length / 2)
                 ds = math.copysign(max(abs(ds) - extent, 0.0), ds)
             return ds if signed else abs(ds)
         sa, sb = self.state_of(a), self.state_of(b)
@@ -953,6 +956,10 @@ class ScenarioEngine:
                 self._release(previous)
                 self._set(previous, Transition.STOP, State.COMPLETE)
             self.running[key] = node
+            # an Init action still running in this domain (a distance kept from the start) is overridden too
+            self.init_runtimes = [
+                r for r in self.init_runtimes if not (r.actor is body and r.domain == runtime.domain)
+            ]
             runtime.start()
             runtimes.append(runtime)
         node.runtime = runtimes

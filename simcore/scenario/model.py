@@ -307,6 +307,7 @@ class LongitudinalDistanceAction:
     continuous: bool
     displacement: str  # trailingReferencedEntity | leadingReferencedEntity | any
     constraints: DynamicConstraints | None
+    coordinate_system: str = "entity"
     domain = "longitudinal"
 
 

@@ -745,6 +745,7 @@ def _longitudinal_distance(reader: _Reader, action: ET.Element) -> m.Longitudina
         continuous=reader.boolean(action, "continuous", False),
         displacement=reader.attr(action, "displacement", "trailingReferencedEntity"),
         constraints=_constraints(reader, action.find("DynamicConstraints")),
+        coordinate_system=reader.attr(action, "coordinateSystem", "entity"),
     )
 
 
