@@ -243,7 +243,7 @@ class LongitudinalDistanceRuntime(Runtime):
         if self.action.distance is not None:
             gap = self.action.distance
         else:
-            gap = (self.action.time_gap or 0.0) * abs(self.actor.speed)
+            gap = (self.action.time_gap or 0.0) * abs(ref.speed)
         return gap
 
     def start(self) -> None:
@@ -272,7 +272,7 @@ class LongitudinalDistanceRuntime(Runtime):
             return
         # a critically damped follower limited by the constraints
         closing = ref.speed - a.speed
-        accel = 0.25 * error + 1.0 * closing
+        accel = 4.0 * error + 4.0 * closing  # a spring (k = 4) with critical damping (2√k)
         if c.max_acceleration is not None:
             accel = min(accel, c.max_acceleration)
         if c.max_deceleration is not None:
