@@ -92,13 +92,14 @@ class Lidar:
         dirs[..., 1] = np.sin(az)[:, None] * ce[None, :]
         dirs[..., 2] = se[None, :]
         self.dirs = dirs.reshape(-1, 3)  # sensor frame, column-major
+        self._dirs_t = np.ascontiguousarray(self.dirs.T, dtype=np.float32)  # (3, M): row operations are fast
         self.ring = np.tile(np.arange(self.channels, dtype=np.uint16), self.columns)
         self.column_time = -self.period + (np.arange(self.columns) + 0.5) / self.columns * self.period
         m = config.mount
         self.mount_rot = rotation(math.radians(m.yaw), math.radians(m.pitch), math.radians(m.roll))
         self.mount_pos = np.array([m.x, m.y, m.z])
         self.rng = np.random.default_rng(seed)
-        self._rays = np.empty((len(self.dirs), 6), np.float32)
+        self._rays_t = np.empty((6, len(self.dirs)), np.float32)
 
     @property
     def ray_count(self) -> int:
@@ -148,17 +149,24 @@ class Lidar:
             )
             col_rot = rots @ self.mount_rot
             col_pos = base + rots @ self.mount_pos
-            d = self.dirs.reshape(self.columns, self.channels, 3)
-            dirs_world = np.einsum("cij,ckj->cki", col_rot, d).reshape(-1, 3)
+            d3 = self.dirs.reshape(self.columns, self.channels, 3)
+            dirs_world = np.einsum("cij,ckj->cki", col_rot, d3).reshape(-1, 3)
             origins = np.repeat(col_pos, self.channels, axis=0)
+        rays_t = self._rays_t
+        if distort:
+            rays_t[:3] = origins.T
+            rays_t[3:] = dirs_world.T
         else:
-            dirs_world = self.dirs @ rot.T
-            origins = np.broadcast_to(pos, dirs_world.shape)
-        rays = self._rays
-        rays[:, :3] = origins
-        rays[:, 3:] = dirs_world
-        t, normals, classes = road.cast(rays)
-        t = t.astype(np.float64)
+            # the 3x3 rotation as row operations on (3, M) float32: no BLAS call, no strided casts
+            d = self._dirs_t
+            r32 = rot.astype(np.float32)
+            for k in range(3):
+                rays_t[k] = pos[k]
+                np.multiply(d[0], r32[k, 0], out=rays_t[3 + k])
+                rays_t[3 + k] += d[1] * r32[k, 1]
+                rays_t[3 + k] += d[2] * r32[k, 2]
+            dirs_world = rays_t[3:].T
+        t, normals, classes = road.cast(np.ascontiguousarray(rays_t.T))
         object_id = np.zeros(n_rays, np.uint32)
         nbox = len(boxes.names)
         unoccluded = np.zeros(nbox, np.int64)
@@ -200,11 +208,13 @@ class Lidar:
         valid = (t >= cfg.range_min) & (t <= cfg.range_max)
         visible = np.bincount(object_id[valid], minlength=nbox + 1)[1 : nbox + 1]
         if cfg.dropout > 0.0:
-            valid &= self.rng.random(n_rays) >= cfg.dropout
+            valid &= self.rng.random(n_rays, dtype=np.float32) >= cfg.dropout
         idx = np.flatnonzero(valid)
         rng_t = t[idx]
         if cfg.range_noise > 0.0:
-            rng_t = np.maximum(rng_t + self.rng.normal(0.0, cfg.range_noise, len(idx)), 0.0)
+            noise = self.rng.standard_normal(len(idx), dtype=np.float32)
+            noise *= cfg.range_noise
+            rng_t = np.maximum(rng_t + noise, 0.0)
         dw = dirs_world[idx]
         cos_inc = np.abs(np.einsum("ij,ij->i", dw, normals[idx]))
         cls = classes[idx]
@@ -213,12 +223,14 @@ class Lidar:
             world = origins[idx] + dw * rng_t[:, None]
             local = (world - pos) @ rot
             points["time"] = np.repeat(self.column_time, self.channels)[idx]
+            points["x"] = local[:, 0]
+            points["y"] = local[:, 1]
+            points["z"] = local[:, 2]
         else:
-            local = self.dirs[idx] * rng_t[:, None]
             points["time"] = 0.0
-        points["x"] = local[:, 0]
-        points["y"] = local[:, 1]
-        points["z"] = local[:, 2]
+            points["x"] = self._dirs_t[0, idx] * rng_t
+            points["y"] = self._dirs_t[1, idx] * rng_t
+            points["z"] = self._dirs_t[2, idx] * rng_t
         points["intensity"] = road.reflectivity[cls] * cos_inc
         points["object_id"] = object_id[idx]
         points["ring"] = self.ring[idx]
