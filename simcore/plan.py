@@ -47,7 +47,13 @@ class Plan(Sequence[RunPoint]):
         self.matrix: tuple[tuple[str, tuple[ParameterValue, ...]], ...] = tuple(
             (name, tuple(values)) for name, values in spec.sweep.matrix.items()
         )
-        self.permutations = prod(len(values) for _, values in self.matrix)
+        self.distribution = None
+        if spec.sweep.distribution:
+            from simcore.scenario.distribution import load_distribution
+
+            self.distribution = load_distribution(spec.sweep.distribution, seed=spec.simulation.seed)
+        self.matrix_permutations = prod(len(values) for _, values in self.matrix)
+        self.permutations = self.matrix_permutations * (len(self.distribution) if self.distribution else 1)
         self.repetitions = spec.sweep.repetitions
         self.per_scenario = self.permutations * self.repetitions
 
@@ -63,7 +69,12 @@ class Plan(Sequence[RunPoint]):
         scenario_index, k = divmod(index, self.per_scenario)
         perm, repetition = divmod(k, self.repetitions)
         scenario = self.spec.scenarios[scenario_index]
-        values = permutation(self.matrix, perm)
+        if self.distribution is not None:
+            # the distribution's permutations run fastest, after the matrix keys
+            matrix_perm, dist_perm = divmod(perm, len(self.distribution))
+            values = {**permutation(self.matrix, matrix_perm), **self.distribution[dist_perm]}
+        else:
+            values = permutation(self.matrix, perm)
         parameters: dict[str, ParameterValue] = {**self.spec.parameters, **scenario.parameters, **values}
         return RunPoint(
             index=index,

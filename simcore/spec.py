@@ -148,6 +148,16 @@ class Sweep(Model):
         le=100_000,
         description="Runs of each permutation with seeds `simulation.seed + k`, k = 0…repetitions-1. Default 1.",
     )
+    distribution: str | None = Field(
+        None,
+        max_length=4096,
+        description=(
+            "An OpenSCENARIO ParameterValueDistribution file (.xosc; absolute, or relative to the working "
+            "directory): each of its permutations (deterministic sets and ranges, or stochastic draws from "
+            "its randomSeed, else simulation.seed, and the permutation number) is crossed with the matrix, "
+            "after its keys. Its ScenarioFile is not used: the scenarios are spec.scenarios. Default: none."
+        ),
+    )
 
     @field_validator("matrix")
     @classmethod
