@@ -386,7 +386,9 @@ def conformance(
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Worker processes.")] = 1,
     include: Annotated[
         list[str] | None,
-        typer.Option("--include", "-k", help="Only files whose relative path matches this glob (repeatable)."),
+        typer.Option(
+            "--include", "-k", help="Only files whose relative path matches this glob (repeatable)."
+        ),
     ] = None,
 ) -> None:
     """Run every scenario under DIRECTORY headless (0.05 s steps) and compare with reference trajectories."""

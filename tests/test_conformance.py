@@ -96,9 +96,9 @@ def test_command_prints_totals_and_writes_csv_and_json(suite: tuple[Path, Path],
     scenarios, reference = suite
     write_reference(reference / "set__straight.csv.gz", shift=0.0, end=2.05)
     out = tmp_path / "out" / "table.csv"
+    options = ["--reference", str(reference), "--out", str(out)]
     proc = subprocess.run(
-        [sys.executable, "-m", "simcore.cli", "conformance", str(scenarios), "--reference", str(reference)]
-        + ["--out", str(out)],
+        [sys.executable, "-m", "simcore.cli", "conformance", str(scenarios), *options],
         capture_output=True,
         text=True,
         check=False,

@@ -225,7 +225,12 @@ def test_unknown_parameter_override_is_bad_input(tmp_path: Path) -> None:
 
 def test_unsupported_action_names_the_element(tmp_path: Path) -> None:
     path = scenario(
-        tmp_path, event("X", "<PrivateAction><RoutingAction><Fly/></RoutingAction></PrivateAction>", sim_time("greaterThan", 0.0))
+        tmp_path,
+        event(
+            "X",
+            "<PrivateAction><RoutingAction><Fly/></RoutingAction></PrivateAction>",
+            sim_time("greaterThan", 0.0),
+        ),
     )
     with pytest.raises(BadInput, match="RoutingAction/Fly is not supported") as info:
         load_scenario(path)

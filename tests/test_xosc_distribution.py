@@ -70,7 +70,7 @@ def test_bad_distribution_names_the_file(tmp_path: Path) -> None:
     with pytest.raises(BadInput, match="Deterministic> or <Stochastic"):
         load_distribution(write(tmp_path, ""))
     bad = DETERMINISTIC.replace('stepWidth="0.5"', 'stepWidth="-1"')
-    with pytest.raises(BadInput, match="dist.xosc"):
+    with pytest.raises(BadInput, match=r"dist\.xosc"):
         load_distribution(write(tmp_path, bad))
 
 

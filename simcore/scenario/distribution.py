@@ -245,26 +245,26 @@ def load_distribution(path: str | Path, seed: int = 0) -> ParameterDistribution:
             if body is None:
                 raise BadInput("empty StochasticDistribution", file=str(path), field=d.tag)
             rng_el = body.find("Range")
-            low = num(rng_el, "lowerLimit") if rng_el is not None else None
-            high = num(rng_el, "upperLimit") if rng_el is not None else None
+            lower: float | None = num(rng_el, "lowerLimit") if rng_el is not None else None
+            upper: float | None = num(rng_el, "upperLimit") if rng_el is not None else None
             if body.tag == "UniformDistribution":
-                if low is None or high is None:
+                if lower is None or upper is None:
                     raise BadInput("UniformDistribution needs a Range", file=str(path), field=body.tag)
-                items.append(_Stochastic(name, "uniform", (), low, high))
+                items.append(_Stochastic(name, "uniform", (), lower, upper))
             elif body.tag == "NormalDistribution":
                 items.append(
                     _Stochastic(
-                        name, "normal", (num(body, "expectedValue"), num(body, "variance")), low, high
+                        name, "normal", (num(body, "expectedValue"), num(body, "variance")), lower, upper
                     )
                 )
             elif body.tag == "LogNormalDistribution":
                 items.append(
                     _Stochastic(
-                        name, "lognormal", (num(body, "expectedValue"), num(body, "variance")), low, high
+                        name, "lognormal", (num(body, "expectedValue"), num(body, "variance")), lower, upper
                     )
                 )
             elif body.tag == "PoissonDistribution":
-                items.append(_Stochastic(name, "poisson", (num(body, "expectedValue"),), low, high))
+                items.append(_Stochastic(name, "poisson", (num(body, "expectedValue"),), lower, upper))
             elif body.tag == "Histogram":
                 bins = []
                 for b in body.findall("Bin"):

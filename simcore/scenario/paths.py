@@ -69,7 +69,11 @@ class SampledPath:
 
 
 def _from_points(points: list[tuple[float, float, float]], times: list[float] | None) -> SampledPath:
-    xs, ys, zs, ss, hs = [], [], [], [], []
+    xs: list[float] = []
+    ys: list[float] = []
+    zs: list[float] = []
+    ss: list[float] = []
+    hs: list[float] = []
     kept_times: list[float] = []
     total = 0.0
     for i, (x, y, z) in enumerate(points):
@@ -112,7 +116,11 @@ def polyline(shape: m.Polyline, resolve: Resolver) -> tuple[SampledPath, float |
 def clothoid(
     shape: m.Clothoid, resolve: Resolver, start_pose: tuple[float, float, float, float]
 ) -> SampledPath:
-    xs, ys, zs, hs, ss = [], [], [], [], []
+    xs: list[float] = []
+    ys: list[float] = []
+    zs: list[float] = []
+    hs: list[float] = []
+    ss: list[float] = []
     times: list[float] = []
     timed = all(seg.time_start is not None and seg.time_end is not None for seg in shape.segments)
     x, y, z, h = start_pose

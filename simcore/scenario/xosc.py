@@ -10,7 +10,7 @@ import math
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 import defusedxml.ElementTree as SafeET
 from defusedxml import DefusedXmlException
@@ -480,8 +480,8 @@ def _init(reader: _Reader, init: ET.Element) -> list[m.InitAction]:
                 m.InitAction(entity=entity, action=reader.within(private, entity, _private, reader, action))
             )
     for other in actions.findall("GlobalAction"):
-        action = reader.within(other, None, _global, reader, other)
-        out.append(m.InitAction(entity="", action=action))
+        g = reader.within(other, None, _global, reader, other)
+        out.append(m.InitAction(entity="", action=g))
     for other in actions.findall("UserDefinedAction"):
         reader.warn("UserDefinedAction is ignored", other)
     return out
@@ -655,6 +655,9 @@ def _controller_action(reader: _Reader, inner: ET.Element) -> m.PrivateAction:
     return m.NoMotionAction("ControllerAction")
 
 
+_MODIFY_RULES: dict[str, Literal["add", "multiply"]] = {"AddValue": "add", "MultiplyByValue": "multiply"}
+
+
 def _global(reader: _Reader, element: ET.Element) -> m.GlobalAction:
     inner = reader.only_child(element)
     tag = inner.tag
@@ -670,14 +673,14 @@ def _global(reader: _Reader, element: ET.Element) -> m.GlobalAction:
             )
         if body.tag == "ModifyAction":
             rule = reader.only_child(reader.child(body, "Rule"))
-            kinds = {"AddValue": "add", "MultiplyByValue": "multiply"}
+            kinds = _MODIFY_RULES
             if rule.tag not in kinds:
                 raise reader.fail(f"unknown modify rule <{rule.tag}>", rule)
             return m.ParameterModifyAction(
                 name=name.lstrip("$"),
                 rule=kinds[rule.tag],
                 value=reader.num(rule, "value"),
-                variable=variable,  # type: ignore[arg-type]
+                variable=variable,
             )
         raise reader.fail(f"unknown {tag} <{body.tag}>", body)
     if tag in ("ParameterSetAction", "VariableSetAction"):
@@ -690,14 +693,14 @@ def _global(reader: _Reader, element: ET.Element) -> m.GlobalAction:
         variable = tag == "VariableModifyAction"
         name = (inner.get("variableRef") if variable else inner.get("parameterRef")) or ""
         rule = reader.only_child(reader.child(inner, "Rule"))
-        kinds = {"AddValue": "add", "MultiplyByValue": "multiply"}
+        kinds = _MODIFY_RULES
         if rule.tag not in kinds:
             raise reader.fail(f"unknown modify rule <{rule.tag}>", rule)
         return m.ParameterModifyAction(
             name=name.lstrip("$"),
             rule=kinds[rule.tag],
             value=reader.num(rule, "value"),
-            variable=variable,  # type: ignore[arg-type]
+            variable=variable,
         )
     if tag == "EntityAction":
         entity = reader.attr(inner, "entityRef")

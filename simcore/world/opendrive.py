@@ -1052,9 +1052,7 @@ class OpenDrive:
                     return conn.connecting_road, to, 1 if conn.contact_point == "start" else -1
         return None
 
-    def connections(
-        self, road_id: str, lane_id: int | None, s_direction: int
-    ) -> list[tuple[str, int, int]]:
+    def connections(self, road_id: str, lane_id: int | None, s_direction: int) -> list[tuple[str, int, int]]:
         """Every way on from the end of ``road_id`` in ``s_direction`` (all junction connections, not only the
         first): ``(road_id, lane_id, new_s_direction)``. ``lane_id`` None: from any lane of the road."""
         road = self.road(road_id)
