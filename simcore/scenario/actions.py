@@ -373,6 +373,16 @@ class SynchronizeRuntime(Runtime):
             a.speed = max(d_me / remaining, 0.0)
             return
         v0, T, d = a.speed, remaining, d_me
+        # a steady state: the final speed is reached this far (or this long) before the target
+        if self.action.steady_distance is not None and final > 1e-6:
+            d -= self.action.steady_distance
+            T -= self.action.steady_distance / final
+        elif self.action.steady_time is not None:
+            d -= final * self.action.steady_time
+            T -= self.action.steady_time
+        if T <= dt or d <= 0:
+            a.speed = final
+            return
         c = 6.0 * ((final - v0) * T / 2.0 - d + v0 * T) / T**3
         b = (final - v0 - c * T * T) / T
         a.speed = max(v0 + b * dt + c * dt * dt, 0.0)

@@ -370,6 +370,8 @@ class SynchronizeAction:
     tolerance: float = 0.0
     final_speed: float | None = None  # AbsoluteSpeed
     final_relative: tuple[str, float, str] | None = None  # (entity, value, delta|factor) steady state
+    steady_distance: float | None = None  # final speed held over this distance before the target
+    steady_time: float | None = None  # … or for this time
     domain = "longitudinal"
 
 

@@ -128,6 +128,9 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
                 body.end_of_road_since = now
             break
         road_id, lane_id, direction = nxt
+        # the offset is kept to the same side of the travel direction (t flips with the s direction)
+        body.offset *= body.direction * direction
+        body.lateral_velocity *= body.direction * direction
         body.road_id, body.lane_id, body.direction = road_id, lane_id, direction
         body.s = 0.0 if direction > 0 else road.road_length(road_id)
         remaining = overshoot * scale

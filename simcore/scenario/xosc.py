@@ -792,9 +792,14 @@ def _lane_offset(reader: _Reader, action: ET.Element) -> m.LaneOffsetAction:
 def _synchronize(reader: _Reader, action: ET.Element) -> m.SynchronizeAction:
     final_speed = None
     final_relative = None
+    steady_distance = steady_time = None
     fs = action.find("FinalSpeed")
     if fs is not None:
         body = reader.only_child(fs)
+        sd = body.find("TargetDistanceSteadyState")
+        st = body.find("TargetTimeSteadyState")
+        steady_distance = reader.num(sd, "distance") if sd is not None else None
+        steady_time = reader.num(st, "time") if st is not None else None
         if body.tag == "AbsoluteSpeed":
             final_speed = reader.num(body, "value")
         elif body.tag == "RelativeSpeedToMaster":
@@ -813,6 +818,8 @@ def _synchronize(reader: _Reader, action: ET.Element) -> m.SynchronizeAction:
         tolerance=reader.num(action, "targetTolerance", 0.0),
         final_speed=final_speed,
         final_relative=final_relative,
+        steady_distance=steady_distance,
+        steady_time=steady_time,
     )
 
 
