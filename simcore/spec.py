@@ -192,7 +192,9 @@ class Simulation(Model):
     )
 
 
-_CRITERION = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_.\-]*)\s*(>=|<=|==|!=|>|<)\s*(\S+)\s*$")
+_CRITERION = re.compile(
+    r"^\s*([A-Za-z_][A-Za-z0-9_.\-]*)\s*(>=|<=|==|!=|>|<)\s*(\S+)(?:\s+within\s+(\S+?)\s*m)?\s*$"
+)
 
 
 def _criterion_from_string(value: Any) -> Any:
@@ -203,7 +205,18 @@ def _criterion_from_string(value: Any) -> Any:
                 f"{value!r} is not a criterion: write 'METRIC OP VALUE', e.g. 'minDistance >= 2.0' "
                 "(OP is one of >=, >, <=, <, ==, !=)"
             )
-        metric, op, raw = match.groups()
+        metric, op, raw, within = match.groups()
+        if within is not None:
+            # `detection.recall >= 0.9 within 50 m` is the metric over objects closer than 50 m
+            if not metric.startswith("detection."):
+                raise ValueError(f"{value!r}: 'within N m' applies to detection.* metrics only")
+            try:
+                reach = float(within)
+            except ValueError as exc:
+                raise ValueError(f"{value!r}: {within!r} in 'within N m' is not a number") from exc
+            if not 0 < reach <= 1000:
+                raise ValueError(f"{value!r}: the distance in 'within N m' must be in (0, 1000]")
+            metric = f"{metric}.0-{int(reach) if reach.is_integer() else reach:g}m"
         number: float
         if raw.lower() in ("true", "false"):
             number = 1.0 if raw.lower() == "true" else 0.0
@@ -225,7 +238,9 @@ class CriterionModel(Model):
     metric: str = Field(
         description=(
             "Metric name: collision, minDistance, minTimeHeadway, minTimeToCollision, maxDeceleration, "
-            "maxSpeed, stopTriggered, simSeconds (see README)."
+            "maxSpeed, stopTriggered, simSeconds, detection.recall, … (see README). As a string, "
+            "`detection.recall >= 0.9 within 50 m` is the metric `detection.recall.0-50m` (objects closer "
+            "than 50 m)."
         ),
         min_length=1,
         max_length=200,

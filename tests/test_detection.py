@@ -116,3 +116,40 @@ def test_undefined_metrics_are_absent() -> None:
     metrics = ev._result_from_frames()
     assert metrics["detection.frames"] == 1
     assert "detection.recall" not in metrics and "detection.precision" not in metrics
+
+
+def test_within_ranges_and_per_class_bands() -> None:
+    from pydantic import TypeAdapter
+
+    from simcore.evaluation.detection import ranges_of
+    from simcore.spec import Criterion
+
+    criterion = TypeAdapter(Criterion).validate_python("detection.recall >= 0.9 within 50 m")
+    assert (
+        criterion.metric == "detection.recall.0-50m"
+        and criterion.name == "detection.recall >= 0.9 within 50 m"
+    )
+    assert ranges_of(
+        [criterion.metric, "detection.precision.car.0-12.5m", "minDistance", "detection.recall"]
+    ) == [12.5, 50.0]
+    ev = DetectionEvaluator(CONFIG.model_copy(update={"bands": [0.0, 30.0]}), ranges=[50.0])
+    ev.add_frame(
+        0.0,
+        [
+            box(10, 0, name="a"),
+            box(40, 0, name="b"),
+            box(70, 0, name="c"),
+            box(20, 5, 0.6, 0.6, label="pedestrian", name="ped"),
+        ],
+        {"a": 50, "b": 50, "c": 50, "ped": 50},
+        [box(10, 0), box(70, 0), box(45, 10)],
+    )
+    m = ev._result_from_frames()
+    # within 50 m: a found, b and the pedestrian missed; the false positive at 46 m counts
+    assert m["detection.recall.0-50m"] == pytest.approx(1 / 3)
+    assert m["detection.precision.0-50m"] == pytest.approx(1 / 2)
+    assert m["detection.recall.car.0-50m"] == pytest.approx(1 / 2)
+    assert m["detection.recall.pedestrian.0-30m"] == 0.0
+    assert m["detection.recall"] == pytest.approx(2 / 4)
+    with pytest.raises(ValueError, match="detection"):
+        TypeAdapter(Criterion).validate_python("minDistance >= 2 within 50 m")

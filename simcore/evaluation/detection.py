@@ -15,15 +15,19 @@ sensor frame) with `…/objects/info` (lidar points per object); the detections 
   `.recall` (TP/(TP+FN)), `.f1`, `.meanIou` and `.meanCenterError` (m, 3D, over true positives),
   `.classAccuracy` (true positives whose detected class is the object's); per distance band
   `detection.<metric>.<lo>-<hi>m` (objects by their distance, false positives by the detection's) and
-  per class `detection.recall.<class>` (object class), `detection.precision.<class>` (detected class).
+  per class `detection.recall.<class>` (object class), `detection.precision.<class>` (detected class);
+  the class metrics per band too (`detection.recall.car.0-30m`). Ranges from 0 that criteria name
+  (`detection.recall >= 0.9 within 50 m`, i.e. `detection.recall.0-50m`) are computed as well
+  (`ranges_of`).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+import re
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -225,8 +229,11 @@ def _stamp_ns(msg: Any) -> int:
 class DetectionEvaluator:
     """Collects ground truth and detections from the bus and scores them at the end (`result()`)."""
 
-    def __init__(self, config: DetectionEvaluation) -> None:
+    def __init__(self, config: DetectionEvaluation, ranges: Sequence[float] = ()) -> None:
+        """`ranges`: extra distances r for metrics over objects closer than r (`detection.recall.0-50m`),
+        e.g. those the criteria name (`detection.recall >= 0.9 within 50 m`)."""
         self.config = config
+        self.ranges = sorted(set(ranges))
         from simcore.transport.messages import ros_name
 
         entity, _, sensor = config.sensor.partition("/")
@@ -288,55 +295,82 @@ class DetectionEvaluator:
         """The metrics over the frames added so far (`add_frame`)."""
         cfg = self.config
         edges = [*cfg.bands, cfg.max_range]
-        bands = [(lo, hi) for lo, hi in itertools.pairwise(edges) if lo < cfg.max_range]
+        out: dict[str, float] = {"detection.frames": float(len(self.frames))}
+        out.update(self._metrics(lambda _: True, ""))
+        for lo, hi in itertools.pairwise(edges):
+            if lo >= cfg.max_range:
+                continue
+            last = hi == cfg.max_range
 
-        def band_of(distance: float) -> str | None:
-            for lo, hi in bands:
-                if lo <= distance < hi or (hi == cfg.max_range and distance == hi):
-                    return f".{_edge(lo)}-{_edge(hi)}m"
-            return None
+            def in_band(distance: float, lo: float = lo, hi: float = hi, last: bool = last) -> bool:
+                return lo <= distance < hi or (last and distance == hi)
 
+            out.update(self._metrics(in_band, f".{_edge(lo)}-{_edge(hi)}m"))
+        for reach in self.ranges:
+
+            def within(distance: float, reach: float = reach) -> bool:
+                return distance < reach
+
+            out.update(self._metrics(within, f".0-{_edge(reach)}m"))
+        return out
+
+    def _metrics(self, keep: Callable[[float], bool], suffix: str) -> dict[str, float]:
+        """The metrics over objects (true positives, false negatives: by the object's distance) and false
+        positives (by the detection's distance) that `keep` accepts; names end with `suffix`."""
         total = _Counts()
-        by_band: dict[str, _Counts] = defaultdict(_Counts)
         recall_by_class: dict[str, _Counts] = defaultdict(_Counts)
         precision_by_class: dict[str, _Counts] = defaultdict(_Counts)
         for frame, (objs, dets) in zip(self.frames, self._frame_data, strict=True):
             for oi, di, iou, err in frame.matches:
                 o, d = objs[oi], dets[di]
-                for counts in (total, by_band[band_of(o.distance) or ""]):
-                    counts.tp += 1
-                    counts.iou += iou
-                    counts.center += err
-                    counts.same_class += o.label == d.label
+                if not keep(o.distance):
+                    continue
+                total.tp += 1
+                total.iou += iou
+                total.center += err
+                total.same_class += o.label == d.label
                 recall_by_class[o.label].tp += 1
-                precision_by_class[d.label].tp += 1 if o.label == d.label else 0
-                if o.label != d.label:
+                if o.label == d.label:
+                    precision_by_class[d.label].tp += 1
+                else:
                     precision_by_class[d.label].fp += 1
             for di in frame.false_positives:
                 d = dets[di]
-                total.fp += 1
-                by_band[band_of(d.distance) or ""].fp += 1
-                precision_by_class[d.label].fp += 1
+                if keep(d.distance):
+                    total.fp += 1
+                    precision_by_class[d.label].fp += 1
             for oi in frame.false_negatives:
                 o = objs[oi]
-                total.fn += 1
-                by_band[band_of(o.distance) or ""].fn += 1
-                recall_by_class[o.label].fn += 1
-        out: dict[str, float] = {"detection.frames": float(len(self.frames))}
-        out.update(total.metrics("detection", ""))
+                if keep(o.distance):
+                    total.fn += 1
+                    recall_by_class[o.label].fn += 1
+        out = total.metrics("detection", suffix)
         if total.tp:
             p, r = total.tp / (total.tp + total.fp), total.tp / (total.tp + total.fn)
-            out["detection.f1"] = 2 * p * r / (p + r)
-            out["detection.classAccuracy"] = total.same_class / total.tp
+            out[f"detection.f1{suffix}"] = 2 * p * r / (p + r)
+            out[f"detection.classAccuracy{suffix}"] = total.same_class / total.tp
         elif total.fp or total.fn:
-            out["detection.f1"] = 0.0
-        for lo, hi in bands:
-            suffix = f".{_edge(lo)}-{_edge(hi)}m"
-            out.update(by_band[suffix].metrics("detection", suffix))
+            out[f"detection.f1{suffix}"] = 0.0
         for label, counts in recall_by_class.items():
             if label and counts.tp + counts.fn:
-                out[f"detection.recall.{label}"] = counts.tp / (counts.tp + counts.fn)
+                out[f"detection.recall.{label}{suffix}"] = counts.tp / (counts.tp + counts.fn)
         for label, counts in precision_by_class.items():
             if label and counts.tp + counts.fp:
-                out[f"detection.precision.{label}"] = counts.tp / (counts.tp + counts.fp)
+                out[f"detection.precision.{label}{suffix}"] = counts.tp / (counts.tp + counts.fp)
         return out
+
+
+_RANGE = re.compile(r"^detection\.[A-Za-z0-9_.]*?\.0-([0-9.]+)m$")
+
+
+def ranges_of(metrics: Iterable[str]) -> list[float]:
+    """The distances r of the metric names ending in `.0-<r>m` (criteria such as `… within 50 m`)."""
+    out = set()
+    for name in metrics:
+        match = _RANGE.match(name)
+        if match:
+            try:
+                out.add(float(match.group(1)))
+            except ValueError:
+                continue
+    return sorted(out)

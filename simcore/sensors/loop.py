@@ -81,9 +81,12 @@ class PerceptionLoop:
 
             self.rig = SensorRig(spec.sensors, road, bus, seed, road_file=road_file)
         if spec.evaluation.detection is not None:
-            from simcore.evaluation.detection import DetectionEvaluator
+            from simcore.evaluation.detection import DetectionEvaluator, ranges_of
 
-            self.evaluator = DetectionEvaluator(spec.evaluation.detection)
+            criteria = [*spec.evaluation.criteria, *(c for s in spec.scenarios for c in s.criteria)]
+            self.evaluator = DetectionEvaluator(
+                spec.evaluation.detection, ranges_of(c.metric for c in criteria)
+            )
             self.evaluator.attach(bus)
         sut = spec.system_under_test
         if sut is not None and sut.module is not None:
