@@ -191,7 +191,7 @@ def test_broken_detector_fails_its_criterion(tmp_path: Path) -> None:
         and summary["metrics"]["detection.truePositives"] == 0
     )
     assert summary["metrics"]["detection.recall"] == 0.0
-    assert "detection.recall" in failed and "detection.recall.0-30m" in failed
+    assert "detection.recall" in failed and "detection.recall.0-50m" in failed
 
 
 def test_unimportable_system_under_test_is_bad_input(tmp_path: Path) -> None:
