@@ -171,7 +171,7 @@ class LaneOffsetRuntime(Runtime):
             self.duration = math.sqrt(distance / acc) * 2.0
         if self.duration <= 0:
             self.actor.offset = self.offset1
-            self.done = not self.action.continuous
+            self.done = not (self.action.continuous and self.action.entity is not None)
 
     def step(self, dt: float) -> None:
         if self.done:
@@ -187,10 +187,10 @@ class LaneOffsetRuntime(Runtime):
         if p >= 1.0 - 1e-9:
             self.actor.lateral_velocity = 0.0
             self.actor.offset = self.offset1
-            if self.action.continuous:
-                self.duration = 0.0
+            if self.action.continuous and self.action.entity is not None:
+                self.duration = 0.0  # keep following the other entity's offset
             else:
-                self.done = True
+                self.done = True  # an absolute target reached ends the action, continuous or not (as esmini)
 
 
 class LateralDistanceRuntime(Runtime):

@@ -780,13 +780,26 @@ class ScenarioEngine:
         return True
 
     def _clearance(self, c: m.RelativeClearanceCondition, body: Body) -> bool:
-        """True when the lanes and distances given are free of the listed (else of all) entities."""
+        """True when the lanes and distances given are clear of the listed (else of all) entities; freeSpace
+        chooses bounding-box distances over reference points."""
         others = [self.body(n) for n in c.entities] if c.entities else list(self.bodies.values())
+        if c.lanes is not None and self.road is not None and body.road_id is not None:
+            # the lanes checked must exist (in the travel direction unless oppositeLanes): no lane, no clearance
+            for d_lane in range(max(c.lanes[0], -20), min(c.lanes[1], 20) + 1):
+                if d_lane == 0:
+                    continue
+                try:
+                    lane = lane_shift(self.road, body.road_id, body.s, body.lane_id, d_lane, body.direction)
+                except ValueError:
+                    return False
+                same_way = self.road.drives_backward(body.road_id, lane) == (body.direction < 0)
+                if not c.opposite_lanes and not same_way:
+                    return False
         occupied = False
         for other in others:
             if other is body or other.gone:
                 continue
-            lon = self.relative_distance(body, other, "longitudinal", True, signed=True)
+            lon = self.relative_distance(body, other, "longitudinal", c.free_space, signed=True)
             if not (-c.distance_backward <= lon <= c.distance_forward):
                 continue
             if c.lanes is not None and self.road is not None and body.road_id is not None:
@@ -802,7 +815,7 @@ class ScenarioEngine:
                     continue
             occupied = True
             break
-        return (not occupied) if c.free_space else occupied
+        return not occupied
 
     def relative_distance(
         self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False, system: str = "entity"

@@ -550,7 +550,7 @@ class VariableCondition:
 @dataclass(frozen=True)
 class RelativeClearanceCondition:
     entities: tuple[str, ...]
-    free_space: bool  # True: the checked area must be free
+    free_space: bool  # distances between bounding boxes (else reference points)
     distance_forward: float
     distance_backward: float
     opposite_lanes: bool

@@ -115,6 +115,8 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
         ds = remaining / max(scale, 1e-6)
         target = body.s + body.direction * ds
         if 0.0 <= target <= length:
+            if body.lane_id != 0:
+                _follow_lane_links(r, body, target)
             body.s = target
             body.end_of_road_since = None
             break
@@ -135,6 +137,20 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
         body.s = 0.0 if direction > 0 else road.road_length(road_id)
         remaining = overshoot * scale
     update_pose_from_road(road, body)
+
+
+def _follow_lane_links(r: object, body: Body, s_new: float) -> None:
+    """Across a lane section boundary within a road, the lane continues by its successor/predecessor link
+    (lane ids may be renumbered between sections)."""
+    side = 1 if body.lane_id > 0 else -1
+    old = r.section_at(body.s, side)  # type: ignore[attr-defined]
+    new = r.section_at(s_new, side)  # type: ignore[attr-defined]
+    if old is new:
+        return
+    lane = old.lane(body.lane_id)
+    link = None if lane is None else (lane.successor if s_new > body.s else lane.predecessor)
+    if link is not None and link != 0 and new.lane(link) is not None:
+        body.lane_id = link
 
 
 def next_road(road: OpenDrive, body: Body) -> tuple[str, int, int] | None:
