@@ -218,25 +218,35 @@ def sample(
 State = tuple[str, int]  # (road id, travel direction along s)
 
 
-def plan(road: OpenDrive, start: State, goal_road: str, max_roads: int = 200) -> list[State] | None:
-    """The shortest sequence of roads (by count, then length) from `start` to `goal_road`, inclusive."""
+def plan(road: OpenDrive, start: State, goal_road: str, max_roads: int = 2000) -> list[State] | None:
+    """The shortest sequence of roads (by length driven) from `start` to `goal_road`, both included."""
+    import heapq
+
     if start[0] == goal_road:
         return [start]
+    best: dict[State, float] = {start: 0.0}
     previous: dict[State, State | None] = {start: None}
-    queue: deque[State] = deque([start])
-    while queue and len(previous) < max_roads * 4:
-        current = queue.popleft()
+    heap: list[tuple[float, int, State]] = [(0.0, 0, start)]
+    counter = 0
+    while heap and len(previous) < max_roads:
+        cost, _, current = heapq.heappop(heap)
+        if current[0] == goal_road:
+            out = [current]
+            back = previous[current]
+            while back is not None:
+                out.append(back)
+                back = previous[back]
+            return out[::-1]
+        if cost > best.get(current, math.inf):
+            continue
+        # leaving `current` costs its length (the start road's part does not matter for the choice)
+        step = road.road_length(current[0]) if current != start else 0.0
         for nxt_road, _lane, nxt_dir in road.connections(current[0], None, current[1]):
             state = (nxt_road, nxt_dir)
-            if state in previous:
-                continue
-            previous[state] = current
-            if nxt_road == goal_road:
-                out = [state]
-                back = previous[state]
-                while back is not None:
-                    out.append(back)
-                    back = previous[back]
-                return out[::-1]
-            queue.append(state)
+            new_cost = cost + step
+            if new_cost < best.get(state, math.inf):
+                best[state] = new_cost
+                previous[state] = current
+                counter += 1
+                heapq.heappush(heap, (new_cost, counter, state))
     return None
