@@ -91,6 +91,14 @@ class SpeedRuntime(ActionRuntime):
             self.duration = dyn.value / mean if mean > 1e-9 else 0.0
         else:
             self.duration = dyn.value
+        if dyn.dimension != "rate" and dyn.shape != "step" and self.duration > 0 and dv > 0:
+            # the shape's peak acceleration stays within the vehicle's performance: the transition is
+            # stretched when it would exceed it (as esmini does)
+            perf = self.actor.entity.performance
+            limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
+            peak = dv / self.duration * shape_peak_rate_factor(dyn.shape)
+            if limit > 0 and peak > limit:
+                self.duration = dv * shape_peak_rate_factor(dyn.shape) / limit
         if self.actor.entity.driver == "sumo":
             # the SUMO driver reaches the desired speed with its own dynamics
             self.engine.sumo_set_speed(self.actor, self.target())
@@ -126,7 +134,8 @@ class SpeedRuntime(ActionRuntime):
         self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress), dt)
         if progress >= 1.0 - 1e-9:
             self._set(target, dt)
-            self.done = not self._continuous
+            # bounded by the vehicle's performance, the target may be reached later than the shape says
+            self.done = not self._continuous and abs(self.actor.speed - target) < 1e-9
 
 
 class LaneChangeRuntime(ActionRuntime):
