@@ -341,6 +341,12 @@ def totals(results: list[ScenarioResult]) -> dict[str, Any]:
         "ended": len(ended),
         "with_reference": len(with_reference),
         "agreed": sum(r.agreed for r in with_reference),
+        # agreed scenarios in which no scripted entity was compared (every entity controller-driven): they
+        # agree on the end time only
+        "agreed_end_time_only": sum(
+            r.agreed and not any(e.scripted and e.rmse is not None for e in r.entities)
+            for r in with_reference
+        ),
         "sim_seconds": round(sum(r.sim_seconds for r in scenarios), 2),
         "wall_seconds": round(sum(r.wall_seconds for r in scenarios), 2),
         "warnings": sum(len(r.warnings) for r in scenarios),
