@@ -153,3 +153,52 @@ def test_within_ranges_and_per_class_bands() -> None:
     assert m["detection.recall"] == pytest.approx(2 / 4)
     with pytest.raises(ValueError, match="detection"):
         TypeAdapter(Criterion).validate_python("minDistance >= 2 within 50 m")
+
+
+def test_scores_every_sweep_on_the_bus() -> None:
+    import numpy as np
+
+    from simcore.sensors import ros
+    from simcore.transport.bus import InProcessBus, Message
+
+    bus = InProcessBus()
+    scored: list[Message] = []
+    bus.subscribe("/carlos/evaluation/detection", scored.append)
+    ev = DetectionEvaluator(CONFIG)
+    ev.attach(bus)
+    objects = bus.advertise("/carlos/Ego/lidar/objects", ros.DETECTIONS)
+    info = bus.advertise("/carlos/Ego/lidar/objects/info", ros.DIAGNOSTICS)
+    dets = bus.advertise("/carlos/sut/detections", ros.DETECTIONS)
+    q = ros.quaternion_of(np.eye(3))
+
+    def array(time: float, centers: list[float], ids: list[str]) -> object:
+        hdr = ros.header(time, "Ego/lidar")
+        size = np.array([4.0, 2.0, 1.5])
+        return ros.detection_array(
+            [
+                ros.detection(np.array([x, 0.0, 0.0]), q, size, "car", 1.0, i, hdr)
+                for x, i in zip(centers, ids, strict=True)
+            ],
+            hdr,
+        )
+
+    for k, time in enumerate((0.0, 0.1, 0.2)):
+        dets.publish(
+            array(time, [10.2] if k != 1 else [], ["0"] if k != 1 else []), time
+        )  # sweep 0.1: nothing
+        objects.publish(array(time, [10.0], ["Other"]), time)
+        info.publish(
+            ros.object_info([{"name": "Other", "points": "40"}], ros.header(time, "Ego/lidar")), time
+        )
+    # a sweep is scored once the next one's truth arrives; the last one at flush (end of run)
+    assert len(scored) == 2
+    dets.publish(array(0.0, [10.0], ["late"]), 0.25)  # too late: sweep 0.0 is scored already
+    ev.flush(0.3)
+    assert len(scored) == 3 and ev.late_detections == 1
+    values = [{kv.key: kv.value for kv in m.msg.values} for m in scored]
+    assert [v["truePositives"] for v in values] == ["1", "0", "1"]
+    assert [v["falseNegatives"] for v in values] == ["0", "1", "0"]
+    assert [m.msg.level for m in scored] == [0, 1, 0]
+    m = ev.result()
+    assert m["detection.frames"] == 3 and m["detection.recall"] == pytest.approx(2 / 3)
+    assert m["detection.precision"] == 1.0

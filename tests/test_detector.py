@@ -149,6 +149,15 @@ def test_perception_example_scores_real_matches(tmp_path: Path) -> None:
         [tmp_path / "results" / "perception" / "0" / "recording.mcap"], default_typestore=TYPESTORE
     ) as r:
         counts = {c.topic: c.msgcount for c in r.connections}
+        wanted = [c for c in r.connections if c.topic == "/carlos/evaluation/detection"]
+        scored = [
+            {kv.key: kv.value for kv in r.deserialize(raw, c.msgtype).values}
+            for c, _, raw in r.messages(connections=wanted)
+        ]
+    # every sweep's score is recorded, and they add up to the run's metrics
+    assert len(scored) == m["detection.frames"]
+    assert sum(int(v["truePositives"]) for v in scored) == tp
+    assert sum(int(v["falsePositives"]) for v in scored) == fp
     assert counts["/carlos/Ego/lidar/points"] == counts["/carlos/sut/detections"] == m["detection.frames"]
     assert counts["/carlos/Ego/lidar/objects"] == m["detection.frames"] and counts["/tf_static"] == 1
 

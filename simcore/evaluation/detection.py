@@ -161,6 +161,7 @@ class FrameMatch:
     false_positives: list[int] = field(default_factory=list)
     false_negatives: list[int] = field(default_factory=list)
     ignored: list[int] = field(default_factory=list)  # detections matched to don't-care objects
+    required: int = 0  # objects that had to be detected
 
 
 def match_frame(
@@ -218,6 +219,39 @@ class _Counts:
         return out
 
 
+#: Per-sweep results, published as sweeps are scored (one sweep after theirs, the rest at the end of the run).
+FRAME_TOPIC = "/carlos/evaluation/detection"
+FRAME_TYPE = "diagnostic_msgs/msg/DiagnosticStatus"
+
+
+def _frame_status(frame: FrameMatch, detections: int) -> Any:
+    """diagnostic_msgs/DiagnosticStatus of one scored sweep: level WARN when it has a miss or a false
+    positive; values stamp (s), required, detections, truePositives, falsePositives, falseNegatives,
+    meanIou."""
+    from simcore.transport.messages import TYPESTORE
+
+    status = TYPESTORE.types[FRAME_TYPE]
+    kv = TYPESTORE.types["diagnostic_msgs/msg/KeyValue"]
+    tp, fp, fn = len(frame.matches), len(frame.false_positives), len(frame.false_negatives)
+    mean_iou = sum(m[2] for m in frame.matches) / tp if tp else float("nan")
+    values = {
+        "stamp": repr(frame.time),
+        "required": str(frame.required),
+        "detections": str(detections),
+        "truePositives": str(tp),
+        "falsePositives": str(fp),
+        "falseNegatives": str(fn),
+        "meanIou": repr(mean_iou),
+    }
+    return status(
+        level=1 if fp or fn else 0,
+        name="detection",
+        message=f"{tp} matched, {fp} false positives, {fn} missed",
+        hardware_id="",
+        values=[kv(key=k, value=v) for k, v in values.items()],
+    )
+
+
 def _edge(value: float) -> str:
     return str(int(value)) if float(value).is_integer() else f"{value:g}"
 
@@ -245,11 +279,16 @@ class DetectionEvaluator:
         self._detections: dict[int, list[Box3D]] = {}
         self.frames: list[FrameMatch] = []
         self._frame_data: list[tuple[list[Box3D], list[Box3D]]] = []
+        self._scored: set[int] = set()
+        self._publisher: Any = None
+        self.late_detections = 0
 
     def attach(self, bus: Bus) -> None:
+        """Subscribe to the truth and the detections; per-sweep results go to `FRAME_TOPIC`."""
         bus.subscribe(self.objects_topic, self._on_objects)
         bus.subscribe(self.info_topic, self._on_info)
         bus.subscribe(self.config.topic, self._on_detections)
+        self._publisher = bus.advertise(FRAME_TOPIC, FRAME_TYPE)
 
     def _on_objects(self, message: Message) -> None:
         msg = message.obj()
@@ -261,34 +300,52 @@ class DetectionEvaluator:
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
             points[status.name] = int(values.get("points", "0"))
-        self._points[_stamp_ns(msg)] = points
+        stamp = _stamp_ns(msg)
+        self._points[stamp] = points
+        # the sweeps before this one are complete: a detector may answer up to one sweep late
+        self._score_pending(before=stamp, time_s=message.time_s)
 
     def _on_detections(self, message: Message) -> None:
         msg = message.obj()
-        self._detections.setdefault(_stamp_ns(msg), []).extend(boxes_from_detections(msg))
+        stamp = _stamp_ns(msg)
+        if stamp in self._scored:
+            self.late_detections += 1  # its sweep was scored already: it counts as nothing detected
+            return
+        self._detections.setdefault(stamp, []).extend(boxes_from_detections(msg))
+
+    def flush(self, time_s: float) -> None:
+        """Score every sweep not scored yet (at the end of the run, while the bus is still recorded)."""
+        self._score_pending(before=None, time_s=time_s)
+
+    def _score_pending(self, before: int | None, time_s: float, *, publish: bool = True) -> None:
+        for stamp in sorted(self._objects):
+            if stamp in self._scored or (before is not None and stamp >= before):
+                continue
+            time, objects = self._objects.pop(stamp)
+            frame = self.add_frame(
+                time, objects, self._points.pop(stamp, {}), self._detections.pop(stamp, [])
+            )
+            self._scored.add(stamp)
+            if publish and self._publisher is not None:
+                self._publisher.publish(_frame_status(frame, len(self._frame_data[-1][1])), time_s)
 
     def add_frame(
         self, time: float, objects: Sequence[Box3D], points: dict[str, int], detections: Sequence[Box3D]
     ) -> FrameMatch:
+        """Score one sweep (objects and detections in the sensor frame; points: lidar points per object name)."""
         cfg = self.config
         objs = [o for o in objects if o.distance <= cfg.max_range]
         dets = [d for d in detections if d.distance <= cfg.max_range]
         required = [points.get(o.name, 0) >= cfg.min_points for o in objs]
         frame = match_frame(objs, required, dets, cfg, time)
+        frame.required = sum(required)
         self.frames.append(frame)
         self._frame_data.append((objs, dets))
         return frame
 
-    def _collect(self) -> None:
-        self.frames = []
-        self._frame_data = []
-        for stamp in sorted(self._objects):
-            time, objects = self._objects[stamp]
-            self.add_frame(time, objects, self._points.get(stamp, {}), self._detections.get(stamp, []))
-
     def result(self) -> dict[str, float]:
         """The `detection.*` metrics over every sweep with ground truth received from the bus."""
-        self._collect()
+        self._score_pending(before=None, time_s=0.0, publish=False)  # after `flush`, nothing is left
         return self._result_from_frames()
 
     def _result_from_frames(self) -> dict[str, float]:

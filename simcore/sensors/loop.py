@@ -76,6 +76,7 @@ class PerceptionLoop:
         self.rig = None
         self.evaluator = None
         self.node: Any = None
+        self._time = 0.0
         if spec.sensors:
             from simcore.sensors.rig import SensorRig
 
@@ -93,10 +94,14 @@ class PerceptionLoop:
             self.node = load_system_under_test(sut, bus, base_dir)
 
     def step(self, frame: WorldFrame) -> None:
+        self._time = frame.time
         if self.rig is not None:
             self.rig.step(frame)
 
     def close(self) -> None:
+        """Close the node, and publish the scores of the sweeps not scored yet (the bus is still open)."""
+        if self.evaluator is not None:
+            self.evaluator.flush(self._time)
         node, self.node = self.node, None
         close = getattr(node, "close", None)
         if callable(close):
