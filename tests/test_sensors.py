@@ -398,3 +398,47 @@ def test_spec_system_under_test_and_detection() -> None:
     assert _spec(
         systemUnderTest={"image": "registry/detector:1", "command": ["python", "-m", "x"]}
     ).system_under_test
+
+
+@pytest.mark.parametrize("fov", [360.0, 200.0, 90.0])
+def test_column_culling_changes_nothing(
+    straight: RoadScene, fov: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # boxes ahead, beside, behind across the ±180° seam, turned, and one straddling the fov's edge
+    ego = car("Ego", 50, -1.75)
+    others = [
+        car("Ahead", 70, -1.75, heading=0.4),
+        car("Behind", 35, -1.75),
+        car("Side", 52, -5.25, heading=-0.3),
+        car("Edge", 60, -12.0, heading=1.2),
+    ]
+    boxes = Boxes.of(frame(ego, *others))
+    sensor = lidar(channels=24, horizontal_resolution=round(1024 * fov / 360), horizontal_fov=fov)
+    culled = sensor.scan(straight, boxes, ego, 0)
+    monkeypatch.setattr(Lidar, "_columns_of", lambda self, corners, pad: None)
+    every_ray = sensor.scan(straight, boxes, ego, 0)
+    assert np.array_equal(culled.points, every_ray.points)
+    assert np.array_equal(culled.unoccluded_rays, every_ray.unoccluded_rays)
+    assert culled.object_points.sum() > 0
+
+
+def test_camera_pixel_culling_changes_nothing(straight: RoadScene, monkeypatch: pytest.MonkeyPatch) -> None:
+    ego = car("Ego", 50, -1.75)
+    others = [
+        car("Ahead", 58, -1.75, heading=0.4),
+        car("Near", 53.5, -4.5, heading=-0.8),
+        car("Back", 40, -1.75),
+    ]
+    boxes = Boxes.of(frame(ego, *others))
+    cam = Camera(
+        CameraSensor(
+            type="camera", name="cam", width=80, height=60, horizontal_fov=100, mount={"x": 2.5, "z": 1.2}
+        )
+    )
+    culled = cam.capture(straight, boxes, ego, 0)
+    monkeypatch.setattr(Camera, "_pixels_of", lambda self, corners: None)
+    every_pixel = cam.capture(straight, boxes, ego, 0)
+    assert np.array_equal(culled.labels, every_pixel.labels)
+    assert np.array_equal(culled.object_ids, every_pixel.object_ids)
+    assert np.allclose(culled.depth, every_pixel.depth, equal_nan=True)
+    assert {2, 3} <= set(np.unique(culled.object_ids).tolist())  # both cars in front are seen
