@@ -32,6 +32,7 @@ class SampledPath:
     z: list[float]
     h: list[float]
     t: list[float] | None  # trajectory time at each sample (None: no timing)
+    v: list[float] | None = None  # speeds at the samples: constant acceleration between them (timed polylines)
 
     @property
     def length(self) -> float:
@@ -64,8 +65,16 @@ class SampledPath:
             return self.s[-1]
         i = bisect.bisect_right(ts, time) - 1
         span = ts[i + 1] - ts[i]
-        f = (time - ts[i]) / span if span > 0 else 1.0
-        return self.s[i] + f * (self.s[i + 1] - self.s[i])
+        if span <= 0:
+            return self.s[i + 1]
+        tau = time - ts[i]
+        length = self.s[i + 1] - self.s[i]
+        if self.v is not None:
+            # speed changes linearly between the vertices (as esmini interpolates timed polylines)
+            v0, v1 = self.v[i], self.v[i + 1]
+            along = v0 * tau + 0.5 * (v1 - v0) / span * tau * tau
+            return self.s[i] + min(max(along, 0.0), length)
+        return self.s[i] + tau / span * length
 
 
 def _from_points(points: list[tuple[float, float, float]], times: list[float] | None) -> SampledPath:
@@ -79,8 +88,8 @@ def _from_points(points: list[tuple[float, float, float]], times: list[float] | 
     for i, (x, y, z) in enumerate(points):
         if xs:
             d = math.hypot(x - xs[-1], y - ys[-1])
-            if d < 1e-9:
-                continue
+            if d < 1e-9 and (times is None or times[i] <= kept_times[-1]):
+                continue  # a repeated point (kept when timed: the entity waits there)
             total += d
         xs.append(x)
         ys.append(y)
@@ -91,7 +100,16 @@ def _from_points(points: list[tuple[float, float, float]], times: list[float] | 
     if len(xs) == 1:
         hs = [0.0]
     else:
-        seg = [math.atan2(ys[i + 1] - ys[i], xs[i + 1] - xs[i]) for i in range(len(xs) - 1)]
+        seg: list[float] = []
+        for i in range(len(xs) - 1):
+            dx, dy = xs[i + 1] - xs[i], ys[i + 1] - ys[i]
+            if math.hypot(dx, dy) < 1e-9:  # a pause: keep the heading it had
+                seg.append(seg[-1] if seg else 0.0)
+            else:
+                seg.append(math.atan2(dy, dx))
+        for i in range(len(seg) - 1, 0, -1):  # leading pauses take the first real heading
+            if math.hypot(xs[i] - xs[i - 1], ys[i] - ys[i - 1]) < 1e-9 and i - 1 == 0:
+                seg[0] = seg[i]
         hs = [*seg, seg[-1]]
     return SampledPath(ss, xs, ys, zs, hs, kept_times if times is not None else None)
 
@@ -108,6 +126,16 @@ def polyline(shape: m.Polyline, resolve: Resolver) -> tuple[SampledPath, float |
         times.append(vertex.time if vertex.time is not None else math.nan)
     timed = all(not math.isnan(t) for t in times)
     path = _from_points(points, times if timed else None)
+    if path.t is not None and len(path.s) > 1:
+        # vertex speeds such that each segment's mean speed covers it: v0 = L0/T0, v(i+1) = 2 Li/Ti - v(i)
+        speeds = [0.0] * len(path.s)
+        for i in range(len(path.s) - 1):
+            span = path.t[i + 1] - path.t[i]
+            mean = (path.s[i + 1] - path.s[i]) / span if span > 0 else 0.0
+            if i == 0:
+                speeds[0] = mean
+            speeds[i + 1] = max(2 * mean - speeds[i], 0.0)
+        path.v = speeds
     if len(path.x) == 1:
         path.h = [first_heading or 0.0]
     return path, first_heading
