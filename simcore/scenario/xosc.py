@@ -920,8 +920,12 @@ def _trajectory(reader: _Reader, element: ET.Element, declare: bool = True) -> m
             )
         elif shape_el.tag == "ClothoidSpline":
             segments = []
-            for seg in shape_el.findall("ClothoidSplineSegment"):
+            seg_els = shape_el.findall("ClothoidSplineSegment")
+            time_end = reader.opt_num(shape_el, "timeEnd")
+            for i, seg in enumerate(seg_els):
                 start = seg.find("PositionStart")
+                t0 = reader.opt_num(seg, "timeStart")
+                t1 = reader.opt_num(seg_els[i + 1], "timeStart") if i + 1 < len(seg_els) else time_end
                 segments.append(
                     m.ClothoidSegment(
                         curvature_start=reader.num(seg, "curvatureStart"),
@@ -929,6 +933,8 @@ def _trajectory(reader: _Reader, element: ET.Element, declare: bool = True) -> m
                         length=reader.num(seg, "length"),
                         start=_position(reader, start) if start is not None else None,
                         h_offset=reader.num(seg, "hOffset", 0.0),
+                        time_start=t0,
+                        time_end=t1,
                     )
                 )
             if not segments:
