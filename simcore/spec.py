@@ -625,6 +625,23 @@ class SimulationRunSpec(Model):
                     f"sensor {sensor.name!r} is defined twice on the same entity; names must be unique"
                 )
             sensors.add(key)
+        detection = self.evaluation.detection
+        if detection is not None:
+            entity, _, name = detection.sensor.partition("/")
+            lidars = [
+                s
+                for s in self.sensors
+                if isinstance(s, LidarSensor) and s.name == name and s.entity in (None, entity)
+            ]
+            if not lidars:
+                raise ValueError(
+                    f"evaluation.detection.sensor {detection.sensor!r} names no lidar of spec.sensors: add a lidar "
+                    f"named {name!r} on {entity!r} (or on the ego)"
+                )
+            if not any(s.ground_truth for s in lidars):
+                raise ValueError(
+                    f"evaluation.detection.sensor {detection.sensor!r}: that lidar has groundTruth: false"
+                )
         return self
 
 

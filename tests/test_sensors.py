@@ -380,6 +380,7 @@ def test_spec_sensor_models() -> None:
 
 def test_spec_system_under_test_and_detection() -> None:
     spec = _spec(
+        sensors=[{"type": "lidar", "name": "lidar"}],
         systemUnderTest={"module": "examples.detector:Detector", "parameters": {"min_points": 3}},
         evaluation={
             "detection": {"sensor": "Ego/lidar", "topic": "/carlos/sut/detections"},
@@ -394,7 +395,10 @@ def test_spec_system_under_test_and_detection() -> None:
     with pytest.raises(ValidationError, match="pattern"):
         _spec(systemUnderTest={"module": "no-colon"})
     with pytest.raises(ValidationError, match="strictly increasing"):
-        _spec(evaluation={"detection": {"sensor": "Ego/lidar", "topic": "/d", "bands": [0, 50, 30]}})
+        _spec(
+            sensors=[{"type": "lidar", "name": "lidar"}],
+            evaluation={"detection": {"sensor": "Ego/lidar", "topic": "/d", "bands": [0, 50, 30]}},
+        )
     assert _spec(
         systemUnderTest={"image": "registry/detector:1", "command": ["python", "-m", "x"]}
     ).system_under_test
@@ -442,3 +446,19 @@ def test_camera_pixel_culling_changes_nothing(straight: RoadScene, monkeypatch: 
     assert np.array_equal(culled.object_ids, every_pixel.object_ids)
     assert np.allclose(culled.depth, every_pixel.depth, equal_nan=True)
     assert {2, 3} <= set(np.unique(culled.object_ids).tolist())  # both cars in front are seen
+
+
+def test_spec_detection_names_a_lidar_with_ground_truth() -> None:
+    detection = {"sensor": "Ego/lidar", "topic": "/carlos/sut/detections"}
+    assert _spec(sensors=[{"type": "lidar", "name": "lidar"}], evaluation={"detection": detection})
+    assert _spec(
+        sensors=[{"type": "lidar", "name": "lidar", "entity": "Ego"}], evaluation={"detection": detection}
+    )
+    for sensors, message in [
+        ([], "names no lidar"),
+        ([{"type": "camera", "name": "lidar"}], "names no lidar"),
+        ([{"type": "lidar", "name": "lidar", "entity": "Other"}], "names no lidar"),
+        ([{"type": "lidar", "name": "lidar", "groundTruth": False}], "groundTruth: false"),
+    ]:
+        with pytest.raises(ValidationError, match=message):
+            _spec(sensors=sensors, evaluation={"detection": detection})
