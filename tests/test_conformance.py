@@ -118,12 +118,19 @@ def test_corpus_subset_agrees_with_esmini() -> None:
     """A few corpus scenarios covering lane changes, speed shapes, trajectories, catalogs and headway
     triggers: each loads, ends on its own and agrees with esmini."""
     subset = [
-        "xosc/cut-in.xosc",
-        "xosc/cut-in_simple.xosc",
-        "xosc/acc-test.xosc",
-        "xosc/lane-change_trajectory_wp.xosc",
-        "xosc/slow-lead-vehicle.xosc",
-        "xosc/straight_500m.xosc",
+        "xosc/cut-in.xosc",  # lane change, headway triggers, parameters in Story scope
+        "xosc/acc-test.xosc",  # speed rates bounded by performance, lateral share of speed
+        "xosc/cut-in_cr.xosc",  # LaneOffset, qualified Event::Action names
+        "xosc/lane-change_trajectory_wp.xosc",  # polyline trajectory
+        "xosc/lane-change_clothoid_based_trajectory.xosc",  # chained clothoids
+        "xosc/bicycle_fall_over.xosc",  # timed polyline with pauses
+        "scenario_construct_examples/scenario_nurb_curved_road.xosc",  # NURBS, maneuver catalogs
+        "xosc/routing-test.xosc",  # routes, route positions, AcquirePosition
+        "xosc/synch_with_steady_state.xosc",  # Synchronize with a steady state
+        "xosc/drop-bike.xosc",  # LongitudinalDistance in road coordinates, Init action overridden
+        "xosc/two_plus_one_road.xosc",  # RelativeClearance, lanes across lane sections
+        "xosc/left-hand-traffic_using_road_rule.xosc",  # OpenDRIVE rule="LHT", edges
+        "xosc/velodrome.xosc",  # Init speed transitions
     ]
     results = conformance.run_directory(
         CORPUS / "resources", CORPUS / "reference", include=subset, cap_seconds=60

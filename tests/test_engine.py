@@ -248,3 +248,61 @@ def test_hostile_xml_is_refused(tmp_path: Path) -> None:
     broken.write_text("<OpenSCENARIO><Storyboard></OpenSCENARIO>")
     with pytest.raises(BadInput, match="not well-formed"):
         load_scenario(broken)
+
+
+def test_speed_transition_is_stretched_to_the_vehicle_performance(tmp_path: Path, road: OpenDrive) -> None:
+    # 20 → 40 m/s linearly in 1 s would need 20 m/s²; maxAcceleration is 5: it takes 4 s instead
+    path = scenario(
+        tmp_path, event("Go", speed_action("linear", "time", 1.0, 40.0), sim_time("greaterThan", 0.0))
+    )
+    _, trace = run(path, road, 6.0)
+    assert trace[2.05]["speed"] == pytest.approx(30.0, abs=1e-6)
+    assert trace[4.05]["speed"] == pytest.approx(40.0, abs=1e-6)
+
+
+def test_rising_edge_needs_a_change(tmp_path: Path, road: OpenDrive) -> None:
+    # true from the first evaluation: no rising edge, the event never starts
+    path = scenario(
+        tmp_path,
+        event("Slow", speed_action("step", "time", 0, 5.0), sim_time("greaterOrEqual", 0.0, "rising")),
+    )
+    _, trace = run(path, road, 2.0)
+    assert trace[2.0]["speed"] == pytest.approx(20.0)
+    # false first, then true: it fires
+    path = scenario(
+        tmp_path, event("Slow", speed_action("step", "time", 0, 5.0), sim_time("greaterThan", 1.0, "rising"))
+    )
+    _, trace = run(path, road, 2.0)
+    assert trace[2.0]["speed"] == pytest.approx(5.0)
+
+
+def test_unsupported_lights_warn_with_file_and_line(tmp_path: Path, road: OpenDrive) -> None:
+    light = """<PrivateAction><AppearanceAction><LightStateAction transitionTime="0">
+      <LightType><VehicleLight vehicleLightType="brakeLights"/></LightType><LightState mode="on"/>
+    </LightStateAction></AppearanceAction></PrivateAction>"""
+    path = scenario(tmp_path, event("Lights", light, sim_time("greaterThan", 0.0)))
+    loaded = load_scenario(path)
+    assert len(loaded.warnings) == 1
+    warning = loaded.warnings[0]
+    assert str(path) in warning and "Event[Lights]" in warning and "LightStateAction" in warning
+    line = int(warning.split(str(path) + ":", 1)[1].split(":", 1)[0])
+    assert "<AppearanceAction>" in path.read_text().splitlines()[line - 1]
+    engine, trace = run(path, road, 1.0)  # and the run goes on
+    assert trace[1.0]["speed"] == pytest.approx(20.0)
+
+
+def test_follow_trajectory_polyline_with_times(tmp_path: Path, road: OpenDrive) -> None:
+    trajectory = """<PrivateAction><RoutingAction><FollowTrajectoryAction>
+      <TrajectoryRef><Trajectory name="T" closed="false"><Shape><Polyline>
+        <Vertex time="0"><Position><RelativeLanePosition entityRef="Ego" dLane="0" ds="0" offset="0"/></Position></Vertex>
+        <Vertex time="2"><Position><RelativeLanePosition entityRef="Ego" dLane="0" ds="20" offset="0"/></Position></Vertex>
+      </Polyline></Shape></Trajectory></TrajectoryRef>
+      <TimeReference><Timing domainAbsoluteRelative="relative" scale="1" offset="0"/></TimeReference>
+      <TrajectoryFollowingMode followingMode="position"/>
+    </FollowTrajectoryAction></RoutingAction></PrivateAction>"""
+    path = scenario(tmp_path, event("Traj", trajectory, sim_time("greaterThan", 0.0)))
+    engine, trace = run(path, road, 3.0)
+    start_s = trace[0.05]["s"]
+    assert trace[1.05]["s"] == pytest.approx(start_s + 10.0, abs=0.05)  # 20 m in 2 s at a constant 10 m/s
+    assert trace[1.05]["speed"] == pytest.approx(10.0, abs=1e-6)
+    assert trace[2.05]["s"] == pytest.approx(start_s + 20.0, abs=0.05)
