@@ -287,7 +287,7 @@ def test_unsupported_lights_warn_with_file_and_line(tmp_path: Path, road: OpenDr
     assert str(path) in warning and "Event[Lights]" in warning and "LightStateAction" in warning
     line = int(warning.split(str(path) + ":", 1)[1].split(":", 1)[0])
     assert "<AppearanceAction>" in path.read_text().splitlines()[line - 1]
-    engine, trace = run(path, road, 1.0)  # and the run goes on
+    _, trace = run(path, road, 1.0)  # and the run goes on
     assert trace[1.0]["speed"] == pytest.approx(20.0)
 
 
@@ -301,7 +301,7 @@ def test_follow_trajectory_polyline_with_times(tmp_path: Path, road: OpenDrive) 
       <TrajectoryFollowingMode followingMode="position"/>
     </FollowTrajectoryAction></RoutingAction></PrivateAction>"""
     path = scenario(tmp_path, event("Traj", trajectory, sim_time("greaterThan", 0.0)))
-    engine, trace = run(path, road, 3.0)
+    _, trace = run(path, road, 3.0)
     start_s = trace[0.05]["s"]
     assert trace[1.05]["s"] == pytest.approx(start_s + 10.0, abs=0.05)  # 20 m in 2 s at a constant 10 m/s
     assert trace[1.05]["speed"] == pytest.approx(10.0, abs=1e-6)
