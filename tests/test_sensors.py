@@ -462,3 +462,39 @@ def test_spec_detection_names_a_lidar_with_ground_truth() -> None:
     ]:
         with pytest.raises(ValidationError, match=message):
             _spec(sensors=sensors, evaluation={"detection": detection})
+
+
+SCENERY = STRAIGHT.replace(
+    "</lanes></road>",
+    """</lanes><objects>
+<object id="p1" name="lamp" type="pole" s="60" t="2" zOffset="0" radius="0.15" height="6" hdg="0"/>
+<object id="b1" name="wall" type="barrier" s="80" t="-8" zOffset="0" length="10" width="0.5" height="1.2" hdg="0"/>
+<object id="c1" name="zebra" type="crosswalk" s="70" t="-3" length="4" width="7" height="0"/>
+<object id="x1" name="odd" type="pole" s="oops" t="0" radius="0.1" height="3"/>
+</objects></road>""",
+)
+
+
+def test_static_scenery_from_the_road_file(tmp_path: Path) -> None:
+    from simcore.sensors.rig import road_scene
+    from simcore.sensors.scene import static_objects
+
+    road = OpenDrive.from_string(SCENERY)
+    objects = static_objects(road, SCENERY.encode())
+    assert [o.name for o in objects] == ["lamp", "wall"], "flat and malformed records are left out"
+    assert objects[0].center == pytest.approx([60.0, 2.0, 3.0])
+    assert objects[1].half == pytest.approx([5.0, 0.25, 0.6])
+    file = tmp_path / "scenery.xodr"
+    file.write_text(SCENERY)
+    scene = road_scene(road, file)
+    assert len(scene.scenery) == 2
+    ego = car("Ego", 50, -1.75)
+    p = lidar(channels=32).scan(scene, Boxes.of(frame(ego)), ego, 0).points
+    world = np.array([50.0, -1.75, 2.0]) + np.stack([p["x"], p["y"], p["z"]], axis=1).astype(float)
+    pole = world[p["label"] == CLASS_IDS["pole"]]
+    wall = world[p["label"] == CLASS_IDS["barrier"]]
+    assert len(pole) > 5 and np.all(np.hypot(pole[:, 0] - 60, pole[:, 1] - 2) <= 0.15 * math.sqrt(2) + 1e-3)
+    assert len(wall) > 5 and np.all((np.abs(wall[:, 0] - 80) <= 5 + 1e-3) & (wall[:, 2] <= 1.2 + 1e-3))
+    assert np.all(p["object_id"][p["label"] == CLASS_IDS["pole"]] == 0), (
+        "scenery is not an object of the truth"
+    )

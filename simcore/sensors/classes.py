@@ -30,6 +30,8 @@ CLASSES: dict[str, tuple[int, float]] = {
     "pole": (41, 0.4),
     "barrier": (42, 0.6),
     "object": (49, 0.3),  # any other miscObject category
+    "building": (43, 0.35),
+    "vegetation": (44, 0.25),
 }
 CLASS_IDS: dict[str, int] = {name: cid for name, (cid, _) in CLASSES.items()}
 CLASS_NAMES: dict[int, str] = {cid: name for name, (cid, _) in CLASSES.items()}
@@ -56,3 +58,19 @@ def lane_class(lane_type: str, drivable: bool) -> str:
     if lane_type.lower() in _SIDEWALK_LANES:
         return "sidewalk"
     return "roadside"
+
+
+#: OpenDRIVE `<object type>` → class name (static scenery); flat types (markings, surfaces) are left out.
+SCENERY_CLASSES: dict[str, str] = {
+    "pole": "pole",
+    "streetlamp": "pole",
+    "barrier": "barrier",
+    "railing": "barrier",
+    "soundbarrier": "barrier",
+    "building": "building",
+    "gantry": "building",
+    "tree": "vegetation",
+    "vegetation": "vegetation",
+    "obstacle": "obstacle",
+    "trafficisland": "roadside",
+}

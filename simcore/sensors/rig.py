@@ -22,7 +22,7 @@ from simcore.errors import BadInput
 from simcore.sensors import ros
 from simcore.sensors.camera import OPTICAL, Camera
 from simcore.sensors.lidar import Lidar, LidarScan, mount_pose
-from simcore.sensors.scene import Boxes, RoadScene
+from simcore.sensors.scene import Boxes, RoadScene, static_objects
 from simcore.spec import CameraSensor, LidarSensor
 from simcore.transport.bus import Bus, Publisher
 from simcore.transport.messages import base_link
@@ -34,7 +34,8 @@ _EPS = 1e-9
 
 
 def road_scene(road: OpenDrive | None, road_file: Path | None = None) -> RoadScene:
-    """The road scene of a network, cached per road file (path, size, mtime) in this process."""
+    """The road scene of a network with its static scenery, cached per road file (path, size, mtime) in this
+    process."""
     if road is None or road_file is None:
         return RoadScene(road)
     stat = road_file.stat()
@@ -43,7 +44,8 @@ def road_scene(road: OpenDrive | None, road_file: Path | None = None) -> RoadSce
     if scene is None:
         if len(_ROAD_CACHE) >= 4:
             _ROAD_CACHE.clear()
-        scene = _ROAD_CACHE[key] = RoadScene(road)
+        scenery = static_objects(road, road_file.read_bytes()) if road_file.suffix == ".xodr" else []
+        scene = _ROAD_CACHE[key] = RoadScene(road, scenery=scenery)
     return scene
 
 

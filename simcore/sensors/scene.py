@@ -12,18 +12,23 @@
   (occlusion ratio) for free.
 
 A sensor never sees the entity it is mounted on (its own box is left out of its scans).
-Static scenery (OpenDRIVE `<objects>`) is not modelled: the parser ignores it.
+
+Static scenery: the road file's `<object>` records with a height (poles, barriers, buildings, trees, …) are
+boxes in the static scene (`static_objects`): `length`×`width`×`height`, or a square of side 2×`radius`
+for round ones, at (s, t, zOffset) with `hdg` relative to the road; `<repeat>`, `<outline>` and flat types
+(markings, parking spaces, crosswalks) are left out.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from simcore.sensors.classes import CLASS_IDS, REFLECTIVITY, entity_class, lane_class
+from simcore.sensors.classes import CLASS_IDS, REFLECTIVITY, SCENERY_CLASSES, entity_class, lane_class
 from simcore.world.opendrive import DRIVING_LANE_TYPES, OpenDrive
 from simcore.world.state import WorldFrame
 
@@ -83,6 +88,71 @@ def road_mesh(road: OpenDrive, step: float = 1.0) -> tuple[np.ndarray, np.ndarra
     )
 
 
+_CUBE = np.array(
+    [[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+     [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]],
+    dtype=np.uint32,
+)  # fmt: skip
+_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+
+
+@dataclass(frozen=True, slots=True)
+class StaticObject:
+    """A box of static scenery (world frame)."""
+
+    name: str
+    class_id: int
+    center: np.ndarray
+    rotation: np.ndarray
+    half: np.ndarray
+
+    def corners(self) -> np.ndarray:
+        return self.center + (_SIGNS * self.half) @ self.rotation.T
+
+
+def static_objects(road: OpenDrive, xml: bytes) -> list[StaticObject]:
+    """The `<object>` records of an OpenDRIVE document (already parsed into `road`) as boxes."""
+    import defusedxml.ElementTree as DET
+
+    out: list[StaticObject] = []
+    root = DET.fromstring(xml)
+    for road_el in root.findall("road"):
+        road_id = road_el.get("id", "")
+        if road_id not in road.roads:
+            continue
+        for obj in road_el.findall("objects/object"):
+            kind = (obj.get("type") or "").lower()
+            cls = SCENERY_CLASSES.get(kind)
+            try:
+                s = float(obj.get("s", "0"))
+                t = float(obj.get("t", "0"))
+                z_offset = float(obj.get("zOffset", "0"))
+                height = float(obj.get("height", "0"))
+                radius = obj.get("radius")
+                length = 2 * float(radius) if radius else float(obj.get("length", "0"))
+                width = 2 * float(radius) if radius else float(obj.get("width", "0"))
+                hdg = float(obj.get("hdg", "0"))
+                pitch = float(obj.get("pitch", "0"))
+                roll = float(obj.get("roll", "0"))
+            except ValueError:
+                continue  # a malformed record is scenery we cannot place; the road itself parsed
+            if cls is None or min(height, length, width) <= 0:
+                continue
+            pose = road.road_to_world(road_id, min(max(s, 0.0), road.road_length(road_id)), t)
+            rot = rotation(pose.heading + hdg, pitch, roll)
+            center = np.array([pose.x, pose.y, pose.z + z_offset]) + rot @ np.array([0.0, 0.0, height / 2])
+            out.append(
+                StaticObject(
+                    name=obj.get("name") or obj.get("id") or kind,
+                    class_id=CLASS_IDS[cls],
+                    center=center,
+                    rotation=rot,
+                    half=np.array([length / 2, width / 2, height / 2]),
+                )
+            )
+    return out
+
+
 @dataclass(frozen=True, slots=True)
 class Boxes:
     """Every entity of one frame as an oriented box (world frame), in the frame's entity order.
@@ -135,8 +205,7 @@ class Boxes:
 
     def corners(self, i: int) -> np.ndarray:
         """The 8 corners (8, 3) of box `i` in the world frame."""
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
-        return self.centers[i] + (signs * self.half[i]) @ self.rotations[i].T
+        return self.centers[i] + (_SIGNS * self.half[i]) @ self.rotations[i].T
 
 
 def intersect_box(
@@ -170,7 +239,9 @@ def intersect_box(
 class RoadScene:
     """The static road surface as an open3d RaycastingScene (built once per road network)."""
 
-    def __init__(self, road: OpenDrive | None, step: float = 1.0) -> None:
+    def __init__(
+        self, road: OpenDrive | None, step: float = 1.0, scenery: Sequence[StaticObject] = ()
+    ) -> None:
         import open3d as o3d  # heavy: only where the sensors are used
 
         self._o3d = o3d
@@ -180,6 +251,17 @@ class RoadScene:
         else:
             vertices, triangles = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint32)
             self.triangle_classes = np.zeros(0, np.uint8)
+        if scenery:
+            verts, tris, classes = [vertices], [triangles], [self.triangle_classes]
+            base = len(vertices)
+            for obj in scenery:
+                verts.append(obj.corners().astype(np.float32))
+                tris.append(_CUBE + base)
+                classes.append(np.full(12, obj.class_id, np.uint8))
+                base += 8
+            vertices, triangles = np.concatenate(verts), np.concatenate(tris)
+            self.triangle_classes = np.concatenate(classes)
+        self.scenery = tuple(scenery)
         self.triangle_count = len(triangles)
         if len(triangles):
             self.scene.add_triangles(
