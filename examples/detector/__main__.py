@@ -45,7 +45,7 @@ def replay(args: argparse.Namespace, params: dict[str, Any]) -> int:
     from rosbags.highlevel import AnyReader
 
     from simcore.recorder import McapRecorder
-    from simcore.transport.bus import InProcessBus
+    from simcore.transport.bus import InProcessBus, Message
     from simcore.transport.messages import TYPESTORE
 
     source = Path(args.replay)
@@ -55,7 +55,11 @@ def replay(args: argparse.Namespace, params: dict[str, Any]) -> int:
     bus = InProcessBus()
     recorder = McapRecorder(args.record, topics=[args.output_topic]) if args.record else None
     if recorder is not None:
-        bus.subscribe(args.output_topic, lambda m: recorder.write(m.topic, m.typename, m.obj(), m.time_s))
+
+        def record(m: Message) -> None:
+            recorder.write(m.topic, m.typename, m.obj(), m.time_s)
+
+        bus.subscribe(args.output_topic, record)
     counts: list[int] = []
     bus.subscribe(args.output_topic, lambda m: counts.append(len(m.obj().detections)))
     node = Detector(bus, input_topic=args.input_topic, output_topic=args.output_topic, **params)
