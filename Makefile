@@ -44,6 +44,7 @@ typecheck: install
 
 bench: install
 	$(PY) bench/simcore.py
+	$(PY) bench/sensors.py
 
 CORPUS ?= ../shared/corpus/esmini
 # the whole esmini corpus against its reference trajectories (table + CSV/JSON under results/), then the speed bench
