@@ -113,6 +113,9 @@ class FollowTrajectoryRuntime(Runtime):
         if a.mover is self:
             a.mover = None
         self.engine.track_road(a, lock_lane=True)
+        if a.road_id is None and self.engine.road is None:
+            # with no road to go on with, the entity stops where the trajectory ends (as esmini does)
+            a.speed = 0.0
         self.done = True
 
 
