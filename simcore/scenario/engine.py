@@ -418,6 +418,20 @@ class ScenarioEngine:
                 return position.x, position.y, z, position.h if position.h is not None else 0.0
             if isinstance(position, m.LanePosition):
                 r = need_road()
+                road_id, lane_id, s_on = _walk_lane(r, position.road_id, position.lane_id, position.s)
+                if (road_id, lane_id, s_on) != (position.road_id, position.lane_id, position.s):
+                    # beyond the road's ends: on along the lane's links (the position keeps its lane)
+                    length = r.road_length(road_id)
+                    if not 0.0 <= s_on <= length:
+                        message = (
+                            f"{self.source}: LanePosition road {position.road_id} s={position.s:g} lies beyond "
+                            f"the lanes' links: placed at the end of road {road_id}"
+                        )
+                        if message not in self.warnings:
+                            self.warnings.append(message)
+                        s_on = min(max(s_on, 0.0), length)
+                    pose = r.lane_to_world(road_id, lane_id, s_on, position.offset)
+                    return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
                 pose = r.lane_to_world(position.road_id, position.lane_id, position.s, position.offset)
                 # relative orientation is relative to the lane's driving direction (as esmini does)
                 backward = r.drives_backward(position.road_id, position.lane_id)
@@ -1200,6 +1214,25 @@ class ScenarioEngine:
     @property
     def ended(self) -> bool:
         return self.ended_by is not None
+
+
+def _walk_lane(road: OpenDrive, road_id: str, lane_id: int, s: float) -> tuple[str, int, float]:
+    """A lane position past a road's end continued along the lane's successors (before its start, along
+    its predecessors)."""
+    for _ in range(32):
+        if road_id not in road.roads:
+            return road_id, lane_id, s
+        length = road.road_length(road_id)
+        if 0.0 <= s <= length:
+            return road_id, lane_id, s
+        direction = 1 if s > length else -1
+        nxt = road.successor(road_id, lane_id, direction)
+        if nxt is None:
+            return road_id, lane_id, s
+        over = s - length if direction > 0 else -s
+        road_id, lane_id, new_dir = nxt
+        s = over if new_dir > 0 else road.road_length(road_id) - over
+    return road_id, lane_id, s
 
 
 def _added_later(scenario: m.Scenario) -> set[str]:
