@@ -383,7 +383,7 @@ class SynchronizeRuntime(Runtime):
         elif self.action.steady_time is not None:
             d -= final * self.action.steady_time
             T -= self.action.steady_time
-        if T <= dt or d <= 0:
+        if dt >= T or d <= 0:
             a.speed = final
             return
         c = 6.0 * ((final - v0) * T / 2.0 - d + v0 * T) / T**3

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -32,7 +31,9 @@ class SampledPath:
     z: list[float]
     h: list[float]
     t: list[float] | None  # trajectory time at each sample (None: no timing)
-    v: list[float] | None = None  # speeds at the samples: constant acceleration between them (timed polylines)
+    v: list[float] | None = (
+        None  # speeds at the samples: constant acceleration between them (timed polylines)
+    )
 
     @property
     def length(self) -> float:
