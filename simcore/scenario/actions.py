@@ -185,7 +185,7 @@ class LaneOffsetRuntime(Runtime):
         self.elapsed += dt
         p = self.elapsed / self.duration
         new = self.offset0 + (self.offset1 - self.offset0) * shape_value(self.action.shape, p)
-        self.actor.lateral_velocity = (new - self.actor.offset) / dt
+        # a lane offset shifts the path sideways: the speed along the road is kept (as esmini does)
         self.actor.offset = new
         if p >= 1.0 - 1e-9:
             self.actor.lateral_velocity = 0.0

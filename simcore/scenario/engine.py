@@ -798,7 +798,7 @@ class ScenarioEngine:
         s = min(max(body.s, 0.0), r.length)
         t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
         for lane, inner, outer in r.all_borders(s):
-            if lane.id != 0 and lane.type == "driving" and min(inner, outer) <= t <= max(inner, outer):
+            if lane.id != 0 and lane.type != "none" and min(inner, outer) <= t <= max(inner, outer):
                 return False
         return True
 
