@@ -219,9 +219,12 @@ def simulate(
     result = metrics.result()
     end_reason = engine.ended_by or "maxSeconds"
     result["stopTriggered"] = 1.0 if end_reason == "stopTrigger" else 0.0
+    log_lines = engine.log
     if perception is not None:
         result.update(perception.metrics())
-    return result, end_reason, engine.time, engine.log
+        if perception.failure is not None:
+            log_lines = [*log_lines, f"system under test failed: {perception.failure}"]
+    return result, end_reason, engine.time, log_lines
 
 
 def error_outcome(run: SimulationRun, index: int, attempt: int, message: str) -> RunOutcome:

@@ -214,3 +214,58 @@ def test_unimportable_system_under_test_is_bad_input(tmp_path: Path) -> None:
     summary = json.loads((tmp_path / "results" / "missing" / "0" / "summary.json").read_text())
     assert summary["status"] == "error" and "Traceback" not in summary["error"]
     assert "spec.systemUnderTest.module: cannot import 'no_such_package.detector'" in summary["error"]
+
+
+class Exploding:
+    """A node under test that fails on its third point cloud."""
+
+    def __init__(self, bus: object, input_topic: str = "/carlos/Ego/lidar/points") -> None:
+        self.clouds = 0
+        self.publisher = bus.advertise("/carlos/sut/detections", "vision_msgs/msg/Detection3DArray")  # type: ignore[attr-defined]
+        bus.subscribe(input_topic, self.on_points)  # type: ignore[attr-defined]
+
+    def on_points(self, message: Message) -> None:
+        self.clouds += 1
+        if self.clouds == 3:
+            raise RuntimeError("segmentation fault in the clustering")
+        from examples.detector.node import detections_message
+
+        self.publisher.publish(detections_message([], message.obj().header), message.time_s)
+
+
+def test_a_crash_of_the_system_under_test_is_a_test_result(tmp_path: Path) -> None:
+    from rosbags.highlevel import AnyReader
+
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan
+    from simcore.runner import simulate
+    from simcore.transport.messages import TYPESTORE
+
+    manifest = _manifest(
+        tmp_path,
+        "exploding",
+        **{
+            "systemUnderTest.module": "tests.test_detector:Exploding",
+            "systemUnderTest.parameters": {},
+            "simulation.maxSeconds": 1,
+        },
+    )
+    run = load_manifest(manifest)
+    out = tmp_path / "out"
+    metrics, _, sim, log = simulate(
+        run, Plan(run.spec)[0], ROOT / "examples/scenarios/cut-in.xosc", out, base_dir=tmp_path
+    )
+    assert sim == pytest.approx(1.0)
+    assert metrics["systemUnderTest.failed"] == 1.0
+    assert metrics["detection.frames"] == 11 and metrics["detection.truePositives"] == 0
+    assert any("system under test failed: RuntimeError: segmentation fault" in line for line in log)
+    with AnyReader([out / "recording.mcap"], default_typestore=TYPESTORE) as r:
+        counts = {c.topic: c.msgcount for c in r.connections}
+        status = [
+            r.deserialize(raw, c.msgtype)
+            for c, _, raw in r.messages()
+            if c.topic == "/carlos/detector/status"
+        ]
+    assert counts["/carlos/sut/detections"] == 2, "the node got nothing after its failure"
+    assert counts["/carlos/Ego/lidar/points"] == 11
+    assert len(status) == 1 and status[0].level == 2 and "segmentation fault" in status[0].message

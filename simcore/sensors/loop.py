@@ -6,21 +6,65 @@ publishing each frame and `close()` at the end; `metrics()` gives the `detection
 Order on the bus (synchronous in-process delivery): the evaluator subscribes before the system under
 test is constructed, so it sees every detection; a sensor's messages go out in the frame they are due, and
 an in-process node reacting to them publishes within the same frame.
+
+The node gets a guarded view of the bus: when one of its callbacks raises, the node is stopped (it receives
+nothing more), the run goes on, the error is published once on `/carlos/<sut name>/status`
+(diagnostic_msgs/DiagnosticStatus, level ERROR, recorded) and logged, and the metric
+`systemUnderTest.failed` is 1 (0 while it ran without an error): a crash of the software under test is a
+test result (its detection criteria fail, or a criterion `systemUnderTest.failed == 0`), not an
+infrastructure error of the simulator.
 """
 
 from __future__ import annotations
 
 import importlib
 import inspect
+import logging
 import sys
+import traceback
 from pathlib import Path
 from typing import Any
 
 from simcore.errors import BadInput
 from simcore.spec import SimulationRunSpec, SystemUnderTest
-from simcore.transport.bus import Bus
+from simcore.transport.bus import Bus, Callback, Message, Publisher
 from simcore.world.opendrive import OpenDrive
 from simcore.world.state import WorldFrame
+
+log = logging.getLogger("carlos.sut")
+
+
+class GuardedBus:
+    """The bus as the system under test sees it: its callbacks stop at its first exception."""
+
+    def __init__(self, bus: Bus, name: str) -> None:
+        self.bus = bus
+        self.name = name
+        self.error: str | None = None
+        self.error_time = 0.0
+
+    def advertise(self, topic: str, typename: str) -> Publisher:
+        return self.bus.advertise(topic, typename)
+
+    def subscribe(self, pattern: str, callback: Callback) -> None:
+        def guarded(message: Message) -> None:
+            if self.error is not None:
+                return
+            try:
+                callback(message)
+            except Exception as exc:  # the software under test failed: a test result, reported below
+                self.error = (
+                    f"{type(exc).__name__}: {exc} (handling {message.topic} at t={message.time_s:g} s)"
+                )
+                self.error_time = message.time_s
+                log.warning(
+                    "system under test %s stopped: %s\n%s", self.name, self.error, traceback.format_exc()
+                )
+
+        self.bus.subscribe(pattern, guarded)
+
+    def close(self) -> None:
+        """The node does not close the run's bus."""
 
 
 def load_system_under_test(sut: SystemUnderTest, bus: Bus, base_dir: Path | None) -> Any:
@@ -76,6 +120,8 @@ class PerceptionLoop:
         self.rig = None
         self.evaluator = None
         self.node: Any = None
+        self.guard: GuardedBus | None = None
+        self._bus = bus
         self._time = 0.0
         if spec.sensors:
             from simcore.sensors.rig import SensorRig
@@ -91,15 +137,40 @@ class PerceptionLoop:
             self.evaluator.attach(bus)
         sut = spec.system_under_test
         if sut is not None and sut.module is not None:
-            self.node = load_system_under_test(sut, bus, base_dir)
+            self.guard = GuardedBus(bus, sut.name)
+            self.node = load_system_under_test(sut, self.guard, base_dir)
 
     def step(self, frame: WorldFrame) -> None:
         self._time = frame.time
         if self.rig is not None:
             self.rig.step(frame)
+        if self.guard is not None and self.guard.error is not None and not self._reported:
+            self._reported = True
+            self._report_failure()
+
+    _reported = False
+
+    def _report_failure(self) -> None:
+        from simcore.transport.messages import TYPESTORE, ros_name
+
+        assert self.guard is not None
+        status = TYPESTORE.types["diagnostic_msgs/msg/DiagnosticStatus"]
+        kv = TYPESTORE.types["diagnostic_msgs/msg/KeyValue"]
+        msg = status(
+            level=2,  # ERROR
+            name=self.guard.name,
+            message=self.guard.error or "",
+            hardware_id="",
+            values=[kv(key="state", value="failed"), kv(key="time", value=repr(self.guard.error_time))],
+        )
+        topic = f"/carlos/{ros_name(self.guard.name)}/status"
+        self._bus.advertise(topic, "diagnostic_msgs/msg/DiagnosticStatus").publish(msg, self._time)
 
     def close(self) -> None:
         """Close the node, and publish the scores of the sweeps not scored yet (the bus is still open)."""
+        if self.guard is not None and self.guard.error is not None and not self._reported:
+            self._reported = True
+            self._report_failure()
         if self.evaluator is not None:
             self.evaluator.flush(self._time)
         node, self.node = self.node, None
@@ -108,4 +179,12 @@ class PerceptionLoop:
             close()
 
     def metrics(self) -> dict[str, float]:
-        return self.evaluator.result() if self.evaluator is not None else {}
+        out = self.evaluator.result() if self.evaluator is not None else {}
+        if self.guard is not None:
+            out["systemUnderTest.failed"] = 1.0 if self.guard.error is not None else 0.0
+        return out
+
+    @property
+    def failure(self) -> str | None:
+        """The system under test's error, if it failed."""
+        return self.guard.error if self.guard is not None else None
