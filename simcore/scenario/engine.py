@@ -866,8 +866,11 @@ class ScenarioEngine:
             if freespace:
                 return box_distance(Box.of(sa), Box.of(sb))
             return math.hypot(b.x - a.x, b.y - a.y)
-        ax, ay, _ = sa.box_center()
-        bx, by, _ = sb.box_center()
+        if freespace:
+            ax, ay, _ = sa.box_center()
+            bx, by, _ = sb.box_center()
+        else:  # between reference points (as esmini measures without freespace)
+            ax, ay, bx, by = a.x, a.y, b.x, b.y
         c, s = math.cos(a.heading), math.sin(a.heading)
         dx, dy = bx - ax, by - ay
         lon, lat = c * dx + s * dy, -s * dx + c * dy
