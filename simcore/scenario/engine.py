@@ -1100,6 +1100,8 @@ class ScenarioEngine:
         self._evaluate_storyboard()
         previous_speed = {name: b.speed for name, b in self.bodies.items()}
         previous_heading = {name: b.heading for name, b in self.bodies.items()}
+        for body in self.bodies.values():
+            body.lateral_velocity = 0.0  # lateral actions that are still running set it again
         if self.init_runtimes:
             for runtime in self.init_runtimes:
                 if not runtime.done:
