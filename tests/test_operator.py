@@ -211,3 +211,24 @@ def test_invalid_spec_is_not_accepted(env: tuple[Cluster, Kube], s3_server: S3Se
         assert words in accepted["message"]
     assert c.objects("jobs") == [] and c.objects("configmaps") == []
     assert any(e.get("reason") == "InvalidSpec" and e.get("type") == "Warning" for e in c.objects("events"))
+
+
+def test_suspended_run_starts_when_resumed(
+    env: tuple[Cluster, Kube], s3_server: S3Server, tmp_path: Path
+) -> None:
+    c, kube = env
+    c.start_operator()
+    jobs = runner(kube, s3_server, tmp_path)
+    try:
+        create(kube, manifest("e2e-suspend", s3_server.bucket, [], [10.0], suspend=True))
+        wait_for(lambda: status(kube, "e2e-suspend").get("phase") == "Suspended", 30, "phase Suspended")
+        job = c.objects("jobs")[0]
+        assert job["spec"]["suspend"] is True and not job.get("status", {}).get("completedIndexes")
+        kube.custom.patch_namespaced_custom_object(
+            GROUP, VERSION, "default", PLURAL, "e2e-suspend", {"spec": {"suspend": False}}
+        )
+        st = wait_for(lambda: terminal(kube, "e2e-suspend"), 120, "a terminal phase")
+    finally:
+        jobs.stop()
+    assert st["phase"] == "Succeeded" and st["passed"] == 1
+    assert c.objects("jobs")[0]["spec"]["suspend"] is False

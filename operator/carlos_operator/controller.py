@@ -402,7 +402,8 @@ class Controller:
         assert state.run is not None and state.tally is not None and state.output is not None
         run, tally = state.run, state.tally
         job = self._job(state)
-        suspend = bool(run.spec.suspend or run.spec.execution.queue_name)
+        # spec.suspend is the one field that may change after creation: read it from the latest body
+        suspend = bool(state.body.get("spec", {}).get("suspend") or run.spec.execution.queue_name)
         if (
             job is not None
             and not run.spec.execution.queue_name
