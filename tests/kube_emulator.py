@@ -5,8 +5,9 @@ Gaps of kmock 0.8 filled here (test side only):
 - objects get `uid`, `creationTimestamp`, `generation` and a `resourceVersion` that grows with every
   change (kopf's and the kubernetes client's consistency checks need them); create answers 201;
 - the resources are registered for discovery (kind, namespaced, status subresource);
-- kmock misparses the cluster-scoped Namespace paths (`GET /api/v1/namespaces`): these tests run kopf
-  cluster-wide (`--all-namespaces`), which does not list Namespaces.
+- kmock misparses the cluster-scoped Namespace paths (`/api/v1/namespaces[/NAME]` as a namespace
+  prefix): `parse_path` is wrapped so they address the `namespaces` resource (kopf lists and watches
+  Namespaces when it serves named namespaces, and serves only those that exist).
 No garbage collector: owner references are asserted, not acted on.
 """
 
@@ -29,7 +30,7 @@ from typing import Any
 
 import aiohttp.web
 import kmock
-from kmock._internal import enums, rendering
+from kmock._internal import enums, parsing, rendering
 
 from tests.kubelet import Kubelet
 
@@ -59,6 +60,19 @@ RESOURCES = {
         kind="Namespace", namespaced=False, singular="namespace", verbs={"get", "list"}
     ),
 }
+
+
+_parse_path = parsing.parse_path
+
+
+def _parse_path_with_namespaces(path: str) -> parsing.ParsedPath:
+    parts = path.strip("/").split("/")
+    if parts[:3] == ["api", "v1", "namespaces"] and len(parts) <= 4:
+        return parsing.ParsedPath("", "v1", "namespaces", None, parts[3] if len(parts) == 4 else None, None)
+    return _parse_path(path)
+
+
+parsing.parse_path = _parse_path_with_namespaces  # rendering calls parsing.parse_path at request time
 
 
 def _now() -> str:
@@ -137,8 +151,9 @@ class Cluster:
         self.url = self._run(start())
         return self.url
 
-    def start_operator(self) -> None:
-        """kopf on its own thread and event loop (it waits for every task of its loop when stopping)."""
+    def start_operator(self, namespaces: list[str] | None = None) -> None:
+        """kopf on its own thread and event loop (it waits for every task of its loop when stopping):
+        cluster-wide, or serving `namespaces` (as `carlos operator --namespace NS`)."""
         import carlos_operator.handlers  # noqa: F401 - registers the handlers
         import kopf
 
@@ -148,7 +163,15 @@ class Cluster:
             settings = kopf.OperatorSettings()
             settings.queueing.idle_timeout = 0.5  # per-object workers exit soon: a quick shutdown
             settings.queueing.exit_timeout = 0.5
-            asyncio.run(kopf.operator(clusterwide=True, standalone=True, stop_flag=stop, settings=settings))
+            asyncio.run(
+                kopf.operator(
+                    clusterwide=not namespaces,
+                    namespaces=namespaces or (),
+                    standalone=True,
+                    stop_flag=stop,
+                    settings=settings,
+                )
+            )
 
         thread = threading.Thread(target=run, name="operator", daemon=True)
         thread.start()

@@ -197,7 +197,14 @@ def test_operator_restart_adopts_the_job(
 
 def test_invalid_spec_is_not_accepted(env: tuple[Cluster, Kube], s3_server: S3Server) -> None:
     c, kube = env
-    c.start_operator()
+    for namespace in ("default", "elsewhere"):
+        kube.core.create_namespace({"metadata": {"name": namespace}}, _preload_content=False)
+    c.start_operator(namespaces=["default"])  # namespace-scoped, as `carlos operator --namespace default`
+    ignored = manifest("e2e-elsewhere", s3_server.bucket, [], [10.0])
+    ignored["metadata"]["namespace"] = "elsewhere"
+    kube.custom.create_namespaced_custom_object(
+        GROUP, VERSION, "elsewhere", PLURAL, ignored, _preload_content=False
+    )
     bad = manifest("e2e-bad", s3_server.bucket, [], [10.0])
     bad["spec"]["scenarios"][0]["openscenario"] = "relative/path.xosc"
     create(kube, bad)
@@ -211,6 +218,9 @@ def test_invalid_spec_is_not_accepted(env: tuple[Cluster, Kube], s3_server: S3Se
         assert words in accepted["message"]
     assert c.objects("jobs") == [] and c.objects("configmaps") == []
     assert any(e.get("reason") == "InvalidSpec" and e.get("type") == "Warning" for e in c.objects("events"))
+    # the run in a namespace the operator does not serve is left alone
+    raw = kube.custom.get_namespaced_custom_object(GROUP, VERSION, "elsewhere", PLURAL, "e2e-elsewhere")
+    assert not raw.get("status")
 
 
 def test_suspended_run_starts_when_resumed(
