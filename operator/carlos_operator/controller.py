@@ -412,14 +412,21 @@ class Controller:
         ):
             job = self.kube.patch_job(key[0], job["metadata"]["name"], {"spec": {"suspend": suspend}})
         job_status = (job or {}).get("status") or {}
+        more = False
         for intervals in (job_status.get("completedIndexes"), job_status.get("failedIndexes")):
             todo = tally.unknown_among(intervals, self.batch)
+            more = more or len(todo) >= self.batch
             for summary in self._fetch.map(lambda i: self._summary(state, i), todo):
                 tally.record(summary)
+        if more:
+            self.enqueue(key)  # more finished indexes to read: the next batch right after this pass
         if job is None and state.last_status.get("phase") in TERMINAL_PHASES:
             tally.finalized = True  # finished and its Job expired: keep the recorded status
             return
         previous = state.last_status
+        reported = sum(int(previous.get(k) or 0) for k in ("passed", "testFailures", "errors"))
+        if more and tally.known_count < reported:
+            return  # catching up after a restart: never publish counts lower than the ones already shown
         status = aggregate(
             total=tally.total,
             job=job,
