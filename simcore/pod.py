@@ -387,6 +387,8 @@ def run_recorder(env: PodEnv) -> int:
     log.info("recorder: subscribed, ready on 127.0.0.1:%d", env.ready_port)
     while not done.is_set() and not stop.is_set():
         done.wait(0.2)
+    if not done.is_set():
+        bus.drain()  # SIGTERM: what is in flight to us still goes into the file
     with lock:  # no message is written after this point; everything received is in the file
         done.set()
         if recorder is not None:

@@ -147,3 +147,59 @@ def test_a_test_failure_exits_1_and_bad_input_exits_2(
     assert "nonexistent" in result.logs["simcore"]
     summary = json.loads(store.get_bytes("pod-bad/0/summary.json"))
     assert summary["status"] == "error"
+
+
+@pytest.mark.s3
+def test_recorder_on_sigterm_keeps_every_message_and_writes_no_summary(
+    s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import signal
+    import subprocess
+
+    from simcore.transport.messages import TYPESTORE
+    from tests.kubelet import CARLOS, free_port
+
+    manifest = body("pod-term", s3_server.bucket, [])
+    kubelet, _ = kubelet_for(manifest, s3_server, tmp_path)
+    spec_file = tmp_path / "simulationrun.yaml"
+    spec_file.write_text(next(iter(kubelet.configmaps.values()))["simulationrun.yaml"])
+    bus_port, ready_port = free_port(), free_port()
+    env = {
+        **s3_server.env(),
+        "PATH": "/usr/bin:/bin",
+        "JOB_COMPLETION_INDEX": "0",
+        "CARLOS_SPEC": str(spec_file),
+        "CARLOS_OUTPUT_URL": f"s3://{s3_server.bucket}/pods",
+        "CARLOS_BUS_PORT": str(bus_port),
+        "CARLOS_RECORDER_READY_PORT": str(ready_port),
+        "CARLOS_SCRATCH": str(tmp_path / "scratch"),
+    }
+    bridge = subprocess.Popen([CARLOS, "pod", "--role", "bridge"], env=env)
+    recorder = subprocess.Popen([CARLOS, "pod", "--role", "recorder"], env=env)
+    try:
+        from tests.kubelet import _wait_port
+
+        _wait_port(bus_port, 30, bridge)
+        _wait_port(ready_port, 30, recorder)
+        Clock = TYPESTORE.types["rosgraph_msgs/msg/Clock"]
+        Time = TYPESTORE.types["builtin_interfaces/msg/Time"]
+        bus = LoopbackBus("127.0.0.1", bus_port)
+        clock = bus.advertise("/clock", "rosgraph_msgs/msg/Clock")
+        for i in range(2000):
+            clock.publish(Clock(clock=Time(sec=i, nanosec=0)), float(i))
+        bus.close()
+        recorder.send_signal(signal.SIGTERM)  # at once: messages may still be in flight
+        assert recorder.wait(30) == 0
+    finally:
+        for proc in (recorder, bridge):
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+                proc.wait(30)
+    store = results_store(s3_server, monkeypatch)
+    assert not store.exists("pod-term/0/summary.json")
+    assert "terminated before the end" in store.get_bytes("pod-term/0/log.txt").decode()
+    recording = tmp_path / "term.mcap"
+    recording.write_bytes(store.get_bytes("pod-term/0/recording.mcap"))
+    with recording.open("rb") as f:
+        stats = make_reader(f).get_summary().statistics
+    assert stats.message_count == 2000

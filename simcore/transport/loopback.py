@@ -270,6 +270,7 @@ class LoopbackBus:
         self._on_disconnect = on_disconnect
         self.disconnected = threading.Event()
         self.error: BaseException | None = None
+        self.last_receive = time.monotonic()  # when the reader last got a frame (drain on shutdown)
         self._reader = threading.Thread(target=self._read, name="loopback-reader", daemon=True)
         self._reader.start()
 
@@ -298,6 +299,16 @@ class LoopbackBus:
             self._sock.sendall(frame)
         self._dispatch(message)
 
+    def drain(self, quiet: float = 0.3, limit: float = 5.0) -> None:
+        """Wait until nothing arrived for `quiet` seconds (or `limit` passed, or the hub is gone): what
+        was already sent to this client is then dispatched."""
+        deadline = time.monotonic() + limit
+        while time.monotonic() < deadline and not self.disconnected.is_set():
+            idle = time.monotonic() - self.last_receive
+            if idle >= quiet:
+                return
+            time.sleep(quiet - idle)
+
     def close(self) -> None:
         """Send everything (the kernel delivers what was written before the FIN), then disconnect."""
         if self._closed:
@@ -324,6 +335,7 @@ class LoopbackBus:
                 body = read_frame(self._sock)
                 if body is None:
                     return
+                self.last_receive = time.monotonic()
                 kind = body[:1]
                 if kind == b"P":
                     self._dispatch(decode_publish(body))
