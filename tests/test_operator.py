@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import base64
 import json
+import os
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -242,3 +243,57 @@ def test_suspended_run_starts_when_resumed(
         jobs.stop()
     assert st["phase"] == "Succeeded" and st["passed"] == 1
     assert c.objects("jobs")[0]["spec"]["suspend"] is False
+
+
+def test_carlos_operator_command_serves_liveness_and_metrics(
+    env: tuple[Cluster, Kube], s3_server: S3Server, tmp_path: Path
+) -> None:
+    import subprocess
+    import urllib.request
+
+    from tests.kubelet import CARLOS, free_port
+
+    _, kube = env
+    liveness, metrics = free_port(), free_port()
+    log = (tmp_path / "operator.log").open("wb")
+    proc = subprocess.Popen(
+        [
+            CARLOS,
+            "operator",
+            "--all-namespaces",
+            "--liveness-port",
+            str(liveness),
+            "--metrics-port",
+            str(metrics),
+        ],
+        env=dict(os.environ),
+        stdout=log,
+        stderr=subprocess.STDOUT,
+    )
+
+    def get(port: int, path: str) -> str | None:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=2) as response:
+                return response.read().decode()
+        except OSError:
+            return None
+
+    try:
+        wait_for(lambda: get(liveness, "/healthz"), 60, "the liveness endpoint")
+        bad = manifest("cli-bad", s3_server.bucket, [], [10.0])
+        bad["spec"]["output"]["url"] = "file:///results"
+        create(kube, bad)
+        st = wait_for(lambda: status(kube, "cli-bad").get("conditions"), 30, "conditions")
+        assert st[0]["reason"] == "InvalidSpec" and "s3://" in st[0]["message"]
+        text = wait_for(
+            lambda: (
+                (m := get(metrics, "/metrics")) and 'carlos_simulationruns{phase="Failed"} 1.0' in m and m
+            ),
+            30,
+            "the run in the metrics",
+        )
+        assert "carlos_reconcile_seconds_count" in text
+    finally:
+        proc.terminate()
+        proc.wait(30)
+        log.close()
