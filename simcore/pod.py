@@ -221,14 +221,13 @@ def run_simcore(env: PodEnv) -> int:
         f"scenario {point.scenario.name}, seed {point.seed}",
         f"parameters: {json.dumps(point.parameters, sort_keys=True)}",
     ]
-    # the recorder role records; simulate must not write a second MCAP
-    quiet = run.model_copy(
-        update={
-            "spec": spec.model_copy(
-                update={"recording": spec.recording.model_copy(update={"enabled": False})}
-            )
-        }
-    )
+    # the recorder role records (simulate must not write a second MCAP); a system under test with an image
+    # is its own container of the pod, never also loaded in-process here
+    update: dict[str, Any] = {"recording": spec.recording.model_copy(update={"enabled": False})}
+    sut = spec.system_under_test
+    if sut is not None and sut.image:
+        update["system_under_test"] = sut.model_copy(update={"module": None})
+    quiet = run.model_copy(update={"spec": spec.model_copy(update=update)})
     env.scratch.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="simcore-", dir=env.scratch) as scratch_name:
         scratch = Path(scratch_name)

@@ -267,3 +267,27 @@ def test_aggregation_of_50000_indexes_is_incremental() -> None:
     st = aggregate(total=total, job=job(completed, finished="Complete"), tally=tally, results_url="", now="t")
     assert st["testFailures"] == 50 and st["passed"] == total - 50 and len(st["failures"]) == 20
     assert tally.unknown_among(completed, 10) == []
+
+
+def test_system_under_test_is_a_sidecar_on_the_cluster() -> None:
+    body = manifest(
+        systemUnderTest={
+            "name": "planner",
+            "image": "reg/planner:2",
+            "command": ["planner"],
+            "args": ["--fast"],
+        }
+    )
+    run = load(body)
+    check_cluster_spec(run)
+    pod = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))["spec"]["template"]["spec"]
+    assert [c["name"] for c in pod["initContainers"]] == ["bridge", "recorder", "planner"]
+    sut = pod["initContainers"][2]
+    assert sut["image"] == "reg/planner:2" and sut["command"] == ["planner"] and sut["args"] == ["--fast"]
+    assert sut["restartPolicy"] == "Always" and sut["securityContext"]["readOnlyRootFilesystem"]
+    assert "envFrom" not in sut
+    assert {e["name"] for e in sut["env"]} >= {"JOB_COMPLETION_INDEX", "CARLOS_BUS_PORT", "CARLOS_SPEC"}
+    with pytest.raises(BadInput, match=r"spec.systemUnderTest.image"):
+        check_cluster_spec(load(manifest(systemUnderTest={"module": "pkg.mod:Node"})))
+    with pytest.raises(BadInput, match=r"spec.systemUnderTest.name"):
+        check_cluster_spec(load(manifest(systemUnderTest={"name": "bridge", "image": "x"})))

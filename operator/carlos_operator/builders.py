@@ -161,6 +161,17 @@ MAX_COMPLETIONS = 100_000
 def check_cluster_spec(run: SimulationRun) -> None:
     """What a cluster run needs beyond the models: at most `MAX_COMPLETIONS` runs, and scenarios a pod can
     reach (s3://, a ConfigMap, or an absolute file:// path inside the image)."""
+    sut = run.spec.system_under_test
+    if sut is not None and not sut.image:
+        raise BadInput(
+            "a cluster runs the system under test as a container: set its image (module is for local runs)",
+            field="spec.systemUnderTest.image",
+        )
+    if sut is not None and sut.name in ("simcore", "bridge", "recorder"):
+        raise BadInput(
+            f"{sut.name!r} is the name of a CARLOS container: choose another name",
+            field="spec.systemUnderTest.name",
+        )
     total = len(Plan(run.spec))
     if total > MAX_COMPLETIONS:
         raise BadInput(
@@ -260,7 +271,7 @@ def _container(
 ) -> dict[str, Any]:
     container: dict[str, Any] = {
         "name": role,
-        "image": getattr(settings, f"image_{role}"),
+        "image": getattr(settings, f"image_{role}", ""),
         "imagePullPolicy": settings.pull_policies.get(role, "IfNotPresent"),
         "args": ["pod", "--role", role],
         "env": _env(run, output),
@@ -329,6 +340,24 @@ def build_job(
     simcore = _container("simcore", settings, run, output, mounts)
     bridge = _sidecar(_container("bridge", settings, run, output, mounts), BUS_PORT)
     recorder = _sidecar(_container("recorder", settings, run, output, mounts), RECORDER_READY_PORT)
+    sidecars = [bridge, recorder]
+    sut = spec.system_under_test
+    if sut is not None and sut.image:
+        # the system under test: a native sidecar too, started after the recorder, stopped after simcore
+        node = {
+            **_container(sut.name, settings, run, output, mounts),
+            "image": sut.image,
+            "imagePullPolicy": "IfNotPresent",
+            "restartPolicy": "Always",
+        }
+        node.pop("args")
+        node.pop("envFrom", None)  # the object-store credentials are CARLOS' business, not the node's
+        if sut.command:
+            node["command"] = list(sut.command)
+        if sut.args:
+            node["args"] = list(sut.args)
+        node["env"] = [*node["env"], {"name": "CARLOS_ROLE", "value": "system-under-test"}]
+        sidecars.append(node)
     pod_spec: dict[str, Any] = {
         "restartPolicy": "Never",
         "automountServiceAccountToken": False,
@@ -342,7 +371,7 @@ def build_job(
             "fsGroup": UID,
             "seccompProfile": {"type": "RuntimeDefault"},
         },
-        "initContainers": [bridge, recorder],
+        "initContainers": sidecars,
         "containers": [simcore],
         "volumes": volumes,
     }
