@@ -40,7 +40,7 @@ from carlos_operator.builders import (
 from carlos_operator.kube import Conflict, Kube, NotFound, now_rfc3339
 from carlos_operator.status import TERMINAL_PHASES, Tally, aggregate, job_finished
 from simcore.errors import BadInput, CarlosError
-from simcore.evaluation.report import index_summary, junit_xml, run_summary
+from simcore.evaluation.report import junit_xml, run_summary
 from simcore.manifest import parse_manifest
 from simcore.plan import Plan
 from simcore.spec import SimulationRun
@@ -505,20 +505,9 @@ class Controller:
 
 
 def _missing_summary(run: SimulationRun, index: int, reason: str) -> dict[str, Any]:
-    point = Plan(run.spec)[index]
-    return index_summary(
-        index=index,
-        scenario=point.scenario.name,
-        parameters=point.parameters,
-        seed=point.seed,
-        optional=point.scenario.optional,
-        sim_seconds=0.0,
-        wall_seconds=0.0,
-        metrics={},
-        results=[],
-        error=reason,
-        end_reason="error",
-    )
+    from simcore.runner import error_outcome
+
+    return error_outcome(run, index, 1, reason).summary
 
 
 def slim_job(job: dict[str, Any]) -> dict[str, Any]:
