@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from simcore.errors import BadInput, SimulationError
 from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
@@ -217,7 +217,51 @@ class TeleportRuntime(ActionRuntime):
         self.done = True
 
 
+class ControllerRuntime(ActionRuntime):
+    """Assign/activate a controller: an external one, active on any domain, moves the entity by its
+    control input from now on (the scenario's motion actions on it are then ignored)."""
+
+    domain = "none"
+
+    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.ControllerAction) -> None:
+        super().__init__(engine, actor)
+        self.action = action
+
+    def start(self) -> None:
+        control = self.engine.controllers[self.actor.name]
+        if self.action.assign is not None:
+            control[0] = self.action.assign
+        if self.action.longitudinal is not None:
+            control[1] = self.action.longitudinal
+        if self.action.lateral is not None:
+            control[2] = self.action.lateral
+        external = control[0] == "external" and (control[1] or control[2])
+        if external != self.actor.external:
+            self.actor.external = bool(external)
+            self.actor.mover = None
+            self.engine.log.append(
+                f"t={self.engine.time:.2f} {self.actor.name}: external controller "
+                f"{'activated: moved by its control input' if external else 'deactivated'}"
+            )
+        self.done = True
+
+
+class IgnoredRuntime(ActionRuntime):
+    """A motion action on an entity an external controller drives: the controller overrides it."""
+
+    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> None:
+        super().__init__(engine, actor)
+        self.domain = getattr(action, "domain", "other")
+
+    def start(self) -> None:
+        self.done = True
+
+
 def make_runtime(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> Runtime:
+    if isinstance(action, m.ControllerAction):
+        return ControllerRuntime(engine, actor, action)
+    if actor.external and not isinstance(action, m.TeleportAction | m.NoMotionAction | m.AssignRouteAction):
+        return IgnoredRuntime(engine, actor, action)
     other = extra_actions.make(engine, actor, action)
     if other is not None:
         return other
@@ -228,6 +272,15 @@ def make_runtime(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -
     if isinstance(action, m.TeleportAction):
         return TeleportRuntime(engine, actor, action)
     raise BadInput(f"{type(action).__name__} is not supported", file=engine.source)
+
+
+class ExternalDriver(Protocol):
+    """Moves the entities an external controller drives (`simcore.closedloop`): the pose and speed after
+    `dt` from the current ones."""
+
+    def move(
+        self, entity: m.Entity, x: float, y: float, heading: float, speed: float, dt: float
+    ) -> tuple[float, float, float, float]: ...
 
 
 # --- conditions -------------------------------------------------------------------------------------------
@@ -253,8 +306,10 @@ class ScenarioEngine:
         sumo: SumoWorld | None,
         step_seconds: float,
         ego: str | None = None,
+        external: ExternalDriver | None = None,
     ) -> None:
         self.scenario = scenario
+        self.external = external  # moves the entities whose external controller is active
         self.source = str(scenario.path)
         self.road = road
         self.sumo = sumo
@@ -265,6 +320,10 @@ class ScenarioEngine:
         self.warnings: list[str] = []
         self.ended_by: str | None = None
         self.bodies: dict[str, Body] = {e.name: Body(entity=e) for e in scenario.entities}
+        # per entity: [driver of its assigned controller, active longitudinally, active laterally]
+        self.controllers: dict[str, list[Any]] = {
+            e.name: [e.driver if e.driver == "external" else "scenario", False, False] for e in scenario.entities
+        }
         self.ego = ego or _default_ego(scenario)
         if self.ego not in self.bodies:
             raise BadInput(f"ego entity {self.ego!r} is not in the scenario", field="spec.simulation.ego")
@@ -277,10 +336,17 @@ class ScenarioEngine:
                 )
         self.conditions: dict[int, ConditionState] = {}
         self._target_roads: dict[tuple[float, float, str], Any] = {}
+        self._fixed_points: dict[int, tuple[m.Position, tuple[float, float, float, float]]] = {}
         self.owner: Body | None = None  # the actor whose action runs now ("$owner")
         self.parameter_values: dict[str, Any] = dict(scenario.parameters)
         self.variables: dict[str, Any] = dict(scenario.variables)
         self.added_later = _added_later(scenario)
+        # traffic signals: state shown by each signal (by the id or name the scenario uses), and the phase
+        # cycle of each signal controller: name → (time its current cycle was anchored, phase index then)
+        self.signals: dict[str, str] = {}
+        self._signal_cycles: dict[str, tuple[float, int]] = _signal_starts(scenario.signal_controllers)
+        self._signal_controllers = {c.name: c for c in scenario.signal_controllers}
+        self.signal_phases: dict[str, str] = {}
         self.root = self._build()
         self.registry = Registry(self.root)
         self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
@@ -328,7 +394,9 @@ class ScenarioEngine:
             elif isinstance(item.action, m.SpeedAction):
                 # with a transition shape the speed changes over time from the start, as in a story
                 self.init_runtimes.append(runtime)
-            elif isinstance(item.action, m.TeleportAction | m.AssignRouteAction | m.NoMotionAction):
+            elif isinstance(
+                item.action, m.TeleportAction | m.AssignRouteAction | m.NoMotionAction | m.ControllerAction
+            ):
                 runtime.start()
             else:
                 # an Init action with duration (a trajectory, a distance to keep) runs from the first step
@@ -653,6 +721,48 @@ class ScenarioEngine:
             body = self.body(action.entity)
             body.gone = True
             self._states.clear()
+        elif isinstance(action, m.TrafficSignalStateAction):
+            self.signals[action.name] = action.state
+            self.log.append(f"t={self.time:.2f} signal {action.name} := {action.state}")
+        elif isinstance(action, m.TrafficSignalControllerAction):
+            ctrl = self._signal_controllers.get(action.controller)
+            if ctrl is None:
+                raise BadInput(
+                    f"TrafficSignalControllerAction: no TrafficSignalController {action.controller!r} in "
+                    "RoadNetwork/TrafficSignals",
+                    file=self.source,
+                )
+            names = [p.name for p in ctrl.phases]
+            if action.phase not in names:
+                raise BadInput(
+                    f"TrafficSignalControllerAction: controller {ctrl.name!r} has no phase {action.phase!r} "
+                    f"(phases: {', '.join(names)})",
+                    file=self.source,
+                )
+            self._signal_cycles[ctrl.name] = (self.time, names.index(action.phase))
+            self._update_signals()
+
+    def _update_signals(self) -> None:
+        """Signal controllers: the phase each is in now, and the signal states that phase sets."""
+        for name, (anchor, index) in self._signal_cycles.items():
+            ctrl = self._signal_controllers[name]
+            if not ctrl.phases or self.time < anchor - 1e-9:
+                continue
+            total = sum(p.duration for p in ctrl.phases)
+            elapsed = (self.time - anchor) % total if total > 0 else 0.0
+            n = len(ctrl.phases)
+            i = index
+            for _ in range(n):
+                duration = ctrl.phases[i].duration
+                if elapsed < duration - 1e-9:
+                    break
+                elapsed -= duration
+                i = (i + 1) % n
+            phase = ctrl.phases[i]
+            if self.signal_phases.get(name) != phase.name:
+                self.signal_phases[name] = phase.name
+                for signal, state in phase.states:
+                    self.signals[signal] = state
 
     # --- SUMO hooks -----------------------------------------------------------------------------------
 
@@ -701,6 +811,10 @@ class ScenarioEngine:
                     file=self.source,
                 )
             return any(node.is_(c.state, self.step_index) for node in nodes)
+        if isinstance(c, m.TrafficSignalCondition):
+            return self.signals.get(c.name) == c.state
+        if isinstance(c, m.TrafficSignalControllerCondition):
+            return self.signal_phases.get(c.controller) == c.phase
         if isinstance(c, m.UnsupportedCondition):
             return False
         store = self.variables if isinstance(c, m.VariableCondition) else self.parameter_values
@@ -739,12 +853,8 @@ class ScenarioEngine:
             x, y, _, _ = self.resolve_position(c.position)
             return math.hypot(body.x - x, body.y - y) <= c.tolerance
         if isinstance(c, m.DistanceCondition):
-            x, y, _, _ = self.resolve_position(c.position)
-            if c.freespace:
-                point = Box(((x, y),) * 4, ((1.0, 0.0), (0.0, 1.0)))
-                distance = box_distance(Box.of(self.state_of(body)), point)
-            else:
-                distance = math.hypot(body.x - x, body.y - y)
+            target = self._fixed_point(c.position)
+            distance = self.point_distance(body, target, c.distance_type, c.freespace, c.coordinate_system)
             return compare(c.rule, distance, c.value)
         if isinstance(c, m.RelativeDistanceCondition):
             other = self.body(c.entity)
@@ -839,6 +949,55 @@ class ScenarioEngine:
             occupied = True
             break
         return not occupied
+
+    def _fixed_point(self, position: m.Position) -> tuple[float, float, float, float]:
+        """World pose of a condition's position: computed once when it depends on no entity."""
+        if isinstance(position, m.WorldPosition | m.LanePosition | m.RoadPosition):
+            key = id(position)
+            cached = self._fixed_points.get(key)
+            if cached is None:
+                cached = self._fixed_points[key] = (position, self.resolve_position(position))
+            return cached[1]
+        return self.resolve_position(position)
+
+    def point_distance(
+        self, body: Body, target: tuple[float, float, float, float], kind: str, freespace: bool, system: str
+    ) -> float:
+        """Distance (absolute) from an entity to a point: euclidean, or longitudinal/lateral in the entity's
+        frame (system "entity") or along the road (system "road"/"lane": difference of s, of t)."""
+        x, y = target[0], target[1]
+        if kind in ("euclidianDistance", "cartesianDistance"):
+            if freespace:
+                point = Box(((x, y),) * 4, ((1.0, 0.0), (0.0, 1.0)))
+                return box_distance(Box.of(self.state_of(body)), point)
+            return math.hypot(body.x - x, body.y - y)
+        box = body.entity.box
+        if system in ("road", "lane") and self.road is not None and body.road_id is not None:
+            key = (x, y, body.road_id)
+            if key not in self._target_roads:
+                self._target_roads[key] = self.road.world_to_road(x, y, None, road_hint=body.road_id)
+            rc = self._target_roads[key]
+            if rc is not None and rc.road_id == body.road_id:
+                if kind == "longitudinal":
+                    value = (rc.s - body.s) * body.direction
+                    if freespace:
+                        extent = box.center_x + box.length / 2 if value >= 0 else box.length / 2 - box.center_x
+                        value = math.copysign(max(abs(value) - extent, 0.0), value)
+                else:
+                    t_body = self.road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
+                    value = (rc.t - t_body) * body.direction
+                    if freespace:
+                        value = math.copysign(max(abs(value) - box.width / 2, 0.0), value)
+                return abs(value)
+        c, s = math.cos(body.heading), math.sin(body.heading)
+        dx, dy = x - body.x, y - body.y
+        lon, lat = c * dx + s * dy, -s * dx + c * dy
+        if freespace:
+            lon -= box.center_x
+            lat -= box.center_y
+            lon = math.copysign(max(abs(lon) - box.length / 2, 0.0), lon)
+            lat = math.copysign(max(abs(lat) - box.width / 2, 0.0), lat)
+        return abs(lon if kind == "longitudinal" else lat)
 
     def relative_distance(
         self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False, system: str = "entity"
@@ -1097,6 +1256,8 @@ class ScenarioEngine:
     def advance(self) -> None:
         """Advance one step without building the frame (headless runs that read the bodies directly)."""
         dt = self.dt
+        if self._signal_cycles:
+            self._update_signals()
         self._evaluate_storyboard()
         previous_speed = {name: b.speed for name, b in self.bodies.items()}
         previous_heading = {name: b.heading for name, b in self.bodies.items()}
@@ -1120,6 +1281,9 @@ class ScenarioEngine:
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         for body in self.bodies.values():
             if body.entity.driver == "sumo" or body.gone:
+                continue
+            if body.external:
+                self._move_external(body, dt)
                 continue
             distance = body.speed * dt
             if body.lateral_velocity != 0.0 and body.mover is None:
@@ -1151,21 +1315,7 @@ class ScenarioEngine:
                     continue
                 body.odometer += math.hypot(state.x - body.x, state.y - body.y)
                 body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
-                if self.road is not None:
-                    rc = None
-                    if body.road_id is not None:
-                        rc = self.road.world_to_road_near(body.x, body.y, body.road_id, body.s)
-                    if rc is None:
-                        rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
-                    if rc is not None:
-                        body.road_id, body.lane_id, body.s, body.offset = (
-                            rc.road_id,
-                            rc.lane_id,
-                            rc.s,
-                            rc.offset,
-                        )
-                        body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
-                        body.z = self.road.road_to_world(rc.road_id, rc.s, rc.t).z
+                self._locate(body)
         for body in self.bodies.values():
             body.acceleration = (body.speed - previous_speed[body.name]) / dt
             body.yaw_rate = wrap_angle(body.heading - previous_heading[body.name]) / dt
@@ -1178,6 +1328,31 @@ class ScenarioEngine:
         self.step_index += 1
         self._states.clear()
         self._check_stop()
+
+    def _locate(self, body: Body) -> None:
+        """Road coordinates (road, lane, s, offset, direction, z) of a body moved in world coordinates."""
+        if self.road is None:
+            return
+        rc = None
+        if body.road_id is not None:
+            rc = self.road.world_to_road_near(body.x, body.y, body.road_id, body.s)
+        if rc is None:
+            rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
+        if rc is not None:
+            body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
+            body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
+            body.z = self.road.road_to_world(rc.road_id, rc.s, rc.t).z
+
+    def _move_external(self, body: Body, dt: float) -> None:
+        """An entity its external controller drives: moved by the control input; without one (no system
+        under test attached, as in a headless conformance run) it stands still, as in esmini."""
+        if self.external is None:
+            body.speed = 0.0
+            return
+        x, y, heading, speed = self.external.move(body.entity, body.x, body.y, body.heading, body.speed, dt)
+        body.odometer += math.hypot(x - body.x, y - body.y)
+        body.x, body.y, body.heading, body.speed = x, y, heading, speed
+        self._locate(body)
 
     def state_of(self, body: Body) -> EntityState:
         cached = self._states.get(body.name)
@@ -1209,7 +1384,7 @@ class ScenarioEngine:
                 e.box.center_x, e.box.center_y, e.box.center_z, e.box.length, e.box.width, e.box.height
             ),
             lane=lane,
-            controlled_by=e.driver,
+            controlled_by="external" if body.external else e.driver,
         )
 
     def frame(self) -> WorldFrame:
@@ -1238,6 +1413,21 @@ def _walk_lane(road: OpenDrive, road_id: str, lane_id: int, s: float) -> tuple[s
         road_id, lane_id, new_dir = nxt
         s = over if new_dir > 0 else road.road_length(road_id) - over
     return road_id, lane_id, s
+
+
+def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tuple[float, int]]:
+    """When each signal controller starts its first phase: its delay, counted from the start of the
+    controller it references (if any)."""
+    by_name = {c.name: c for c in controllers}
+    out: dict[str, tuple[float, int]] = {}
+    for ctrl in controllers:
+        start, seen, current = 0.0, set(), ctrl
+        while current is not None and current.name not in seen:
+            seen.add(current.name)
+            start += current.delay
+            current = by_name.get(current.reference) if current.reference else None
+        out[ctrl.name] = (start, 0)
+    return out
 
 
 def _added_later(scenario: m.Scenario) -> set[str]:

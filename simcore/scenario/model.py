@@ -45,11 +45,24 @@ class Entity:
     performance: Performance
     properties: dict[str, str] = field(default_factory=dict)
     controller: dict[str, str] = field(default_factory=dict)  # the assigned controller's properties
+    wheelbase: float | None = None  # vehicles: FrontAxle.positionX − RearAxle.positionX, m
+    max_steering: float | None = None  # vehicles: FrontAxle.maxSteering, rad
 
     @property
     def driver(self) -> str:
-        """Who moves the entity: "scenario" (default) or "sumo" (`carlos.driver` controller property)."""
-        return self.controller.get("carlos.driver", "scenario")
+        """Who moves the entity: "scenario" (default), "sumo" (`carlos.driver=sumo` controller property) or
+        "external": the system under test through its control topic (`carlos.driver=external`, or the
+        controllers other tools name for it: esmini's ExternalController and InteractiveController)."""
+        driver = self.controller.get("carlos.driver")
+        if driver is not None:
+            return driver
+        if self.controller.get("esminiController") in EXTERNAL_CONTROLLERS:
+            return "external"
+        return "scenario"
+
+
+# controllers of other tools whose entity is moved from outside the scenario (a program, a person)
+EXTERNAL_CONTROLLERS = frozenset({"ExternalController", "InteractiveController"})
 
 
 # --- positions -----------------------------------------------------------------------------------------
@@ -296,6 +309,8 @@ class DynamicConstraints:
     max_acceleration: float | None = None
     max_deceleration: float | None = None
     max_speed: float | None = None
+    max_acceleration_rate: float | None = None  # jerk limits, m/s³
+    max_deceleration_rate: float | None = None
 
 
 @dataclass(frozen=True)
@@ -383,6 +398,19 @@ class NoMotionAction:
     domain = "none"
 
 
+@dataclass(frozen=True)
+class ControllerAction:
+    """Assign and/or (de)activate an entity's controller. `assign`: the driver of the controller assigned
+    now ("external", "scenario"), None when nothing is assigned; `longitudinal`/`lateral`: True activates,
+    False deactivates, None leaves that domain as it is. Only an external controller changes motion: while
+    it is active on a domain, the entity moves by its control input (without one, it stands still)."""
+
+    assign: str | None = None
+    longitudinal: bool | None = None
+    lateral: bool | None = None
+    domain = "none"
+
+
 PrivateAction = (
     SpeedAction
     | LaneChangeAction
@@ -396,6 +424,7 @@ PrivateAction = (
     | AcquirePositionAction
     | SynchronizeAction
     | NoMotionAction
+    | ControllerAction
 )
 
 
@@ -426,12 +455,35 @@ class DeleteEntityAction:
 
 
 @dataclass(frozen=True)
+class TrafficSignalStateAction:
+    """InfrastructureAction/TrafficSignalAction/TrafficSignalStateAction: a signal (by its OpenDRIVE id or
+    name) shows `state` (e.g. "off;off;on", one entry per lamp) from now on."""
+
+    name: str
+    state: str
+
+
+@dataclass(frozen=True)
+class TrafficSignalControllerAction:
+    """TrafficSignalControllerAction: the controller jumps to `phase` (its cycle goes on from there)."""
+
+    controller: str
+    phase: str
+
+
+@dataclass(frozen=True)
 class NoMotionGlobalAction:
     kind: str
 
 
 GlobalAction = (
-    ParameterSetAction | ParameterModifyAction | AddEntityAction | DeleteEntityAction | NoMotionGlobalAction
+    ParameterSetAction
+    | ParameterModifyAction
+    | AddEntityAction
+    | DeleteEntityAction
+    | TrafficSignalStateAction
+    | TrafficSignalControllerAction
+    | NoMotionGlobalAction
 )
 
 
@@ -504,6 +556,8 @@ class DistanceCondition:
     freespace: bool
     value: float
     rule: Rule
+    distance_type: str = "euclidianDistance"  # longitudinal | lateral | euclidianDistance (1.1+)
+    coordinate_system: str = "entity"  # entity | road | lane | trajectory (1.1+)
 
 
 @dataclass(frozen=True)
@@ -563,6 +617,22 @@ class OffroadCondition:
 
 
 @dataclass(frozen=True)
+class TrafficSignalCondition:
+    """The signal (OpenDRIVE id or name) shows exactly `state`."""
+
+    name: str
+    state: str
+
+
+@dataclass(frozen=True)
+class TrafficSignalControllerCondition:
+    """The traffic signal controller is in `phase`."""
+
+    controller: str
+    phase: str
+
+
+@dataclass(frozen=True)
 class UnsupportedCondition:
     """A condition CARLOS does not evaluate: always false (it is warned about at load)."""
 
@@ -591,6 +661,8 @@ ValueCondition = (
     | StoryboardElementStateCondition
     | ParameterCondition
     | VariableCondition
+    | TrafficSignalCondition
+    | TrafficSignalControllerCondition
     | UnsupportedCondition
 )
 
@@ -662,6 +734,24 @@ class Story:
 
 
 @dataclass(frozen=True)
+class SignalPhase:
+    name: str
+    duration: float
+    states: tuple[tuple[str, str], ...]  # (traffic signal id, state)
+
+
+@dataclass(frozen=True)
+class SignalController:
+    """RoadNetwork/TrafficSignals/TrafficSignalController: phases cycled from the start (after `delay`
+    seconds, counted from the start of the `reference` controller when given)."""
+
+    name: str
+    delay: float
+    reference: str | None
+    phases: tuple[SignalPhase, ...]
+
+
+@dataclass(frozen=True)
 class InitAction:
     entity: str  # "" for a global action
     action: PrivateAction | GlobalAction
@@ -679,5 +769,6 @@ class Scenario:
     stop_trigger: Trigger | None
     parameters: dict[str, bool | int | float | str]
     variables: dict[str, bool | int | float | str] = field(default_factory=dict)
+    signal_controllers: tuple[SignalController, ...] = ()
     #: unsupported elements that do not change motion: "file:line: element: what was ignored"
     warnings: tuple[str, ...] = ()

@@ -65,6 +65,7 @@ class Body:
     extra: dict[str, float] = field(default_factory=dict)
     mover: Any = None  # a runtime that moves the entity itself (a trajectory) instead of lane following
     route: list[tuple[str, int]] = field(default_factory=list)  # roads ahead (id, direction) of a route
+    external: bool = False  # an external controller is active on it: moved by its control input only
 
     @property
     def name(self) -> str:

@@ -235,11 +235,15 @@ def load_scenario(path: str | Path, overrides: Mapping[str, ParamValue] | None =
     catalogs = _catalog_dirs(reader, root)
     reader.catalogs = catalogs
     road_file = None
+    signal_controllers: tuple[m.SignalController, ...] = ()
     network = root.find("RoadNetwork")
     if network is not None:
         logic = network.find("LogicFile")
         if logic is not None:
             road_file = (path.parent / reader.attr(logic, "filepath")).resolve()
+        signals = network.find("TrafficSignals")
+        if signals is not None:
+            signal_controllers = reader.within(network, None, _signal_controllers, reader, signals)
     entities = tuple(_entities(reader, reader.child(root, "Entities"), catalogs))
     names = {e.name for e in entities}
     storyboard = reader.child(root, "Storyboard")
@@ -257,10 +261,39 @@ def load_scenario(path: str | Path, overrides: Mapping[str, ParamValue] | None =
         stop_trigger=_trigger(reader, stop) if stop is not None else None,
         parameters=dict(reader.scopes[1]),
         variables=dict(reader.variables),
+        signal_controllers=signal_controllers,
         warnings=tuple(reader.warnings),
     )
     _check_references(scenario, names)
     return scenario
+
+
+def _signal_controllers(reader: _Reader, signals: ET.Element) -> tuple[m.SignalController, ...]:
+    out = []
+    for ctrl in signals.findall("TrafficSignalController"):
+        phases = []
+        for phase in ctrl.findall("Phase"):
+            duration = reader.num(phase, "duration")
+            if duration < 0:
+                raise reader.fail(f"duration={duration:g} is negative", phase)
+            states = tuple(
+                (reader.attr(state, "trafficSignalId"), reader.attr(state, "state"))
+                for state in phase.findall("TrafficSignalState")
+            )
+            phases.append(m.SignalPhase(name=reader.attr(phase, "name"), duration=duration, states=states))
+        out.append(
+            m.SignalController(
+                name=reader.attr(ctrl, "name"),
+                delay=reader.num(ctrl, "delay", 0.0),
+                reference=reader.attr(ctrl, "reference") if ctrl.get("reference") else None,
+                phases=tuple(phases),
+            )
+        )
+    names = {c.name for c in out}
+    for c in out:
+        if c.reference is not None and c.reference not in names:
+            raise reader.fail(f"TrafficSignalController {c.name!r}: reference {c.reference!r} does not exist")
+    return tuple(out)
 
 
 def declared_parameters(path: str | Path) -> dict[str, str]:
@@ -412,6 +445,7 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
             else m.Performance()
         )
         properties = _properties(reader, body)
+        wheelbase, max_steering = _axles(reader, body)
     finally:
         if pushed:
             reader.pop()
@@ -427,7 +461,22 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         performance=performance,
         properties=properties,
         controller=controller,
+        wheelbase=wheelbase,
+        max_steering=max_steering,
     )
+
+
+def _axles(reader: _Reader, body: ET.Element) -> tuple[float | None, float | None]:
+    """A vehicle's wheelbase and front-wheel steering limit (Axles), when it has both axles."""
+    axles = body.find("Axles")
+    if axles is None:
+        return None, None
+    front, rear = axles.find("FrontAxle"), axles.find("RearAxle")
+    if front is None or rear is None:
+        return None, None
+    wheelbase = reader.num(front, "positionX", 0.0) - reader.num(rear, "positionX", 0.0)
+    max_steering = abs(reader.num(front, "maxSteering", 0.0))
+    return (wheelbase if wheelbase > 0 else None), (max_steering if max_steering > 0 else None)
 
 
 def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
@@ -448,8 +497,14 @@ def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
     finally:
         if pushed:
             reader.pop()
+    if properties.get("carlos.driver", "scenario") not in ("scenario", "sumo", "external"):
+        raise reader.fail(
+            f"controller property carlos.driver={properties['carlos.driver']!r}: use scenario, sumo or external",
+            ctrl,
+        )
     kind = properties.get("esminiController", properties.get("name", ""))
-    if properties.get("carlos.driver") != "sumo" and kind not in ("", "DefaultController"):
+    known = properties.get("carlos.driver") in ("sumo", "external") or kind in m.EXTERNAL_CONTROLLERS
+    if not known and kind not in ("", "DefaultController"):
         reader.warn(
             f"controller {kind!r} is not modelled: the entity follows the scenario's actions "
             "(default controller)",
@@ -640,19 +695,41 @@ def _private(reader: _Reader, element: ET.Element) -> m.PrivateAction:
 
 
 def _controller_action(reader: _Reader, inner: ET.Element) -> m.PrivateAction:
+    """ActivateControllerAction (1.0: a PrivateAction of its own; 1.1+: inside ControllerAction) and
+    AssignControllerAction (its activate* attributes, 1.2+)."""
+
+    def flag(element: ET.Element, name: str) -> bool | None:
+        raw = reader.attr(element, name, "")
+        if raw == "":
+            return None
+        if raw.lower() not in ("true", "false", "1", "0"):
+            raise reader.fail(f"{name}={raw!r} is not a boolean", element)
+        return raw.lower() in ("true", "1")
+
     if inner.tag == "ActivateControllerAction":
-        return m.NoMotionAction("ActivateControllerAction")
+        return m.ControllerAction(longitudinal=flag(inner, "longitudinal"), lateral=flag(inner, "lateral"))
+    assign: str | None = None
+    longitudinal: bool | None = None
+    lateral: bool | None = None
     for child in inner:
         if child.tag == "AssignControllerAction":
             properties = _controller(reader, child)
-            if properties.get("carlos.driver") == "sumo":
+            driver = properties.get("carlos.driver")
+            if driver == "sumo":
                 raise reader.fail(
                     "the SUMO driver can only be given in the entity's ObjectController, not assigned later",
                     child,
                 )
+            external = driver == "external" or properties.get("esminiController") in m.EXTERNAL_CONTROLLERS
+            assign = "external" if external else "scenario"
+            longitudinal = flag(child, "activateLongitudinal")
+            lateral = flag(child, "activateLateral")
+        elif child.tag == "ActivateControllerAction":
+            longitudinal = flag(child, "longitudinal")
+            lateral = flag(child, "lateral")
         elif child.tag.startswith("Override"):
             reader.warn(f"{child.tag} is ignored (no driver model to override)", child)
-    return m.NoMotionAction("ControllerAction")
+    return m.ControllerAction(assign=assign, longitudinal=longitudinal, lateral=lateral)
 
 
 _MODIFY_RULES: dict[str, Literal["add", "multiply"]] = {"AddValue": "add", "MultiplyByValue": "multiply"}
@@ -712,6 +789,17 @@ def _global(reader: _Reader, element: ET.Element) -> m.GlobalAction:
         if body.tag == "DeleteEntityAction":
             return m.DeleteEntityAction(entity=entity)
         raise reader.fail(f"unknown EntityAction <{body.tag}>", body)
+    if tag == "InfrastructureAction":
+        signal = reader.only_child(reader.child(inner, "TrafficSignalAction"))
+        if signal.tag == "TrafficSignalStateAction":
+            return m.TrafficSignalStateAction(
+                name=reader.attr(signal, "name"), state=reader.attr(signal, "state")
+            )
+        if signal.tag == "TrafficSignalControllerAction":
+            return m.TrafficSignalControllerAction(
+                controller=reader.attr(signal, "trafficSignalControllerRef"), phase=reader.attr(signal, "phase")
+            )
+        raise reader.fail(f"TrafficSignalAction/{signal.tag} is not supported", signal)
     if tag == "EnvironmentAction":
         reader.warn(
             "EnvironmentAction is recorded only (weather and time of day change no motion here)", inner
@@ -719,7 +807,7 @@ def _global(reader: _Reader, element: ET.Element) -> m.GlobalAction:
         return m.NoMotionGlobalAction(tag)
     detail = reader.only_child(inner).tag if len(inner) else ""
     kind = f"{tag}/{detail}" if detail else tag
-    if tag in ("InfrastructureAction", "TrafficAction", "SetMonitorAction"):
+    if tag in ("TrafficAction", "SetMonitorAction"):
         reader.warn(f"{kind} is not modelled: ignored (it moves no scripted entity)", inner)
         return m.NoMotionGlobalAction(kind)
     raise reader.fail(f"GlobalAction/{kind} is not supported", inner)
@@ -732,6 +820,8 @@ def _constraints(reader: _Reader, element: ET.Element | None) -> m.DynamicConstr
         max_acceleration=reader.opt_num(element, "maxAcceleration"),
         max_deceleration=reader.opt_num(element, "maxDeceleration"),
         max_speed=reader.opt_num(element, "maxSpeed"),
+        max_acceleration_rate=reader.opt_num(element, "maxAccelerationRate"),
+        max_deceleration_rate=reader.opt_num(element, "maxDecelerationRate"),
     )
 
 
@@ -1263,9 +1353,13 @@ def _value_condition(reader: _Reader, c: ET.Element) -> m.ValueCondition:
             value=reader.attr(c, "value"),
             rule=_rule(reader, c),
         )
+    if c.tag == "TrafficSignalCondition":
+        return m.TrafficSignalCondition(name=reader.attr(c, "name"), state=reader.attr(c, "state"))
+    if c.tag == "TrafficSignalControllerCondition":
+        return m.TrafficSignalControllerCondition(
+            controller=reader.attr(c, "trafficSignalControllerRef"), phase=reader.attr(c, "phase")
+        )
     if c.tag in (
-        "TrafficSignalCondition",
-        "TrafficSignalControllerCondition",
         "UserDefinedValueCondition",
         "TimeOfDayCondition",
     ):
@@ -1307,11 +1401,16 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
             position=_position(reader, reader.child(c, "Position")), tolerance=reader.num(c, "tolerance")
         )
     if tag == "DistanceCondition":
+        kind = reader.attr(c, "relativeDistanceType", "euclidianDistance")
+        if kind not in ("longitudinal", "lateral", "cartesianDistance", "euclidianDistance"):
+            raise reader.fail(f"relativeDistanceType={kind!r} is not supported", c)
         return m.DistanceCondition(
             position=_position(reader, reader.child(c, "Position")),
             freespace=_freespace(reader, c),
             value=reader.num(c, "value"),
             rule=_rule(reader, c),
+            distance_type=kind,
+            coordinate_system=reader.attr(c, "coordinateSystem", "entity"),
         )
     if tag in ("TimeHeadwayCondition", "TimeToCollisionCondition"):
         target = c
