@@ -4,6 +4,7 @@ Entities here are moved by the scenario alone (no SUMO), so every number is exac
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 
@@ -306,3 +307,101 @@ def test_follow_trajectory_polyline_with_times(tmp_path: Path, road: OpenDrive) 
     assert trace[1.05]["s"] == pytest.approx(start_s + 10.0, abs=0.05)  # 20 m in 2 s at a constant 10 m/s
     assert trace[1.05]["speed"] == pytest.approx(10.0, abs=1e-6)
     assert trace[2.05]["s"] == pytest.approx(start_s + 20.0, abs=0.05)
+
+
+def speed_profile(mode: str, entries: list[tuple[float, float]], constraints: str = "") -> str:
+    points = "".join(f'<SpeedProfileEntry time="{t}" speed="{v}"/>' for t, v in entries)
+    return f"""<PrivateAction><LongitudinalAction><SpeedProfileAction followingMode="{mode}">{constraints}{points}
+      </SpeedProfileAction></LongitudinalAction></PrivateAction>"""
+
+
+JERKY = '<DynamicConstraints maxAcceleration="5" maxDeceleration="10" maxAccelerationRate="4" maxDecelerationRate="3" maxSpeed="50"/>'
+
+
+def accelerations(trace: dict[float, dict[str, float]]) -> list[float]:
+    times = sorted(trace)
+    return [(trace[b]["speed"] - trace[a]["speed"]) / (b - a) for a, b in itertools.pairwise(times)]
+
+
+def test_speed_profile_position_mode_is_straight_lines(tmp_path: Path, road: OpenDrive) -> None:
+    action = speed_profile("position", [(4.0, 10.0), (2.0, 4.0)], JERKY)
+    path = scenario(
+        tmp_path, event("P", action, sim_time("greaterThan", 0.0)), init=place("Ego", 100.0, speed=0.0)
+    )
+    _, trace = run(path, road, 8.0)
+    assert trace[2.05]["speed"] == pytest.approx(5.0, abs=1e-6)
+    assert trace[4.05]["speed"] == pytest.approx(10.0, abs=1e-6)
+    assert trace[5.05]["speed"] == pytest.approx(7.0, abs=1e-6)
+    assert trace[7.0]["speed"] == pytest.approx(4.0, abs=1e-6)
+
+
+def test_speed_profile_follow_mode_limits_jerk_and_reaches_a_single_target_on_time(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    action = speed_profile("follow", [(4.0, 10.0)], JERKY)
+    path = scenario(
+        tmp_path, event("P", action, sim_time("greaterThan", 0.0)), init=place("Ego", 100.0, speed=0.0)
+    )
+    _, trace = run(path, road, 6.0)
+    assert trace[4.05]["speed"] == pytest.approx(10.0, abs=1e-6)  # on time despite the rounded corners
+    acc = accelerations(trace)
+    assert max(acc) <= 5.0 + 1e-6
+    jerks = [(b - a) / 0.05 for a, b in itertools.pairwise(acc)]
+    assert max(jerks) <= 4.0 + 1e-6 and min(jerks) >= -3.0 - 1e-6
+    assert trace[1.05]["speed"] < 4.0 * 1.0**2 / 2 + 1e-6  # starts with jerk 4 from standstill: ≤ ½ j t²
+
+
+def test_speed_profile_follow_mode_rounds_every_corner(tmp_path: Path, road: OpenDrive) -> None:
+    action = speed_profile("follow", [(4.0, 10.0), (4.0, 4.0), (2.0, 8.0)], JERKY)
+    path = scenario(
+        tmp_path, event("P", action, sim_time("greaterThan", 0.0)), init=place("Ego", 100.0, speed=0.0)
+    )
+    _, trace = run(path, road, 14.0)
+    acc = accelerations(trace)
+    jerks = [(b - a) / 0.05 for a, b in itertools.pairwise(acc)]
+    assert max(jerks) <= 4.0 + 1e-6 and min(jerks) >= -3.0 - 1e-6
+    assert trace[13.0]["speed"] == pytest.approx(8.0, abs=1e-6)
+    peak = max(v["speed"] for v in trace.values())
+    assert 8.0 < peak < 10.0  # the corner at 10 m/s is cut
+
+
+def distance_keeping(constraints: str, *, continuous: bool = True) -> str:
+    return f"""<PrivateAction><LongitudinalAction>
+      <LongitudinalDistanceAction entityRef="Lead" distance="20" freespace="false" continuous="{str(continuous).lower()}">
+        {constraints}</LongitudinalDistanceAction></LongitudinalAction></PrivateAction>"""
+
+
+def test_longitudinal_distance_with_constraints_is_a_damped_spring_within_the_limits(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    constraints = '<DynamicConstraints maxAcceleration="3" maxDeceleration="3" maxAccelerationRate="1" maxDecelerationRate="1" maxSpeed="30"/>'
+    path = scenario(
+        tmp_path,
+        event("Keep", distance_keeping(constraints), sim_time("greaterThan", 0.0)),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0, speed=20.0) + place("Lead", 160.0, speed=10.0),
+    )
+    engine, trace = run(path, road, 40.0)
+    acc = accelerations(trace)
+    assert min(acc) >= -3.0 - 1e-6 and max(acc) <= 3.0 + 1e-6
+    # the acceleration grows in magnitude no faster than the jerk limits (it may drop back at once)
+    for a, b in itertools.pairwise(acc):
+        if b >= 0 and b > a:
+            assert b - a <= 1.0 * 0.05 + 1e-6
+        if b < 0 and b < a:
+            assert a - b <= 1.0 * 0.05 + 1e-6
+    gap = engine.bodies["Lead"].s - engine.bodies["Ego"].s
+    assert gap == pytest.approx(20.0, abs=0.2)
+    assert trace[40.0]["speed"] == pytest.approx(10.0, abs=0.05)
+
+
+def test_longitudinal_distance_without_constraints_is_kept_exactly(tmp_path: Path, road: OpenDrive) -> None:
+    path = scenario(
+        tmp_path,
+        event("Keep", distance_keeping(""), sim_time("greaterThan", 0.0)),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0, speed=20.0) + place("Lead", 160.0, speed=10.0),
+    )
+    engine, trace = run(path, road, 2.0)
+    assert engine.bodies["Lead"].s - engine.bodies["Ego"].s == pytest.approx(20.0, abs=1e-6)
+    assert trace[2.0]["speed"] == pytest.approx(10.0)

@@ -14,6 +14,9 @@ from simcore.scenario.motion import Body, shape_value, wrap_angle
 if TYPE_CHECKING:
     from simcore.scenario.engine import ScenarioEngine
 
+_BIG = 1e10  # no limit (esmini's LARGE_NUMBER)
+_EPS = 1e-10
+
 
 class Runtime:
     domain = "other"
@@ -236,95 +239,272 @@ class LateralDistanceRuntime(Runtime):
 
 
 class LongitudinalDistanceRuntime(Runtime):
+    """Keeps a distance (or time gap) to another entity along the longitudinal axis. Without dynamic
+    constraints the distance is kept exactly (the actor is moved to it and takes the other's speed); with
+    them a critically damped spring pulls it there, its stiffness scaled by the acceleration limit, its
+    acceleration limited and (with maxAcceleration/DecelerationRate) changing no faster than the jerk
+    limits (as esmini does)."""
+
     domain = "longitudinal"
+    SPRING = 0.4
+    THRESHOLD = 0.1  # m: a distance this close ends a non-continuous action
 
     def __init__(self, engine: ScenarioEngine, actor: Body, action: m.LongitudinalDistanceAction) -> None:
         super().__init__(engine, actor)
         self.action = action
+        self.acceleration = 0.0
+        self.trailing = action.displacement != "leadingReferencedEntity"
 
-    def _target_gap(self, ref: Body) -> float:
-        if self.action.distance is not None:
-            gap = self.action.distance
-        else:
-            gap = (self.action.time_gap or 0.0) * abs(ref.speed)
-        return gap
+    def _gap(self, ref: Body) -> float:
+        a = self.action
+        return self.engine.relative_distance(
+            self.actor, ref, "longitudinal", a.freespace, signed=True, system=a.coordinate_system
+        )
 
     def start(self) -> None:
-        self.step(0.0)
+        if self.action.displacement == "any":
+            self.trailing = self._gap(self.engine.body(self.action.entity)) >= 0.0
 
     def step(self, dt: float) -> None:
         a = self.actor
         ref = self.engine.body(self.action.entity)
-        gap = self.engine.relative_distance(
-            a, ref, "longitudinal", self.action.freespace, signed=True, system=self.action.coordinate_system
-        )
-        ahead = self.action.displacement != "leadingReferencedEntity"
-        if self.action.displacement == "any":
-            ahead = gap >= 0
-        target = self._target_gap(ref) * (1 if ahead else -1)
-        error = gap - target  # > 0: too far behind (trailing)
-        c = self.action.constraints
-        if c is None:
+        gap = self._gap(ref)
+        if self.action.distance is not None:
+            wanted = abs(self.action.distance)
+        else:
+            wanted = abs((self.action.time_gap or 0.0) * ref.speed)
+        error = gap - (wanted if self.trailing else -wanted)  # > 0: too far behind the wanted place
+        if not self.action.continuous and abs(error) < self.THRESHOLD:
+            self.done = True
+        c = self.action.constraints or m.DynamicConstraints()
+        max_acc = c.max_acceleration if c.max_acceleration is not None else _BIG
+        max_dec = c.max_deceleration if c.max_deceleration is not None else _BIG
+        if max_acc >= _BIG and max_dec >= _BIG:
             # no dynamics given: the distance is kept exactly
             self.engine.shift_along(a, error)
             a.speed = ref.speed
-            if not self.action.continuous:
-                self.done = True
             return
-        if dt <= 0:
-            return
-        # a critically damped follower limited by the constraints
-        closing = ref.speed - a.speed
-        accel = 4.0 * error + 4.0 * closing  # a spring (k = 4) with critical damping (2√k)
-        if c.max_acceleration is not None:
-            accel = min(accel, c.max_acceleration)
-        if c.max_deceleration is not None:
-            accel = max(accel, -c.max_deceleration)
-        speed = a.speed + accel * dt
-        if c.max_speed is not None:
-            speed = min(speed, c.max_speed)
-        a.speed = max(speed, 0.0)
-        if not self.action.continuous and abs(error) < 0.1 and abs(closing) < 0.1:
-            self.done = True
+        stiffness = (max_acc if error < 0.0 else max_dec) * self.SPRING
+        acc = error * stiffness - (a.speed - ref.speed) * 2.0 * math.sqrt(stiffness)
+        if acc < 0.0:
+            jerk = -(c.max_deceleration_rate if c.max_deceleration_rate is not None else _BIG)
+            acc = max(acc, -max_dec)
+            if acc < self.acceleration:
+                acc = max(self.acceleration + jerk * dt, acc)
+        else:
+            jerk = c.max_acceleration_rate if c.max_acceleration_rate is not None else _BIG
+            acc = min(acc, max_acc)
+            if acc > self.acceleration:
+                acc = min(self.acceleration + jerk * dt, acc)
+        self.acceleration = acc
+        speed = a.speed + acc * dt
+        limit = c.max_speed if c.max_speed is not None else _BIG
+        a.speed = min(max(speed, -limit), limit)
 
 
 class SpeedProfileRuntime(Runtime):
+    """Speed over time through the entries' (time, speed) vertices. followingMode="position": straight lines
+    between the vertices. "follow": the corners are rounded by phases of constant jerk within the dynamic
+    constraints (maxAccelerationRate / maxDecelerationRate), each placed so the speed joins the next line
+    tangentially; a single target is reached on time with jerk, constant acceleration, jerk (as esmini)."""
+
     domain = "longitudinal"
 
     def __init__(self, engine: ScenarioEngine, actor: Body, action: m.SpeedProfileAction) -> None:
         super().__init__(engine, actor)
         self.action = action
         self.elapsed = 0.0
-        self.knots: list[tuple[float, float]] = []
+        # (start time, speed, acceleration, jerk) of each phase, times from the action's start
+        self.segments: list[tuple[float, float, float, float]] = []
+        self.index = 0
+        self.speed = 0.0
 
     def start(self) -> None:
-        v = self.actor.speed
-        t = 0.0
-        self.knots = [(0.0, v)]
-        base = self.engine.body(self.action.entity).speed if self.action.entity else 0.0
-        c = self.action.constraints
-        for entry in self.action.entries:
-            target = base + entry.speed
-            if entry.time is not None:
-                duration = entry.time
+        c = self.action.constraints or m.DynamicConstraints()
+        self.max_acc = c.max_acceleration if c.max_acceleration is not None else _BIG
+        self.max_dec = c.max_deceleration if c.max_deceleration is not None else _BIG
+        self.jerk_up = c.max_acceleration_rate if c.max_acceleration_rate is not None else _BIG
+        self.jerk_down = c.max_deceleration_rate if c.max_deceleration_rate is not None else _BIG
+        self.max_speed = c.max_speed if c.max_speed is not None else _BIG
+        self.follow = self.action.following_mode == "follow"
+        vertices = self._vertices()
+        a0 = self.actor.acceleration
+        if len(vertices) == 1:
+            self._add(vertices[0][0], vertices[0][1], 0.0, 0.0)
+        elif self.follow and len(vertices) == 2:
+            self._single_target(vertices, a0)
+        else:
+            self._multiple_targets(vertices, a0)
+        self.speed = self.actor.speed
+
+    def _vertices(self) -> list[list[float]]:
+        """[time, speed, slope to the next vertex, intercept of that line] with redundant vertices merged."""
+        entries = self.action.entries
+        offset = self.engine.body(self.action.entity).speed if self.action.entity else 0.0
+        v_now = self.actor.speed
+        first = entries[0]
+        start = 0
+        if first.time is not None and abs(first.time) <= _EPS and not self.follow:
+            vertices = [[0.0, first.speed + offset, 0.0, 0.0]]
+        else:
+            vertices = [[0.0, v_now, 0.0, 0.0]]
+            if first.time is not None and abs(first.time) <= _EPS:
+                start = 1  # follow: the first entry at time 0 is where the entity is now
+        time = 0.0
+        last_index = len(entries) - 1
+        for index in range(start, len(entries)):
+            entry = entries[index]
+            target = entry.speed + offset
+            last = vertices[-1]
+            if entry.time is None:
+                # no time: reached at the constraints' acceleration (or deceleration)
+                dv = target - last[1]
+                if abs(dv) < _EPS:
+                    continue
+                acc = min(-_EPS, -self.max_dec) if dv < 0 else max(_EPS, self.max_acc)
+                last[0] = time
+                time += dv / acc
             else:
-                rate = None
-                if c is not None:
-                    rate = c.max_acceleration if target >= v else c.max_deceleration
-                duration = abs(target - v) / rate if rate else 0.0
-            t += max(duration, 0.0)
-            self.knots.append((t, target))
-            v = target
+                time += entry.time
+            span = time - last[0]
+            if index < last_index and span < _EPS:
+                vertices[-1] = [time, target, 0.0, 0.0]
+                continue
+            last[2] = (target - last[1]) / span
+            last[3] = last[1] - last[2] * last[0]
+            previous_slope = vertices[-2][2] if index > 1 and len(vertices) > 1 else self.actor.acceleration
+            if index > 1 and len(vertices) > 1 and abs(last[2] - previous_slope) < _EPS:
+                # on the same line as the previous segment: the vertex between them is dropped
+                before = vertices[-2]
+                slope = (target - before[1]) / (time - before[0])
+                vertices[-1] = [time, target, slope, target - slope * time]
+                continue
+            if index == last_index:
+                vertices.append([time, target, 0.0, target])
+            else:
+                vertices.append([time, target, 0.0, 0.0])
+        return vertices
+
+    def _add(self, t: float, v: float, k: float, j: float) -> None:
+        if self.follow and (
+            abs(v) > self.max_speed + _EPS
+            or not -self.max_dec - _EPS <= k <= self.max_acc + _EPS
+            or not -self.jerk_down - _EPS <= j <= self.jerk_up + _EPS
+        ):
+            self.follow = False  # beyond the constraints: the rest is followed along straight lines
+        self.segments.append((t, v, k, j))
+
+    def _within(self, k: float) -> bool:
+        return -self.max_dec < k < self.max_acc
+
+    def _single_target(self, vertices: list[list[float]], k0: float) -> None:
+        """Reach one speed at its time: jerk, constant acceleration when there is time for it, jerk back."""
+        t0, v0, slope = vertices[0][0], vertices[0][1], vertices[0][2]
+        t3, v3 = vertices[1][0], vertices[1][1]
+        j0 = -self.jerk_down if slope - k0 < 0 else self.jerk_up
+        j1 = self.jerk_up if slope < 0 else -self.jerk_down
+        self._add(t0, v0, k0, j0)
+        k1 = t2 = v2 = 0.0
+        if abs(j1 - j0) < _EPS:
+            if abs(t0 - t3) > _EPS and abs(j1 * (t0 - t3) - k0) > _EPS:
+                t1 = (2 * j1 * (v0 + t0 * j1 * (t0 - t3) - v3) + k0**2 + 2 * k0 * j1 * (t3 - 2 * t0)) / (
+                    2 * j1 * (j1 * (t0 - t3) - k0)
+                )
+                if t1 >= 0:
+                    v1 = v0 + k0 * (t1 - t0) + 0.5 * j0 * (t1 - t0) ** 2
+                    k1 = k0 + j0 * (t1 - t0)
+                    t2 = k1 / j1 + t3
+                    if t2 >= 0:
+                        v2 = v1 + k1 * (t2 - t1)
+                        if self._within(k1):
+                            self._add(t1, v1, k1, 0.0)
+        else:
+            inner = 2 * v0 * (j1 - j0) + k0**2 + 2 * k0 * j1 * (t3 - t0) + j0 * j1 * (t0 - t3) ** 2
+            factor = j0 * j1 * (inner + 2 * v3 * (j0 - j1))
+            if factor < 0.0:
+                # no time for a phase of constant acceleration: the target is reached later than asked
+                root = math.sqrt(max(j1 * (j1 - j0) * (j0 * (2 * v3 - 2 * v0) + k0**2), 0.0))
+                t2 = (root + (j0 - j1) * (t0 * j0 - k0)) / (j0 * (j0 - j1))
+                v2 = v0 + k0 * (t2 - t0) + 0.5 * j0 * (t2 - t0) ** 2
+                k1 = k0 + j0 * (t2 - t0)
+                t3 = t2 - k1 / j1
+            else:
+                t1 = (-math.sqrt(factor) - j0 * (k0 + t3 * j1) + t0 * j0**2) / (j0 * (j0 - j1))
+                v1 = v0 + k0 * (t1 - t0) + 0.5 * j0 * (t1 - t0) ** 2
+                k1 = k0 + j0 * (t1 - t0)
+                t2 = k1 / j1 + t3
+                v2 = v1 + k1 * (t2 - t1)
+                if self._within(k1):
+                    self._add(t1, v1, k1, 0.0)
+        if self._within(k1):
+            self._add(t2, v2, k1, j1)
+            self._add(t3, v3, 0.0, 0.0)
+            return
+        # the acceleration needed is beyond the constraints: limited, and the target is reached later
+        k1 = min(max(k1, -self.max_dec), self.max_acc)
+        t1 = t0 + (k1 - k0) / j0
+        v1 = v0 + k0 * (t1 - t0) + 0.5 * j0 * (t1 - t0) ** 2
+        t2 = (v3 - v1) / k1 + t1 + k1 / (2 * j1)
+        v2 = v3 + k1**2 / (2 * j1)
+        t3 = (v3 - v1) / k1 + t1 - k1 / (2 * j1)
+        self._add(t1, v1, k1, 0.0)
+        self._add(t2, v2, k1, j1)
+        self._add(t3, v3, 0.0, 0.0)
+
+    def _multiple_targets(self, vertices: list[list[float]], k0: float) -> None:
+        if not self.follow:
+            for t, v, k, _ in vertices:
+                self._add(t, v, k, 0.0)
+            return
+        t0 = vertices[0][0]
+        t3, v3 = t0, vertices[0][1]
+        j = 0.0
+        if abs(vertices[0][2]) > _EPS:
+            # from the acceleration the entity has now to the first line's slope
+            j = -self.jerk_down if vertices[0][2] - k0 < 0 else self.jerk_up
+            self._add(t0, vertices[0][1], k0, j)
+            t3 = t0 + (vertices[0][2] - k0) / j
+        v3 = vertices[0][1] + k0 * (t3 - t0) + 0.5 * j * (t3 - t0) ** 2
+        k1 = vertices[0][2]
+        m1 = v3 - k1 * t3
+        self._add(t3, v3, k1, 0.0)
+        for index in range(len(vertices) - 1):
+            if not self.follow:
+                t, v, k, _ = vertices[index]
+                self._add(t, v, k, 0.0)
+                continue
+            k0, m0, t0, v0 = k1, m1, t3, v3
+            _, _, k1, m1 = vertices[index + 1]
+            j = -self.jerk_down if k1 - k0 < 0 else self.jerk_up
+            if abs(k0 - k1) >= _EPS:
+                # the jerk phase that leaves line (k0, m0) and joins line (k1, m1) tangentially
+                t1 = ((k0 - k1) ** 2 - 2 * j * (m0 - m1)) / (2 * j * (k0 - k1))
+                if t1 < t0:
+                    self.follow = False  # no room for it: straight lines from here
+                    continue
+                v1 = v0 + k0 * (t1 - t0)
+                t3 = t1 + (k1 - k0) / j
+                v3 = v1 + k0 * (t3 - t1) + 0.5 * j * (t3 - t1) ** 2
+                self._add(t1, v1, k0, j)
+            self._add(t3, v3, k1, 0.0)
 
     def step(self, dt: float) -> None:
         self.elapsed += dt
-        for (t0, v0), (t1, v1) in zip(self.knots, self.knots[1:], strict=False):
-            if self.elapsed <= t1:
-                f = (self.elapsed - t0) / (t1 - t0) if t1 > t0 else 1.0
-                self.actor.speed = v0 + f * (v1 - v0)
-                return
-        self.actor.speed = self.knots[-1][1]
-        self.done = True
+        time = self.elapsed
+        segments = self.segments
+        last_t, last_v = segments[-1][0], segments[-1][1]
+        if time < last_t + 10 and not (time > last_t and abs(self.speed - last_v) < _EPS):
+            while self.index < len(segments) - 1 and time > segments[self.index + 1][0] - _EPS:
+                self.index += 1
+            t, v, k, j = segments[self.index]
+            tau = time - t
+            self.speed = v + k * tau + 0.5 * j * tau * tau
+            if abs(self.speed) < _EPS:
+                self.speed = 0.0
+        if self.index >= len(self.action.entries) - 1 and abs(self.speed - last_v) < 1e-6:
+            self.speed = last_v
+            self.done = True
+        self.actor.speed = self.speed
 
 
 class SynchronizeRuntime(Runtime):
