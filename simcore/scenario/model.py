@@ -311,8 +311,6 @@ class DynamicConstraints:
     max_speed: float | None = None
     max_acceleration_rate: float | None = None  # jerk limits, m/s³
     max_deceleration_rate: float | None = None
-    max_acceleration_rate: float | None = None  # jerk limits, m/s³
-    max_deceleration_rate: float | None = None
 
 
 @dataclass(frozen=True)
