@@ -7,7 +7,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
@@ -15,6 +15,9 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from simcore.errors import BadInput, CarlosError
+
+if TYPE_CHECKING:
+    from simcore.transport.bus import Bus
 
 app = typer.Typer(
     name="carlos",
@@ -72,6 +75,20 @@ def run(
             help="Simulated seconds per wall second of the live view (0: as fast as possible).",
         ),
     ] = 1.0,
+    transport: Annotated[
+        str,
+        typer.Option(
+            "--transport",
+            help=(
+                "How nodes in other processes reach the run's topics (one run, e.g. a closed-loop "
+                "controller): `none` (default), `loopback` (a topic hub on 127.0.0.1:--bus-port, "
+                "simcore.transport.loopback.LoopbackBus clients)."
+            ),
+        ),
+    ] = "none",
+    bus_port: Annotated[
+        int, typer.Option("--bus-port", min=0, max=65535, help="Port of the loopback topic hub.")
+    ] = 7447,
 ) -> None:
     """Run every scenario × permutation of a SimulationRun on this machine.
 
@@ -81,23 +98,39 @@ def run(
     from simcore.plan import Plan
 
     server = None
+    hub = None
     try:
         simulation_run = load_manifest(manifest)
         total = len(Plan(simulation_run.spec))
         _preflight(simulation_run, manifest)
-        bus = None
-        if live:
+        live = live or simulation_run.spec.live
+        if transport not in ("none", "loopback"):
+            raise BadInput(f"unknown transport {transport!r}: use none or loopback", field="--transport")
+        bus: Bus | None = None
+        for flag, wanted in (("--live", live), ("--transport", transport != "none")):
             selected = len(set(index)) if index else total
-            if selected != 1:
+            if wanted and selected != 1:
                 raise BadInput(
-                    f"--live shows one run, and this selects {selected}: choose one with --index N",
-                    field="--live",
+                    f"{flag} serves one run, and this selects {selected}: choose one with --index N",
+                    field=flag if flag != "--live" or not simulation_run.spec.live else "spec.live",
                 )
+        if transport == "loopback":
+            from simcore.transport.loopback import LoopbackBus, LoopbackHub
+
+            try:
+                hub = LoopbackHub(port=bus_port).start()
+            except OSError as exc:
+                raise BadInput(
+                    f"cannot serve the topic hub on 127.0.0.1:{bus_port}: {exc}", field="--bus-port"
+                ) from None
+            bus = LoopbackBus(port=hub.port)
+            console.print(f"topics: loopback hub on 127.0.0.1:{hub.port}", highlight=False)
+        if live:
             from simcore.live import LiveServer
             from simcore.transport.bus import InProcessBus
 
             server = LiveServer(port=live_port, speed=live_speed).start()
-            bus = InProcessBus()
+            bus = bus if bus is not None else InProcessBus()
             bus.subscribe("*", server)
             console.print(
                 f"live view: {server.url} (Foxglove: Open connection → Foxglove WebSocket; "
@@ -175,6 +208,8 @@ def run(
     finally:
         if server is not None:
             server.stop()
+        if hub is not None:
+            hub.close()
     _print_report(report)
     raise typer.Exit(report.exit_code)
 

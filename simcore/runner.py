@@ -163,9 +163,27 @@ def simulate(
     recorder = None
     perception = None
     try:
+        closed_loop = None
+        control = spec.control
+        if control is not None or any(e.driver == "external" for e in scenario.entities):
+            from simcore.closedloop import ClosedLoop
+
+            closed_loop = ClosedLoop(
+                bus,
+                mode=control.mode if control is not None else "freeRunning",
+                timeout_s=control.timeout_seconds if control is not None else 10.0,
+                startup_timeout_s=control.startup_timeout_seconds if control is not None else 60.0,
+            )
         engine = ScenarioEngine(
-            scenario, road=road, sumo=sumo, step_seconds=spec.simulation.step_seconds, ego=spec.simulation.ego
+            scenario,
+            road=road,
+            sumo=sumo,
+            step_seconds=spec.simulation.step_seconds,
+            ego=spec.simulation.ego,
+            external=closed_loop,
         )
+        for name in control.entities if control is not None else ():
+            engine.drive_externally(name)
         if spec.recording.enabled:
             recorder = McapRecorder(
                 out_dir / "recording.mcap",
@@ -181,16 +199,24 @@ def simulate(
             perception = PerceptionLoop(
                 spec, bus, road=road, road_file=scenario.road_file, seed=point.seed, base_dir=base_dir
             )
+        if closed_loop is not None:
+            closed_loop.wait_for_nodes(b.name for b in engine.bodies.values() if b.external)
         frame = engine.frame()
         metrics.update(frame)
+        if closed_loop is not None:
+            closed_loop.published(frame.time)
         world.publish(frame)
         if perception is not None:
             perception.step(frame)
         max_steps = round(spec.simulation.max_seconds / spec.simulation.step_seconds)
         reported = 0.0
         while not engine.ended and engine.step_index < max_steps:
+            if closed_loop is not None:
+                closed_loop.wait((b.name for b in engine.bodies.values() if b.external), frame.time)
             frame = engine.step()
             metrics.update(frame)
+            if closed_loop is not None:
+                closed_loop.published(frame.time)
             world.publish(frame)
             if perception is not None:
                 perception.step(frame)

@@ -573,6 +573,42 @@ class SystemUnderTest(Model):
         return self
 
 
+class Control(Model):
+    """Closed loop: the system under test drives entities through `/carlos/<entity>/control`
+    (ackermann_msgs/AckermannDriveStamped or geometry_msgs/Twist), moved by a kinematic bicycle model. The
+    entities are those named here plus those whose scenario controller is external (ExternalController,
+    InteractiveController, or the controller property `carlos.driver = external`) once it is activated."""
+
+    entities: list[Annotated[str, Field(min_length=1, max_length=256)]] = Field(
+        default_factory=list,
+        description="Scenario entities driven by the control input from the start. Default: none.",
+        max_length=64,
+    )
+    mode: Literal["lockstep", "freeRunning"] = Field(
+        "lockstep",
+        description=(
+            "`lockstep`: every step waits for each driven entity's command answering the frame just "
+            "published (deterministic at any machine speed); `freeRunning`: the latest command holds, "
+            "nothing waits. Default lockstep."
+        ),
+    )
+    timeout_seconds: float = Field(
+        10.0,
+        gt=0,
+        le=3600,
+        description="Lockstep: wall seconds to wait for a step's command before the run fails. Default 10.",
+    )
+    startup_timeout_seconds: float = Field(
+        60.0,
+        gt=0,
+        le=3600,
+        description=(
+            "Lockstep: wall seconds to wait before the first frame for the system under test to subscribe "
+            "to the driven entities' odometry. Default 60."
+        ),
+    )
+
+
 class SimulationRunSpec(Model):
     """What to simulate, how to sweep it, how to judge it and where the results go."""
 
@@ -597,6 +633,20 @@ class SimulationRunSpec(Model):
     system_under_test: SystemUnderTest | None = Field(
         None,
         description="The software under test, talking to the simulation through topics only. Default: none.",
+    )
+    control: Control | None = Field(
+        None,
+        description=(
+            "Closed loop (entities driven by the system under test's commands). Default: entities whose "
+            "scenario controller is external follow commands free-running; none wait."
+        ),
+    )
+    live: bool = Field(
+        False,
+        description=(
+            "Serve the run live (Foxglove WebSocket on 127.0.0.1:8765), paced to real time, as "
+            "`carlos run --live`. Local runs of one index only. Default false."
+        ),
     )
     evaluation: Evaluation = Field(default_factory=Evaluation, description="Verdict criteria.")
     recording: Recording = Field(default_factory=Recording, description="MCAP recording.")

@@ -18,6 +18,7 @@ from simcore.scenario import actions as extra_actions
 from simcore.scenario import model as m
 from simcore.scenario import paths
 from simcore.scenario.actions import Runtime
+from simcore.scenario.conditions import LARGE, Measure
 from simcore.scenario.motion import (
     Body,
     advance_on_road,
@@ -125,7 +126,8 @@ class SpeedRuntime(ActionRuntime):
             self.engine.sumo_set_speed(self.actor, self.target())
             return
         if self.done or (self.action.dynamics.shape == "step" and self._continuous):
-            self._set(self.target())
+            # following a moving target: within the vehicle's performance (as esmini does)
+            self._set(self.target(), dt)
             return
         self.elapsed += dt
         dyn = self.action.dynamics
@@ -337,6 +339,7 @@ class ScenarioEngine:
         self.conditions: dict[int, ConditionState] = {}
         self._target_roads: dict[tuple[float, float, str], Any] = {}
         self._fixed_points: dict[int, tuple[m.Position, tuple[float, float, float, float]]] = {}
+        self.measure = Measure(self)
         self.owner: Body | None = None  # the actor whose action runs now ("$owner")
         self.parameter_values: dict[str, Any] = dict(scenario.parameters)
         self.variables: dict[str, Any] = dict(scenario.variables)
@@ -386,8 +389,13 @@ class ScenarioEngine:
                 continue
             body = self.bodies[item.entity]
             runtime = make_runtime(self, body, item.action)  # type: ignore[arg-type]
-            if isinstance(item.action, m.SpeedAction) and (
-                item.action.dynamics.shape == "step" or item.action.dynamics.value == 0
+            continuous = isinstance(item.action, m.SpeedAction) and (
+                isinstance(item.action.target, m.RelativeTargetSpeed) and item.action.target.continuous
+            )
+            if (
+                isinstance(item.action, m.SpeedAction)
+                and (item.action.dynamics.shape == "step" or item.action.dynamics.value == 0)
+                and not continuous
             ):
                 # initial speed with a step: reached at once
                 body.speed = runtime.target() if isinstance(runtime, SpeedRuntime) else body.speed
@@ -850,43 +858,38 @@ class ScenarioEngine:
             mine = Box.of(self.state_of(body))
             return any(boxes_overlap(mine, Box.of(self.state_of(o))) for o in others)
         if isinstance(c, m.ReachPositionCondition):
-            x, y, _, _ = self.resolve_position(c.position)
-            return math.hypot(body.x - x, body.y - y) <= c.tolerance
+            x, y, _, _ = self._fixed_point(c.position)
+            return math.hypot(body.x - x, body.y - y) < c.tolerance
         if isinstance(c, m.DistanceCondition):
-            target = self._fixed_point(c.position)
-            distance = self.point_distance(body, target, c.distance_type, c.freespace, c.coordinate_system)
-            return compare(c.rule, distance, c.value)
+            x, y, _, _ = self._fixed_point(c.position)
+            measured = self.measure.to_point(body, x, y, c.coordinate_system, c.distance_type, c.freespace)
+            return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
         if isinstance(c, m.RelativeDistanceCondition):
             other = self.body(c.entity)
-            distance = self.relative_distance(
-                body, other, c.distance_type, c.freespace, system=c.coordinate_system
-            )
-            return compare(c.rule, distance, c.value)
+            if other.gone:
+                return False
+            measured = self.measure.to_entity(body, other, c.coordinate_system, c.distance_type, c.freespace)
+            return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
         if isinstance(c, m.TimeHeadwayCondition):
             other = self.body(c.entity)
-            gap = self.relative_distance(
-                body, other, "longitudinal", c.freespace, signed=True, system=c.coordinate_system
-            )
-            if gap <= 0:  # no headway to an entity behind: the condition does not hold (as in esmini)
+            if other.gone:
                 return False
-            if body.speed <= 1e-6:  # standing still: infinite headway
-                return compare(c.rule, math.inf, c.value)
-            return compare(c.rule, gap / body.speed, c.value)
-        if isinstance(c, m.TimeToCollisionCondition) and c.position is not None:
-            x, y, _, _ = self.resolve_position(c.position)
-            gap = math.cos(body.heading) * (x - body.x) + math.sin(body.heading) * (y - body.y)
-            if c.freespace:
-                gap -= body.entity.box.center_x + body.entity.box.length / 2
-            if gap <= 0 or body.speed <= 1e-6:
-                return compare(c.rule, math.inf, c.value)
-            return compare(c.rule, gap / body.speed, c.value)
+            headway = self.measure.headway(body, other, c.coordinate_system, c.distance_type, c.freespace)
+            return headway is not None and compare(c.rule, headway, c.value)
         if isinstance(c, m.TimeToCollisionCondition):
-            other = self.body(c.entity)
-            gap = self.relative_distance(body, other, "longitudinal", c.freespace, signed=True)
-            closing = body.speed - other.speed * math.cos(other.heading - body.heading)
-            if gap <= 0 or closing <= 1e-6:
-                return compare(c.rule, math.inf, c.value)
-            return compare(c.rule, gap / closing, c.value)
+            point: tuple[float, float] | None = None
+            target: Body | None = None
+            if c.position is not None:
+                x, y, _, _ = self._fixed_point(c.position)
+                point = (x, y)
+            else:
+                target = self.body(c.entity)
+                if target.gone:
+                    return False
+            ttc = self.measure.time_to_collision(
+                body, target, point, c.coordinate_system, c.distance_type, c.freespace
+            )
+            return ttc is not None and compare(c.rule, ttc, c.value)
         if isinstance(c, m.OffroadCondition):
             if body.road_id is None or self._outside_driving_lanes(body):
                 since = body.extra.setdefault("offroad_since", self.time)
@@ -959,45 +962,6 @@ class ScenarioEngine:
                 cached = self._fixed_points[key] = (position, self.resolve_position(position))
             return cached[1]
         return self.resolve_position(position)
-
-    def point_distance(
-        self, body: Body, target: tuple[float, float, float, float], kind: str, freespace: bool, system: str
-    ) -> float:
-        """Distance (absolute) from an entity to a point: euclidean, or longitudinal/lateral in the entity's
-        frame (system "entity") or along the road (system "road"/"lane": difference of s, of t)."""
-        x, y = target[0], target[1]
-        if kind in ("euclidianDistance", "cartesianDistance"):
-            if freespace:
-                point = Box(((x, y),) * 4, ((1.0, 0.0), (0.0, 1.0)))
-                return box_distance(Box.of(self.state_of(body)), point)
-            return math.hypot(body.x - x, body.y - y)
-        box = body.entity.box
-        if system in ("road", "lane") and self.road is not None and body.road_id is not None:
-            key = (x, y, body.road_id)
-            if key not in self._target_roads:
-                self._target_roads[key] = self.road.world_to_road(x, y, None, road_hint=body.road_id)
-            rc = self._target_roads[key]
-            if rc is not None and rc.road_id == body.road_id:
-                if kind == "longitudinal":
-                    value = (rc.s - body.s) * body.direction
-                    if freespace:
-                        extent = box.center_x + box.length / 2 if value >= 0 else box.length / 2 - box.center_x
-                        value = math.copysign(max(abs(value) - extent, 0.0), value)
-                else:
-                    t_body = self.road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
-                    value = (rc.t - t_body) * body.direction
-                    if freespace:
-                        value = math.copysign(max(abs(value) - box.width / 2, 0.0), value)
-                return abs(value)
-        c, s = math.cos(body.heading), math.sin(body.heading)
-        dx, dy = x - body.x, y - body.y
-        lon, lat = c * dx + s * dy, -s * dx + c * dy
-        if freespace:
-            lon -= box.center_x
-            lat -= box.center_y
-            lon = math.copysign(max(abs(lon) - box.length / 2, 0.0), lon)
-            lat = math.copysign(max(abs(lat) - box.width / 2, 0.0), lat)
-        return abs(lon if kind == "longitudinal" else lat)
 
     def relative_distance(
         self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False, system: str = "entity"
@@ -1280,10 +1244,14 @@ class ScenarioEngine:
         self._states.clear()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         for body in self.bodies.values():
-            if body.entity.driver == "sumo" or body.gone:
+            if body.gone:
                 continue
             if body.external:
                 self._move_external(body, dt)
+                if self.sumo is not None and self.sumo.has(body.name):
+                    self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+                continue
+            if body.entity.driver == "sumo":
                 continue
             distance = body.speed * dt
             if body.lateral_velocity != 0.0 and body.mover is None:
@@ -1304,7 +1272,7 @@ class ScenarioEngine:
         if self.sumo is not None:
             self.sumo.step()
             for body in self.bodies.values():
-                if body.entity.driver != "sumo" or body.gone:
+                if body.entity.driver != "sumo" or body.gone or body.external:
                     continue
                 state = self.sumo.read(body.name)
                 if state is None:
@@ -1328,6 +1296,19 @@ class ScenarioEngine:
         self.step_index += 1
         self._states.clear()
         self._check_stop()
+
+    def drive_externally(self, name: str) -> None:
+        """Make `name` externally driven from now on (`spec.control.entities`), as if its external
+        controller had been assigned and activated on both domains."""
+        body = self.bodies.get(name)
+        if body is None:
+            raise BadInput(
+                f"entity {name!r} is not in the scenario (entities: {', '.join(self.bodies)})",
+                field="spec.control.entities",
+            )
+        self.controllers[name] = ["external", True, True]
+        body.external = True
+        body.mover = None
 
     def _locate(self, body: Body) -> None:
         """Road coordinates (road, lane, s, offset, direction, z) of a body moved in world coordinates."""
@@ -1421,7 +1402,9 @@ def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tup
     by_name = {c.name: c for c in controllers}
     out: dict[str, tuple[float, int]] = {}
     for ctrl in controllers:
-        start, seen, current = 0.0, set(), ctrl
+        start = 0.0
+        seen: set[str] = set()
+        current: m.SignalController | None = ctrl
         while current is not None and current.name not in seen:
             seen.add(current.name)
             start += current.delay

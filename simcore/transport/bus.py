@@ -91,6 +91,10 @@ class InProcessBus:
         self._subscriptions.append((pattern, callback))
         self._routes.clear()
 
+    def subscriber_count(self, topic: str) -> int:
+        """Subscriptions to `topic` by its name (glob patterns such as a recorder's `*` do not count)."""
+        return sum(1 for pattern, _ in self._subscriptions if pattern == topic)
+
     def dispatch(self, message: Message) -> None:
         route = self._routes.get(message.topic)
         if route is None:

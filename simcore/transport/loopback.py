@@ -15,7 +15,10 @@ on DDS, over 127.0.0.1 through a hub:
 Wire format: frames of a 4-byte big-endian length and a body whose first byte is the kind:
 - `P` publish: u16 topic length, topic (UTF-8), u16 type length, type, f64 time (s), CDR bytes to the end;
 - `S` subscribe: u32 request id, u16 pattern length, pattern (shell-style glob, as `Bus.subscribe`);
-- `A` acknowledge: u32 request id.
+- `A` acknowledge: u32 request id;
+- `C` count request: u32 request id, u16 topic length, topic: how many *other* clients subscribed to
+  exactly this topic name (glob patterns do not count; the closed loop's lockstep start waits for the
+  system under test this way); `N` its answer: u32 request id, u32 count.
 """
 
 from __future__ import annotations
@@ -76,6 +79,12 @@ def _encode_subscribe(request: int, pattern: str) -> bytes:
 
 def _encode_ack(request: int) -> bytes:
     body = b"A" + _U32.pack(request)
+    return _LEN.pack(len(body)) + body
+
+
+def _encode_count(request: int, topic: str) -> bytes:
+    t = topic.encode()
+    body = b"C" + _U32.pack(request) + _U16.pack(len(t)) + t
     return _LEN.pack(len(body)) + body
 
 
@@ -191,6 +200,16 @@ class LoopbackHub:
                         client.patterns.append(pattern)
                         self._routes.clear()
                     client.send(_encode_ack(request))
+                elif kind == b"C":
+                    (request,) = _U32.unpack_from(body, 1)
+                    (tlen,) = _U16.unpack_from(body, 5)
+                    topic = body[7 : 7 + tlen].decode()
+                    with self._lock:
+                        count = sum(
+                            1 for c in self._clients if c is not client and c.alive and topic in c.patterns
+                        )
+                    reply = b"N" + _U32.pack(request) + _U32.pack(count)
+                    client.send(_LEN.pack(len(reply)) + reply)
                 else:
                     raise LoopbackError(f"unknown frame kind {kind!r} from {client.name}")
         except (OSError, LoopbackError, struct.error, UnicodeDecodeError) as exc:
@@ -264,6 +283,7 @@ class LoopbackBus:
         self._subscriptions: list[tuple[str, Callback]] = []
         self._routes: dict[str, list[Callback]] = {}
         self._acks: dict[int, threading.Event] = {}
+        self._counts: dict[int, int] = {}
         self._next_request = 0
         self.topics: dict[str, str] = {}
         self._closed = False
@@ -292,6 +312,17 @@ class LoopbackBus:
             self._sock.sendall(_encode_subscribe(request, pattern))
         if not event.wait(timeout):
             raise LoopbackError(f"the topic hub did not acknowledge the subscription {pattern!r}")
+
+    def subscriber_count(self, topic: str, *, timeout: float = 10.0) -> int:
+        """How many other clients of the hub subscribed to `topic` by its exact name."""
+        with self._send_lock:
+            self._next_request += 1
+            request = self._next_request
+            event = self._acks[request] = threading.Event()
+            self._sock.sendall(_encode_count(request, topic))
+        if not event.wait(timeout):
+            raise LoopbackError(f"the topic hub did not answer a subscriber count for {topic!r}")
+        return self._counts.pop(request)
 
     def publish_message(self, message: Message) -> None:
         frame = encode_publish(message.topic, message.typename, message.time_s, message.cdr())
@@ -341,6 +372,12 @@ class LoopbackBus:
                     self._dispatch(decode_publish(body))
                 elif kind == b"A":
                     (request,) = _U32.unpack_from(body, 1)
+                    event = self._acks.pop(request, None)
+                    if event is not None:
+                        event.set()
+                elif kind == b"N":
+                    request, count = struct.unpack_from("!II", body, 1)
+                    self._counts[request] = count
                     event = self._acks.pop(request, None)
                     if event is not None:
                         event.set()
