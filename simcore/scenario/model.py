@@ -567,6 +567,7 @@ class TimeHeadwayCondition:
     value: float
     rule: Rule
     coordinate_system: str = "entity"  # entity | road | lane | trajectory
+    distance_type: str = "euclidianDistance"  # longitudinal | lateral | euclidianDistance
 
 
 @dataclass(frozen=True)
@@ -577,6 +578,7 @@ class TimeToCollisionCondition:
     rule: Rule
     coordinate_system: str = "entity"
     position: Position | None = None  # to a position instead of an entity
+    distance_type: str = "euclidianDistance"
 
 
 @dataclass(frozen=True)

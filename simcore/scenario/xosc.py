@@ -797,7 +797,8 @@ def _global(reader: _Reader, element: ET.Element) -> m.GlobalAction:
             )
         if signal.tag == "TrafficSignalControllerAction":
             return m.TrafficSignalControllerAction(
-                controller=reader.attr(signal, "trafficSignalControllerRef"), phase=reader.attr(signal, "phase")
+                controller=reader.attr(signal, "trafficSignalControllerRef"),
+                phase=reader.attr(signal, "phase"),
             )
         raise reader.fail(f"TrafficSignalAction/{signal.tag} is not supported", signal)
     if tag == "EnvironmentAction":
@@ -1368,6 +1369,27 @@ def _value_condition(reader: _Reader, c: ET.Element) -> m.ValueCondition:
     raise reader.fail(f"ByValueCondition/{c.tag} is not supported", c)
 
 
+_SYSTEMS = ("entity", "road", "lane", "trajectory")
+_DISTANCE_TYPES = ("longitudinal", "lateral", "cartesianDistance", "euclidianDistance")
+
+
+def _distance_frame(reader: _Reader, c: ET.Element) -> tuple[str, str]:
+    """coordinateSystem and relativeDistanceType of a distance, headway or time-to-collision condition
+    (1.1+), defaulting to the entity system and the Euclidean distance; without either, 1.0's
+    alongRoute="true" selects the road system."""
+    system = reader.attr(c, "coordinateSystem", "")
+    kind = reader.attr(c, "relativeDistanceType", "")
+    if not system and not kind and c.get("alongRoute") is not None and reader.boolean(c, "alongRoute"):
+        system = "road"
+    system = system or "entity"
+    kind = kind or "euclidianDistance"
+    if system not in _SYSTEMS:
+        raise reader.fail(f"coordinateSystem={system!r}: expected one of {', '.join(_SYSTEMS)}", c)
+    if kind not in _DISTANCE_TYPES:
+        raise reader.fail(f"relativeDistanceType={kind!r}: expected one of {', '.join(_DISTANCE_TYPES)}", c)
+    return system, kind
+
+
 def _freespace(reader: _Reader, c: ET.Element) -> bool:
     return reader.boolean(c, "freespace", False)
 
@@ -1401,20 +1423,17 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
             position=_position(reader, reader.child(c, "Position")), tolerance=reader.num(c, "tolerance")
         )
     if tag == "DistanceCondition":
-        kind = reader.attr(c, "relativeDistanceType", "euclidianDistance")
-        if kind not in ("longitudinal", "lateral", "cartesianDistance", "euclidianDistance"):
-            raise reader.fail(f"relativeDistanceType={kind!r} is not supported", c)
+        system, kind = _distance_frame(reader, c)
         return m.DistanceCondition(
             position=_position(reader, reader.child(c, "Position")),
             freespace=_freespace(reader, c),
             value=reader.num(c, "value"),
             rule=_rule(reader, c),
             distance_type=kind,
-            coordinate_system=reader.attr(c, "coordinateSystem", "entity"),
+            coordinate_system=system,
         )
     if tag in ("TimeHeadwayCondition", "TimeToCollisionCondition"):
-        target = c
-        entity = reader.attr(c, "entityRef") if c.get("entityRef") is not None else None
+        system, kind = _distance_frame(reader, c)
         if tag == "TimeToCollisionCondition":
             target_el = reader.only_child(reader.child(c, "TimeToCollisionConditionTarget"))
             if target_el.tag == "Position":
@@ -1423,16 +1442,25 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
                     freespace=_freespace(reader, c),
                     value=reader.num(c, "value"),
                     rule=_rule(reader, c),
+                    coordinate_system=system,
                     position=_position(reader, target_el),
+                    distance_type=kind,
                 )
-            entity = reader.attr(target_el, "entityRef")
-        cls: Any = m.TimeHeadwayCondition if tag == "TimeHeadwayCondition" else m.TimeToCollisionCondition
-        return cls(
-            entity=entity if entity is not None else reader.attr(target, "entityRef"),
+            return m.TimeToCollisionCondition(
+                entity=reader.attr(target_el, "entityRef"),
+                freespace=_freespace(reader, c),
+                value=reader.num(c, "value"),
+                rule=_rule(reader, c),
+                coordinate_system=system,
+                distance_type=kind,
+            )
+        return m.TimeHeadwayCondition(
+            entity=reader.attr(c, "entityRef"),
             freespace=_freespace(reader, c),
             value=reader.num(c, "value"),
             rule=_rule(reader, c),
-            coordinate_system=reader.attr(c, "coordinateSystem", "entity"),
+            coordinate_system=system,
+            distance_type=kind,
         )
     if tag == "StandStillCondition":
         return m.StandStillCondition(duration=reader.num(c, "duration"))

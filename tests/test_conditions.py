@@ -1,0 +1,298 @@
+"""Conditions and signals: what distance, headway and time-to-collision conditions measure (coordinate
+system, distance type, freespace), traffic signal states and signal controller phases, and the catalog
+errors a user sees. Scenarios run on the example highway, moved by the scenario alone (exact numbers)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from simcore.errors import BadInput
+from simcore.scenario.engine import ScenarioEngine
+from simcore.scenario.xosc import load_scenario
+from simcore.world.opendrive import OpenDrive
+
+ROOT = Path(__file__).resolve().parents[1]
+HIGHWAY = ROOT / "examples" / "maps" / "highway.xodr"
+
+CAR = """
+<ScenarioObject name="{name}">
+  <Vehicle name="car" vehicleCategory="car">
+    <BoundingBox><Center x="1.4" y="0" z="0.75"/><Dimensions width="1.8" length="4.5" height="1.5"/></BoundingBox>
+    <Performance maxSpeed="70" maxAcceleration="5" maxDeceleration="9"/>
+  </Vehicle>
+</ScenarioObject>"""
+
+
+def place(name: str, s: float, lane: int = -2, speed: float = 20.0) -> str:
+    return f"""
+<Private entityRef="{name}">
+  <PrivateAction><TeleportAction><Position><LanePosition roadId="1" laneId="{lane}" s="{s}" offset="0"/></Position></TeleportAction></PrivateAction>
+  <PrivateAction><LongitudinalAction><SpeedAction>
+    <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
+    <SpeedActionTarget><AbsoluteTargetSpeed value="{speed}"/></SpeedActionTarget>
+  </SpeedAction></LongitudinalAction></PrivateAction>
+</Private>"""
+
+
+def sim_time(value: float) -> str:
+    return f"""<Condition name="t" delay="0" conditionEdge="none"><ByValueCondition>
+  <SimulationTimeCondition value="{value}" rule="greaterOrEqual"/></ByValueCondition></Condition>"""
+
+
+def by_ego(body: str, edge: str = "none") -> str:
+    return f"""<Condition name="c" delay="0" conditionEdge="{edge}"><ByEntityCondition>
+  <TriggeringEntities triggeringEntitiesRule="any"><EntityRef entityRef="Ego"/></TriggeringEntities>
+  <EntityCondition>{body}</EntityCondition></ByEntityCondition></Condition>"""
+
+
+def stop_ego() -> str:
+    return """<PrivateAction><LongitudinalAction><SpeedAction>
+  <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
+  <SpeedActionTarget><AbsoluteTargetSpeed value="0"/></SpeedActionTarget></SpeedAction></LongitudinalAction></PrivateAction>"""
+
+
+def signal_state(name: str, state: str) -> str:
+    return f"""<GlobalAction><InfrastructureAction><TrafficSignalAction>
+  <TrafficSignalStateAction name="{name}" state="{state}"/></TrafficSignalAction></InfrastructureAction></GlobalAction>"""
+
+
+def event(name: str, action: str, trigger: str) -> str:
+    return f"""<Event name="{name}" priority="parallel" maximumExecutionCount="1">
+  <Action name="{name}Action">{action}</Action>
+  <StartTrigger><ConditionGroup>{trigger}</ConditionGroup></StartTrigger></Event>"""
+
+
+def scenario(
+    tmp_path: Path,
+    events: str,
+    *,
+    entities: tuple[str, ...] = ("Ego",),
+    init: str = "",
+    network_extra: str = "",
+    header_minor: int = 2,
+) -> Path:
+    init = init or place("Ego", 100.0)
+    text = f"""<?xml version="1.0"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="{header_minor}" date="2025-01-01T00:00:00" author="test" description="t"/>
+  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/>{network_extra}</RoadNetwork>
+  <Entities>{"".join(CAR.format(name=n) for n in entities)}</Entities>
+  <Storyboard>
+    <Init><Actions>{init}</Actions></Init>
+    <Story name="S"><Act name="A">
+      <ManeuverGroup name="G" maximumExecutionCount="1"><Actors selectTriggeringEntities="false"><EntityRef entityRef="Ego"/></Actors>
+        <Maneuver name="M">{events}</Maneuver>
+      </ManeuverGroup>
+      <StartTrigger><ConditionGroup>{sim_time(0)}</ConditionGroup></StartTrigger>
+    </Act></Story>
+    <StopTrigger/>
+  </Storyboard>
+</OpenSCENARIO>"""
+    path = tmp_path / "s.xosc"
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture(scope="module")
+def road() -> OpenDrive:
+    return OpenDrive.from_file(HIGHWAY)
+
+
+def run(path: Path, road: OpenDrive, seconds: float) -> ScenarioEngine:
+    engine = ScenarioEngine(load_scenario(path), road=road, sumo=None, step_seconds=0.05)
+    while engine.time < seconds - 1e-9 and not engine.ended:
+        engine.advance()
+    return engine
+
+
+def started(engine: ScenarioEngine, name: str) -> float | None:
+    """Simulated time at which event `name` started (None: never)."""
+    for line in engine.log:
+        if f"event {name}: startTransition" in line:
+            return float(line.split()[0])
+    return None
+
+
+# --- traffic signals ------------------------------------------------------------------------------------
+
+
+def test_signal_state_action_and_condition(tmp_path: Path, road: OpenDrive) -> None:
+    init = place("Ego", 100.0) + signal_state("7", "on;off;off")
+    green = """<Condition name="g" delay="0.5" conditionEdge="rising"><ByValueCondition>
+      <TrafficSignalCondition name="7" state="off;off;on"/></ByValueCondition></Condition>"""
+    red = """<Condition name="r" delay="0" conditionEdge="none"><ByValueCondition>
+      <TrafficSignalCondition name="7" state="on;off;off"/></ByValueCondition></Condition>"""
+    events = (
+        event("SwitchGreen", signal_state("7", "off;off;on"), sim_time(2.0))
+        + event("Go", stop_ego(), green)
+        + event(
+            "RedAtStart",
+            stop_ego().replace('value="0"/></SpeedActionTarget>', 'value="25"/></SpeedActionTarget>'),
+            red,
+        )
+    )
+    engine = run(scenario(tmp_path, events, init=init), road, 4.0)
+    assert started(engine, "RedAtStart") == pytest.approx(0.0)
+    assert started(engine, "SwitchGreen") == pytest.approx(2.0, abs=0.051)
+    # the state changes during the step at 2.0; seen from the next evaluation, plus the 0.5 s delay
+    assert started(engine, "Go") == pytest.approx(2.55, abs=0.051)
+    assert engine.signals["7"] == "off;off;on"
+    assert engine.bodies["Ego"].speed == 0.0
+
+
+def test_signal_controller_cycles_its_phases_and_jumps_on_action(tmp_path: Path, road: OpenDrive) -> None:
+    network = """<TrafficSignals>
+      <TrafficSignalController name="main" delay="1">
+        <Phase name="stop" duration="3"><TrafficSignalState trafficSignalId="7" state="on;off;off"/></Phase>
+        <Phase name="go" duration="2"><TrafficSignalState trafficSignalId="7" state="off;off;on"/></Phase>
+      </TrafficSignalController>
+      <TrafficSignalController name="follower" delay="0.5" reference="main">
+        <Phase name="only" duration="10"><TrafficSignalState trafficSignalId="8" state="on"/></Phase>
+      </TrafficSignalController>
+    </TrafficSignals>"""
+    go = """<Condition name="go" delay="0" conditionEdge="rising"><ByValueCondition>
+      <TrafficSignalControllerCondition trafficSignalControllerRef="main" phase="go"/></ByValueCondition></Condition>"""
+    jump = """<GlobalAction><InfrastructureAction><TrafficSignalAction>
+      <TrafficSignalControllerAction trafficSignalControllerRef="main" phase="go"/></TrafficSignalAction></InfrastructureAction></GlobalAction>"""
+    path = scenario(tmp_path, event("Go", stop_ego(), go), network_extra=network)
+    engine = ScenarioEngine(load_scenario(path), road=road, sumo=None, step_seconds=0.05)
+    seen: dict[float, tuple[str | None, str | None, str | None]] = {}
+    while engine.time < 11.0 - 1e-9:
+        engine.advance()
+        seen[round(engine.time, 2)] = (
+            engine.signal_phases.get("main"),
+            engine.signals.get("7"),
+            engine.signals.get("8"),
+        )
+    assert seen[0.9] == (None, None, None)  # before its delay
+    assert seen[1.1][:2] == ("stop", "on;off;off")
+    assert seen[4.1][:2] == ("go", "off;off;on")
+    assert seen[6.1][:2] == ("stop", "on;off;off")  # the cycle starts over
+    assert seen[1.4][2] is None and seen[1.6][2] == "on"  # the referencing controller starts 0.5 s after
+    assert started(engine, "Go") == pytest.approx(4.05, abs=0.051)
+
+    path = scenario(tmp_path, event("Jump", jump, sim_time(2.0)), network_extra=network)
+    engine = run(path, road, 2.5)
+    assert engine.signal_phases["main"] == "go"  # jumped at 2.0 instead of waiting for 4.0
+    assert engine.signals["7"] == "off;off;on"
+
+
+def test_signal_controller_action_naming_an_unknown_phase_is_bad_input(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    network = """<TrafficSignals><TrafficSignalController name="main">
+        <Phase name="stop" duration="3"/></TrafficSignalController></TrafficSignals>"""
+    jump = """<GlobalAction><InfrastructureAction><TrafficSignalAction>
+      <TrafficSignalControllerAction trafficSignalControllerRef="main" phase="amber"/></TrafficSignalAction></InfrastructureAction></GlobalAction>"""
+    path = scenario(tmp_path, event("Jump", jump, sim_time(1.0)), network_extra=network)
+    with pytest.raises(BadInput, match="no phase 'amber'"):
+        run(path, road, 2.0)
+
+
+# --- distances, headway, time to collision ----------------------------------------------------------------
+
+
+def test_distance_condition_along_the_road(tmp_path: Path, road: OpenDrive) -> None:
+    near = by_ego(
+        """<DistanceCondition value="30" freespace="false" rule="lessThan" relativeDistanceType="longitudinal"
+           coordinateSystem="road"><Position><LanePosition roadId="1" laneId="-3" s="300" offset="0"/></Position>
+           </DistanceCondition>"""
+    )
+    engine = run(scenario(tmp_path, event("Near", stop_ego(), near)), road, 12.0)
+    # s 100 → 270 at 20 m/s: 8.5 s; the lateral offset to lane -3 does not count along the road
+    assert started(engine, "Near") == pytest.approx(8.55, abs=0.051)
+
+
+def test_distance_condition_defaults_to_euclidean(tmp_path: Path, road: OpenDrive) -> None:
+    near = by_ego(
+        """<DistanceCondition value="30" freespace="false" rule="lessThan">
+           <Position><LanePosition roadId="1" laneId="-3" s="300" offset="0"/></Position></DistanceCondition>"""
+    )
+    engine = run(scenario(tmp_path, event("Near", stop_ego(), near)), road, 12.0)
+    # hypot(ds, 3.5) < 30 → ds < 29.795: s > 270.205 at 20 m/s
+    assert started(engine, "Near") == pytest.approx(8.55, abs=0.051)
+    assert engine.bodies["Ego"].s == pytest.approx(100 + 20 * 8.5, abs=1.01)
+
+
+def test_time_headway_is_euclidean_by_default_and_undefined_to_an_entity_behind(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    init = place("Ego", 100.0, lane=-2, speed=10.0) + place("Side", 110.0, lane=-1, speed=10.0)
+    headway = by_ego(
+        """<TimeHeadwayCondition entityRef="Side" value="1.03" freespace="false" rule="greaterThan"/>"""
+    )
+    engine = run(
+        scenario(tmp_path, event("Far", stop_ego(), headway), entities=("Ego", "Side"), init=init), road, 1.0
+    )
+    # Euclidean: hypot(10, 3.5) / 10 = 1.06 s > 1.03 (longitudinally it would be 1.0 s)
+    assert started(engine, "Far") == pytest.approx(0.0)
+
+    longitudinal = by_ego(
+        """<TimeHeadwayCondition entityRef="Side" value="1.05" freespace="false" rule="greaterThan"
+           coordinateSystem="entity" relativeDistanceType="longitudinal"/>"""
+    )
+    engine = run(
+        scenario(tmp_path, event("Far", stop_ego(), longitudinal), entities=("Ego", "Side"), init=init),
+        road,
+        1.0,
+    )
+    assert started(engine, "Far") is None  # 1.0 s, not above 1.05
+
+    behind = place("Ego", 100.0, lane=-2, speed=10.0) + place("Side", 90.0, lane=-2, speed=10.0)
+    anything = by_ego(
+        """<TimeHeadwayCondition entityRef="Side" value="0" freespace="false" rule="greaterThan"/>"""
+    )
+    engine = run(
+        scenario(tmp_path, event("Any", stop_ego(), anything), entities=("Ego", "Side"), init=behind),
+        road,
+        1.0,
+    )
+    assert started(engine, "Any") is None
+
+
+def test_time_to_collision_with_freespace_and_closing_speed(tmp_path: Path, road: OpenDrive) -> None:
+    init = place("Ego", 100.0, speed=30.0) + place("Lead", 200.0, speed=20.0)
+    ttc = by_ego(
+        """<TimeToCollisionCondition value="2" freespace="true" rule="lessThan" coordinateSystem="entity"
+           relativeDistanceType="longitudinal"><TimeToCollisionConditionTarget><EntityRef entityRef="Lead"/>
+           </TimeToCollisionConditionTarget></TimeToCollisionCondition>"""
+    )
+    engine = run(
+        scenario(tmp_path, event("Brake", stop_ego(), ttc), entities=("Ego", "Lead"), init=init), road, 10.0
+    )
+    # gap 100 − 4.5 closing at 10 m/s: below 20 m after 7.55 s
+    assert started(engine, "Brake") == pytest.approx(7.6, abs=0.051)
+
+
+def test_time_to_collision_is_undefined_when_not_closing_in(tmp_path: Path, road: OpenDrive) -> None:
+    init = place("Ego", 100.0, speed=20.0) + place("Lead", 150.0, speed=25.0)
+    ttc = by_ego(
+        """<TimeToCollisionCondition value="0" freespace="false" rule="greaterThan">
+           <TimeToCollisionConditionTarget><EntityRef entityRef="Lead"/></TimeToCollisionConditionTarget>
+           </TimeToCollisionCondition>"""
+    )
+    engine = run(
+        scenario(tmp_path, event("Any", stop_ego(), ttc), entities=("Ego", "Lead"), init=init), road, 2.0
+    )
+    assert started(engine, "Any") is None  # moving apart: no time to collision, not an infinite one
+
+
+def test_along_route_of_1_0_selects_road_coordinates(tmp_path: Path) -> None:
+    headway = by_ego("""<TimeHeadwayCondition entityRef="Ego" value="1" freespace="false" alongRoute="true"
+        rule="lessThan"/>""")
+    path = scenario(tmp_path, event("E", stop_ego(), headway), header_minor=0)
+    cond = load_scenario(path).stories[0].acts[0].groups[0].maneuvers[0].events[0].start_trigger
+    assert cond is not None
+    parsed = cond.groups[0][0].entity_condition
+    assert parsed is not None
+    assert (parsed.coordinate_system, parsed.distance_type) == ("road", "euclidianDistance")  # type: ignore[union-attr]
+
+
+def test_bad_coordinate_system_names_the_element(tmp_path: Path) -> None:
+    bad = by_ego("""<TimeHeadwayCondition entityRef="Ego" value="1" freespace="false" coordinateSystem="polar"
+        rule="lessThan"/>""")
+    with pytest.raises(BadInput, match="coordinateSystem='polar'") as err:
+        load_scenario(scenario(tmp_path, event("E", stop_ego(), bad)))
+    assert "TimeHeadwayCondition" in str(err.value)
