@@ -171,3 +171,26 @@ def test_carlos_run_live_serves_the_run_and_still_writes_results(tmp_path: Path)
     assert {"/clock", "/tf", "/carlos/objects", "/carlos/objects/markers", "/carlos/Ego/odometry"} <= topics
     assert (tmp_path / "prototyping" / "0" / "recording.mcap").is_file()
     assert (tmp_path / "prototyping" / "summary.json").is_file()
+
+
+def test_spec_live_is_refused_for_more_than_one_run(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    import yaml
+
+    root = Path(__file__).resolve().parents[1]
+    body = yaml.safe_load((root / "examples" / "runs" / "data-generation.yaml").read_text())
+    body["spec"]["live"] = True
+    for scenario in body["spec"]["scenarios"]:
+        scenario["openscenario"] = str((root / "examples" / "runs" / scenario["openscenario"]).resolve())
+    manifest = tmp_path / "live.yaml"
+    manifest.write_text(yaml.safe_dump(body))
+    done = subprocess.run(
+        [sys.executable, "-m", "simcore.cli", "run", str(manifest), "-o", f"file://{tmp_path}"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "spec.live" in done.stderr and "choose one with --index N" in done.stderr
