@@ -405,3 +405,61 @@ def test_longitudinal_distance_without_constraints_is_kept_exactly(tmp_path: Pat
     engine, trace = run(path, road, 2.0)
     assert engine.bodies["Lead"].s - engine.bodies["Ego"].s == pytest.approx(20.0, abs=1e-6)
     assert trace[2.0]["speed"] == pytest.approx(10.0)
+
+
+def test_an_entity_stuck_at_the_end_of_its_road_stops(tmp_path: Path, road: OpenDrive) -> None:
+    # 2000 m road without successor: at 25 m/s from s=1990 the end is reached within the first step
+    stop = """<Condition name="end" delay="0" conditionEdge="none"><ByEntityCondition>
+      <TriggeringEntities triggeringEntitiesRule="any"><EntityRef entityRef="Ego"/></TriggeringEntities>
+      <EntityCondition><EndOfRoadCondition duration="1.0"/></EntityCondition></ByEntityCondition></Condition>"""
+    path = scenario(tmp_path, "", init=place("Ego", 1999.0, speed=25.0), stop=stop)
+    engine, trace = run(path, road, 5.0)
+    assert trace[0.05]["s"] == pytest.approx(2000.0) and trace[0.05]["speed"] == pytest.approx(25.0)
+    assert trace[0.15]["speed"] == 0.0  # two steps later it has stopped
+    # standing at the end keeps it at the end: the EndOfRoadCondition (1 s) ends the run
+    assert engine.ended and engine.time == pytest.approx(1.05)
+
+
+def test_continuous_relative_speed_in_init_follows_the_other_within_performance(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    follow = """<Private entityRef="Ego"><PrivateAction><LongitudinalAction><SpeedAction>
+      <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
+      <SpeedActionTarget><RelativeTargetSpeed entityRef="Lead" value="0" speedTargetValueType="delta" continuous="true"/>
+      </SpeedActionTarget></SpeedAction></LongitudinalAction></PrivateAction></Private>"""
+    lead = speed_action("step", "time", 0, 0.0)
+    path = scenario(
+        tmp_path,
+        "",
+        entities=("Lead", "Ego"),
+        init=place("Lead", 500.0, speed=20.0) + place("Ego", 100.0, speed=0.0) + follow,
+    )
+    # the Lead stops at 1 s (its own maneuver group), Ego follows its speed down at its maxDeceleration (9)
+    text = path.read_text().replace(
+        "</Act></Story>",
+        f"""</Act><Act name="B"><ManeuverGroup name="L" maximumExecutionCount="1"><Actors selectTriggeringEntities="false">
+        <EntityRef entityRef="Lead"/></Actors><Maneuver name="LM">{event("Stop", lead, sim_time("greaterOrEqual", 1.0))}
+        </Maneuver></ManeuverGroup><StartTrigger><ConditionGroup>{sim_time("greaterOrEqual", 0)}</ConditionGroup>
+        </StartTrigger></Act></Story>""",
+    )
+    path.write_text(text)
+    _, trace = run(path, road, 4.0)
+    assert trace[0.5]["speed"] == pytest.approx(20.0)  # took the Lead's speed at once
+    assert trace[1.5]["speed"] == pytest.approx(20.0 - 9.0 * 0.5, abs=1e-6)
+    assert trace[4.0]["speed"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_longitudinal_distance_limits_are_bounded_by_the_vehicle_performance(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    # maxAcceleration 50 in the action, 5 in the vehicle: the spring pulls at most with 5 m/s²
+    constraints = '<DynamicConstraints maxAcceleration="50" maxDeceleration="50" maxSpeed="60"/>'
+    path = scenario(
+        tmp_path,
+        event("Keep", distance_keeping(constraints), sim_time("greaterThan", 0.0)),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0, speed=20.0) + place("Lead", 300.0, speed=20.0),
+    )
+    _, trace = run(path, road, 3.0)
+    acc = accelerations(trace)
+    assert max(acc) == pytest.approx(5.0, abs=1e-6)

@@ -277,8 +277,10 @@ class LongitudinalDistanceRuntime(Runtime):
         if not self.action.continuous and abs(error) < self.THRESHOLD:
             self.done = True
         c = self.action.constraints or m.DynamicConstraints()
-        max_acc = c.max_acceleration if c.max_acceleration is not None else _BIG
-        max_dec = c.max_deceleration if c.max_deceleration is not None else _BIG
+        # the limits given are bounded by the vehicle's performance (as esmini does)
+        perf = a.entity.performance
+        max_acc = min(c.max_acceleration, perf.max_acceleration) if c.max_acceleration is not None else _BIG
+        max_dec = min(c.max_deceleration, perf.max_deceleration) if c.max_deceleration is not None else _BIG
         if max_acc >= _BIG and max_dec >= _BIG:
             # no dynamics given: the distance is kept exactly
             self.engine.shift_along(a, error)

@@ -59,6 +59,7 @@ class Body:
     odometer: float = 0.0
     standstill_since: float | None = 0.0
     end_of_road_since: float | None = None
+    end_of_road_steps: int = 0  # steps begun at the end of the road since it got there
     lateral_velocity: float = 0.0  # d(offset)/dt during a lane change, in t units
     placed: bool = False
     gone: bool = False  # left the SUMO network
@@ -119,7 +120,8 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
             if body.lane_id != 0:
                 _follow_lane_links(r, body, target)
             body.s = target
-            body.end_of_road_since = None
+            if ds != 0.0:  # standing still at the end of a road, it stays there
+                body.end_of_road_since = None
             break
         # past the end of this road: continue on the successor
         overshoot = (target - length) if target > length else -target
@@ -129,6 +131,13 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
             body.s = edge_s
             if body.end_of_road_since is None:
                 body.end_of_road_since = now
+                body.end_of_road_steps = 0
+            else:
+                body.end_of_road_steps += 1
+                if body.end_of_road_steps >= 2:
+                    # stuck at the end of a road with nowhere to go: it stops (as esmini's default
+                    # controller does, two steps after it got there)
+                    body.speed = 0.0
             break
         road_id, lane_id, direction = nxt
         # the offset is kept to the same side of the travel direction (t flips with the s direction)
