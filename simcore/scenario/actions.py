@@ -548,6 +548,9 @@ class SynchronizeRuntime(Runtime):
             return
         self.master_previous = d_master
         if self.master.speed <= 1e-3:
+            if final is not None:
+                # the master stands still: with a final speed to reach, the actor waits for it (as esmini)
+                a.speed = 0.0
             return
         remaining = d_master / self.master.speed
         if remaining <= dt:

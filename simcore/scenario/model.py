@@ -56,13 +56,18 @@ class Entity:
         driver = self.controller.get("carlos.driver")
         if driver is not None:
             return driver
-        if self.controller.get("esminiController") in EXTERNAL_CONTROLLERS:
+        if controller_type(self.controller) in EXTERNAL_CONTROLLERS:
             return "external"
         return "scenario"
 
 
 # controllers of other tools whose entity is moved from outside the scenario (a program, a person)
 EXTERNAL_CONTROLLERS = frozenset({"ExternalController", "InteractiveController"})
+
+
+def controller_type(properties: dict[str, str]) -> str:
+    """The kind of a controller: its `esminiController` property, else its name (as esmini decides)."""
+    return properties.get("esminiController") or properties.get("name", "")
 
 
 # --- positions -----------------------------------------------------------------------------------------

@@ -502,7 +502,7 @@ def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
             f"controller property carlos.driver={properties['carlos.driver']!r}: use scenario, sumo or external",
             ctrl,
         )
-    kind = properties.get("esminiController", properties.get("name", ""))
+    kind = m.controller_type(properties)
     known = properties.get("carlos.driver") in ("sumo", "external") or kind in m.EXTERNAL_CONTROLLERS
     if not known and kind not in ("", "DefaultController"):
         reader.warn(
@@ -720,7 +720,7 @@ def _controller_action(reader: _Reader, inner: ET.Element) -> m.PrivateAction:
                     "the SUMO driver can only be given in the entity's ObjectController, not assigned later",
                     child,
                 )
-            external = driver == "external" or properties.get("esminiController") in m.EXTERNAL_CONTROLLERS
+            external = driver == "external" or m.controller_type(properties) in m.EXTERNAL_CONTROLLERS
             assign = "external" if external else "scenario"
             longitudinal = flag(child, "activateLongitudinal")
             lateral = flag(child, "activateLateral")
