@@ -89,6 +89,12 @@ def load_manifest(path: str | Path) -> SimulationRun:
         # locally there is no API server to generate a name: take the prefix plus the file name
         name = f"{run.metadata.generate_name.rstrip('-')}-{_name_from_file(path)}"[:63].strip("-")
         run = run.model_copy(update={"metadata": run.metadata.model_copy(update={"name": name})})
+    distribution = run.spec.sweep.distribution
+    if distribution and not distribution.startswith("s3://") and not Path(distribution).is_absolute():
+        # relative to the manifest, like the scenario files: the spec as applied names the file itself
+        located = str((path.parent / distribution).resolve())
+        sweep = run.spec.sweep.model_copy(update={"distribution": located})
+        run = run.model_copy(update={"spec": run.spec.model_copy(update={"sweep": sweep})})
     return run
 
 

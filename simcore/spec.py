@@ -152,8 +152,8 @@ class Sweep(Model):
         None,
         max_length=4096,
         description=(
-            "An OpenSCENARIO ParameterValueDistribution file (.xosc; absolute, or relative to the working "
-            "directory): each of its permutations (deterministic sets and ranges, or stochastic draws from "
+            "An OpenSCENARIO ParameterValueDistribution file (.xosc; absolute, or relative to the manifest's "
+            "folder, made absolute when the manifest is loaded): each of its permutations (deterministic sets and ranges, or stochastic draws from "
             "its randomSeed, else simulation.seed, and the permutation number) is crossed with the matrix, "
             "after its keys. Its ScenarioFile is not used: the scenarios are spec.scenarios. Default: none."
         ),

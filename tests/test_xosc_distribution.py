@@ -88,3 +88,22 @@ def test_sweep_points_at_a_distribution(tmp_path: Path) -> None:
     assert point.scenario.name == "a" and point.repetition == 1
     assert point.sweep_values == {"M": 2, "A": "a1", "B": "b1", "S": "x", "R": "1.5"}
     assert plan[len(plan) - 1].scenario.name == "b"
+
+
+def test_manifest_distribution_path_is_relative_to_the_manifest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from simcore.manifest import load_manifest
+
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    write(folder, DETERMINISTIC)
+    manifest = folder / "sweep.yaml"
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: sweep}\n"
+        "spec:\n  scenarios: [{name: a, openscenario: a.xosc}]\n  sweep: {distribution: dist.xosc}\n"
+    )
+    monkeypatch.chdir(tmp_path)  # not the manifest's folder
+    run = load_manifest(manifest)
+    assert run.spec.sweep.distribution == str(folder / "dist.xosc")
+    assert len(Plan(run.spec)) == 12
