@@ -463,3 +463,35 @@ def test_longitudinal_distance_limits_are_bounded_by_the_vehicle_performance(
     _, trace = run(path, road, 3.0)
     acc = accelerations(trace)
     assert max(acc) == pytest.approx(5.0, abs=1e-6)
+
+
+def test_a_teleported_entity_stays_where_it_was_put_for_that_step(tmp_path: Path, road: OpenDrive) -> None:
+    jump = """<PrivateAction><TeleportAction><Position>
+      <LanePosition roadId="1" laneId="-2" s="50" offset="0"/></Position></TeleportAction></PrivateAction>"""
+    path = scenario(tmp_path, event("Jump", jump, sim_time("greaterOrEqual", 1.0)))
+    _, trace = run(path, road, 1.2)
+    assert trace[1.0]["s"] == pytest.approx(120.0)
+    assert trace[1.05]["s"] == pytest.approx(50.0)  # teleported at the start of the step from 1.0: not moved
+    assert trace[1.1]["s"] == pytest.approx(51.0)  # then on at 20 m/s
+
+
+LANE_CHANGE = """<PrivateAction><LateralAction><LaneChangeAction>
+  <LaneChangeActionDynamics dynamicsShape="sinusoidal" dynamicsDimension="time" value="3"/>
+  <LaneChangeTarget><RelativeTargetLane entityRef="Ego" value="1"/></LaneChangeTarget></LaneChangeAction></LateralAction></PrivateAction>"""
+
+
+def test_actions_step_in_storyboard_order_and_a_lane_change_moves_at_the_speed_it_sees(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    # the speed action starts first (t > 0: 20 → 30 m/s in 2 s, +0.25 m/s a step), the lane change at t > 1.
+    # A lane change stepped before the speed action (defined before it) moves the entity at the speed before
+    # that step's change; stepped after it, at the new one.
+    speed = event("Faster", speed_action("linear", "time", 2.0, 30.0), sim_time("greaterThan", 0.0))
+    change = event("Change", LANE_CHANGE, sim_time("greaterThan", 1.0))
+    progress = {}
+    for first, events in (("change", change + speed), ("speed", speed + change)):
+        path = scenario(tmp_path, events.replace('priority="override"', 'priority="parallel"'))
+        _, trace = run(path, road, 2.5)
+        progress[first] = trace[2.5]["s"] - trace[1.0]["s"]
+    # 20 steps (from 1.05 to 2.0) at the previous step's speed: 20 × 0.25 × 0.05 m less
+    assert progress["speed"] - progress["change"] == pytest.approx(20 * 0.25 * 0.05, abs=0.002)

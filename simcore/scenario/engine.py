@@ -189,6 +189,9 @@ class LaneChangeRuntime(ActionRuntime):
     def step(self, dt: float) -> None:
         if self.done:
             return
+        # the lane change moves the entity at the speed it has now: a speed action stepped after it in the
+        # storyboard's order changes the speed from the next step on (as esmini)
+        self.actor.extra["move_speed"] = self.actor.speed
         dyn = self.action.dynamics
         self.elapsed += dt
         if dyn.dimension == "distance":
@@ -216,6 +219,9 @@ class TeleportRuntime(ActionRuntime):
 
     def start(self) -> None:
         self.engine.place(self.actor, self.action.position)
+        if self.engine.root.state == State.RUNNING:
+            # teleported during the run: it stays where it was put for the rest of this step (as esmini)
+            self.actor.extra["teleported"] = 1.0
         self.done = True
 
 
@@ -350,6 +356,7 @@ class ScenarioEngine:
         self._signal_cycles: dict[str, tuple[float, int]] = _signal_starts(scenario.signal_controllers)
         self._signal_controllers = {c.name: c for c in scenario.signal_controllers}
         self.signal_phases: dict[str, str] = {}
+        self.action_order: dict[int, int] = {}  # id of an action node → its place in the storyboard
         self.root = self._build()
         self.registry = Registry(self.root)
         self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
@@ -376,7 +383,9 @@ class ScenarioEngine:
                             e = Node("event", event.name, event, mv)
                             mv.children.append(e)
                             for action in event.actions:
-                                e.children.append(Node("action", action.name, action, e))
+                                node = Node("action", action.name, action, e)
+                                e.children.append(node)
+                                self.action_order[id(node)] = len(self.action_order)
         return root
 
     def _init(self) -> None:
@@ -1232,7 +1241,10 @@ class ScenarioEngine:
                 if not runtime.done:
                     runtime.step(dt)
             self.init_runtimes = [r for r in self.init_runtimes if not r.done]
-        for node in {id(n): n for n in self.running.values()}.values():
+        nodes: list[Node] = list({id(n): n for n in self.running.values()}.values())
+        if len(nodes) > 1:  # actions step in the storyboard's order (as esmini), not in the order they started
+            nodes = sorted(nodes, key=lambda n: self.action_order.get(id(n), 0))
+        for node in nodes:
             runtimes: list[Runtime] = node.runtime or []
             for runtime in runtimes:
                 self.owner = runtime.actor
@@ -1253,11 +1265,15 @@ class ScenarioEngine:
                 continue
             if body.entity.driver == "sumo":
                 continue
-            distance = body.speed * dt
+            if body.extra and body.extra.pop("teleported", None):
+                body.extra.pop("move_speed", None)
+                continue
+            speed = body.extra.pop("move_speed", body.speed) if body.extra else body.speed
+            distance = speed * dt
             if body.lateral_velocity != 0.0 and body.mover is None:
                 # the entity moves at its speed along its path: a lateral motion takes its share of it
-                lateral = min(abs(body.lateral_velocity), abs(body.speed))
-                distance = math.copysign(math.sqrt(body.speed**2 - lateral**2), body.speed) * dt
+                lateral = min(abs(body.lateral_velocity), abs(speed))
+                distance = math.copysign(math.sqrt(speed**2 - lateral**2), speed) * dt
             if body.mover is not None:
                 body.mover.move(dt, now)
             elif self.road is not None and body.road_id is not None:
