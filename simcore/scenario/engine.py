@@ -1265,8 +1265,8 @@ class ScenarioEngine:
                 continue
             if body.entity.driver == "sumo":
                 continue
-            if body.extra and body.extra.pop("teleported", None):
-                body.extra.pop("move_speed", None)
+            if body.extra and body.extra.pop("teleported", 0.0):
+                body.extra.pop("move_speed", 0.0)
                 continue
             speed = body.extra.pop("move_speed", body.speed) if body.extra else body.speed
             distance = speed * dt
