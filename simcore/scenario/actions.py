@@ -53,6 +53,7 @@ class FollowTrajectoryRuntime(Runtime):
         self.path: paths.SampledPath | None = None
         self.s = 0.0
         self.t0 = 0.0
+        self.step_speed: float | None = None
 
     def start(self) -> None:
         a = self.actor
@@ -73,6 +74,11 @@ class FollowTrajectoryRuntime(Runtime):
         a.mover = self
         a.placed = True
         self._pose(self.s)
+
+    def step(self, dt: float) -> None:
+        # the entity moves along the trajectory at the speed it has when this action steps: a speed action
+        # that steps after it (later in the storyboard) takes effect one step later (as esmini)
+        self.step_speed = self.actor.speed
 
     def _trajectory_time(self, now: float) -> float:
         elapsed = now if self.action.timing == "absolute" else now - self.t0
@@ -96,7 +102,9 @@ class FollowTrajectoryRuntime(Runtime):
             a.speed = (s_new - self.s) / dt
             end = self.path.t is not None and self._trajectory_time(now) >= self.path.t[-1] - 1e-9
         else:
-            s_new = self.s + abs(a.speed) * dt
+            speed = a.speed if self.step_speed is None else self.step_speed
+            self.step_speed = None
+            s_new = self.s + abs(speed) * dt
             end = s_new >= self.path.length - 1e-9
         a.odometer += abs(s_new - self.s)
         self.s = min(s_new, self.path.length)

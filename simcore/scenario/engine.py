@@ -632,6 +632,13 @@ class ScenarioEngine:
                 if isinstance(position, m.LanePosition):
                     body.road_id, body.lane_id, body.s = position.road_id, position.lane_id, position.s
                     body.offset = position.offset
+        # an orientation given relative to the road is kept while the entity moves along it (as esmini)
+        body.heading_offset = 0.0
+        orientation = getattr(position, "orientation", None)
+        if body.road_id is not None and orientation is not None and orientation.type == "relative":
+            lane_heading = self.road.road_to_world(body.road_id, body.s, 0.0).heading if self.road else heading
+            travel = lane_heading if body.direction > 0 else lane_heading + math.pi
+            body.heading_offset = wrap_angle(heading - travel)
         if self.sumo is not None and self.step_index > 0 and self.sumo.has(body.name):
             self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
 
@@ -651,6 +658,7 @@ class ScenarioEngine:
             return
         body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
         body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
+        body.heading_offset = 0.0
         if lock_lane:
             body.lateral_velocity = 0.0
 

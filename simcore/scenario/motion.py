@@ -56,6 +56,7 @@ class Body:
     s: float = 0.0
     offset: float = 0.0  # from the centre of lane_id, + to the left of the reference line (+t)
     direction: int = 1  # +1 travels toward increasing s
+    heading_offset: float = 0.0  # heading relative to the lane's travel direction, kept along the lane
     odometer: float = 0.0
     standstill_since: float | None = 0.0
     end_of_road_since: float | None = None
@@ -193,4 +194,4 @@ def update_pose_from_road(road: OpenDrive, body: Body) -> None:
     if abs(body.speed) > 0.1:
         lateral = body.lateral_velocity * body.direction  # + is to the left of the travel direction
         drift = math.atan2(lateral, abs(body.speed))
-    body.heading = wrap_angle(road_heading + drift)
+    body.heading = wrap_angle(road_heading + drift + body.heading_offset)
