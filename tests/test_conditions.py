@@ -296,3 +296,50 @@ def test_bad_coordinate_system_names_the_element(tmp_path: Path) -> None:
     with pytest.raises(BadInput, match="coordinateSystem='polar'") as err:
         load_scenario(scenario(tmp_path, event("E", stop_ego(), bad)))
     assert "TimeHeadwayCondition" in str(err.value)
+
+
+# --- catalogs ---------------------------------------------------------------------------------------------
+
+
+def test_missing_catalog_directory_is_named_with_its_declaration(tmp_path: Path) -> None:
+    text = f"""<?xml version="1.0"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
+  <CatalogLocations>
+    <VehicleCatalog><Directory path="../nowhere/Vehicles"/></VehicleCatalog>
+  </CatalogLocations>
+  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/></RoadNetwork>
+  <Entities><ScenarioObject name="Ego"><CatalogReference catalogName="VehicleCatalog" entryName="car_white"/>
+  </ScenarioObject></Entities>
+  <Storyboard><Init><Actions/></Init><StopTrigger/></Storyboard>
+</OpenSCENARIO>"""
+    path = tmp_path / "s.xosc"
+    path.write_text(text)
+    with pytest.raises(BadInput) as err:
+        load_scenario(path)
+    message = str(err.value)
+    assert "VehicleCatalog/car_white not found" in message
+    assert "path='../nowhere/Vehicles' (line 5): no such directory" in message
+    assert f"{path}:8" in message  # the CatalogReference's line
+
+
+def test_catalog_directory_may_name_the_catalog_file(tmp_path: Path) -> None:
+    (tmp_path / "cat").mkdir()
+    (tmp_path / "cat" / "Cars.xosc").write_text(
+        """<?xml version="1.0"?><OpenSCENARIO><FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00"
+        author="t" description="t"/><Catalog name="Cars">"""
+        + CAR.format(name="x").replace('<ScenarioObject name="x">', "").replace("</ScenarioObject>", "")
+        + "</Catalog></OpenSCENARIO>"
+    )
+    text = f"""<?xml version="1.0"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
+  <CatalogLocations><VehicleCatalog><Directory path="cat/Cars.xosc"/></VehicleCatalog></CatalogLocations>
+  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/></RoadNetwork>
+  <Entities><ScenarioObject name="Ego"><CatalogReference catalogName="Cars" entryName="car"/></ScenarioObject></Entities>
+  <Storyboard><Init><Actions/></Init><StopTrigger/></Storyboard>
+</OpenSCENARIO>"""
+    path = tmp_path / "s.xosc"
+    path.write_text(text)
+    scenario_ = load_scenario(path)
+    assert scenario_.entities[0].box.length == 4.5

@@ -76,6 +76,7 @@ class _Reader:
         self.lines: dict[int, int] = {}
         self.warnings: list[str] = []
         self.catalogs: dict[str, Path] = {}
+        self.catalog_origins: dict[str, str] = {}  # catalog kind → where its directory is declared
         self._catalog_files: dict[Path, ET.Element | None] = {}
         self.variables: dict[str, ParamValue] = {}
 
@@ -340,9 +341,13 @@ def _catalog_dirs(reader: _Reader, root: ET.Element) -> dict[str, Path]:
     for location in block:
         directory = location.find("Directory")
         if directory is not None:
-            dirs[location.tag.removesuffix("Catalog")] = (
-                reader.path.parent / reader.attr(directory, "path")
-            ).resolve()
+            raw = reader.attr(directory, "path")
+            kind = location.tag.removesuffix("Catalog")
+            dirs[kind] = (reader.path.parent / raw).resolve()
+            line = reader.line(directory)
+            reader.catalog_origins[kind] = f"CatalogLocations/{location.tag}/Directory path={raw!r}" + (
+                f" (line {line})" if line else ""
+            )
     return dirs
 
 
@@ -369,7 +374,10 @@ def _catalog_entry(
             f"CatalogReference to {catalog_name}/{entry_name} but no {kinds[0]}Catalog location", ref
         )
     for directory in dict.fromkeys(directories):
+        # a directory of catalog files, or (as esmini accepts) the path of one catalog file
         files = sorted(directory.glob("*.xosc")) if directory.is_dir() else []
+        if not files and directory.suffix == ".xosc" and directory.is_file():
+            files = [directory]
         for file in files:
             if file not in reader._catalog_files:
                 root = read_xml(file, what="catalog")
@@ -381,7 +389,16 @@ def _catalog_entry(
             for entry in catalog:
                 if entry.get("name") == entry_name:
                     return entry, assignments
-    raise reader.fail(f"catalog entry {catalog_name}/{entry_name} not found under {directories[0]}", ref)
+    searched = []
+    for k, d in catalogs.items():
+        origin = reader.catalog_origins.get(k, f"{k}Catalog")
+        state = "" if d.is_dir() else ": no such directory"
+        searched.append(f"{d} ({origin}{state})")
+    raise reader.fail(
+        f"catalog entry {catalog_name}/{entry_name} not found: no catalog named {catalog_name!r} with an entry "
+        f"{entry_name!r} in {'; '.join(searched)}. Add the catalog file or correct CatalogLocations",
+        ref,
+    )
 
 
 def _entities(reader: _Reader, element: ET.Element, catalogs: dict[str, Path]) -> list[m.Entity]:
