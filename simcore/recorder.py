@@ -9,6 +9,18 @@ It is readable by `mcap` + `mcap_ros2`, Foxglove, `ros2 bag play/info` (a bare .
 by rosbag2 since humble), and rosbags (`AnyReader([Path("recording.mcap")])`: rosbags ≥ 0.10 opens a
 bare `.mcap` file, no metadata.yaml needed).
 
+Layout (MCAP v0): header, metadata records (indexed), chunks of `chunk_size` bytes (4 MiB) holding the
+schema and channel records where they are first used and the message records, each chunk followed by its
+message indexes; a summary with the schemas, channels, statistics, chunk and metadata indexes and summary
+offsets; every chunk carries the CRC-32 of its uncompressed records, the footer the summary's CRC.
+
+Speed: the writer is this module's own (no per-message record objects): `write` serialises the message
+(or takes CDR bytes as they are, see `write`), packs the 31-byte record header and appends both to the
+open chunk; full chunks go to a writer thread that compresses them (zstd level 1 by default, lz4, or none;
+the compressors run without the GIL), checksums and writes them while the simulation goes on. At most
+`_QUEUE_CHUNKS` chunks wait for the writer thread (the caller blocks beyond that: bounded memory, nothing
+is dropped); `close`/`abort` write every chunk before the summary.
+
 Crash safety: the recorder writes `<path>.part` and renames it to `path` only in :meth:`McapRecorder.close`,
 after an fsync; a run that dies never leaves a file under the final name. On an exception inside the
 `with` block the partial recording is finished (a valid MCAP up to the last message) and kept as
@@ -17,31 +29,34 @@ after an fsync; a run that dies never leaves a file under the final name. On an 
 
 from __future__ import annotations
 
-import contextlib
 import fnmatch
 import os
-from collections.abc import Iterable, Mapping
+import queue
+import struct
+import threading
+import zlib
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, Literal, Self
-
-from mcap.writer import CompressionType, Writer
 
 from simcore.spec import Recording
 from simcore.store import fsync_dir
 from simcore.transport.messages import frame_messages, msgdef, serialize
 from simcore.world.state import WorldFrame
 
-__all__ = ["DEFAULT_QOS", "Compression", "McapRecorder", "RecorderError"]
+__all__ = ["DEFAULT_QOS", "ZSTD_LEVEL", "Compression", "McapRecorder", "RecorderError"]
 
 Compression = Literal["zstd", "lz4", "none"]
+_COMPRESSIONS = ("zstd", "lz4", "none")
 
-_COMPRESSION: dict[str, CompressionType] = {
-    "zstd": CompressionType.ZSTD,
-    "lz4": CompressionType.LZ4,
-    "none": CompressionType.NONE,
-}
+#: zstd level of the chunks: level 1 compresses point clouds as well as the default level 3 here
+#: (float coordinates are the bulk and barely compress) at about 1.5x the speed.
+ZSTD_LEVEL = 1
+#: Chunks waiting for the writer thread before `write` blocks.
+_QUEUE_CHUNKS = 4
 
 #: The QoS every channel offers, in rosbag2's (metadata version 9, jazzy) YAML: reliable, volatile,
 #: keep-last 10 (the rclcpp/rclpy default); zero durations mean "system default".
@@ -57,9 +72,30 @@ DEFAULT_QOS = (
     "  avoid_ros_namespace_conventions: false"
 )
 
+# --- MCAP records (https://mcap.dev/spec) -------------------------------------------------------------
 
-class RecorderError(RuntimeError):
-    """The recording cannot be written (bad arguments, closed recorder, I/O error)."""
+_MAGIC = b"\x89MCAP0\r\n"
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
+_OP_MESSAGE_INDEX, _OP_CHUNK_INDEX, _OP_STATISTICS, _OP_METADATA = 0x07, 0x08, 0x0B, 0x0C
+_OP_METADATA_INDEX, _OP_SUMMARY_OFFSET, _OP_DATA_END = 0x0D, 0x0E, 0x0F
+#: opcode, record length, channel id, sequence, log time, publish time
+_MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+_MESSAGE_FIXED = _MESSAGE_HEAD.size - 9  # content bytes before the data
+_U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
+
+
+def _string(value: str) -> bytes:
+    data = value.encode("utf-8")
+    return _U32.pack(len(data)) + data
+
+
+def _map(values: Mapping[str, str]) -> bytes:
+    body = b"".join(_string(k) + _string(v) for k, v in values.items())
+    return _U32.pack(len(body)) + body
+
+
+def _record(opcode: int, content: bytes) -> bytes:
+    return struct.pack("<BQ", opcode, len(content)) + content
 
 
 def _library() -> str:
@@ -67,11 +103,7 @@ def _library() -> str:
         carlos = importlib_metadata.version("carlos")
     except importlib_metadata.PackageNotFoundError:
         carlos = "unknown"
-    try:
-        mcap = importlib_metadata.version("mcap")
-    except importlib_metadata.PackageNotFoundError:
-        mcap = "unknown"
-    return f"carlos {carlos} (mcap-python {mcap})"
+    return f"carlos {carlos}"
 
 
 def _ns(time_s: float) -> int:
@@ -79,6 +111,172 @@ def _ns(time_s: float) -> int:
     if ns < 0:
         raise RecorderError(f"negative simulation time {time_s}")
     return ns
+
+
+class RecorderError(RuntimeError):
+    """The recording cannot be written (bad arguments, closed recorder, I/O error)."""
+
+
+def _compressor(compression: str) -> Callable[[bytes], bytes] | None:
+    if compression == "zstd":
+        import zstandard
+
+        return zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress
+    if compression == "lz4":
+        import lz4.frame
+
+        compress: Callable[[bytes], bytes] = lz4.frame.compress
+        return compress
+    return None
+
+
+@dataclass
+class _Chunk:
+    """An open chunk: its records as pieces (record heads and message data), message indexes per channel
+    as flat [log time, offset, …] lists, the time range."""
+
+    pieces: list[bytes] = field(default_factory=list)
+    size: int = 0
+    indexes: dict[int, list[int]] = field(default_factory=dict)
+    start: int = 0
+    end: int = 0
+    messages: int = 0
+
+
+@dataclass
+class _Summary:
+    schemas: list[bytes]
+    channels: list[bytes]
+    statistics: bytes
+
+
+class _FileWriter(threading.Thread):
+    """Owns the file: writes the records handed to it in order (chunks compressed here, off the
+    simulation thread), keeps the chunk and metadata indexes, and writes the summary at the end."""
+
+    def __init__(self, file: IO[bytes], compression: str) -> None:
+        super().__init__(name="mcap-writer", daemon=True)
+        self.file = file
+        self.compression = "" if compression == "none" else compression
+        self.compress = _compressor(compression)
+        self.queue: queue.Queue[tuple[str, Any]] = queue.Queue(maxsize=_QUEUE_CHUNKS)
+        self.error: BaseException | None = None
+        self.position = 0
+        self.chunk_indexes: list[bytes] = []
+        self.metadata_indexes: list[bytes] = []
+
+    def submit(self, kind: str, item: Any) -> None:
+        self.queue.put((kind, item))
+
+    def run(self) -> None:
+        while True:
+            kind, item = self.queue.get()
+            if self.error is None:
+                try:
+                    if kind == "raw":
+                        self._write(item)
+                    elif kind == "metadata":
+                        self._metadata(*item)
+                    elif kind == "chunk":
+                        self._chunk(item)
+                    elif kind == "finish":
+                        self._finish(item)
+                except BaseException as exc:  # reported to the caller by the next write/close
+                    self.error = exc
+            if kind in ("finish", "stop"):
+                return
+
+    def _write(self, data: bytes) -> None:
+        self.file.write(data)
+        self.position += len(data)
+
+    def _metadata(self, name: str, content: bytes) -> None:
+        offset = self.position
+        record = _record(_OP_METADATA, content)
+        self._write(record)
+        self.metadata_indexes.append(
+            _record(_OP_METADATA_INDEX, struct.pack("<QQ", offset, len(record)) + _string(name))
+        )
+
+    def _chunk(self, chunk: _Chunk) -> None:
+        if self.compress is None:
+            crc = 0
+            for piece in chunk.pieces:
+                crc = zlib.crc32(piece, crc)
+            data: bytes | None = None
+            compressed_size = chunk.size
+        else:
+            raw = b"".join(chunk.pieces)
+            crc = zlib.crc32(raw)
+            data = self.compress(raw)
+            del raw
+            compressed_size = len(data)
+        tail = _string(self.compression) + _U64.pack(compressed_size)
+        content_length = 8 + 8 + 8 + 4 + len(tail) + compressed_size
+        start = self.position
+        self._write(
+            struct.pack("<BQQQQI", _OP_CHUNK, content_length, chunk.start, chunk.end, chunk.size, crc) + tail
+        )
+        if data is None:
+            self.file.writelines(chunk.pieces)
+            self.position += chunk.size
+        else:
+            self._write(data)
+        end = self.position
+        offsets: list[bytes] = []
+        indexes: list[bytes] = []
+        at = self.position
+        for channel_id, flat in chunk.indexes.items():
+            offsets.append(struct.pack("<HQ", channel_id, at))
+            indexes.append(
+                _record(
+                    _OP_MESSAGE_INDEX,
+                    struct.pack(f"<HI{len(flat)}Q", channel_id, 8 * len(flat), *flat),
+                )
+            )
+            at += len(indexes[-1])
+        index_data = b"".join(indexes)
+        self._write(index_data)
+        offset_map = b"".join(offsets)
+        self.chunk_indexes.append(
+            _record(
+                _OP_CHUNK_INDEX,
+                struct.pack("<QQQQ", chunk.start, chunk.end, start, end - start)
+                + _U32.pack(len(offset_map))
+                + offset_map
+                + _U64.pack(len(index_data))
+                + _string(self.compression)
+                + struct.pack("<QQ", compressed_size, chunk.size),
+            )
+        )
+
+    def _finish(self, summary: _Summary) -> None:
+        self._write(_record(_OP_DATA_END, _U32.pack(0)))
+        summary_start = self.position
+        groups = [
+            (_OP_SCHEMA, summary.schemas),
+            (_OP_CHANNEL, summary.channels),
+            (_OP_STATISTICS, [summary.statistics]),
+            (_OP_CHUNK_INDEX, self.chunk_indexes),
+            (_OP_METADATA_INDEX, self.metadata_indexes),
+        ]
+        parts: list[bytes] = []
+        offsets: list[bytes] = []
+        at = summary_start
+        for opcode, records in groups:
+            if not records:
+                continue
+            length = sum(len(r) for r in records)
+            parts.extend(records)
+            offsets.append(_record(_OP_SUMMARY_OFFSET, struct.pack("<BQQ", opcode, at, length)))
+            at += length
+        summary_offset_start = at
+        body = b"".join(parts + offsets)
+        footer_head = struct.pack("<BQQQ", _OP_FOOTER, 20, summary_start, summary_offset_start)
+        crc = zlib.crc32(footer_head, zlib.crc32(body))
+        self._write(body + footer_head + _U32.pack(crc) + _MAGIC)
+        self.file.flush()
+        os.fsync(self.file.fileno())
 
 
 class McapRecorder:
@@ -95,30 +293,45 @@ class McapRecorder:
         topics: Iterable[str] = ("*",),
         compression: Compression = "zstd",
         metadata: Mapping[str, Mapping[str, str]] | None = None,
-        chunk_size: int = 1024 * 1024,
+        chunk_size: int = 4 * 1024 * 1024,
     ) -> None:
-        if compression not in _COMPRESSION:
+        if compression not in _COMPRESSIONS:
             raise RecorderError(f"unknown compression {compression!r}: use one of zstd, lz4, none")
         self.path = Path(path)
         self.part_path = self.path.with_name(self.path.name + ".part")
         self.topics: tuple[str, ...] = tuple(topics)
         if not self.topics:
             raise RecorderError("no topic patterns: use ['*'] to record every topic")
+        if chunk_size <= 0:
+            raise RecorderError(f"chunk_size must be positive, not {chunk_size}")
         self.compression: Compression = compression
+        self.chunk_size = chunk_size
         self._schemas: dict[str, int] = {}
+        self._schema_records: list[bytes] = []
         self._channels: dict[str, tuple[int, str]] = {}  # topic → (channel id, typename)
+        self._channel_records: list[bytes] = []
         self._sequence: dict[int, int] = {}
+        self._counts: dict[int, int] = {}
         self._wanted: dict[str, bool] = {}
+        self._chunk = _Chunk()
+        self._start = 0
+        self._end = 0
+        self._chunks = 0
+        self._metadata_count = 0
         self.message_count = 0
         self._closed = False
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file: IO[bytes] = open(self.part_path, "wb")  # noqa: SIM115 - closed in close()/abort()
+        self._file: IO[bytes] = open(self.part_path, "wb", buffering=1024 * 1024)  # noqa: SIM115 - closed in close()/abort()
+        self._writer = _FileWriter(self._file, compression)
         try:
-            self._writer = Writer(self._file, chunk_size=chunk_size, compression=_COMPRESSION[compression])
-            self._writer.start(profile="ros2", library=_library())
+            self._writer.submit("raw", _MAGIC + _record(_OP_HEADER, _string("ros2") + _string(_library())))
+            self._writer.start()
             for name, data in (metadata or {}).items():
                 self.add_metadata(name, data)
         except BaseException:
+            self._writer.submit("stop", None)
+            if self._writer.is_alive():
+                self._writer.join()
             self._file.close()
             self.part_path.unlink(missing_ok=True)
             raise
@@ -149,7 +362,8 @@ class McapRecorder:
         bad = [key for key, value in data.items() if not isinstance(key, str) or not isinstance(value, str)]
         if bad:
             raise RecorderError(f"metadata {name!r}: keys and values must be strings (not: {bad!r})")
-        self._writer.add_metadata(name, dict(data))
+        self._submit("metadata", (name, _string(name) + _map(data)))
+        self._metadata_count += 1
 
     def _channel(self, topic: str, typename: str) -> int:
         known = self._channels.get(topic)
@@ -160,40 +374,82 @@ class McapRecorder:
                     f"topic {topic!r} has type {known_type!r}; cannot also record {typename!r}"
                 )
             return channel_id
+        try:
+            text = msgdef(typename)
+        except KeyError:
+            raise RecorderError(f"topic {topic!r}: unknown message type {typename!r}") from None
+        chunk = self._chunk
         schema_id = self._schemas.get(typename)
         if schema_id is None:
-            schema_id = self._writer.register_schema(
-                name=typename, encoding="ros2msg", data=msgdef(typename).encode("utf-8")
+            schema_id = self._schemas[typename] = len(self._schemas) + 1
+            record = _record(
+                _OP_SCHEMA,
+                _U16.pack(schema_id) + _string(typename) + _string("ros2msg") + _string(text),
             )
-            self._schemas[typename] = schema_id
-        channel_id = self._writer.register_channel(
-            topic=topic,
-            message_encoding="cdr",
-            schema_id=schema_id,
-            metadata={"offered_qos_profiles": DEFAULT_QOS},
+            self._schema_records.append(record)
+            chunk.pieces.append(record)
+            chunk.size += len(record)
+        channel_id = len(self._channels) + 1
+        record = _record(
+            _OP_CHANNEL,
+            _U16.pack(channel_id)
+            + _U16.pack(schema_id)
+            + _string(topic)
+            + _string("cdr")
+            + _map({"offered_qos_profiles": DEFAULT_QOS}),
         )
+        self._channel_records.append(record)
+        chunk.pieces.append(record)
+        chunk.size += len(record)
         self._channels[topic] = (channel_id, typename)
         self._sequence[channel_id] = 0
+        self._counts[channel_id] = 0
         return channel_id
 
     def write(self, topic: str, typename: str, msg: Any, time_s: float) -> bool:
-        """Record `msg` (a rosbags message of `typename`) on `topic` at simulated time `time_s`.
+        """Record `msg` on `topic` at simulated time `time_s`: a rosbags message of `typename`, or its CDR
+        serialisation (`bytes`, `bytearray` or `memoryview`, written as it is: what a transport received).
         Returns False when the topic is filtered out."""
-        self._check_open()
+        if self._closed:
+            self._check_open()
         if not self.wants(topic):
             return False
-        data = serialize(msg)
+        if isinstance(msg, bytes):
+            data = msg
+        elif isinstance(msg, bytearray | memoryview):
+            data = bytes(msg)
+        else:
+            data = serialize(msg)
         channel_id = self._channel(topic, typename)
         ns = _ns(time_s)
-        self._sequence[channel_id] += 1
-        self._writer.add_message(
-            channel_id=channel_id,
-            log_time=ns,
-            publish_time=ns,
-            data=data,
-            sequence=self._sequence[channel_id],
-        )
+        seq = self._sequence[channel_id] = (self._sequence[channel_id] + 1) & 0xFFFFFFFF
+        self._counts[channel_id] += 1
+        chunk = self._chunk
+        index = chunk.indexes.get(channel_id)
+        if index is None:
+            index = chunk.indexes[channel_id] = []
+        index.append(ns)
+        index.append(chunk.size)
+        head = _MESSAGE_HEAD.pack(_OP_MESSAGE, _MESSAGE_FIXED + len(data), channel_id, seq, ns, ns)
+        chunk.pieces.append(head)
+        chunk.pieces.append(data)
+        chunk.size += len(head) + len(data)
+        if chunk.messages == 0:
+            chunk.start = chunk.end = ns
+        elif ns < chunk.start:
+            chunk.start = ns
+        elif ns > chunk.end:
+            chunk.end = ns
+        chunk.messages += 1
+        if self.message_count == 0:
+            self._start = self._end = ns
+        elif ns < self._start:
+            self._start = ns
+        elif ns > self._end:
+            self._end = ns
         self.message_count += 1
+        if chunk.size >= self.chunk_size:
+            self._flush_chunk()
         return True
 
     def write_frame(self, frame: WorldFrame) -> int:
@@ -205,16 +461,58 @@ class McapRecorder:
                 written += 1
         return written
 
+    def _flush_chunk(self) -> None:
+        chunk = self._chunk
+        if not chunk.pieces:
+            return
+        self._chunk = _Chunk()
+        self._chunks += 1
+        self._submit("chunk", chunk)
+
+    def _submit(self, kind: str, item: Any) -> None:
+        error = self._writer.error
+        if error is not None:
+            raise RecorderError(f"cannot write {self.part_path}: {error}") from error
+        self._writer.submit(kind, item)
+
     # --- ending ------------------------------------------------------------------------------------------
 
     def _check_open(self) -> None:
         if self._closed:
             raise RecorderError(f"the recorder of {self.path} is closed")
 
+    def _statistics(self) -> bytes:
+        counts = b"".join(struct.pack("<HQ", cid, n) for cid, n in self._counts.items())
+        return _record(
+            _OP_STATISTICS,
+            struct.pack(
+                "<QHIIIIQQ",
+                self.message_count,
+                len(self._schemas),
+                len(self._channels),
+                0,  # attachments
+                self._metadata_count,
+                self._chunks,
+                self._start,
+                self._end,
+            )
+            + _U32.pack(len(counts))
+            + counts,
+        )
+
     def _finish(self) -> None:
-        self._writer.finish()
-        self._file.flush()
-        os.fsync(self._file.fileno())
+        """Write the open chunk and the summary, wait for the writer thread; raise its error."""
+        try:
+            if self._writer.error is None:
+                self._flush_chunk()
+            self._writer.submit(
+                "finish", _Summary(self._schema_records, self._channel_records, self._statistics())
+            )
+        finally:
+            self._writer.join()
+        if self._writer.error is not None:
+            error = self._writer.error
+            raise RecorderError(f"cannot write {self.part_path}: {error}") from error
 
     def close(self) -> None:
         """Finish the file, fsync it and rename `<path>.part` to `path` atomically. Idempotent."""
@@ -235,8 +533,9 @@ class McapRecorder:
             return
         self._closed = True
         try:
-            with contextlib.suppress(Exception):
-                self._finish()
+            self._finish()
+        except Exception:  # an abort keeps what could be written
+            pass
         finally:
             self._file.close()
             if not keep_partial:

@@ -289,3 +289,85 @@ def test_bytes_per_frame(tmp_path: Path) -> None:
         sizes[compression] = path.stat().st_size / 1000
     print(f"bytes per frame (2 entities): {sizes}")
     assert sizes["zstd"] < sizes["none"] < 4000
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+def test_records_indexes_and_checksums_are_valid(tmp_path: Path, compression: Any) -> None:
+    """Every record parses with CRC validation on; each message index entry points at a message record of
+    its channel with its log time inside the (decompressed) chunk; small chunks (many of them go through the
+    writer thread's bounded queue) and a message larger than a chunk lose nothing."""
+    import struct
+
+    import lz4.frame
+    import zstandard
+    from mcap.records import Channel, Chunk, ChunkIndex, Message, MessageIndex, Statistics
+    from mcap.stream_reader import StreamReader
+
+    path = tmp_path / "r.mcap"
+    big = bytes(range(256)) * 1000  # 256 kB of CDR-like payload, given as bytes
+    with McapRecorder(path, compression=compression, chunk_size=4096, metadata=METADATA) as rec:
+        for i, frame in enumerate(FRAMES):
+            rec.write_frame(frame)
+            if i % 5 == 0:
+                rec.write("/big", "std_msgs/msg/UInt8MultiArray", big, frame.time)
+    with path.open("rb") as f:
+        inner = list(StreamReader(f, validate_crcs=True).records)  # the chunks' records
+    with path.open("rb") as f:
+        records = list(StreamReader(f, validate_crcs=True, emit_chunks=True).records)
+    chunks = [r for r in records if isinstance(r, Chunk)]
+    indexes = [r for r in records if isinstance(r, MessageIndex)]
+    messages_ = [r for r in inner if isinstance(r, Message)]
+    channels = {r.id: r.topic for r in inner if isinstance(r, Channel)}
+    assert len(chunks) > 10
+    assert len(messages_) == N_FRAMES * 5 + 4
+    assert sum(1 for m in messages_ if channels[m.channel_id] == "/big" and m.data == big) == 4
+    stats = next(r for r in records if isinstance(r, Statistics))
+    assert stats.message_count == len(messages_) and stats.chunk_count == len(chunks)
+    assert stats.message_start_time == 0 and stats.message_end_time == round(FRAMES[-1].time * 1e9)
+    assert sum(1 for r in records if isinstance(r, ChunkIndex)) == len(chunks)
+    # message indexes follow their chunk: check each entry against the chunk's records
+    decompress = {
+        "zstd": lambda d, n: zstandard.ZstdDecompressor().decompress(d, max_output_size=n),
+        "lz4": lambda d, n: lz4.frame.decompress(d),
+        "": lambda d, n: d,
+    }
+    checked = 0
+    for record in records:
+        if isinstance(record, Chunk):
+            data = decompress[record.compression](record.data, record.uncompressed_size)
+            assert len(data) == record.uncompressed_size
+        elif isinstance(record, MessageIndex):
+            for log_time, offset in record.records:
+                opcode, _, channel_id, _, log = struct.unpack_from("<BQHIQ", data, offset)
+                assert (opcode, channel_id, log) == (0x05, record.channel_id, log_time)
+                checked += 1
+    assert checked == len(messages_) and indexes
+
+
+def test_cdr_bytes_are_written_as_given(tmp_path: Path) -> None:
+    path = tmp_path / "r.mcap"
+    tf = messages.tf(FRAMES[3])
+    with McapRecorder(path, compression="none") as rec:
+        rec.write("/tf", "tf2_msgs/msg/TFMessage", tf, 1.0)
+        rec.write("/tf", "tf2_msgs/msg/TFMessage", messages.serialize(tf), 2.0)
+        rec.write("/tf", "tf2_msgs/msg/TFMessage", memoryview(messages.serialize(tf)), 3.0)
+    with path.open("rb") as f:
+        data = [m.data for _, _, m in make_reader(f).iter_messages()]
+    assert data == [messages.serialize(tf)] * 3
+
+
+def test_write_errors_reach_the_caller(tmp_path: Path) -> None:
+    """An I/O error in the writer thread surfaces as RecorderError on a later write or on close."""
+    path = tmp_path / "r.mcap"
+    rec = McapRecorder(path, chunk_size=1024)
+
+    def broken(data: Any) -> int:
+        raise OSError(28, "No space left on device")
+
+    rec._file.write = broken  # type: ignore[method-assign]
+    with pytest.raises(RecorderError, match="No space left"):
+        for i in range(1000):
+            rec.write_frame(_frame(i))
+    with pytest.raises(RecorderError, match="No space left"):
+        rec.close()
+    assert not path.exists()
