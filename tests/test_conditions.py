@@ -343,3 +343,34 @@ def test_catalog_directory_may_name_the_catalog_file(tmp_path: Path) -> None:
     path.write_text(text)
     scenario_ = load_scenario(path)
     assert scenario_.entities[0].box.length == 4.5
+
+
+def test_warning_in_a_catalog_entry_names_the_catalog_file_and_line(tmp_path: Path) -> None:
+    (tmp_path / "man").mkdir()
+    (tmp_path / "man" / "Lights.xosc").write_text(
+        """<?xml version="1.0"?>
+<OpenSCENARIO><FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="t" description="t"/>
+<Catalog name="Lights">
+  <Maneuver name="Blink">
+    <Event name="On" priority="parallel"><Action name="OnAction"><PrivateAction><AppearanceAction>
+      <LightStateAction><LightType><VehicleLight vehicleLightType="indicatorLeft"/></LightType>
+      <LightState mode="on"/></LightStateAction></AppearanceAction></PrivateAction></Action>
+      <StartTrigger><ConditionGroup><Condition name="t" delay="0" conditionEdge="none"><ByValueCondition>
+        <SimulationTimeCondition value="1" rule="greaterThan"/></ByValueCondition></Condition></ConditionGroup>
+      </StartTrigger></Event>
+  </Maneuver>
+</Catalog></OpenSCENARIO>"""
+    )
+    path = scenario(tmp_path, "")
+    text = path.read_text()
+    text = text.replace(
+        '<Maneuver name="M"></Maneuver>', '<CatalogReference catalogName="Lights" entryName="Blink"/>'
+    ).replace(
+        "<RoadNetwork>",
+        '<CatalogLocations><ManeuverCatalog><Directory path="man"/></ManeuverCatalog></CatalogLocations><RoadNetwork>',
+    )
+    path.write_text(text)
+    warnings = load_scenario(path).warnings
+    assert any(
+        w.startswith(f"{tmp_path / 'man' / 'Lights.xosc'}:5: ") and "LightStateAction" in w for w in warnings
+    ), warnings

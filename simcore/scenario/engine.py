@@ -427,7 +427,8 @@ class ScenarioEngine:
             if not body.placed and body.entity.controller:
                 # an entity a controller of another tool populates (esmini's SUMO traffic): not in the world
                 self.warnings.append(
-                    f"{self.source}: entity {body.name!r} has no initial position and is driven by controller "
+                    f"{body.entity.source or self.source}: ScenarioObject[{body.name}]: no initial position and "
+                    "driven by controller "
                     f"{body.entity.controller.get('name', '')!r}: it stays out of the world"
                 )
                 body.gone = True
@@ -435,7 +436,8 @@ class ScenarioEngine:
             if not body.placed:
                 # placed later by a TeleportAction (until then not in the world)
                 self.warnings.append(
-                    f"{self.source}: Storyboard/Init: entity {body.name!r} has no initial position: "
+                    f"{body.entity.source or self.source}: ScenarioObject[{body.name}]: no initial position in "
+                    "Storyboard/Init: "
                     "it is out of the world until an action places it"
                 )
                 body.gone = True

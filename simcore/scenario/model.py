@@ -47,6 +47,7 @@ class Entity:
     controller: dict[str, str] = field(default_factory=dict)  # the assigned controller's properties
     wheelbase: float | None = None  # vehicles: FrontAxle.positionX − RearAxle.positionX, m
     max_steering: float | None = None  # vehicles: FrontAxle.maxSteering, rad
+    source: str = ""  # "file:line" of its ScenarioObject (for messages)
 
     @property
     def driver(self) -> str:

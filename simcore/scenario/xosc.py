@@ -74,28 +74,34 @@ class _Reader:
         self.scopes: list[dict[str, ParamValue]] = [{}]
         self.where: list[str] = []
         self.lines: dict[int, int] = {}
+        self.files: dict[int, Path] = {}  # element id → the catalog file it comes from (others: self.path)
         self.warnings: list[str] = []
         self.catalogs: dict[str, Path] = {}
         self.catalog_origins: dict[str, str] = {}  # catalog kind → where its directory is declared
         self._catalog_files: dict[Path, ET.Element | None] = {}
+        self._catalog_roots: list[ET.Element] = []
         self.variables: dict[str, ParamValue] = {}
 
     def line(self, element: ET.Element | None) -> int | None:
         return None if element is None else self.lines.get(id(element))
 
+    def source(self, element: ET.Element | None) -> str:
+        """"file:line" of an element (of the scenario, or of the catalog it comes from)."""
+        file = self.files.get(id(element), self.path) if element is not None else self.path
+        line = self.line(element)
+        return f"{file}:{line}" if line else str(file)
+
     def warn(self, message: str, element: ET.Element | None = None) -> None:
         """An unsupported element that does not change motion: the run goes on, the warning names it."""
-        line = self.line(element)
         where = "/".join(self.where + ([element.tag] if element is not None else []))
-        text = f"{self.path}{':' + str(line) if line else ''}: {where}: {message}"
+        text = f"{self.source(element)}: {where}: {message}"
         if text not in self.warnings:
             self.warnings.append(text)
 
     # -- errors and scopes --
     def fail(self, message: str, element: ET.Element | None = None) -> BadInput:
         where = "/".join(self.where + ([element.tag] if element is not None else []))
-        line = self.line(element)
-        return BadInput(message, file=f"{self.path}:{line}" if line else str(self.path), field=where or None)
+        return BadInput(message, file=self.source(element), field=where or None)
 
     @property
     def values(self) -> dict[str, ParamValue]:
@@ -380,8 +386,11 @@ def _catalog_entry(
             files = [directory]
         for file in files:
             if file not in reader._catalog_files:
-                root = read_xml(file, what="catalog")
+                root = read_xml(file, what="catalog", lines=reader.lines)
                 reader._catalog_files[file] = root.find("Catalog")
+                reader._catalog_roots.append(root)  # alive while loading: element ids stay unique
+                for element in root.iter():
+                    reader.files[id(element)] = file
             catalog = reader._catalog_files[file]
             # by the catalog's name, or by its file name (esmini accepts both)
             if catalog is None or catalog_name not in (catalog.get("name"), file.stem):
@@ -471,6 +480,7 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
     if oc is not None:
         controller = _controller(reader, oc)
     return m.Entity(
+        source=reader.source(obj),
         name=name,
         object_type=object_type,  # type: ignore[arg-type]
         category=category,
