@@ -495,3 +495,52 @@ def test_actions_step_in_storyboard_order_and_a_lane_change_moves_at_the_speed_i
         progress[first] = trace[2.5]["s"] - trace[1.0]["s"]
     # 20 steps (from 1.05 to 2.0) at the previous step's speed: 20 × 0.25 × 0.05 m less
     assert progress["speed"] - progress["change"] == pytest.approx(20 * 0.25 * 0.05, abs=0.002)
+
+
+def timed_polyline(mode: str, points: list[tuple[float, float]]) -> str:
+    vertices = "".join(
+        f"""<Vertex time="{t}"><Position><LanePosition roadId="1" laneId="-2" s="{s}" offset="0"/></Position></Vertex>"""
+        for t, s in points
+    )
+    return f"""<PrivateAction><RoutingAction><FollowTrajectoryAction>
+      <TrajectoryRef><Trajectory name="T" closed="false"><Shape><Polyline>{vertices}</Polyline></Shape></Trajectory></TrajectoryRef>
+      <TimeReference><Timing domainAbsoluteRelative="relative" scale="1" offset="0"/></TimeReference>
+      <TrajectoryFollowingMode followingMode="{mode}"/>
+    </FollowTrajectoryAction></RoutingAction></PrivateAction>"""
+
+
+def test_timed_polyline_speed_per_segment_in_position_mode_and_linear_in_follow_mode(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    # 20 m in 2 s, then 5 m in 1 s: position mode runs each segment at its mean speed (10, then 5 m/s);
+    # follow mode changes the speed linearly between vertices (10 → 10 → 0: the mean of the second is 5)
+    points = [(0.0, 100.0), (2.0, 120.0), (3.0, 125.0)]
+    speeds = {}
+    for mode in ("position", "follow"):
+        path = scenario(tmp_path, event("Traj", timed_polyline(mode, points), sim_time("greaterThan", 0.0)))
+        _, trace = run(path, road, 3.1)
+        speeds[mode] = trace
+    assert speeds["position"][2.55]["speed"] == pytest.approx(5.0, abs=1e-6)
+    assert speeds["follow"][2.55]["speed"] == pytest.approx(5.0, abs=0.3)
+    assert speeds["follow"][2.3]["speed"] == pytest.approx(7.5, abs=0.3)
+    assert speeds["position"][2.3]["speed"] == pytest.approx(5.0, abs=1e-6)
+    for trace in speeds.values():
+        assert trace[3.05]["s"] == pytest.approx(125.0, abs=1e-6)  # started at 0.05
+
+
+def test_an_event_waiting_for_a_trajectory_to_end_starts_at_the_next_step(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    first = event(
+        "Traj", timed_polyline("position", [(0.0, 100.0), (1.0, 110.0)]), sim_time("greaterOrEqual", 0.0)
+    )
+    after = """<Condition name="done" delay="0" conditionEdge="none"><ByValueCondition>
+      <StoryboardElementStateCondition storyboardElementType="event" storyboardElementRef="Traj" state="endTransition"/>
+      </ByValueCondition></Condition>"""
+    second = event("Stop", speed_action("step", "time", 0, 0.0), after, priority="parallel")
+    path = scenario(tmp_path, first + second)
+    _, trace = run(path, road, 2.0)
+    # the trajectory starts at 0 and reaches its end (t = 1) in the step ending at 1.0; the next event starts
+    # at the step from 1.0, so the entity does not move on after the trajectory's end
+    assert trace[1.0]["s"] == pytest.approx(110.0, abs=1e-6)
+    assert trace[1.05]["s"] == pytest.approx(110.0, abs=1e-6) and trace[1.05]["speed"] == 0.0

@@ -65,6 +65,10 @@ class FollowTrajectoryRuntime(Runtime):
         self.path = paths.sample(
             self.action.trajectory, self.engine.resolve_position, (a.x, a.y, a.z, a.heading)
         )
+        if self.action.following_mode == "position":
+            # timed vertices in position mode: each segment at its own constant speed; in follow mode the
+            # speed changes linearly from vertex to vertex (as esmini)
+            self.path.v = None
         self.t0 = self.engine.time
         self.s = min(max(self.action.initial_distance_offset, 0.0), self.path.length)
         timed = self.action.timing != "none" and self.path.t is not None
@@ -128,6 +132,7 @@ class FollowTrajectoryRuntime(Runtime):
             # with no road to go on with, the entity stops where the trajectory ends (as esmini does)
             a.speed = 0.0
         self.done = True
+        self.engine.ended_in_move = True
 
 
 # --- routes ------------------------------------------------------------------------------------------------

@@ -357,6 +357,7 @@ class ScenarioEngine:
         self._signal_controllers = {c.name: c for c in scenario.signal_controllers}
         self.signal_phases: dict[str, str] = {}
         self.action_order: dict[int, int] = {}  # id of an action node → its place in the storyboard
+        self.ended_in_move = False  # an action runtime finished while moving its entity this step
         self.root = self._build()
         self.registry = Registry(self.root)
         self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
@@ -1318,6 +1319,16 @@ class ScenarioEngine:
                     body.standstill_since = now
             else:
                 body.standstill_since = None
+        if self.ended_in_move:
+            # an action that moves its entity itself (a trajectory) ended while moving it: it ends in this
+            # step, so conditions on its end see it at the next (as esmini)
+            self.ended_in_move = False
+            for node in list({id(n): n for n in self.running.values()}.values()):
+                runtimes = node.runtime or []
+                if runtimes and all(r.done for r in runtimes):
+                    self._release(node)
+                    self._set(node, Transition.END, State.COMPLETE)
+            self._complete_elements()
         self.time = now
         self.step_index += 1
         self._states.clear()
