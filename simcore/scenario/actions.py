@@ -115,10 +115,12 @@ class FollowTrajectoryRuntime(Runtime):
         self._pose(self.s)
         if end:
             if not self.timed:
-                # what is left of this step's distance continues along the last heading
+                # what is left of this step's distance continues the way the trajectory ends (backwards
+                # for an entity reversing along it, whose heading is the opposite)
                 over = s_new - self.path.length
-                a.x += over * math.cos(a.heading)
-                a.y += over * math.sin(a.heading)
+                _, _, _, h_end = self.path.at(self.path.length)
+                a.x += over * math.cos(h_end)
+                a.y += over * math.sin(h_end)
             self.finish()
 
     def finish(self) -> None:
@@ -128,6 +130,11 @@ class FollowTrajectoryRuntime(Runtime):
         if a.mover is self:
             a.mover = None
         self.engine.track_road(a, lock_lane=True)
+        if a.road_id is not None and self.engine.road is not None:
+            # it goes on along the lane keeping the heading it has relative to it (as esmini)
+            lane_heading = self.engine.road.road_to_world(a.road_id, a.s, 0.0).heading
+            travel = lane_heading if a.direction > 0 else lane_heading + math.pi
+            a.heading_offset = wrap_angle(a.heading - travel)
         if a.road_id is None and self.engine.road is None:
             # with no road to go on with, the entity stops where the trajectory ends (as esmini does)
             a.speed = 0.0
@@ -213,13 +220,23 @@ class LaneOffsetRuntime(Runtime):
 
 
 class LateralDistanceRuntime(Runtime):
-    """Keeps a lateral distance (in road t) to another entity on the same road."""
+    """Keeps a lateral distance (in road t) to another entity on the same road. Without dynamic constraints
+    the distance is taken at once; with maxSpeed the lateral speed is limited; with maxAcceleration a
+    critically damped spring (stiffness scaled by the limit) pulls the entity there. The action's first
+    step moves nothing (as esmini, which steps it with the time elapsed since its start)."""
 
     domain = "lateral"
+    SPRING = 0.4
+    THRESHOLD = 0.01  # m: this close ends a non-continuous action
 
     def __init__(self, engine: ScenarioEngine, actor: Body, action: m.LateralDistanceAction) -> None:
         super().__init__(engine, actor)
         self.action = action
+        self.velocity = 0.0  # lateral, in t per second
+        self.first_step = -1
+
+    def start(self) -> None:
+        self.first_step = self.engine.step_index
 
     def step(self, dt: float) -> None:
         road = self.engine.road
@@ -237,15 +254,23 @@ class LateralDistanceRuntime(Runtime):
         elif self.action.displacement == "rightToReferencedEntity":
             side = -float(a.direction)
         target = t_ref + side * distance
-        wanted = target - t_me
-        c = self.action.constraints
-        if c is not None and c.max_speed is not None:
-            limit = c.max_speed * dt
-            wanted = max(-limit, min(limit, wanted))
-        a.offset += wanted
-        a.lateral_velocity = wanted / dt
-        if not self.action.continuous and abs(target - t_me - wanted) < 0.01:
+        error = target - t_me
+        if not self.action.continuous and abs(error) < self.THRESHOLD:
             self.done = True
+        if self.engine.step_index == self.first_step:
+            return
+        c = self.action.constraints or m.DynamicConstraints()
+        max_speed = c.max_speed if c.max_speed is not None else _BIG
+        if c.max_acceleration is not None:
+            stiffness = c.max_acceleration * self.SPRING
+            acc = error * stiffness - self.velocity * 2.0 * math.sqrt(stiffness)
+            acc = min(max(acc, -c.max_acceleration), c.max_acceleration)
+            self.velocity = min(max(self.velocity + acc * dt, -max_speed), max_speed)
+            move = self.velocity * dt
+        else:
+            move = min(max(error, -max_speed * dt), max_speed * dt)
+        a.offset += move
+        a.lateral_velocity = move / dt
 
 
 # --- longitudinal ------------------------------------------------------------------------------------------
