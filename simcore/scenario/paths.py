@@ -201,6 +201,17 @@ def _basis(knots: tuple[float, ...], order: int, i: int, u: float) -> float:
     return out
 
 
+def _piecewise_linear(xs: list[float], ys: list[float], x: float) -> float:
+    if x <= xs[0]:
+        return ys[0]
+    for i in range(1, len(xs)):
+        if x <= xs[i]:
+            span = xs[i] - xs[i - 1]
+            f = (x - xs[i - 1]) / span if span > 0 else 1.0
+            return ys[i - 1] + f * (ys[i] - ys[i - 1])
+    return ys[-1]
+
+
 def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
     pts = [resolve(c.position) for c in shape.control_points]
     weights = [c.weight for c in shape.control_points]
@@ -208,12 +219,16 @@ def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
     timed = all(t is not None for t in times)
     knots = shape.knots
     u0, u1 = knots[shape.order - 1], knots[len(pts)]
+    # a control point's time belongs to its Greville abscissa (the mean of the order - 1 knots after it);
+    # between them time is linear in the curve parameter (as esmini)
+    degree = max(shape.order - 1, 1)
+    greville = [sum(knots[i + 1 : i + 1 + degree]) / degree for i in range(len(pts))]
     n = max(NURBS_SAMPLES_PER_POINT * len(pts), 2)
     out_pts: list[tuple[float, float, float]] = []
     out_t: list[float] = []
     for j in range(n + 1):
         u = u0 + (u1 - u0) * j / n
-        num_x = num_y = num_z = num_t = den = 0.0
+        num_x = num_y = num_z = den = 0.0
         for i, (px, py, pz, _) in enumerate(pts):
             b = _basis(knots, shape.order, i, u) * weights[i]
             if b == 0.0:
@@ -221,13 +236,12 @@ def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
             num_x += b * px
             num_y += b * py
             num_z += b * pz
-            if timed:
-                num_t += b * float(times[i] or 0.0)
             den += b
         if den <= 0:
             continue
         out_pts.append((num_x / den, num_y / den, num_z / den))
-        out_t.append(num_t / den)
+        if timed:
+            out_t.append(_piecewise_linear(greville, [float(t or 0.0) for t in times], u))
     return _from_points(out_pts, out_t if timed else None)
 
 
