@@ -374,3 +374,37 @@ def test_warning_in_a_catalog_entry_names_the_catalog_file_and_line(tmp_path: Pa
     assert any(
         w.startswith(f"{tmp_path / 'man' / 'Lights.xosc'}:5: ") and "LightStateAction" in w for w in warnings
     ), warnings
+
+
+# --- positions and trajectories seen by conditions --------------------------------------------------------
+
+
+def test_relative_orientation_is_kept_along_the_lane(tmp_path: Path, road: OpenDrive) -> None:
+    init = """<Private entityRef="Ego"><PrivateAction><TeleportAction><Position>
+      <LanePosition roadId="1" laneId="-2" s="100" offset="0"><Orientation type="relative" h="1.2"/></LanePosition>
+      </Position></TeleportAction></PrivateAction></Private>"""
+    engine = run(scenario(tmp_path, "", init=init), road, 1.0)
+    assert engine.bodies["Ego"].heading == pytest.approx(1.2, abs=1e-6)  # the road heads along +x here
+
+
+def test_nurbs_times_belong_to_the_greville_abscissae(tmp_path: Path, road: OpenDrive) -> None:
+    points = [(100.0, -5.0, 0.0), (200.0, -5.0, 20.0), (260.0, 20.0, 35.0)]
+    control = "".join(
+        f"""<ControlPoint time="{t}" weight="1"><Position><WorldPosition x="{x}" y="{y}" z="0" h="0"/></Position>
+        </ControlPoint>"""
+        for x, y, t in points
+    )
+    follow = f"""<PrivateAction><RoutingAction><FollowTrajectoryAction>
+      <TrajectoryRef><Trajectory name="n" closed="false"><Shape><Nurbs order="3">{control}
+        <Knot value="0"/><Knot value="0"/><Knot value="0"/><Knot value="1"/><Knot value="1"/><Knot value="1"/>
+      </Nurbs></Shape></Trajectory></TrajectoryRef>
+      <TimeReference><Timing domainAbsoluteRelative="relative" scale="1" offset="0"/></TimeReference>
+      <TrajectoryFollowingMode followingMode="position"/></FollowTrajectoryAction></RoutingAction></PrivateAction>"""
+    engine = run(scenario(tmp_path, event("Fly", follow, sim_time(0))), road, 10.0)
+    # time 10 is halfway from the first control point (u = 0) to the second (u = 0.5): u = 0.25
+    u = 0.25
+    b = [(1 - u) ** 2, 2 * u * (1 - u), u * u]
+    x = sum(w * p[0] for w, p in zip(b, points, strict=True))
+    y = sum(w * p[1] for w, p in zip(b, points, strict=True))
+    ego = engine.bodies["Ego"]
+    assert (ego.x, ego.y) == (pytest.approx(x, abs=0.05), pytest.approx(y, abs=0.05))
