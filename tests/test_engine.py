@@ -544,3 +544,46 @@ def test_an_event_waiting_for_a_trajectory_to_end_starts_at_the_next_step(
     # at the step from 1.0, so the entity does not move on after the trajectory's end
     assert trace[1.0]["s"] == pytest.approx(110.0, abs=1e-6)
     assert trace[1.05]["s"] == pytest.approx(110.0, abs=1e-6) and trace[1.05]["speed"] == 0.0
+
+
+def lateral_distance(constraints: str, *, continuous: bool = True, distance: float = 4.0) -> str:
+    return f"""<PrivateAction><LateralAction>
+      <LateralDistanceAction entityRef="Lead" distance="{distance}" freespace="false" continuous="{str(continuous).lower()}"
+        displacement="leftToReferencedEntity">{constraints}</LateralDistanceAction></LateralAction></PrivateAction>"""
+
+
+def test_lateral_distance_at_limited_lateral_speed_then_kept(tmp_path: Path, road: OpenDrive) -> None:
+    # Lead in lane -2, Ego in lane -2 too: 4 m to the left of the Lead at 2 m/s lateral (0.1 m a step);
+    # the step the action starts in moves nothing
+    path = scenario(
+        tmp_path,
+        event("Side", lateral_distance('<DynamicConstraints maxSpeed="2"/>'), sim_time("greaterThan", 1.0)),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0) + place("Lead", 130.0),
+    )
+    engine, trace = run(path, road, 5.0)
+    t0 = trace[1.0]["y"]
+    assert trace[1.1]["y"] == pytest.approx(t0)  # started at 1.05: that step moves nothing
+    assert trace[1.6]["y"] - t0 == pytest.approx(1.0, abs=1e-6)  # 10 steps × 0.1 m, to the left (+y)
+    lead = engine.bodies["Lead"]
+    assert trace[5.0]["y"] - lead.y == pytest.approx(4.0, abs=1e-6)
+
+
+def test_lateral_distance_with_acceleration_limit_is_a_damped_spring(tmp_path: Path, road: OpenDrive) -> None:
+    path = scenario(
+        tmp_path,
+        event(
+            "Side",
+            lateral_distance('<DynamicConstraints maxAcceleration="5"/>', continuous=False),
+            sim_time("greaterThan", 1.0),
+        ),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0) + place("Lead", 130.0),
+    )
+    engine, trace = run(path, road, 12.0)
+    ys = [trace[t]["y"] for t in sorted(trace)]
+    velocity = [(b - a) / 0.05 for a, b in itertools.pairwise(ys)]
+    accel = [(b - a) / 0.05 for a, b in itertools.pairwise(velocity)]
+    assert max(abs(x) for x in accel) <= 5.0 + 1e-6
+    assert max(ys) - engine.bodies["Lead"].y < 4.0 + 0.01  # critically damped: no overshoot
+    assert any("Side: endTransition" in line for line in engine.log)  # within 1 cm it ends
