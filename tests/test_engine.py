@@ -587,3 +587,96 @@ def test_lateral_distance_with_acceleration_limit_is_a_damped_spring(tmp_path: P
     assert max(abs(x) for x in accel) <= 5.0 + 1e-6
     assert max(ys) - engine.bodies["Lead"].y < 4.0 + 0.01  # critically damped: no overshoot
     assert any("Side: endTransition" in line for line in engine.log)  # within 1 cm it ends
+
+
+TRUCK = """
+<ScenarioObject name="Truck">
+  <Vehicle name="truck" vehicleCategory="truck">
+    <BoundingBox><Center x="2" y="0" z="1.5"/><Dimensions width="2.5" length="6" height="3"/></BoundingBox>
+    <Performance maxSpeed="30" maxAcceleration="3" maxDeceleration="8"/>
+    <Axles><FrontAxle maxSteering="0.5" wheelDiameter="0.8" trackWidth="2" positionX="4" positionZ="0.4"/>
+      <RearAxle maxSteering="0" wheelDiameter="0.8" trackWidth="2" positionX="0" positionZ="0.4"/></Axles>
+    <TrailerHitch dx="-1.0"/>
+    {trailer}
+  </Vehicle>
+</ScenarioObject>
+<ScenarioObject name="Trailer">
+  <Vehicle name="trailer" vehicleCategory="trailer">
+    <BoundingBox><Center x="0" y="0" z="1.5"/><Dimensions width="2.5" length="8" height="3"/></BoundingBox>
+    <Performance maxSpeed="30" maxAcceleration="3" maxDeceleration="8"/>
+    <Axles><FrontAxle maxSteering="0" wheelDiameter="0.8" trackWidth="2" positionX="0" positionZ="0.4"/>
+      <RearAxle maxSteering="0" wheelDiameter="0.8" trackWidth="2" positionX="0" positionZ="0.4"/></Axles>
+    <TrailerCoupler dx="5.0"/>
+  </Vehicle>
+</ScenarioObject>"""
+
+
+def trailer_scenario(tmp_path: Path, events: str, *, towing: bool) -> Path:
+    trailer = '<Trailer><TrailerRef entityRef="Trailer"/></Trailer>' if towing else ""
+    path = scenario(
+        tmp_path,
+        events,
+        entities=("Ego",),
+        init=place("Ego", 300.0) + place("Truck", 100.0, speed=10.0) + place("Trailer", 80.0, speed=0.0),
+    )
+    text = path.read_text().replace("</Entities>", TRUCK.format(trailer=trailer) + "</Entities>")
+    text = text.replace('<EntityRef entityRef="Ego"/></Actors>', '<EntityRef entityRef="Truck"/></Actors>')
+    path.write_text(text.replace('revMinor="2"', 'revMinor="3"'))
+    return path
+
+
+def test_a_towed_trailer_follows_the_hitch_of_its_tow_vehicle(tmp_path: Path, road: OpenDrive) -> None:
+    change = LANE_CHANGE.replace('entityRef="Ego"', 'entityRef="Truck"')
+    path = trailer_scenario(tmp_path, event("Change", change, sim_time("greaterThan", 1.0)), towing=True)
+    engine = ScenarioEngine(load_scenario(path), road=road, sumo=None, step_seconds=0.05)
+    truck, trailer = engine.bodies["Truck"], engine.bodies["Trailer"]
+    # its own Teleport is ignored: it starts straight behind, its coupler on the hitch (1 m + 5 m behind)
+    assert trailer.s == pytest.approx(94.0) and trailer.lane_id == -2
+    while engine.time < 6.0:
+        engine.advance()
+        hx, hy = truck.x - math.cos(truck.heading), truck.y - math.sin(truck.heading)
+        assert math.hypot(trailer.x - hx, trailer.y - hy) == pytest.approx(5.0)
+        assert trailer.speed == truck.speed
+    # the truck changed lanes: the trailer followed it into the new lane, lagging behind in the turn
+    assert trailer.lane_id == truck.lane_id == -1
+    assert abs(trailer.heading - truck.heading) < 0.01
+
+
+def test_connect_and_disconnect_trailer_actions(tmp_path: Path, road: OpenDrive) -> None:
+    connect = "<PrivateAction><TrailerAction><ConnectTrailerAction trailerRef='Trailer'/></TrailerAction></PrivateAction>"
+    disconnect = "<PrivateAction><TrailerAction><DisconnectTrailerAction/></TrailerAction></PrivateAction>"
+    events = event("Hook", connect, sim_time("greaterThan", 1.0)) + event(
+        "Unhook", disconnect, sim_time("greaterThan", 3.0), priority="parallel"
+    )
+    path = trailer_scenario(
+        tmp_path, events.replace('priority="override"', 'priority="parallel"'), towing=False
+    )
+    engine = ScenarioEngine(load_scenario(path), road=road, sumo=None, step_seconds=0.05)
+    truck, trailer = engine.bodies["Truck"], engine.bodies["Trailer"]
+    assert trailer.s == pytest.approx(80.0)  # not towed: placed by its own Teleport
+    while engine.time < 2.0:
+        engine.advance()
+    assert truck.s - trailer.s == pytest.approx(6.0)  # hooked: on the hitch
+    while engine.time < 5.0:
+        engine.advance()
+    assert trailer.speed == 0.0  # let go at 3 s: it stays where it was left
+    assert truck.s - trailer.s == pytest.approx(6.0 + 10.0 * 1.95, abs=0.6)
+
+
+def test_an_entity_in_a_lane_that_narrows_to_nothing_moves_to_the_next_inner_lane(tmp_path: Path) -> None:
+    xodr = tmp_path / "merge.xodr"
+    xodr.write_text(
+        """<?xml version="1.0"?><OpenDRIVE><header revMajor="1" revMinor="6"/>
+        <road id="1" length="300" junction="-1"><link/><planView>
+          <geometry s="0" x="0" y="0" hdg="0" length="300"><line/></geometry></planView>
+          <lanes><laneSection s="0"><left/><center><lane id="0" type="none"/></center><right>
+            <lane id="-1" type="driving"><link/><width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane>
+            <lane id="-2" type="driving"><link/><width sOffset="0" a="3.5" b="-0.05" c="0" d="0"/>
+              <width sOffset="70" a="0" b="0" c="0" d="0"/></lane>
+          </right></laneSection></lanes></road></OpenDRIVE>"""
+    )
+    path = scenario(tmp_path, "", init=place("Ego", 10.0, speed=10.0))
+    path.write_text(path.read_text().replace(str(HIGHWAY), str(xodr)))
+    _, trace = run(path, OpenDrive.from_file(xodr), 8.0)
+    assert trace[5.0]["lane"] == -2  # s = 60: still 0.5 m wide
+    assert trace[7.0]["lane"] == -1 and trace[7.0]["y"] == pytest.approx(-1.75)  # s = 80: at lane -1's centre

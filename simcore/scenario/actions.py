@@ -614,6 +614,36 @@ class SynchronizeRuntime(Runtime):
         a.speed = max(v0 + b * dt + c * dt * dt, 0.0)
 
 
+class TrailerRuntime(Runtime):
+    """ConnectTrailerAction: the actor tows the trailer from now on (a trailer it towed before is let go);
+    DisconnectTrailerAction: the actor lets its trailer go, which stops there (as esmini)."""
+
+    domain = "trailer"
+
+    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.TrailerAction) -> None:
+        super().__init__(engine, actor)
+        self.action = action
+
+    def start(self) -> None:
+        e, name = self.engine, self.actor.name
+        old = e.trailer_of.pop(name, None)
+        if old is not None:
+            e.tow_of.pop(old, None)
+            e.body(old).speed = 0.0  # let go, a trailer has nothing to move it on
+        trailer = self.action.trailer
+        if trailer is not None:
+            body = e.body(trailer)
+            if body is self.actor:
+                raise BadInput(f"ConnectTrailerAction: {name!r} cannot tow itself", file=e.source)
+            previous_tow = e.tow_of.pop(trailer, None)
+            if previous_tow is not None:
+                e.trailer_of.pop(previous_tow, None)
+            e.trailer_of[name] = trailer
+            e.tow_of[trailer] = name
+            body.mover = None
+        self.done = True
+
+
 def make(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> Runtime | None:
     if isinstance(action, m.FollowTrajectoryAction):
         return FollowTrajectoryRuntime(engine, actor, action)
@@ -629,6 +659,8 @@ def make(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> Runtim
         return SpeedProfileRuntime(engine, actor, action)
     if isinstance(action, m.SynchronizeAction):
         return SynchronizeRuntime(engine, actor, action)
+    if isinstance(action, m.TrailerAction):
+        return TrailerRuntime(engine, actor, action)
     if isinstance(action, m.NoMotionAction):
         return NoMotionRuntime(engine, actor)
     return None

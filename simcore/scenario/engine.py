@@ -22,9 +22,11 @@ from simcore.scenario.conditions import LARGE, Measure
 from simcore.scenario.motion import (
     Body,
     advance_on_road,
+    align_trailer,
     lane_at_t,
     lane_shift,
     shape_peak_rate_factor,
+    pull_trailer,
     shape_value,
     update_pose_from_road,
     wrap_angle,
@@ -218,7 +220,12 @@ class TeleportRuntime(ActionRuntime):
         self.action = action
 
     def start(self) -> None:
+        self.done = True
+        if self.actor.name in self.engine.tow_of:
+            return  # a towed trailer goes where its tow vehicle takes it (as esmini)
         self.engine.place(self.actor, self.action.position)
+        if self.actor.name in self.engine.trailer_of:
+            self.engine.align_trailers(self.actor)
         if self.engine.root.state == State.RUNNING:
             # teleported during the run: it stays where it was put for the rest of this step (as esmini)
             self.actor.extra["teleported"] = 1.0
@@ -358,6 +365,18 @@ class ScenarioEngine:
         self.signal_phases: dict[str, str] = {}
         self.action_order: dict[int, int] = {}  # id of an action node → its place in the storyboard
         self.ended_in_move = False  # an action runtime finished while moving its entity this step
+        # trailers: tow vehicle → the entity it tows (Trailer/TrailerRef, ConnectTrailerAction), and back
+        self.trailer_of: dict[str, str] = {}
+        for entity in scenario.entities:
+            if entity.trailer is not None:
+                if entity.trailer not in self.bodies or entity.trailer == entity.name:
+                    raise BadInput(
+                        f"entity {entity.name!r} tows {entity.trailer!r}, which is not another declared entity",
+                        file=entity.source or self.source,
+                        field="Vehicle/Trailer/TrailerRef",
+                    )
+                self.trailer_of[entity.name] = entity.trailer
+        self.tow_of: dict[str, str] = {t: tow for tow, t in self.trailer_of.items()}
         self.root = self._build()
         self.registry = Registry(self.root)
         self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
@@ -421,6 +440,8 @@ class ScenarioEngine:
                 self.init_runtimes.append(runtime)
         for runtime in self.init_runtimes:
             runtime.start()
+        if self.trailer_of:
+            self.align_trailers()
         for body in self.bodies.values():
             if not body.placed and body.name in self.added_later:
                 body.gone = True
@@ -644,6 +665,24 @@ class ScenarioEngine:
             body.heading_offset = wrap_angle(heading - travel)
         if self.sumo is not None and self.step_index > 0 and self.sumo.has(body.name):
             self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+
+    def align_trailers(self, tow: Body | None = None, *, pull: bool = False) -> None:
+        """Place every trailer (of `tow`, else of every front tow vehicle) behind its tow vehicle, down the
+        chain: straight behind, or with `pull` dragged by the hitch from where it was."""
+        fronts = [tow] if tow is not None else [self.bodies[n] for n in self.trailer_of if n not in self.tow_of]
+        for front in fronts:
+            current = front
+            for _ in range(len(self.trailer_of)):
+                name = self.trailer_of.get(current.name)
+                if name is None:
+                    break
+                trailer = self.bodies[name]
+                if pull:
+                    pull_trailer(current, trailer)
+                else:
+                    align_trailer(current, trailer)
+                self.track_road(trailer)
+                current = trailer
 
     def track_road(self, body: Body, lock_lane: bool = False) -> None:
         """Road coordinates of a body moved freely (a trajectory): its lane, s and offset from x/y. With
@@ -1274,8 +1313,8 @@ class ScenarioEngine:
                 if self.sumo is not None and self.sumo.has(body.name):
                     self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
                 continue
-            if body.entity.driver == "sumo":
-                continue
+            if body.entity.driver == "sumo" or body.name in self.tow_of:
+                continue  # SUMO moves it, or its tow vehicle drags it (below)
             if body.extra and body.extra.pop("teleported", 0.0):
                 body.extra.pop("move_speed", 0.0)
                 continue
@@ -1296,6 +1335,8 @@ class ScenarioEngine:
                 body.odometer += abs(distance)
             if self.sumo is not None and self.sumo.has(body.name):
                 self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+        if self.trailer_of:
+            self.align_trailers(pull=True)
         if self.sumo is not None:
             self.sumo.step()
             for body in self.bodies.values():

@@ -48,6 +48,9 @@ class Entity:
     wheelbase: float | None = None  # vehicles: FrontAxle.positionX − RearAxle.positionX, m
     max_steering: float | None = None  # vehicles: FrontAxle.maxSteering, rad
     source: str = ""  # "file:line" of its ScenarioObject (for messages)
+    trailer_hitch: float | None = None  # vehicles: TrailerHitch dx (m ahead of the reference point)
+    trailer_coupler: float | None = None  # trailers: TrailerCoupler dx
+    trailer: str | None = None  # the entity towed from the start (Trailer/TrailerRef)
 
     @property
     def driver(self) -> str:
@@ -397,6 +400,14 @@ class SynchronizeAction:
 
 
 @dataclass(frozen=True)
+class TrailerAction:
+    """ConnectTrailerAction (trailer given) or DisconnectTrailerAction (trailer None), OpenSCENARIO 1.3."""
+
+    trailer: str | None
+    domain = "trailer"
+
+
+@dataclass(frozen=True)
 class NoMotionAction:
     """Recorded, no effect on motion: lights, visibility, appearance, controllers CARLOS does not model."""
 
@@ -429,6 +440,7 @@ PrivateAction = (
     | AssignRouteAction
     | AcquirePositionAction
     | SynchronizeAction
+    | TrailerAction
     | NoMotionAction
     | ControllerAction
 )

@@ -57,6 +57,7 @@ class Body:
     offset: float = 0.0  # from the centre of lane_id, + to the left of the reference line (+t)
     direction: int = 1  # +1 travels toward increasing s
     heading_offset: float = 0.0  # heading relative to the lane's travel direction, kept along the lane
+    posed: tuple[Any, ...] | None = None  # the road state the pose was last computed from
     odometer: float = 0.0
     standstill_since: float | None = 0.0
     end_of_road_since: float | None = None
@@ -107,6 +108,8 @@ def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, f
 def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) -> None:
     """Move a road-following body `distance` metres along its lane, across road links; pose updated."""
     assert body.road_id is not None
+    if distance == 0.0 and body.posed == _road_state(body):
+        return  # standing still where the pose was computed: nothing changes
     remaining = distance
     for _ in range(16):  # at most this many road changes in one step
         t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
@@ -121,6 +124,8 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
             if body.lane_id != 0:
                 _follow_lane_links(r, body, target)
             body.s = target
+            if body.lane_id != 0:
+                _leave_vanished_lane(r, body)
             if ds != 0.0:  # standing still at the end of a road, it stays there
                 body.end_of_road_since = None
             break
@@ -164,6 +169,20 @@ def _follow_lane_links(r: object, body: Body, s_new: float) -> None:
         body.lane_id = link
 
 
+def _leave_vanished_lane(r: object, body: Body) -> None:
+    """A lane whose width has shrunk to nothing (a lane that ends by merging) is left for the next lane
+    toward the reference line, at its centre (as esmini does)."""
+    side = 1 if body.lane_id > 0 else -1
+    section = r.section_at(body.s, side)  # type: ignore[attr-defined]
+    lane = section.lane(body.lane_id)
+    if lane is None or not lane.widths or lane.width_at(body.s - section.s) > 1e-6:
+        return
+    inner = body.lane_id - side
+    if inner != 0 and section.lane(inner) is not None:
+        body.lane_id = inner
+        body.offset = 0.0
+
+
 def next_road(road: OpenDrive, body: Body) -> tuple[str, int, int] | None:
     """Where a body goes at the end of its road: along its route when it has one, else straight on."""
     assert body.road_id is not None
@@ -195,3 +214,54 @@ def update_pose_from_road(road: OpenDrive, body: Body) -> None:
         lateral = body.lateral_velocity * body.direction  # + is to the left of the travel direction
         drift = math.atan2(lateral, abs(body.speed))
     body.heading = wrap_angle(road_heading + drift + body.heading_offset)
+    body.posed = _road_state(body)
+
+
+def _road_state(body: Body) -> tuple[Any, ...]:
+    return (
+        body.road_id,
+        body.lane_id,
+        body.s,
+        body.offset,
+        body.direction,
+        body.heading_offset,
+        body.lateral_velocity,
+        body.speed,
+    )
+
+
+def hitch_point(tow: Body) -> tuple[float, float]:
+    """Where a tow vehicle's trailer is coupled: TrailerHitch dx ahead of its reference point (behind when
+    negative)."""
+    dx = tow.entity.trailer_hitch or 0.0
+    return tow.x + dx * math.cos(tow.heading), tow.y + dx * math.sin(tow.heading)
+
+
+def align_trailer(tow: Body, trailer: Body) -> None:
+    """Put a trailer straight behind its tow vehicle: its coupler on the hitch, same heading."""
+    hx, hy = hitch_point(tow)
+    coupler = trailer.entity.trailer_coupler or 0.0
+    trailer.heading = tow.heading
+    trailer.x = hx - coupler * math.cos(tow.heading)
+    trailer.y = hy - coupler * math.sin(tow.heading)
+    trailer.z = tow.z
+    trailer.speed = tow.speed
+    trailer.placed = True
+    trailer.gone = tow.gone
+
+
+def pull_trailer(tow: Body, trailer: Body) -> None:
+    """Drag a trailer after its tow vehicle moved: its coupler stays on the hitch and it turns toward it (a
+    rigid bar from the hitch to the trailer's reference point, as esmini's trailer model); it takes the tow
+    vehicle's speed."""
+    hx, hy = hitch_point(tow)
+    vx, vy = trailer.x - hx, trailer.y - hy
+    length = math.hypot(vx, vy)
+    coupler = trailer.entity.trailer_coupler or 0.0
+    if length < 1e-9:  # on the hitch: straight behind
+        vx, vy, length = -math.cos(tow.heading), -math.sin(tow.heading), 1.0
+    trailer.x = hx + vx * coupler / length
+    trailer.y = hy + vy * coupler / length
+    trailer.heading = wrap_angle(math.atan2(vy, vx) + math.pi)
+    trailer.speed = tow.speed
+    trailer.z = tow.z

@@ -472,6 +472,7 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         )
         properties = _properties(reader, body)
         wheelbase, max_steering = _axles(reader, body)
+        hitch, coupler, trailer = _trailer(reader, body)
     finally:
         if pushed:
             reader.pop()
@@ -490,7 +491,28 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         controller=controller,
         wheelbase=wheelbase,
         max_steering=max_steering,
+        trailer_hitch=hitch,
+        trailer_coupler=coupler,
+        trailer=trailer,
     )
+
+
+def _trailer(reader: _Reader, body: ET.Element) -> tuple[float | None, float | None, str | None]:
+    """A vehicle's TrailerHitch dx, TrailerCoupler dx and the entity it tows from the start (Trailer/TrailerRef,
+    OpenSCENARIO 1.3; an empty reference tows nothing). A trailer defined inline is warned about: it is not
+    created."""
+    hitch_el, coupler_el = body.find("TrailerHitch"), body.find("TrailerCoupler")
+    hitch = reader.num(hitch_el, "dx", 0.0) if hitch_el is not None else None
+    coupler = reader.num(coupler_el, "dx", 0.0) if coupler_el is not None else None
+    trailer = None
+    towed = body.find("Trailer")
+    if towed is not None:
+        ref = towed.find("TrailerRef")
+        if ref is not None:
+            trailer = reader.attr(ref, "entityRef", "") or None
+        else:
+            reader.warn("an inline Trailer is not created (only Trailer/TrailerRef to a declared entity)", towed)
+    return hitch, coupler, trailer
 
 
 def _axles(reader: _Reader, body: ET.Element) -> tuple[float | None, float | None]:
@@ -666,7 +688,6 @@ _NO_MOTION = {
     "AppearanceAction": "lights and animations change no motion here",
     "LightStateAction": "lights change no motion here",
     "AnimationAction": "animations change no motion here",
-    "TrailerAction": "trailers are not modelled (the towing entity moves as scripted)",
 }
 
 
@@ -675,6 +696,13 @@ def _private(reader: _Reader, element: ET.Element) -> m.PrivateAction:
     tag = inner.tag
     if tag == "TeleportAction":
         return m.TeleportAction(position=_position(reader, reader.child(inner, "Position")))
+    if tag == "TrailerAction":
+        action = reader.only_child(inner)
+        if action.tag == "ConnectTrailerAction":
+            return m.TrailerAction(trailer=reader.attr(action, "trailerRef"))
+        if action.tag == "DisconnectTrailerAction":
+            return m.TrailerAction(trailer=None)
+        raise reader.fail(f"TrailerAction/{action.tag} is not supported", action)
     if tag == "LongitudinalAction":
         action = reader.only_child(inner)
         if action.tag == "SpeedAction":
