@@ -1,10 +1,22 @@
 """The roles of a SimulationRun pod: `carlos pod --role simcore|bridge|recorder` (DESIGN.md, pod roles).
 
-Each role is its own process (its own container on a cluster); they talk over the pod's loopback through
-the topic hub of simcore/transport/loopback.py:
+Each role is its own process (its own container on a cluster). They exchange ROS 2 messages over the
+transport `CARLOS_TRANSPORT` names:
 
-- `bridge` (first sidecar): runs the hub on 127.0.0.1:`CARLOS_BUS_PORT` until SIGTERM. (The ROS 2 / DDS
-  side of the bridge is a later issue.)
+- `loopback` (the default): the topic hub of simcore/transport/loopback.py on 127.0.0.1:`CARLOS_BUS_PORT`,
+  run by the bridge. ROS 2 nodes do not see these topics.
+- `dds`: DDS (simcore/transport/dds.py, cyclonedds) on domain `ROS_DOMAIN_ID` (default 0), configured by
+  `CYCLONEDDS_URI` if set. Every role is a DDS participant and the topics are ROS 2 topics (`rt/…`, ROS 2
+  type names and QoS): ROS 2 nodes in the pod (the system under test's container) or on its network see
+  them and can publish `/carlos/<entity>/control`, as with any ROS 2 node; no relay is involved. simcore
+  waits until the recorder announced its subscription before it runs, a writer waits for its announced
+  subscribers before its first message, and simcore flushes (all data acknowledged) before the verdict,
+  which the recorder handles after draining what arrived before it: the recording loses nothing.
+
+- `bridge` (first sidecar): loopback: runs the hub on 127.0.0.1:`CARLOS_BUS_PORT` until SIGTERM. dds: joins
+  the domain, accepts connections on 127.0.0.1:`CARLOS_BUS_PORT` for its startup probe, and logs the ROS 2
+  topics (name, type) that appear on the domain, and the list again at SIGTERM: it is the pod's view of the
+  ROS 2 graph (ROS 2 nodes talk to simcore's and the recorder's participants directly).
 - `recorder` (second sidecar): subscribes to every topic, then opens 127.0.0.1:`CARLOS_RECORDER_READY_PORT`
   for its startup probe. It writes the MCAP while the run goes on. When simcore's verdict arrives (the final
   `/carlos/status` message, whose values carry the index summary as JSON) — or on SIGTERM — it closes the
@@ -45,6 +57,7 @@ STATUS_TYPE = "diagnostic_msgs/msg/DiagnosticStatus"
 RECORDER_TOPIC = "/carlos/recorder/status"
 SUMMARY_KEY = "summary"
 ROLES = ("simcore", "bridge", "recorder")
+TRANSPORTS = ("loopback", "dds")
 
 
 @dataclass(frozen=True)
@@ -60,6 +73,8 @@ class PodEnv:
     scratch: Path
     scenario_dir: Path
     upload_timeout: float
+    transport: str = "loopback"  # CARLOS_TRANSPORT: loopback | dds
+    domain_id: int = 0  # ROS_DOMAIN_ID (dds)
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> PodEnv:
@@ -86,6 +101,17 @@ class PodEnv:
         output = env.get("CARLOS_OUTPUT_URL", "")
         if not output:
             raise BadInput("CARLOS_OUTPUT_URL is not set", field="CARLOS_OUTPUT_URL")
+        transport = env.get("CARLOS_TRANSPORT", "").strip() or "loopback"
+        if transport not in TRANSPORTS:
+            raise BadInput(
+                f"CARLOS_TRANSPORT={transport!r} is not one of {', '.join(TRANSPORTS)}",
+                field="CARLOS_TRANSPORT",
+            )
+        domain_id = 0
+        if transport == "dds":
+            from simcore.transport.dds import domain_id_from_env
+
+            domain_id = domain_id_from_env(env)
         return cls(
             index=number("JOB_COMPLETION_INDEX"),
             spec_path=Path(spec),
@@ -96,6 +122,8 @@ class PodEnv:
             scratch=Path(env.get("CARLOS_SCRATCH") or tempfile.gettempdir()),
             scenario_dir=Path(env.get("CARLOS_SCENARIO_DIR") or "/etc/carlos/scenarios"),
             upload_timeout=float(env.get("CARLOS_UPLOAD_TIMEOUT") or 900),
+            transport=transport,
+            domain_id=domain_id,
         )
 
 
@@ -161,6 +189,17 @@ def _on_sigterm(handler: Callable[[], None]) -> None:
     signal.signal(signal.SIGTERM, handle)
 
 
+def _connect(env: PodEnv, on_disconnect: Callable[[], None] | None = None) -> Any:
+    """The role's bus on the pod's transport (raises ConnectionError when it cannot be reached)."""
+    if env.transport == "dds":
+        from simcore.transport.dds import DdsBus
+
+        return DdsBus(env.domain_id)
+    from simcore.transport.loopback import LoopbackBus
+
+    return LoopbackBus("127.0.0.1", env.bus_port, connect_timeout=60.0, on_disconnect=on_disconnect)
+
+
 # --- bridge ----------------------------------------------------------------------------------------------
 
 
@@ -169,6 +208,8 @@ def run_bridge(env: PodEnv) -> int:
 
     stop = threading.Event()
     _on_sigterm(stop.set)
+    if env.transport == "dds":
+        return _run_dds_bridge(env, stop)
     hub = LoopbackHub("127.0.0.1", env.bus_port).start()
     log.info("bridge: topic hub on 127.0.0.1:%d", hub.port)
     try:
@@ -180,6 +221,33 @@ def run_bridge(env: PodEnv) -> int:
     return 0
 
 
+def _run_dds_bridge(env: PodEnv, stop: threading.Event) -> int:
+    try:
+        bus = _connect(env)
+    except ConnectionError as exc:
+        print(f"error: {exc}", flush=True)
+        return int(ExitCode.INFRASTRUCTURE)
+    ready = _ReadyPort(env.bus_port)
+    log.info("bridge: on DDS domain %d; startup probe on 127.0.0.1:%d", env.domain_id, env.bus_port)
+    logged: set[str] = set()
+
+    def log_new() -> None:
+        for topic, typename in sorted(dict(bus.discovered).items()):
+            if topic not in logged:
+                logged.add(topic)
+                log.info("bridge: ROS 2 topic %s [%s]", topic, typename)
+
+    try:
+        while not stop.wait(0.5):
+            log_new()
+    finally:
+        ready.close()
+        log_new()
+        bus.close()
+    log.info("bridge: %d ROS 2 topics seen on domain %d", len(logged), env.domain_id)
+    return 0
+
+
 # --- simcore ---------------------------------------------------------------------------------------------
 
 
@@ -188,7 +256,6 @@ def run_simcore(env: PodEnv) -> int:
     from simcore.evaluation.report import index_summary
     from simcore.plan import Plan
     from simcore.runner import resolve_scenario_file, simulate
-    from simcore.transport.loopback import LoopbackBus, LoopbackError
 
     started = time.monotonic()
     run = _load(env)
@@ -197,8 +264,8 @@ def run_simcore(env: PodEnv) -> int:
     attempt = env.failures + 1
     final_attempt = attempt > spec.execution.retries
     try:
-        bus = LoopbackBus("127.0.0.1", env.bus_port, connect_timeout=60.0)
-    except LoopbackError as exc:
+        bus = _connect(env)
+    except ConnectionError as exc:
         print(f"error: {exc}", flush=True)
         return int(ExitCode.INFRASTRUCTURE)
     report: dict[str, str] = {}
@@ -208,7 +275,15 @@ def run_simcore(env: PodEnv) -> int:
         report.update(_values(message.obj()))
         reported.set()
 
-    bus.subscribe(RECORDER_TOPIC, on_report)
+    if env.transport == "dds":
+        bus.subscribe(RECORDER_TOPIC, on_report, typename=STATUS_TYPE)
+        # the recorder subscribed ("*") before it reported ready; wait until this participant knows it
+        if not bus.wait_for_subscribers(STATUS_TOPIC, 1, timeout=60.0):
+            print("error: no recorder subscribed on the DDS domain within 60 s", flush=True)
+            bus.close()
+            return int(ExitCode.INFRASTRUCTURE)
+    else:
+        bus.subscribe(RECORDER_TOPIC, on_report)
     criteria = [*spec.evaluation.criteria, *point.scenario.criteria]
     metrics: dict[str, float] = {}
     results: list[CriterionResult] = []
@@ -293,6 +368,8 @@ def run_simcore(env: PodEnv) -> int:
             "writeSummary": "true" if write_summary else "false",
         },
     )
+    if env.transport == "dds" and not bus.flush(60.0):  # everything before the verdict has arrived
+        log.warning("simcore: not every message was acknowledged by the subscribers within 60 s")
     bus.advertise(STATUS_TOPIC, STATUS_TYPE).publish(verdict, sim_seconds)
     if not reported.wait(env.upload_timeout):
         print(f"error: the recorder did not report its upload within {env.upload_timeout:.0f} s", flush=True)
@@ -330,7 +407,6 @@ class _ReadyPort:
 def run_recorder(env: PodEnv) -> int:
     from simcore.recorder import McapRecorder
     from simcore.runner import versions
-    from simcore.transport.loopback import LoopbackBus
 
     run = _load(env)
     spec = run.spec
@@ -343,6 +419,7 @@ def run_recorder(env: PodEnv) -> int:
     workdir = Path(tempfile.mkdtemp(prefix="recorder-", dir=env.scratch))
     lock = threading.Lock()
     verdict: dict[str, str] = {}
+    got_verdict = threading.Event()
     done = threading.Event()
     stop = threading.Event()
     recorder: McapRecorder | None = None
@@ -377,17 +454,23 @@ def run_recorder(env: PodEnv) -> int:
                 values = _values(message.obj())
                 if SUMMARY_KEY in values:
                     verdict.update(values)
-                    done.set()
+                    got_verdict.set()
 
     _on_sigterm(stop.set)
-    bus = LoopbackBus("127.0.0.1", env.bus_port, connect_timeout=60.0, on_disconnect=stop.set)
+    try:
+        bus = _connect(env, on_disconnect=stop.set)
+    except ConnectionError as exc:
+        print(f"error: {exc}", flush=True)
+        return int(ExitCode.INFRASTRUCTURE)
     bus.subscribe("*", on_message)
     ready = _ReadyPort(env.ready_port)
     log.info("recorder: subscribed, ready on 127.0.0.1:%d", env.ready_port)
-    while not done.is_set() and not stop.is_set():
-        done.wait(0.2)
-    if not done.is_set():
-        bus.drain()  # SIGTERM: what is in flight to us still goes into the file
+    while not got_verdict.is_set() and not stop.is_set():
+        got_verdict.wait(0.2)
+    if not got_verdict.is_set() or env.transport == "dds":
+        # SIGTERM: what is in flight to us still goes into the file; DDS: topics are not ordered among
+        # each other, what simcore sent before the verdict (all acknowledged) may still be queued here
+        bus.drain()
     with lock:  # no message is written after this point; everything received is in the file
         done.set()
         if recorder is not None:

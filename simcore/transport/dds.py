@@ -13,8 +13,14 @@ Any process can make one; each is its own DDS participant. Wire conventions, as 
 
 - topic `/a/b` is the DDS topic `rt/a/b`; type `pkg/msg/T` is registered as `pkg::msg::dds_::T_`
   (simcore.transport.dds_types builds the IDL types from the type store, so every type of it works);
-- QoS of writers: ROS 2's default profile (reliable, keep-last 10, volatile); `/tf_static` is transient-local
-  keep-last 1 like tf2's static broadcaster. Data representation XCDR1 (plain CDR, little endian).
+- QoS of writers: reliable, volatile, like ROS 2's default profile; `/tf_static` transient-local keep-last 1
+  like tf2's static broadcaster. History: keep-all by default, `history=10` gives ROS 2's default profile
+  exactly. History is not part of DDS' QoS matching, so ROS 2 subscribers match either way; the difference
+  is what happens when a subscriber is slower than the publisher: with keep-last 10 cyclonedds drops the
+  samples the subscriber has not acknowledged yet once 10 newer ones were written (bench/bridge.py lost 2
+  of 101 point clouds that way), with keep-all the writer waits for it (back-pressure, up to 30 s per
+  write), as the loopback hub does. A recorder must lose nothing, hence the default.
+  Data representation XCDR1 (plain CDR, little endian).
 - payload: the CDR bytes rosbags produces (`simcore.transport.messages.serialize`), which are ROS 2's own
   serialisation byte for byte, written as they are (a 65k-point PointCloud2 is one memcpy, never converted
   element by element); received payloads are handed over as bytes and deserialised only when a subscriber
@@ -29,9 +35,8 @@ What CARLOS adds on top, invisible to ROS 2 nodes (they ignore non-`rt/` topics 
   delivered, or their source timestamp (wall clock) when it has seen no `/clock`.
 - Glob subscriptions. `subscribe("*")` (the recorder, like `ros2 bag record -a`) watches the built-in
   DCPSPublication topic and creates a reader for every matching `rt/` topic as it appears (the reader
-  adopts the publication's reliability and durability, as rosbag2 does). Readers keep all samples (their
-  history is local, not part of the match): a subscriber that is slower than the publisher loses nothing,
-  reliability throttles the writer instead.
+  adopts the publication's reliability and durability, as rosbag2 does). Readers keep all samples, so a
+  callback slower than the publisher loses nothing on the reading side either.
 - Not losing the first messages. DDS delivers a volatile sample only to readers matched when it is
   written, and a glob subscriber creates its reader only after it discovered the writer. So every
   subscription is also announced as a reader of the (non-ROS) topic `carlos/bus/subscriptions` whose
@@ -60,6 +65,7 @@ import contextlib
 import fnmatch
 import logging
 import os
+import struct
 import threading
 import time
 import uuid
@@ -163,15 +169,41 @@ def ros_topic(name: str) -> str | None:
     return "/" + name[len(prefix) :] if name.startswith(prefix) and len(name) > len(prefix) else None
 
 
+def decode(data: bytes, typename: str) -> tuple[Any, bytes]:
+    """A received CDR payload → (message, the payload without transport padding).
+
+    DDS carries payloads in multiples of 4 bytes: a sample of 11 bytes arrives with one byte appended, of
+    any value (rmw_cyclonedds_cpp writes encapsulation options 0 and lets cyclonedds pad, as CARLOS does;
+    ROS 2's deserialisers ignore what follows the message, as rosbags' does up to 3 bytes). The exact
+    length is where the deserialiser stops, so what a subscriber gets (and the recorder stores) is byte for
+    byte what the publisher serialised. Raises ValueError for a payload that is not a `typename`."""
+    from rosbags.serde import SerdeError
+
+    from simcore.transport.messages import TYPESTORE
+
+    if len(data) < 4 or data[:2] != b"\x00\x01":
+        raise ValueError("not a little-endian plain CDR payload")
+    msgdef = TYPESTORE.get_msgdef(typename)
+    try:
+        msg, pos = msgdef.deserialize_cdr_le(memoryview(data)[4:], 0, msgdef.cls, TYPESTORE)
+    except (SerdeError, struct.error, UnicodeDecodeError, ValueError, IndexError) as exc:
+        raise ValueError(f"not a {typename}: {exc}") from None
+    end = 4 + pos
+    if end > len(data) or end + 3 < len(data):
+        raise ValueError(f"not a {typename}: {len(data) - end} bytes left over")
+    return msg, data if end == len(data) else data[:end]
+
+
 def _announcement_type() -> type[IdlStruct]:
     return make_idl_struct("Subscription_", "carlos::bus::Subscription_", {"pattern": str})
 
 
-def _writer_qos(topic: str) -> Qos:
+def _writer_qos(topic: str, depth: int | None) -> Qos:
     latched = topic in LATCHED_TOPICS
+    history = Policy.History.KeepAll if depth is None else Policy.History.KeepLast(depth)
     return Qos(
         Policy.Reliability.Reliable(max_blocking_time=duration(seconds=30)),
-        Policy.History.KeepLast(1 if latched else 10),
+        Policy.History.KeepLast(1) if latched else history,
         Policy.Durability.TransientLocal if latched else Policy.Durability.Volatile,
         Policy.DataRepresentation(use_cdrv0_representation=True),
         Policy.Userdata(data=SIMTIME_MARK),
@@ -235,11 +267,15 @@ class DdsBus:
         *,
         config: str | None = None,
         match_timeout: float = 10.0,
+        history: int | None = None,
     ) -> None:
         self.domain_id = domain_id_from_env() if domain_id is None else domain_id
         if not 0 <= self.domain_id <= MAX_DOMAIN_ID:
             raise ValueError(f"domain id {self.domain_id} is outside 0..{MAX_DOMAIN_ID}")
         self.match_timeout = match_timeout
+        if history is not None and history < 1:
+            raise ValueError(f"history depth {history} is not positive")
+        self.history = history
         try:
             if config is not None:
                 _configure(self.domain_id, config)
@@ -258,9 +294,12 @@ class DdsBus:
         self._announcers: list[DataReader[Any]] = []
         self._announced = _Announcements()
         self._known_publications: dict[uuid.UUID, Any] = {}
+        #: every ROS 2 topic other participants published since this bus started: topic → type
+        self.discovered: dict[str, str] = {}
         self._changed = threading.Condition(self._lock)
         self._simtime_writers: dict[int, bool] = {}
         self._unknown_types: set[str] = set()
+        self._bad_topics: set[str] = set()
         self._last_clock: float | None = None
         self.topics: dict[str, str] = {}  # advertised topic → type
         self.received = 0
@@ -290,7 +329,8 @@ class DdsBus:
                 raise ValueError(f"topic {topic} is advertised as {known}, not {typename}")
             if topic not in self._writers:
                 try:
-                    writer = DataWriter(self.participant, self._topic(topic, typename), _writer_qos(topic))
+                    qos = _writer_qos(topic, self.history)
+                    writer = DataWriter(self.participant, self._topic(topic, typename), qos)
                 except DDSException as exc:
                     raise DdsError(f"cannot create the DDS writer of {topic} ({typename}): {exc}") from None
                 self._writers[topic] = _Writer(topic, typename, writer)
@@ -359,7 +399,9 @@ class DdsBus:
         ok = True
         for writer in writers:
             left = max(0.0, deadline - time.monotonic())
-            ok = writer.writer.wait_for_acks(duration(seconds=left)) and ok
+            # the C call: cyclonedds' DataWriter.wait_for_acks fails on its own timeout code (11.0.1)
+            ret = writer.writer._wait_for_acks(writer.writer._ref, duration(seconds=left))
+            ok = ret == 0 and ok
         return ok
 
     def drain(self, timeout: float = 5.0) -> bool:
@@ -384,6 +426,18 @@ class DdsBus:
         """The participants (other than this one) that announced a subscription matching `topic`."""
         with self._lock:
             return self._announced.participants(topic)
+
+    def graph(self) -> dict[str, str]:
+        """The ROS 2 topics published on the domain as this bus knows them: topic → `pkg/msg/Type` (other
+        participants' writers, discovered through DCPSPublication, and this bus' own)."""
+        with self._lock:
+            out = dict(self.topics)
+            for endpoint in self._known_publications.values():
+                topic = ros_topic(endpoint.topic_name)
+                typename = ros_typename(endpoint.type_name)
+                if topic is not None and typename is not None:
+                    out.setdefault(topic, typename)
+        return out
 
     # --- internals ---------------------------------------------------------------------------------------
 
@@ -460,6 +514,14 @@ class DdsBus:
         except DdsError as exc:
             log.warning("dds: %s", exc)
 
+    def _note(self, endpoint: Any) -> None:
+        if endpoint.participant_key == self.guid:
+            return
+        topic = ros_topic(endpoint.topic_name)
+        typename = ros_typename(endpoint.type_name)
+        if topic is not None and typename is not None:
+            self.discovered.setdefault(topic, typename)
+
     def _on_subscription(self, endpoint: Any, alive: bool) -> None:
         if endpoint.topic_name != ANNOUNCE_TOPIC or endpoint.participant_key == self.guid:
             return
@@ -479,6 +541,7 @@ class DdsBus:
             with self._lock:
                 if info is None or info.instance_state == InstanceState.Alive:
                     self._known_publications[endpoint.key] = endpoint
+                    self._note(endpoint)
                     self._on_publication(endpoint)
                 else:
                     self._known_publications.pop(endpoint.key, None)
@@ -521,7 +584,14 @@ class DdsBus:
                 time_s = self._last_clock
             else:
                 time_s = info.source_timestamp / 1e9
-            self._dispatch(Message(reader.topic, reader.typename, time_s, data=data))
+            try:
+                msg, exact = decode(data, reader.typename)
+            except ValueError as exc:
+                if reader.topic not in self._bad_topics:
+                    self._bad_topics.add(reader.topic)
+                    log.warning("dds: dropping undecodable samples on %s: %s", reader.topic, exc)
+                continue
+            self._dispatch(Message(reader.topic, reader.typename, time_s, msg=msg, data=exact))
         self.received += count
         return count
 

@@ -1,0 +1,262 @@
+"""Point clouds through CARLOS' topic paths: messages/s and MB/s, and CDR serialisation cost per message.
+
+One sensor_msgs/PointCloud2 of 65,536 points (x, y, z, intensity: float32; label: uint32; 20 bytes a point,
+1.31 MB of CDR), published COUNT times as fast as the path takes it, through:
+
+- in-process: `InProcessBus` (the embedded executor): the subscriber gets the object, nothing serialised;
+  "+cdr" is the same with the subscriber asking for the CDR bytes (what the recorder does);
+- loopback: publisher process → `LoopbackHub` + subscriber in another process (the pod's default transport);
+- dds: publisher process → subscriber process over cyclonedds (`DdsBus`, 127.0.0.1, unicast discovery),
+  the subscriber decoding every sample (`decode`: message object + exact bytes).
+
+Cross-process rates run from the first publish to the subscriber's last receipt (CLOCK_MONOTONIC is
+system-wide), after one warm-up message. "10 Hz eq." = messages/s ÷ 10: how many 65k-point lidars at 10 Hz
+the path carries. Serialisation: rosbags' `serialize` (what every path uses; a memcpy of the point array)
+versus building the cyclonedds IDL object of the generated type and letting cyclonedds serialise it (the
+element-by-element path avoided), and the receiving side's `decode`.
+
+Prints a table and, as its last line, one JSON object with the figures. No assertions: machines are noisy.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import statistics
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from simcore.transport.bus import InProcessBus, Message  # noqa: E402
+from simcore.transport.messages import TYPESTORE, serialize  # noqa: E402
+
+POINTS = 65_536
+COUNT = int(os.environ.get("BENCH_COUNT", "200"))
+TOPIC = "/carlos/Ego/lidar/points"
+TYPE = "sensor_msgs/msg/PointCloud2"
+
+SUBSCRIBER = textwrap.dedent(
+    """
+    import sys, time, json
+    sys.path.insert(0, sys.argv[1])
+    mode, count, arg, topic = sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5]
+    state = {"n": 0, "bytes": 0, "last": 0.0, "first": 0.0}
+
+    def on_points(message):
+        if mode == "dds":
+            message.obj()  # decoded already: the object and the exact bytes
+        state["n"] += 1
+        state["bytes"] += len(message.cdr())
+        if state["n"] == 2:
+            state["first"] = time.monotonic()
+        state["last"] = time.monotonic()
+
+    if mode == "dds":
+        from simcore.transport.dds import DdsBus, loopback_config
+        bus = DdsBus(int(arg), config=loopback_config())
+    else:
+        from simcore.transport.loopback import LoopbackBus, LoopbackHub
+        hub = LoopbackHub("127.0.0.1", 0).start()
+        print(hub.port, flush=True)
+        bus = LoopbackBus("127.0.0.1", hub.port)
+    bus.subscribe(topic, on_points)
+    print("READY", flush=True)
+    deadline = time.monotonic() + 300
+    while state["n"] < count + 1 and time.monotonic() < deadline:
+        time.sleep(0.005)
+    print(json.dumps(state), flush=True)
+    bus.close()
+    """
+)
+
+
+def point_cloud(seed: int = 0) -> Any:
+    t = TYPESTORE.types
+    from simcore.transport.messages import Header, stamp
+
+    rng = np.random.default_rng(seed)
+    points = np.zeros(POINTS, dtype=[(n, "<f4") for n in ("x", "y", "z", "intensity")] + [("label", "<u4")])
+    for name in ("x", "y", "z", "intensity"):
+        points[name] = rng.random(POINTS, dtype=np.float32)
+    points["label"] = rng.integers(0, 20, POINTS)
+    fields = [
+        t["sensor_msgs/msg/PointField"](name=name, offset=4 * i, datatype=7 if i < 4 else 6, count=1)
+        for i, name in enumerate(("x", "y", "z", "intensity", "label"))
+    ]
+    return t[TYPE](
+        header=Header(stamp=stamp(0.1), frame_id="Ego/lidar"),
+        height=1,
+        width=POINTS,
+        fields=fields,
+        is_bigendian=False,
+        point_step=20,
+        row_step=20 * POINTS,
+        data=points.view(np.uint8).reshape(-1),
+        is_dense=True,
+    )
+
+
+def in_process(msg: Any, cdr: bool) -> float:
+    bus = InProcessBus()
+    seen = []
+
+    def on_points(message: Message) -> None:
+        seen.append(len(message.cdr()) if cdr else message.msg.width)
+
+    bus.subscribe("*", on_points)
+    publisher = bus.advertise(TOPIC, TYPE)
+    publisher.publish(msg, 0.0)
+    start = time.perf_counter()
+    for i in range(COUNT):
+        publisher.publish(msg, 0.1 * i)
+    elapsed = time.perf_counter() - start
+    assert len(seen) == COUNT + 1
+    return elapsed
+
+
+def cross_process(mode: str, msg: Any) -> tuple[float, int]:
+    """(seconds from the first measured publish to the last receipt, bytes received)."""
+    arg = str(random.randrange(200, 232)) if mode == "dds" else "0"
+    env = dict(os.environ)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SUBSCRIBER, str(ROOT), mode, str(COUNT), arg, TOPIC],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    assert proc.stdout is not None
+    if mode == "dds":
+        from simcore.transport.dds import DdsBus, loopback_config
+
+        assert proc.stdout.readline().strip() == "READY"
+        bus: Any = DdsBus(int(arg), config=loopback_config())
+        if not bus.wait_for_subscribers(TOPIC, 1, timeout=30):
+            raise RuntimeError("the DDS subscriber did not appear")
+    else:
+        from simcore.transport.loopback import LoopbackBus
+
+        port = int(proc.stdout.readline())
+        assert proc.stdout.readline().strip() == "READY"
+        bus = LoopbackBus("127.0.0.1", port)
+    publisher = bus.advertise(TOPIC, TYPE)
+    publisher.publish(msg, 0.0)  # warm-up (and the DDS match)
+    time.sleep(0.5)
+    start = time.monotonic()
+    for i in range(COUNT):
+        publisher.publish(msg, 0.1 * (i + 1))
+    result = json.loads(proc.stdout.readline())
+    proc.wait(60)
+    bus.close()
+    if result["n"] != COUNT + 1:
+        raise RuntimeError(f"{mode}: {result['n']} of {COUNT + 1} messages arrived")
+    return result["last"] - start, result["bytes"] - result["bytes"] // result["n"]
+
+
+def serialisation(msg: Any) -> dict[str, float]:
+    from simcore.transport.dds import decode
+    from simcore.transport.dds_types import idl_type
+
+    def per_call(fn: Any, repeat: int) -> float:
+        fn()
+        times = []
+        for _ in range(repeat):
+            start = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - start)
+        return statistics.median(times) * 1e3
+
+    data = serialize(msg)
+    padded = data + bytes(-len(data) % 4)
+    rosbags_ms = per_call(lambda: serialize(msg), 20)
+    decode_ms = per_call(lambda: decode(padded, TYPE), 20)
+    cls = idl_type(TYPE)
+    point_field = idl_type("sensor_msgs/msg/PointField")
+    header = idl_type("std_msgs/msg/Header")
+    time_type = idl_type("builtin_interfaces/msg/Time")
+
+    def via_idl() -> bytes:
+        obj = cls(
+            header=header(stamp=time_type(sec=0, nanosec=100_000_000), frame_id="Ego/lidar"),
+            height=1,
+            width=POINTS,
+            fields=[
+                point_field(name=f.name, offset=f.offset, datatype=f.datatype, count=f.count)
+                for f in msg.fields
+            ],
+            is_bigendian=False,
+            point_step=20,
+            row_step=20 * POINTS,
+            data=msg.data.tolist(),
+            is_dense=True,
+        )
+        out: bytes = obj.serialize(use_version_2=False)
+        return out
+
+    assert via_idl() == data
+    idl_ms = per_call(via_idl, 2)
+    return {"rosbagsSerializeMs": rosbags_ms, "cycloneddsIdlSerializeMs": idl_ms, "decodeMs": decode_ms}
+
+
+def main() -> None:
+    msg = point_cloud()
+    size = len(serialize(msg))
+    rows: list[dict[str, Any]] = []
+    for name, seconds, nbytes in (
+        ("in-process", in_process(msg, cdr=False), 0),
+        ("in-process+cdr", in_process(msg, cdr=True), size * COUNT),
+        ("loopback", *cross_process("loopback", msg)),
+        ("dds", *cross_process("dds", msg)),
+    ):
+        rate = COUNT / seconds
+        rows.append(
+            {
+                "path": name,
+                "seconds": round(seconds, 3),
+                "messagesPerSecond": round(rate, 1),
+                "MBPerSecond": round(size * rate / 1e6, 1),
+                "tenHzEquivalents": round(rate / 10, 1),
+                "bytesChecked": nbytes == size * COUNT or nbytes == 0,
+            }
+        )
+    base = next(r for r in rows if r["path"] == "in-process+cdr")["messagesPerSecond"]
+    for row in rows:
+        row["ratioToInProcessCdr"] = round(row["messagesPerSecond"] / base, 3)
+    ser = serialisation(msg)
+    print(f"PointCloud2, {POINTS} points, {size / 1e6:.2f} MB CDR, {COUNT} messages per path")
+    header = f"{'path':<16}{'s':>8}{'msg/s':>10}{'MB/s':>10}{'10 Hz eq.':>11}{'÷ in-proc+cdr':>15}"
+    print(header)
+    print("-" * len(header))
+    for r in rows:
+        print(
+            f"{r['path']:<16}{r['seconds']:>8}{r['messagesPerSecond']:>10}{r['MBPerSecond']:>10}"
+            f"{r['tenHzEquivalents']:>11}{r['ratioToInProcessCdr']:>15}"
+        )
+    print()
+    print("CDR per message (ms, median):")
+    print(f"  rosbags serialize (every path)            {ser['rosbagsSerializeMs']:9.3f}")
+    print(f"  cyclonedds IDL object + serialize (avoided){ser['cycloneddsIdlSerializeMs']:9.1f}")
+    print(f"  decode on receipt (object + exact bytes)  {ser['decodeMs']:9.3f}")
+    figures = {
+        "bench": "bridge",
+        "points": POINTS,
+        "messageBytes": size,
+        "count": COUNT,
+        "paths": rows,
+        "serialisationMs": {k: round(v, 3) for k, v in ser.items()},
+        "ddsMessagesPerSecond": next(r for r in rows if r["path"] == "dds")["messagesPerSecond"],
+        "ddsMBPerSecond": next(r for r in rows if r["path"] == "dds")["MBPerSecond"],
+    }
+    print(json.dumps(figures))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,597 @@
+"""The DDS transport (simcore/transport/dds.py) as ROS 2 sees it, and the pod's roles over it.
+
+- byte identity: rosbags' CDR (what CARLOS sends) equals cyclonedds' own XCDR1 serialisation of the
+  generated IDL types, for a spread of the type store's messages;
+- wire-level interop: a separate process that never imports CARLOS (plain cyclonedds, IDL types written by
+  hand as rosidl generates them) discovers our topics through the built-in DCPSPublication topic (`rt/…`,
+  ROS 2 type names, ROS default QoS, /tf_static transient-local), receives our messages with the right
+  values and bytes, and publishes an ackermann_msgs command that our bus receives;
+- cross-process pod: simcore, bridge and recorder as separate processes over DDS record the same messages
+  with the same timestamps as the single-process `carlos run`.
+
+Every test uses its own DDS domain (checked to be empty first) on 127.0.0.1 only.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip("cyclonedds")
+
+from simcore.transport.bus import Message
+from simcore.transport.dds import DdsBus, decode, loopback_config, ros_topic
+from simcore.transport.dds_types import dds_typename, idl_type, ros_typename
+from simcore.transport.messages import TYPESTORE, serialize
+
+ROOT = Path(__file__).resolve().parent.parent
+CARLOS = str(Path(sys.executable).with_name("carlos"))
+CONFIG = loopback_config()
+
+
+def _domain_is_empty(domain: int) -> bool:
+    """No other participant shows up on `domain` within a moment (another test run may use it)."""
+    code = textwrap.dedent(
+        f"""
+        import time
+        from cyclonedds.domain import Domain, DomainParticipant
+        from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsParticipant
+        Domain({domain}, {CONFIG!r})
+        dp = DomainParticipant({domain})
+        reader = BuiltinDataReader(dp, BuiltinTopicDcpsParticipant)
+        time.sleep(0.6)
+        print(len([p for p in reader.take(N=100) if p.key != dp.guid]))
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    return out.stdout.strip() == "0"
+
+
+@pytest.fixture
+def domain() -> int:
+    rng = random.Random(f"{os.getpid()}-{time.time_ns()}-{os.environ.get('PYTEST_XDIST_WORKER', '')}")
+    for _ in range(5):
+        candidate = rng.randrange(100, 200)
+        if _domain_is_empty(candidate):
+            return candidate
+    pytest.fail("no free DDS domain in 100..199 (5 tries)")
+
+
+def _env(domain: int, **extra: str) -> dict[str, str]:
+    return {
+        "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
+        "LANG": "C.UTF-8",
+        "ROS_DOMAIN_ID": str(domain),
+        "CYCLONEDDS_URI": CONFIG,
+        **extra,
+    }
+
+
+def _entity(name: str, x: float, speed: float, heading: float = 0.0) -> Any:
+    from simcore.world.state import BoundingBox, EntityState
+
+    return EntityState(
+        name=name,
+        object_type="vehicle",
+        category="car",
+        x=x,
+        y=0.5,
+        z=0.0,
+        heading=heading,
+        pitch=0.0,
+        roll=0.0,
+        speed=speed,
+        acceleration=0.0,
+        yaw_rate=0.0,
+        bbox=BoundingBox(1.4, 0.0, 0.75, 4.5, 1.9, 1.5),
+    )
+
+
+# --- naming and byte identity ----------------------------------------------------------------------------
+
+
+def test_ros2_names() -> None:
+    assert dds_typename("sensor_msgs/msg/PointCloud2") == "sensor_msgs::msg::dds_::PointCloud2_"
+    assert ros_typename("nav_msgs::msg::dds_::Odometry_") == "nav_msgs/msg/Odometry"
+    assert ros_typename("DDS::ParticipantBuiltinTopicData") is None
+    assert ros_topic("rt/carlos/Ego/odometry") == "/carlos/Ego/odometry"
+    assert ros_topic("carlos/bus/subscriptions") is None
+    assert idl_type("vision_msgs/msg/Detection3DArray").__idl_typename__ == (
+        "vision_msgs::msg::dds_::Detection3DArray_"
+    )
+
+
+def _to_idl(value: Any, typename: str) -> Any:
+    """A rosbags message as an instance of the generated IDL type (field by field)."""
+    cls = idl_type(typename)
+    _, fields = TYPESTORE.fielddefs[typename]
+    kwargs: dict[str, Any] = {}
+    for name, (kind, detail) in fields:
+        item = getattr(value, name)
+        if kind == 2:  # nested message
+            kwargs[name] = _to_idl(item, detail)
+        elif kind in (3, 4) and detail[0][0] == 2:  # array/sequence of messages
+            kwargs[name] = [_to_idl(x, detail[0][1]) for x in item]
+        elif isinstance(item, np.ndarray):
+            kwargs[name] = item.tolist()
+        else:
+            kwargs[name] = item
+    return cls(**kwargs)
+
+
+def _samples() -> list[Any]:
+    from simcore.transport import messages as m
+
+    t = TYPESTORE.types
+    fields = [
+        t["sensor_msgs/msg/PointField"](name=n, offset=4 * i, datatype=7, count=1)
+        for i, n in enumerate(["x", "y", "z", "intensity", "label"])
+    ]
+    points = np.random.default_rng(1).random((7, 5), dtype=np.float32)
+    cloud = t["sensor_msgs/msg/PointCloud2"](
+        header=m.Header(stamp=m.stamp(1.25), frame_id="Ego/lidar"),
+        height=1,
+        width=7,
+        fields=fields,
+        is_bigendian=False,
+        point_step=20,
+        row_step=140,
+        data=points.view(np.uint8).reshape(-1),
+        is_dense=True,
+    )
+    image = t["sensor_msgs/msg/Image"](
+        header=m.Header(stamp=m.stamp(0.1), frame_id="cam"),
+        height=2,
+        width=3,
+        encoding="rgb8",
+        is_bigendian=0,
+        step=9,
+        data=np.arange(18, dtype=np.uint8),
+    )
+    ackermann = t["ackermann_msgs/msg/AckermannDriveStamped"](
+        header=m.Header(stamp=m.stamp(2.0), frame_id="Ego/base_link"),
+        drive=t["ackermann_msgs/msg/AckermannDrive"](
+            steering_angle=0.1, steering_angle_velocity=0.0, speed=12.5, acceleration=-1.0, jerk=0.0
+        ),
+    )
+    from simcore.world.state import WorldFrame
+
+    frame = WorldFrame(
+        step=35, time=3.5, entities=(_entity("Ego", 1.0, 10.0, 0.3), _entity("Lead car", 30.0, 8.0))
+    )
+    world = [msg for _, _, msg in m.frame_messages(frame)]
+    return [cloud, image, ackermann, m.status(frame, "ended", {"a": "b"}), t["std_msgs/msg/Empty"](), *world]
+
+
+def test_rosbags_cdr_is_byte_identical_to_cyclonedds_xcdr1_of_the_generated_types() -> None:
+    for msg in _samples():
+        typename = msg.__msgtype__
+        ours = serialize(msg)
+        theirs = _to_idl(msg, typename).serialize(use_version_2=False)
+        assert ours == theirs, typename
+        assert ours[:4] == b"\x00\x01\x00\x00"  # CDR_LE, options 0
+        back = idl_type(typename).deserialize(ours)  # and cyclonedds reads it back to the same bytes
+        assert back.serialize(use_version_2=False) == ours, typename
+
+
+def _unpadded(hexdata: str, length: int) -> bytes:
+    """A payload as received, checked to be padded to a multiple of 4, without its padding."""
+    data = bytes.fromhex(hexdata)
+    assert len(data) == length + (-length % 4)
+    return data[:length]
+
+
+def test_decode_strips_transport_padding_and_refuses_what_is_not_the_type() -> None:
+    msg = TYPESTORE.types["std_msgs/msg/String"](data="hello")  # 10 bytes
+    data = serialize(msg)
+    decoded, exact = decode(data + b"\x00\x07", "std_msgs/msg/String")  # pad bytes: any value
+    assert exact == data and decoded.data == "hello"
+    assert decode(data, "std_msgs/msg/String")[1] is data
+    with pytest.raises(ValueError, match="left over"):
+        decode(data + b"\x00\x00\x00\x00\x00", "std_msgs/msg/String")
+    with pytest.raises(ValueError, match="not a"):
+        decode(data, "nav_msgs/msg/Odometry")
+    with pytest.raises(ValueError, match="CDR"):
+        decode(b"\x01\x00\x00\x00", "std_msgs/msg/String")
+
+
+# --- wire-level interop with a plain cyclonedds process (what rmw_cyclonedds_cpp sees) ---------------------
+
+ROS_NODE = textwrap.dedent(
+    """
+    # A stand-in for a ROS 2 node on rmw_cyclonedds_cpp: plain cyclonedds, IDL written by hand as
+    # rosidl_generator_dds_idl generates it. It never imports CARLOS.
+    import json, sys, time
+    from dataclasses import dataclass
+    from cyclonedds.domain import Domain, DomainParticipant
+    from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+    from cyclonedds.topic import Topic
+    from cyclonedds.sub import DataReader
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.qos import Qos, Policy
+    from cyclonedds.idl import IdlStruct
+    from cyclonedds.idl.types import float32, float64, int32, uint32, array
+    from cyclonedds.util import duration
+    from cyclonedds._clayer import ddspy_take
+    from cyclonedds.core import SampleState, ViewState, InstanceState
+
+    domain, config = int(sys.argv[1]), sys.argv[2]
+
+    @dataclass
+    class Time_(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+        sec: int32
+        nanosec: uint32
+
+    @dataclass
+    class Header_(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+        stamp: Time_
+        frame_id: str
+
+    @dataclass
+    class String_(IdlStruct, typename="std_msgs::msg::dds_::String_"):
+        data: str
+
+    @dataclass
+    class Point_(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+        x: float64
+        y: float64
+        z: float64
+
+    @dataclass
+    class Quaternion_(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+        x: float64
+        y: float64
+        z: float64
+        w: float64
+
+    @dataclass
+    class Pose_(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+        position: Point_
+        orientation: Quaternion_
+
+    @dataclass
+    class PoseWithCovariance_(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
+        pose: Pose_
+        covariance: array[float64, 36]
+
+    @dataclass
+    class Vector3_(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
+        x: float64
+        y: float64
+        z: float64
+
+    @dataclass
+    class Twist_(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
+        linear: Vector3_
+        angular: Vector3_
+
+    @dataclass
+    class TwistWithCovariance_(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
+        twist: Twist_
+        covariance: array[float64, 36]
+
+    @dataclass
+    class Odometry_(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
+        header: Header_
+        child_frame_id: str
+        pose: PoseWithCovariance_
+        twist: TwistWithCovariance_
+
+    @dataclass
+    class AckermannDrive_(IdlStruct, typename="ackermann_msgs::msg::dds_::AckermannDrive_"):
+        steering_angle: float32
+        steering_angle_velocity: float32
+        speed: float32
+        acceleration: float32
+        jerk: float32
+
+    @dataclass
+    class AckermannDriveStamped_(IdlStruct, typename="ackermann_msgs::msg::dds_::AckermannDriveStamped_"):
+        header: Header_
+        drive: AckermannDrive_
+
+    Domain(domain, config)
+    dp = DomainParticipant(domain)
+    pubs = BuiltinDataReader(dp, BuiltinTopicDcpsPublication)
+    wanted = {"rt/carlos/Ego/odometry", "rt/chatter", "rt/tf_static"}
+    seen = {}
+    deadline = time.time() + 30
+    while not wanted <= set(seen) and time.time() < deadline:
+        for ep in pubs.take(N=100):
+            if ep.participant_key != dp.guid:
+                q = ep.qos
+                seen[ep.topic_name] = {
+                    "type": ep.type_name,
+                    "reliable": isinstance(q[Policy.Reliability], Policy.Reliability.Reliable),
+                    "durability": str(q[Policy.Durability]),
+                    "history": str(q[Policy.History]),
+                }
+        time.sleep(0.02)
+    print(json.dumps({"discovered": seen}), flush=True)
+
+    ros_default = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(10),
+                      Policy.Durability.Volatile)
+    latched = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(1),
+                  Policy.Durability.TransientLocal)
+    odom = DataReader(dp, Topic(dp, "rt/carlos/Ego/odometry", Odometry_), ros_default)
+    chatter = DataReader(dp, Topic(dp, "rt/chatter", String_), ros_default)
+    static = DataReader(dp, Topic(dp, "rt/tf_static", String_), latched)
+    control = DataWriter(dp, Topic(dp, "rt/carlos/Ego/control", AckermannDriveStamped_), ros_default)
+    deadline = time.time() + 30
+    while time.time() < deadline and not (
+        odom.get_subscription_matched_status().current_count
+        and chatter.get_subscription_matched_status().current_count
+        and control.get_publication_matched_status().current_count
+    ):
+        time.sleep(0.01)
+    print("READY", flush=True)
+
+    got = {"odometry": [], "odometry_cdr": [], "chatter": [], "chatter_cdr": [], "tf_static": []}
+    mask = SampleState.Any | ViewState.Any | InstanceState.Any
+    deadline = time.time() + 30
+    while time.time() < deadline and (len(got["odometry"]) < 5 or len(got["chatter"]) < 3):
+        for data, info in ddspy_take(odom._ref, mask, 10):
+            o = Odometry_.deserialize(data)
+            got["odometry"].append([o.header.stamp.sec, o.header.stamp.nanosec, o.header.frame_id,
+                                    o.child_frame_id, o.pose.pose.position.x, o.pose.covariance[7],
+                                    o.twist.twist.linear.x, info.source_timestamp])
+            got["odometry_cdr"].append(data.hex())
+        for data, info in ddspy_take(chatter._ref, mask, 10):
+            got["chatter"].append(String_.deserialize(data).data)
+            got["chatter_cdr"].append(data.hex())
+        time.sleep(0.005)
+    for s in static.take(N=10):
+        got["tf_static"].append(s.data)
+    for i in range(3):
+        control.write(AckermannDriveStamped_(
+            header=Header_(stamp=Time_(sec=7, nanosec=i), frame_id="Ego/base_link"),
+            drive=AckermannDrive_(steering_angle=0.25, steering_angle_velocity=0.0, speed=3.0 + i,
+                                  acceleration=0.0, jerk=0.0)))
+    control.wait_for_acks(duration(seconds=10))
+    print(json.dumps(got), flush=True)
+    """
+)
+
+
+def test_a_plain_cyclonedds_node_sees_ros2_topics_types_qos_and_values(domain: int) -> None:
+    from simcore.transport import messages as m
+
+    t = TYPESTORE.types
+    bus = DdsBus(domain, config=CONFIG, history=10)  # ROS 2's default profile exactly
+    controls: list[Message] = []
+    got_controls = threading.Event()
+
+    def on_control(message: Message) -> None:
+        controls.append(message)
+        if len(controls) == 3:
+            got_controls.set()
+
+    bus.subscribe("/carlos/Ego/control", on_control)
+    odom_pub = bus.advertise("/carlos/Ego/odometry", "nav_msgs/msg/Odometry")
+    chatter_pub = bus.advertise("/chatter", "std_msgs/msg/String")
+    # /tf_static as std_msgs/String here only to keep the hand-written IDL short: what counts is its QoS
+    static_pub = bus.advertise("/tf_static", "std_msgs/msg/String")
+    static_pub.publish(t["std_msgs/msg/String"](data="latched before anyone listened"), 0.0)
+    node = subprocess.Popen(
+        [sys.executable, "-c", ROS_NODE, str(domain), CONFIG],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=_env(domain),
+    )
+    try:
+        assert node.stdout is not None
+        discovered = json.loads(node.stdout.readline())["discovered"]
+        assert node.stdout.readline().strip() == "READY"
+        odometries = []
+        for i in range(5):
+            from simcore.world.state import WorldFrame
+
+            frame = WorldFrame(step=i, time=0.1 * i, entities=(_entity("Ego", float(i), 2.0 * i),))
+            msg = m.odometry(frame, "Ego")
+            msg.pose.covariance[7] = 0.25
+            odometries.append(msg)
+            odom_pub.publish(msg, frame.time)
+        words = ["hello", "wörld", "abcd"]  # odd lengths: no padding added to the CDR
+        for word in words:
+            chatter_pub.publish(t["std_msgs/msg/String"](data=word), 1.0)
+        out, err = node.communicate(timeout=60)
+    finally:
+        if node.poll() is None:
+            node.kill()
+    assert node.returncode == 0, err
+    got = json.loads(out.strip().splitlines()[-1])
+
+    # discovery through DCPSPublication: ROS 2 topic and type names, ROS default QoS, latched /tf_static
+    assert discovered["rt/carlos/Ego/odometry"]["type"] == "nav_msgs::msg::dds_::Odometry_"
+    assert discovered["rt/chatter"]["type"] == "std_msgs::msg::dds_::String_"
+    for name in ("rt/carlos/Ego/odometry", "rt/chatter"):
+        assert discovered[name]["reliable"] is True
+        assert "Volatile" in discovered[name]["durability"]
+        assert "depth=10" in discovered[name]["history"]
+    assert "TransientLocal" in discovered["rt/tf_static"]["durability"]
+    assert "depth=1)" in discovered["rt/tf_static"]["history"]
+
+    # values as the hand-written types read them, bytes as rosbags (= ROS 2) serialises them
+    assert [row[:4] for row in got["odometry"]] == [
+        [0, 100_000_000 * i, "map", "Ego/base_link"] for i in range(5)
+    ]
+    assert [row[4] for row in got["odometry"]] == [0.0, 1.0, 2.0, 3.0, 4.0]
+    assert {row[5] for row in got["odometry"]} == {0.25}
+    assert [row[6] for row in got["odometry"]] == [0.0, 2.0, 4.0, 6.0, 8.0]
+    assert [row[7] for row in got["odometry"]] == [round(0.1 * i * 1e9) for i in range(5)]  # source stamp
+    # on the wire: rosbags' bytes, encapsulation options 0, padded to 4 bytes (by cyclonedds, as for
+    # rmw_cyclonedds_cpp's samples; the pad bytes' values are undefined); decode() takes the padding off
+    assert [
+        _unpadded(h, len(serialize(msg))) for h, msg in zip(got["odometry_cdr"], odometries, strict=True)
+    ] == [serialize(msg) for msg in odometries]
+    assert got["chatter"] == words
+    strings = [serialize(t["std_msgs/msg/String"](data=w)) for w in words]
+    assert [_unpadded(h, len(b)) for h, b in zip(got["chatter_cdr"], strings, strict=True)] == strings
+    assert [len(b) % 4 for b in strings] == [2, 3, 1]
+    assert [decode(bytes.fromhex(h), "std_msgs/msg/String")[1] for h in got["chatter_cdr"]] == strings
+    assert got["tf_static"] == ["latched before anyone listened"]
+
+    # and the other way: a ROS 2 node's command reaches the bus, typed and deserialisable
+    assert got_controls.wait(15)
+    assert [c.typename for c in controls] == ["ackermann_msgs/msg/AckermannDriveStamped"] * 3
+    assert [c.obj().drive.speed for c in controls] == [3.0, 4.0, 5.0]
+    assert controls[0].obj().header.frame_id == "Ego/base_link"
+    assert "/carlos/Ego/control" in bus.graph()
+    bus.close()
+
+
+def test_glob_subscriber_in_another_process_gets_every_message_from_the_first(domain: int) -> None:
+    """A `*` subscriber (the recorder) creates its readers on discovery; the writer waits for it, so the
+    first messages are not lost; the simulated time travels as the source timestamp."""
+    code = textwrap.dedent(
+        f"""
+        import sys, time, json
+        from simcore.transport.dds import DdsBus
+        bus = DdsBus({domain}, config={CONFIG!r})
+        got = []
+        bus.subscribe("*", lambda m: got.append((m.topic, m.time_s, m.cdr().hex())))
+        print("SUBSCRIBED", flush=True)
+        deadline = time.time() + 30
+        while len(got) < 301 and time.time() < deadline:
+            time.sleep(0.02)
+        bus.drain()
+        print(json.dumps(got), flush=True)
+        bus.close()
+        """
+    )
+    sub = subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=_env(domain), cwd=ROOT
+    )
+    try:
+        assert sub.stdout is not None
+        assert sub.stdout.readline().strip() == "SUBSCRIBED"
+        bus = DdsBus(domain, config=CONFIG)
+        assert bus.wait_for_subscribers("/clock", 1, timeout=20)
+        t = TYPESTORE.types
+        clock = bus.advertise("/clock", "rosgraph_msgs/msg/Clock")
+        status = bus.advertise("/carlos/status", "diagnostic_msgs/msg/DiagnosticStatus")
+        sent = []
+        for i in range(300):
+            msg = t["rosgraph_msgs/msg/Clock"](clock=t["builtin_interfaces/msg/Time"](sec=i, nanosec=1))
+            clock.publish(msg, i * 0.05)
+            sent.append(("/clock", i * 0.05, serialize(msg).hex()))
+        from simcore.pod import _status_message
+
+        verdict = _status_message("ended", 15.0, {"summary": "{}"})
+        status.publish(verdict, 15.0)
+        sent.append(("/carlos/status", 15.0, serialize(verdict).hex()))
+        out, _ = sub.communicate(timeout=60)
+        bus.close()
+    finally:
+        if sub.poll() is None:
+            sub.kill()
+    got = [(topic, round(t * 1e9), data) for topic, t, data in json.loads(out.strip().splitlines()[-1])]
+    assert got == [(topic, round(t * 1e9), data) for topic, t, data in sent]  # time: ns, as in the MCAP
+
+
+# --- the pod's roles as separate processes over DDS ---------------------------------------------------------
+
+
+def _manifest(tmp_path: Path, output: str) -> Path:
+    body = {
+        "apiVersion": "carlos.dev/v1alpha1",
+        "kind": "SimulationRun",
+        "metadata": {"name": "dds-pod"},
+        "spec": {
+            "scenarios": [
+                {"name": "braking", "openscenario": (ROOT / "examples/scenarios/braking.xosc").as_uri()}
+            ],
+            "sweep": {"matrix": {"Speed": [15.0, 20.0]}},
+            "simulation": {"stepSeconds": 0.1, "maxSeconds": 3},
+            "evaluation": {"criteria": ["simSeconds <= 100"]},
+            "output": {"url": output},
+        },
+    }
+    path = tmp_path / "simulationrun.yaml"
+    path.write_text(yaml.safe_dump(body))
+    return path
+
+
+def _messages(path: Path) -> list[tuple[str, int, bytes]]:
+    from mcap.reader import make_reader
+
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        return sorted(
+            (channel.topic, message.log_time, bytes(message.data))
+            for _, channel, message in reader.iter_messages(log_time_order=True)
+        )
+
+
+def test_pod_roles_over_dds_record_what_the_single_process_run_records(domain: int, tmp_path: Path) -> None:
+    from tests.kubelet import _wait_port, free_port
+
+    single = tmp_path / "single"
+    pod_out = tmp_path / "pod"
+    manifest = _manifest(tmp_path, pod_out.as_uri())
+    run = subprocess.run(
+        [CARLOS, "run", str(manifest), "-i", "0", "--output", single.as_uri()],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+    bus_port, ready_port = free_port(), free_port()
+    env = _env(
+        domain,
+        JOB_COMPLETION_INDEX="0",
+        CARLOS_SPEC=str(manifest),
+        CARLOS_OUTPUT_URL=pod_out.as_uri(),
+        CARLOS_TRANSPORT="dds",
+        CARLOS_BUS_PORT=str(bus_port),
+        CARLOS_RECORDER_READY_PORT=str(ready_port),
+        CARLOS_SCRATCH=str(tmp_path / "scratch"),
+    )
+    logs = {role: tmp_path / f"{role}.log" for role in ("bridge", "recorder", "simcore")}
+    procs: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(role: str) -> subprocess.Popen[bytes]:
+        with logs[role].open("wb") as log:
+            procs[role] = subprocess.Popen(
+                [CARLOS, "pod", "--role", role], env=env, stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path
+            )
+        return procs[role]
+
+    try:
+        _wait_port(bus_port, 60, start("bridge"))
+        _wait_port(ready_port, 60, start("recorder"))
+        assert start("simcore").wait(300) == 0, logs["simcore"].read_text()
+        for role in ("recorder", "bridge"):
+            procs[role].send_signal(signal.SIGTERM)
+            assert procs[role].wait(60) == 0, logs[role].read_text()
+    finally:
+        for proc in procs.values():
+            if proc.poll() is None:
+                proc.kill()
+    summary = json.loads((pod_out / "dds-pod/0/summary.json").read_text())
+    assert summary["status"] == "passed"
+    ours = _messages(pod_out / "dds-pod/0/recording.mcap")
+    theirs = _messages(single / "dds-pod/0/recording.mcap")
+    # the pod adds one message: simcore's verdict on /carlos/status (the index summary for the recorder)
+    verdicts = [m for m in ours if m[0] == "/carlos/status" and b"summary" in m[2] and m not in theirs]
+    assert len(verdicts) == 1
+    ours.remove(verdicts[0])
+    assert len(theirs) > 100
+    assert {topic for topic, _, _ in theirs} >= {"/clock", "/tf", "/carlos/objects", "/carlos/status"}
+    assert ours == theirs
+    assert "ROS 2 topic /carlos/Ego/odometry [nav_msgs/msg/Odometry]" in logs["bridge"].read_text()
