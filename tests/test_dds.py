@@ -595,3 +595,19 @@ def test_pod_roles_over_dds_record_what_the_single_process_run_records(domain: i
     assert {topic for topic, _, _ in theirs} >= {"/clock", "/tf", "/carlos/objects", "/carlos/status"}
     assert ours == theirs
     assert "ROS 2 topic /carlos/Ego/odometry [nav_msgs/msg/Odometry]" in logs["bridge"].read_text()
+
+
+def test_pod_env_validates_the_transport_and_the_domain_id() -> None:
+    from simcore.errors import BadInput
+    from simcore.pod import PodEnv
+
+    base = {"JOB_COMPLETION_INDEX": "0", "CARLOS_SPEC": "/spec.yaml", "CARLOS_OUTPUT_URL": "file:///out"}
+    assert PodEnv.from_env(base).transport == "loopback"
+    env = PodEnv.from_env({**base, "CARLOS_TRANSPORT": "dds", "ROS_DOMAIN_ID": "42"})
+    assert (env.transport, env.domain_id) == ("dds", 42)
+    assert PodEnv.from_env({**base, "CARLOS_TRANSPORT": "dds"}).domain_id == 0
+    with pytest.raises(BadInput, match="CARLOS_TRANSPORT='zmq' is not one of loopback, dds"):
+        PodEnv.from_env({**base, "CARLOS_TRANSPORT": "zmq"})
+    for bad in ("abc", "-1", "233"):
+        with pytest.raises(BadInput, match="ROS_DOMAIN_ID"):
+            PodEnv.from_env({**base, "CARLOS_TRANSPORT": "dds", "ROS_DOMAIN_ID": bad})
