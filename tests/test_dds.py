@@ -611,3 +611,36 @@ def test_pod_env_validates_the_transport_and_the_domain_id() -> None:
     for bad in ("abc", "-1", "233"):
         with pytest.raises(BadInput, match="ROS_DOMAIN_ID"):
             PodEnv.from_env({**base, "CARLOS_TRANSPORT": "dds", "ROS_DOMAIN_ID": bad})
+
+
+def test_own_publications_arrive_once_synchronously_and_other_buses_get_them_once(domain: int) -> None:
+    t = TYPESTORE.types
+    a, b = DdsBus(domain, config=CONFIG), DdsBus(domain, config=CONFIG)
+    try:
+        own: list[float] = []
+        a.subscribe("/chat*", lambda m: own.append(m.time_s))
+        other: list[tuple[str, float, str]] = []
+        done = threading.Event()
+
+        def on_other(message: Message) -> None:
+            other.append((message.topic, message.time_s, message.obj().data))
+            if len(other) == 20:
+                done.set()
+
+        b.subscribe("*", on_other)
+        assert a.wait_for_subscribers("/chatter", 1, timeout=20)  # b's "*"
+        chatter = a.advertise("/chatter", "std_msgs/msg/String")
+        for i in range(20):
+            chatter.publish(t["std_msgs/msg/String"](data=f"m{i}"), i * 0.5)
+            assert len(own) == i + 1  # delivered before publish returned
+        assert done.wait(20)
+        assert b.drain()
+        assert own == [i * 0.5 for i in range(20)]
+        assert other == [("/chatter", i * 0.5, f"m{i}") for i in range(20)]
+        assert b.discovered == {"/chatter": "std_msgs/msg/String"}
+        assert a.flush(10)
+        with pytest.raises(ValueError, match="advertised as"):
+            a.advertise("/chatter", "std_msgs/msg/Empty")
+    finally:
+        a.close()
+        b.close()
