@@ -680,3 +680,46 @@ def test_an_entity_in_a_lane_that_narrows_to_nothing_moves_to_the_next_inner_lan
     _, trace = run(path, OpenDrive.from_file(xodr), 8.0)
     assert trace[5.0]["lane"] == -2  # s = 60: still 0.5 m wide
     assert trace[7.0]["lane"] == -1 and trace[7.0]["y"] == pytest.approx(-1.75)  # s = 80: at lane -1's centre
+
+
+def synchronize(final: str) -> str:
+    return f"""<PrivateAction><SynchronizeAction masterEntityRef="Ego" targetToleranceMaster="1.0" targetTolerance="1.0">
+      <TargetPositionMaster><LanePosition roadId="1" laneId="-2" s="300" offset="0"/></TargetPositionMaster>
+      <TargetPosition><LanePosition roadId="1" laneId="-1" s="250" offset="0"/></TargetPosition>
+      {final}</SynchronizeAction></PrivateAction>"""
+
+
+def synch_scenario(tmp_path: Path, final: str, ego_speed: float) -> Path:
+    path = scenario(
+        tmp_path,
+        event("Sync", synchronize(final), sim_time("greaterThan", 0.0)),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0, speed=ego_speed) + place("Lead", 100.0, lane=-1, speed=10.0),
+    )
+    path.write_text(
+        path.read_text().replace(
+            '<EntityRef entityRef="Ego"/></Actors>', '<EntityRef entityRef="Lead"/></Actors>'
+        )
+    )
+    return path
+
+
+def test_synchronize_reaches_the_target_with_the_final_speed_when_the_master_reaches_its_own(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    path = synch_scenario(tmp_path, '<FinalSpeed><AbsoluteSpeed value="15"/></FinalSpeed>', 20.0)
+    engine = ScenarioEngine(load_scenario(path), road=road, sumo=None, step_seconds=0.05)
+    ego, lead = engine.bodies["Ego"], engine.bodies["Lead"]
+    while ego.s < 299.0 - 1e-9:  # the master is within its tolerance
+        engine.advance()
+    assert lead.s == pytest.approx(249.0, abs=1.0)  # … and so is the actor
+    engine.advance()
+    assert lead.speed == pytest.approx(15.0)  # the action ended with the final speed
+    assert any("Sync: endTransition" in line for line in engine.log)
+
+
+def test_synchronize_waits_while_the_master_stands_still(tmp_path: Path, road: OpenDrive) -> None:
+    path = synch_scenario(tmp_path, '<FinalSpeed><AbsoluteSpeed value="15"/></FinalSpeed>', 0.0)
+    engine, trace = run(path, road, 2.0)
+    assert engine.bodies["Lead"].speed == 0.0
+    assert trace[2.0]["x"] == pytest.approx(100.0)  # the master did not move either

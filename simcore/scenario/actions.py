@@ -548,21 +548,32 @@ class SpeedProfileRuntime(Runtime):
 
 
 class SynchronizeRuntime(Runtime):
-    """Adapts the actor's speed so it reaches its target position when the master reaches its own; with a
-    final speed, along a quadratic speed profile that ends at that speed."""
+    """Adapts the actor's speed so it reaches its target position when the master reaches its own (within the
+    tolerances). Without a final speed: a constant acceleration to get there in time. With one, esmini's
+    profile: first a phase of constant acceleration toward an apex speed (or a stop and wait when the
+    target is too close), then a linear change to the final speed on arrival; an optional steady state
+    keeps the final speed over the last distance (or time)."""
 
     domain = "longitudinal"
+    MAX_DECELERATION = 8.0  # m/s², stopping at once when the target is far too close
 
     def __init__(self, engine: ScenarioEngine, actor: Body, action: m.SynchronizeAction) -> None:
         super().__init__(engine, actor)
         self.action = action
-        self.master_previous = math.inf
+        self.mode = "none"  # none | nonlinear | linear | stopped | stop | waiting | steady
+        self.convex = False
+        self.last_dist = math.inf
+        self.last_master_dist = math.inf
 
     def start(self) -> None:
         e = self.engine
         self.target = e.resolve_position(self.action.position)
         self.master_target = e.resolve_position(self.action.master_position)
         self.master = e.body(self.action.master)
+        final = self._final_speed()
+        self.steady_distance: float | None = self.action.steady_distance
+        if self.action.steady_time is not None and final is not None:
+            self.steady_distance = self.action.steady_time * final
 
     def _final_speed(self) -> float | None:
         if self.action.final_speed is not None:
@@ -573,45 +584,114 @@ class SynchronizeRuntime(Runtime):
         return None
 
     def step(self, dt: float) -> None:
-        e = self.engine
-        a = self.actor
-        d_master = e.distance_to(self.master, self.master_target)
-        d_me = e.distance_to(a, self.target)
+        e, a, action = self.engine, self.actor, self.action
+        master_dist = e.distance_to(self.master, self.master_target)
+        dist = e.distance_to(a, self.target)
+        done = (
+            dist < action.tolerance + _EPS
+            or master_dist < action.master_tolerance + _EPS
+            or dist > self.last_dist
+            or master_dist > self.last_master_dist
+        )
+        self.last_dist, self.last_master_dist = dist, master_dist
+        # measured to the edge of the tolerance areas
+        dist = max(dist - action.tolerance, _EPS)
+        master_dist = max(master_dist - action.master_tolerance, _EPS)
+        master_time = _BIG
+        if self.master.speed > _EPS:
+            master_time = master_dist / self.master.speed
+            done = done or master_time < dt
         final = self._final_speed()
-        reached = d_master <= max(self.action.master_tolerance, abs(self.master.speed) * dt * 0.5, 0.05)
-        if reached or d_master > self.master_previous + 1e-6:
+        if done:
             if final is not None:
                 a.speed = final
             self.done = True
             return
-        self.master_previous = d_master
-        if self.master.speed <= 1e-3:
-            if final is not None:
-                # the master stands still: with a final speed to reach, the actor waits for it (as esmini)
-                a.speed = 0.0
-            return
-        remaining = d_master / self.master.speed
-        if remaining <= dt:
-            if final is not None:
-                a.speed = final
-            return
         if final is None:
-            a.speed = max(d_me / remaining, 0.0)
+            # no final speed: constant acceleration to cover the distance in the master's time
+            end_speed = 2 * dist / master_time - a.speed
+            a.speed += (end_speed - a.speed) / master_time * dt
             return
-        v0, T, d = a.speed, remaining, d_me
-        # a steady state: the final speed is reached this far (or this long) before the target
-        if self.action.steady_distance is not None and final > 1e-6:
-            d -= self.action.steady_distance
-            T -= self.action.steady_distance / final
-        elif self.action.steady_time is not None:
-            d -= final * self.action.steady_time
-            T -= self.action.steady_time
-        if dt >= T or d <= 0:
+        if self.steady_distance is not None and self.mode != "steady":
+            time_to_steady = self.steady_distance / final if final > _EPS else _BIG
+            if dist - self.steady_distance < _EPS or master_time - time_to_steady < _EPS:
+                self.mode = "steady"
+            else:
+                dist -= self.steady_distance
+                master_time -= time_to_steady
+        if self.mode == "steady":
             a.speed = final
             return
-        c = 6.0 * ((final - v0) * T / 2.0 - d + v0 * T) / T**3
-        b = (final - v0 - c * T * T) / T
-        a.speed = max(v0 + b * dt + c * dt * dt, 0.0)
+        if master_time >= _BIG and self.mode != "stop":
+            a.speed = 0.0  # the master stands still: wait for it (as esmini)
+            return
+        if self.mode == "waiting":
+            if master_time >= _BIG:
+                return
+            self.mode = "none"
+        if self.mode == "stop":
+            a.speed -= self.MAX_DECELERATION * dt
+            if a.speed < 0:
+                a.speed = 0.0
+                self.mode = "waiting"  # until the master moves
+            return
+        if self.mode == "stopped":
+            if master_time < 2 * dist / final:
+                self.mode = "linear"  # time to move again
+            else:
+                a.speed = 0.0
+                return
+        if self.mode == "linear":
+            if master_time > _BIG - 1 or master_time < 0.001 or dist < 0.001:
+                a.speed = 0.0
+            else:
+                a.speed = max(0.0, 2 * dist / master_time - max(0.0, final))
+            return
+        if (
+            self.mode == "nonlinear"
+            and master_time < _BIG
+            and abs(a.speed - (2 * dist / master_time - final)) < 0.1
+        ):
+            self.mode = "linear"  # on the straight line to the final speed: follow it from the next step
+            return
+        if self.mode == "none":
+            self.mode = "nonlinear"
+            self.convex = (final + a.speed) / 2 < dist / master_time  # rush first, else linger first
+        acc, apex = self._first_phase(dist, master_time, a.speed, final)
+        if (not self.convex and acc > 0) or (self.convex and acc < 0):
+            self.mode = "linear"  # past the apex: the speed is kept this step
+            acc = 0.0
+        if self.mode == "nonlinear" and apex < 0:
+            # even stopping at once would be too far: decelerate to a stop, wait, then go
+            v0 = a.speed
+            t1 = 2 * v0 * dist / (v0 * v0 + final * final) if v0 * v0 + final * final > 0 else 0.0
+            acc = -v0 / t1 if abs(t1) > _EPS else 0.0
+            if t1 * v0 / 2 > dist / 2:
+                acc = -self.MAX_DECELERATION
+                self.mode = "stop"
+            if v0 + acc * dt < 0:
+                a.speed = 0.0
+                self.mode = "stopped"
+                return
+        a.speed += acc * dt
+
+    @staticmethod
+    def _first_phase(s: float, t: float, v0: float, v1: float) -> tuple[float, float]:
+        """(acceleration, apex speed) of the first of two phases of constant acceleration that cover s in t,
+        starting at v0 and ending at v1, the second phase being a straight line to v1."""
+        if abs(v1 - v0) < _EPS:
+            apex = (s - t / 2 * v0) / (t / 2)
+            return (apex - v0) / (t / 2), apex
+        radicand = 2 * s * s - 2 * (v1 + v0) * t * s + (v1 * v1 + v0 * v0) * t * t
+        if radicand < 0:
+            return 0.0, 0.0
+        root = math.sqrt(2.0) * math.sqrt(radicand)
+        for sign in (1.0, -1.0):
+            x = -(sign * root + 2 * s - 2 * v1 * t) / (2 * (v1 - v0))
+            apex = (2 * s - sign * root) / (2 * t)
+            if 0 < x < t:
+                return (apex - v0) / x, apex
+        return 0.0, 0.0
 
 
 class TrailerRuntime(Runtime):
