@@ -44,14 +44,20 @@ class Measure:
         self._step = -1
         self._frame: dict[str, float] = {}  # body name → heading of its measuring frame (this step)
         self._road_t: dict[str, float] = {}  # body name → t of its reference point (this step)
+        self._boxes: dict[str, Box] = {}  # body name → bounding box footprint (this step)
         self._plans: dict[tuple[str, int, str], list[tuple[str, int]] | None] = {}
         self._points: dict[tuple[float, float, str | None], tuple[str, float, float] | None] = {}
 
     def _fresh(self) -> None:
         if self._step != self.engine.step_index:
             self._step = self.engine.step_index
-            self._frame.clear()
-            self._road_t.clear()
+            self.clear()
+
+    def clear(self) -> None:
+        """Forget what was measured on the bodies (they moved)."""
+        self._frame.clear()
+        self._road_t.clear()
+        self._boxes.clear()
 
     # --- frames ---------------------------------------------------------------------------------------
 
@@ -200,7 +206,26 @@ class Measure:
         return dx if kind == "longitudinal" else dy
 
     def _box(self, body: Body) -> Box:
-        return Box.of(self.engine.state_of(body))
+        """The entity's bounding box footprint (this step)."""
+        self._fresh()
+        cached = self._boxes.get(body.name)
+        if cached is None:
+            box = body.entity.box
+            c, s = math.cos(body.heading), math.sin(body.heading)
+            cx = body.x + c * box.center_x - s * box.center_y
+            cy = body.y + s * box.center_x + c * box.center_y
+            hl, hw = box.length / 2, box.width / 2
+            lc, ls, wc, ws = hl * c, hl * s, hw * c, hw * s
+            cached = self._boxes[body.name] = Box(
+                (
+                    (cx + lc - ws, cy + ls + wc),
+                    (cx - lc - ws, cy - ls + wc),
+                    (cx - lc + ws, cy - ls - wc),
+                    (cx + lc + ws, cy + ls - wc),
+                ),
+                ((c, s), (-s, c)),
+            )
+        return cached
 
     # --- headway and time to collision ------------------------------------------------------------------
 

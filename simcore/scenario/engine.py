@@ -353,6 +353,7 @@ class ScenarioEngine:
         self._target_roads: dict[tuple[float, float, str], Any] = {}
         self._fixed_points: dict[int, tuple[m.Position, tuple[float, float, float, float]]] = {}
         self.measure = Measure(self)
+        self._state_nodes: dict[int, list[Node]] = {}  # StoryboardElementStateCondition → its elements
         self.owner: Body | None = None  # the actor whose action runs now ("$owner")
         self.parameter_values: dict[str, Any] = dict(scenario.parameters)
         self.variables: dict[str, Any] = dict(scenario.variables)
@@ -640,8 +641,9 @@ class ScenarioEngine:
     def place(self, body: Body, position: m.Position) -> None:
         """Teleport: pose from the position; road coordinates from the road network when on a road."""
         x, y, z, heading = self.resolve_position(position, body)
-        self._states.clear()
+        self._moved()
         body.x, body.y, body.z, body.heading = x, y, z, heading
+        body.posed = None
         body.placed = True
         body.gone = False
         body.mover = None
@@ -687,7 +689,7 @@ class ScenarioEngine:
     def track_road(self, body: Body, lock_lane: bool = False) -> None:
         """Road coordinates of a body moved freely (a trajectory): its lane, s and offset from x/y. With
         `lock_lane` the body follows that lane afterwards, in the direction it is heading."""
-        self._states.clear()
+        self._moved()
         if self.road is None:
             return
         rc = None
@@ -701,6 +703,7 @@ class ScenarioEngine:
         body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
         body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
         body.heading_offset = 0.0
+        body.posed = None
         if lock_lane:
             body.lateral_velocity = 0.0
 
@@ -719,7 +722,7 @@ class ScenarioEngine:
         else:
             body.x += distance * math.cos(body.heading)
             body.y += distance * math.sin(body.heading)
-        self._states.clear()
+        self._moved()
 
     def distance_to(self, body: Body, target: tuple[float, float, float, float]) -> float:
         """Distance still to travel to a position: along the road when both are on the same road."""
@@ -787,7 +790,7 @@ class ScenarioEngine:
         elif isinstance(action, m.DeleteEntityAction):
             body = self.body(action.entity)
             body.gone = True
-            self._states.clear()
+            self._moved()
         elif isinstance(action, m.TrafficSignalStateAction):
             self.signals[action.name] = action.state
             self.log.append(f"t={self.time:.2f} signal {action.name} := {action.state}")
@@ -853,25 +856,35 @@ class ScenarioEngine:
     def _value(self, cond: m.Condition, triggering: list[str]) -> bool:
         if cond.value_condition is not None:
             return self._value_condition(cond.value_condition)
-        assert cond.entity_condition is not None
-        results = [
-            self._entity_condition(cond.entity_condition, self.body(name))
-            for name in cond.triggering_entities
-        ]
-        if cond.triggering_rule == "all":
-            ok = bool(results) and all(results)
-            if ok:
-                triggering.extend(cond.triggering_entities)
-            return ok
-        hits = [name for name, r in zip(cond.triggering_entities, results, strict=True) if r]
-        triggering.extend(hits)
-        return bool(hits)
+        condition = cond.entity_condition
+        assert condition is not None
+        # entities not in the world are skipped; "any" stops at the first entity that fulfils it (the one
+        # that triggers), "all" at the first that does not (as esmini)
+        every = cond.triggering_rule == "all"
+        result = False
+        hits: list[str] = []
+        for name in cond.triggering_entities:
+            body = self.body(name)
+            if body.gone:
+                continue
+            result = self._entity_condition(condition, body)
+            if result:
+                hits.append(name)
+                if not every:
+                    break
+            elif every:
+                return False
+        if result:
+            triggering.extend(hits)
+        return result
 
     def _value_condition(self, c: m.ValueCondition) -> bool:
         if isinstance(c, m.SimulationTimeCondition):
             return compare(c.rule, self.time, c.value)
         if isinstance(c, m.StoryboardElementStateCondition):
-            nodes = self.registry.find(c.element_type, c.element_ref)
+            nodes = self._state_nodes.get(id(c))
+            if nodes is None:
+                nodes = self._state_nodes[id(c)] = self.registry.find(c.element_type, c.element_ref)
             if not nodes:
                 raise BadInput(
                     f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
@@ -1074,7 +1087,9 @@ class ScenarioEngine:
         return value if signed else abs(value)
 
     def _condition(self, cond: m.Condition, triggering: list[str]) -> bool:
-        state = self.conditions.setdefault(id(cond), ConditionState(cond))
+        state = self.conditions.get(id(cond))
+        if state is None:
+            state = self.conditions[id(cond)] = ConditionState(cond)
         value = self._value(cond, triggering)
         # an edge needs a change: the first evaluation only records the value (as esmini does)
         previous = state.previous if state.previous is not None else value
@@ -1303,7 +1318,7 @@ class ScenarioEngine:
                 self._release(node)
                 self._set(node, Transition.END, State.COMPLETE)
         self._complete_elements()
-        self._states.clear()
+        self._moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         for body in self.bodies.values():
             if body.gone:
@@ -1372,7 +1387,7 @@ class ScenarioEngine:
             self._complete_elements()
         self.time = now
         self.step_index += 1
-        self._states.clear()
+        self._moved()
         self._check_stop()
 
     def drive_externally(self, name: str) -> None:
@@ -1412,6 +1427,11 @@ class ScenarioEngine:
         body.odometer += math.hypot(x - body.x, y - body.y)
         body.x, body.y, body.heading, body.speed = x, y, heading, speed
         self._locate(body)
+
+    def _moved(self) -> None:
+        """Bodies moved: the per-step caches of their states and of condition measurements are stale."""
+        self._states.clear()
+        self.measure.clear()
 
     def state_of(self, body: Body) -> EntityState:
         cached = self._states.get(body.name)
