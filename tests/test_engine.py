@@ -723,3 +723,24 @@ def test_synchronize_waits_while_the_master_stands_still(tmp_path: Path, road: O
     engine, trace = run(path, road, 2.0)
     assert engine.bodies["Lead"].speed == 0.0
     assert trace[2.0]["x"] == pytest.approx(100.0)  # the master did not move either
+
+
+def test_velocity_is_the_displacement_and_time_to_collision_uses_it(tmp_path: Path, road: OpenDrive) -> None:
+    ttc = """<Condition name="ttc" delay="0" conditionEdge="none"><ByEntityCondition>
+      <TriggeringEntities triggeringEntitiesRule="any"><EntityRef entityRef="Ego"/></TriggeringEntities>
+      <EntityCondition><TimeToCollisionCondition value="2" freespace="false" rule="lessThan"
+        coordinateSystem="entity" relativeDistanceType="longitudinal">
+        <TimeToCollisionConditionTarget><EntityRef entityRef="Lead"/></TimeToCollisionConditionTarget>
+      </TimeToCollisionCondition></EntityCondition></ByEntityCondition></Condition>"""
+    path = scenario(
+        tmp_path,
+        event("Brake", speed_action("step", "time", 0, 10.0), ttc),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0, speed=20.0) + place("Lead", 160.0, speed=10.0),
+    )
+    engine, trace = run(path, road, 5.0)
+    lead = engine.bodies["Lead"]
+    assert math.hypot(lead.vx, lead.vy) == pytest.approx(10.0)
+    # gap 60 m closing at 10 m/s: below 2 s (20 m) after 4 s; the step from 4.05 brakes
+    assert trace[4.05]["speed"] == pytest.approx(20.0)
+    assert trace[4.1]["speed"] == pytest.approx(10.0)

@@ -244,11 +244,12 @@ class Measure:
         """Time until a reaches b (or the point) at the current speeds; None where not defined."""
         if b is not None:
             dist = self.to_entity(a, b, system, kind, freespace)
-            bvx, bvy = b.speed * math.cos(b.heading), b.speed * math.sin(b.heading)
+            # velocities as moved over the last step (a trajectory's heading may differ from its motion)
+            bvx, bvy = b.vx, b.vy
             if abs(bvx) < SMALL and abs(bvy) < SMALL:
                 rel_speed = a.speed
             else:
-                avx, avy = a.speed * math.cos(a.heading), a.speed * math.sin(a.heading)
+                avx, avy = a.vx, a.vy
                 projected = (avx * bvx + avy * bvy) / math.hypot(bvx, bvy)
                 rel_speed = _sign(a.speed) * _sign(projected) * (projected - abs(b.speed))
         else:

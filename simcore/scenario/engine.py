@@ -1299,6 +1299,7 @@ class ScenarioEngine:
         self._evaluate_storyboard()
         previous_speed = {name: b.speed for name, b in self.bodies.items()}
         previous_heading = {name: b.heading for name, b in self.bodies.items()}
+        previous_xy = {name: (b.x, b.y) for name, b in self.bodies.items()}
         for body in self.bodies.values():
             body.lateral_velocity = 0.0  # lateral actions that are still running set it again
         if self.init_runtimes:
@@ -1370,6 +1371,11 @@ class ScenarioEngine:
         for body in self.bodies.values():
             body.acceleration = (body.speed - previous_speed[body.name]) / dt
             body.yaw_rate = wrap_angle(body.heading - previous_heading[body.name]) / dt
+            # velocity from the displacement (as esmini derives it); a jump (teleport) from speed and heading
+            px, py = previous_xy[body.name]
+            body.vx, body.vy = (body.x - px) / dt, (body.y - py) / dt
+            if math.hypot(body.vx, body.vy) > 2.0 * abs(body.speed) + 1.0:
+                body.vx, body.vy = body.speed * math.cos(body.heading), body.speed * math.sin(body.heading)
             if abs(body.speed) < 1e-3:
                 if body.standstill_since is None:
                     body.standstill_since = now

@@ -50,6 +50,8 @@ class Body:
     speed: float = 0.0
     acceleration: float = 0.0
     yaw_rate: float = 0.0
+    vx: float = 0.0  # world velocity over the last step (its displacement / dt), m/s
+    vy: float = 0.0
     # road following (None when the entity is off every road)
     road_id: str | None = None
     lane_id: int = 0
