@@ -498,3 +498,63 @@ def test_static_scenery_from_the_road_file(tmp_path: Path) -> None:
     assert np.all(p["object_id"][p["label"] == CLASS_IDS["pole"]] == 0), (
         "scenery is not an object of the truth"
     )
+
+
+# A road that climbs (z = 0.002 s², 180 m at its end): upward rays from the bottom hit it ahead.
+HILL = """<?xml version="1.0"?>
+<OpenDRIVE><header revMajor="1" revMinor="6" name="hill"/>
+<road id="1" length="300" junction="-1"><link/>
+<planView><geometry s="0" x="0" y="0" hdg="0" length="300"><line/></geometry></planView>
+<elevationProfile><elevation s="0" a="0" b="0" c="0.002" d="0"/></elevationProfile>
+<lanes><laneSection s="0"><center><lane id="0" type="none"/></center>
+<right><lane id="-1" type="driving"><width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane></right>
+</laneSection></lanes></road></OpenDRIVE>
+"""
+
+
+@pytest.mark.parametrize("where", ["valley", "slope", "flat", "distorted", "pole"])
+def test_ray_culling_changes_nothing(
+    straight: RoadScene, where: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Rays that cannot reach the static scene within range are not cast: the scan is the same as when
+    every ray is cast, and on a flat road the rays above the horizon are indeed left out."""
+    from simcore.sensors.scene import StaticObject
+
+    scene = straight if where in ("flat", "pole") else RoadScene(OpenDrive.from_string(HILL))
+    if where == "pole":  # a 12 m pole beside the road: upward rays must still reach it
+        pole = StaticObject(
+            "pole", CLASS_IDS["pole"], np.array([70.0, 1.0, 6.0]), np.eye(3), np.array([0.3, 0.3, 6.0])
+        )
+        scene = RoadScene(OpenDrive.from_string(STRAIGHT), scenery=[pole])
+    z = {"valley": 0.0, "slope": 0.002 * 150**2, "distorted": 0.002 * 150**2}.get(where, 0.0)
+    x = 20.0 if where == "valley" else 150.0 if where in ("slope", "distorted") else 50.0
+    speed, yaw_rate = (25.0, 0.3) if where == "distorted" else (0.0, 0.0)
+    ego = EntityState("Ego", "vehicle", "car", x, -1.75, z, 0.1, 0.0, 0.0, speed, 0.0, yaw_rate, CAR)
+    ahead = EntityState("Ahead", "vehicle", "car", x + 15, -1.75, z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, CAR)
+    boxes = Boxes.of(frame(ego, ahead))
+    config = {"channels": 32, "horizontal_resolution": 360, "vertical_fov": [-25, 15], "range_noise": 0.02}
+    config["motion_distortion"] = where == "distorted"
+    cast_sizes: list[int] = []
+    original_cast = RoadScene.cast
+
+    def counting(self: RoadScene, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        cast_sizes.append(len(rays))
+        return original_cast(self, rays)
+
+    monkeypatch.setattr(RoadScene, "cast", counting)
+    culled = lidar(**config).scan(scene, boxes, ego, 0)
+    with monkeypatch.context() as m:
+        m.setattr(Lidar, "_reachable", lambda self, *args: None)
+        every_ray = lidar(**config).scan(scene, boxes, ego, 0)
+    assert cast_sizes[1] == culled.rays
+    for name in culled.points.dtype.names or ():
+        assert np.allclose(culled.points[name], every_ray.points[name], rtol=0, atol=1e-6), name
+    assert np.array_equal(culled.visible_rays, every_ray.visible_rays)
+    assert np.array_equal(culled.unoccluded_rays, every_ray.unoccluded_rays)
+    up = culled.points["z"] > 0.0
+    if where == "valley":
+        assert np.count_nonzero(up & (culled.points["label"] == CLASS_IDS["road"])) > 50  # the climb ahead
+    if where == "pole":
+        assert np.count_nonzero(up & (culled.points["label"] == CLASS_IDS["pole"])) > 5
+    if where == "flat":
+        assert cast_sizes[0] < culled.rays * 0.75  # the 15° above and the level rays are not cast

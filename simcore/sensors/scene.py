@@ -236,6 +236,9 @@ def intersect_box(
     return t, local_normal @ rot.T
 
 
+_Z_GRID = 16.0  # m: the grid of RoadScene.z_range's cache
+
+
 class RoadScene:
     """The static road surface as an open3d RaycastingScene (built once per road network)."""
 
@@ -263,6 +266,14 @@ class RoadScene:
             self.triangle_classes = np.concatenate(classes)
         self.scenery = tuple(scenery)
         self.triangle_count = len(triangles)
+        # per triangle: its xy bounding box and z range, for `z_range` (which rays can reach the scene)
+        if len(triangles):
+            corners = np.asarray(vertices, np.float64)[np.asarray(triangles, np.int64)]  # (T, 3, 3)
+            self._lo = corners.min(axis=1)
+            self._hi = corners.max(axis=1)
+        else:
+            self._lo = self._hi = np.zeros((0, 3))
+        self._z_cache: dict[tuple[int, int, int, int], tuple[float, float] | None] = {}
         if len(triangles):
             self.scene.add_triangles(
                 o3d.core.Tensor.from_numpy(np.ascontiguousarray(vertices)),
@@ -272,6 +283,34 @@ class RoadScene:
         for cid, value in REFLECTIVITY.items():
             refl[cid] = value
         self.reflectivity = refl
+
+    def z_range(self, lo: np.ndarray, hi: np.ndarray) -> tuple[float, float] | None:
+        """(lowest, highest) z of the triangles whose xy bounding box meets the xy box [lo, hi] widened to
+        a 16 m grid; None when none does. A ray that stays outside this z range within that box cannot hit
+        the scene there. Cached per grid box (a sensor moves a few metres per sweep)."""
+        key = (
+            math.floor(lo[0] / _Z_GRID),
+            math.floor(lo[1] / _Z_GRID),
+            math.ceil(hi[0] / _Z_GRID),
+            math.ceil(hi[1] / _Z_GRID),
+        )
+        try:
+            return self._z_cache[key]
+        except KeyError:
+            pass
+        if len(self._z_cache) >= 4096:
+            self._z_cache.clear()
+        bounds = self._z_cache[key] = self._z_range(
+            np.array(key[:2], float) * _Z_GRID, np.array(key[2:], float) * _Z_GRID
+        )
+        return bounds
+
+    def _z_range(self, lo: np.ndarray, hi: np.ndarray) -> tuple[float, float] | None:
+        lo_t, hi_t = self._lo, self._hi
+        near = (hi_t[:, 0] >= lo[0]) & (lo_t[:, 0] <= hi[0]) & (hi_t[:, 1] >= lo[1]) & (lo_t[:, 1] <= hi[1])
+        if not near.any():
+            return None
+        return float(lo_t[near, 2].min()), float(hi_t[near, 2].max())
 
     def cast(self, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Cast rays (M, 6) float32 (origin, unit direction) against the road.
