@@ -644,3 +644,31 @@ def test_own_publications_arrive_once_synchronously_and_other_buses_get_them_onc
     finally:
         a.close()
         b.close()
+
+
+@pytest.mark.s3
+def test_the_operators_pod_template_runs_over_dds(
+    domain: int, s3_server: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The operator's own pod template (startup probes on the bus and recorder ports, S3 results), with the
+    transport switched to DDS through the environment only."""
+    from tests.test_pod import body, kubelet_for, results_store
+
+    manifest = body("pod-dds", s3_server.bucket, ["simSeconds <= 100"])
+    kubelet, pod = kubelet_for(manifest, s3_server, tmp_path)
+    kubelet.extra_env = {
+        **kubelet.extra_env,
+        "CARLOS_TRANSPORT": "dds",
+        "ROS_DOMAIN_ID": str(domain),
+        "CYCLONEDDS_URI": CONFIG,
+    }
+    result = kubelet.run_pod(pod, index=1)
+    assert result.exit_codes == {"simcore": 0, "bridge": 0, "recorder": 0}, result.logs
+    assert "on DDS domain" in result.logs["bridge"]
+    store = results_store(s3_server, monkeypatch)
+    summary = json.loads(store.get_bytes("pod-dds/1/summary.json"))
+    assert summary["status"] == "passed" and summary["parameters"] == {"Speed": 20.0}
+    recording = tmp_path / "recording.mcap"
+    recording.write_bytes(store.get_bytes("pod-dds/1/recording.mcap"))
+    topics = {topic for topic, _, _ in _messages(recording)}
+    assert {"/clock", "/tf", "/carlos/objects", "/carlos/status", "/carlos/Ego/odometry"} <= topics
