@@ -231,6 +231,8 @@ class Measure:
 
     def headway(self, a: Body, b: Body, system: str, kind: str, freespace: bool) -> float | None:
         """Time headway from a to b; None where it is not defined (b behind, a standing still)."""
+        if a.speed < SMALL:
+            return None
         dist = self.to_entity(a, b, system, kind, freespace)
         if dist is None:
             dist = LARGE

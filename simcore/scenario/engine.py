@@ -1056,14 +1056,13 @@ class ScenarioEngine:
                     extent = (bb.center_x + bb.length / 2) - (ba.center_x - ba.length / 2)
                 ds = math.copysign(max(abs(ds) - extent, 0.0), ds)
             return ds if signed else abs(ds)
-        sa, sb = self.state_of(a), self.state_of(b)
         if kind in ("euclidianDistance", "cartesianDistance"):
             if freespace:
-                return box_distance(Box.of(sa), Box.of(sb))
+                return box_distance(self.measure.box(a), self.measure.box(b))
             return math.hypot(b.x - a.x, b.y - a.y)
         if freespace:
-            ax, ay, _ = sa.box_center()
-            bx, by, _ = sb.box_center()
+            ax, ay = _box_center(a)
+            bx, by = _box_center(b)
         else:  # between reference points (as esmini measures without freespace)
             ax, ay, bx, by = a.x, a.y, b.x, b.y
         c, s = math.cos(a.heading), math.sin(a.heading)
@@ -1498,6 +1497,13 @@ def _walk_lane(road: OpenDrive, road_id: str, lane_id: int, s: float) -> tuple[s
         road_id, lane_id, new_dir = nxt
         s = over if new_dir > 0 else road.road_length(road_id) - over
     return road_id, lane_id, s
+
+
+def _box_center(body: Body) -> tuple[float, float]:
+    """Centre of a body's bounding box in the map frame."""
+    box = body.entity.box
+    c, s = math.cos(body.heading), math.sin(body.heading)
+    return body.x + c * box.center_x - s * box.center_y, body.y + s * box.center_x + c * box.center_y
 
 
 def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tuple[float, int]]:
