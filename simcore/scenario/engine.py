@@ -366,6 +366,8 @@ class ScenarioEngine:
         self.signal_phases: dict[str, str] = {}
         self.action_order: dict[int, int] = {}  # id of an action node → its place in the storyboard
         self.ended_in_move = False  # an action runtime finished while moving its entity this step
+        self._transitions = 0  # state transitions so far, and how many there were at the last completion pass
+        self._completed_at = -1
         # trailers: tow vehicle → the entity it tows (Trailer/TrailerRef, ConnectTrailerAction), and back
         self.trailer_of: dict[str, str] = {}
         for entity in scenario.entities:
@@ -1127,6 +1129,7 @@ class ScenarioEngine:
 
     def _set(self, node: Node, transition: Transition, state: State) -> None:
         node.transition(transition, state, self.step_index, self.log, self.time)
+        self._transitions += 1
 
     def _stop(self, node: Node) -> None:
         for child in node.children:
@@ -1246,6 +1249,10 @@ class ScenarioEngine:
                                 self._start_event(event, actors)
 
     def _complete_elements(self) -> None:
+        # completion follows from the states of the children: nothing to do while no element changed state
+        if self._transitions == self._completed_at:
+            return
+        self._completed_at = self._transitions
         for story in self.root.children:
             for act in story.children:
                 if act.state != State.RUNNING:
@@ -1296,10 +1303,9 @@ class ScenarioEngine:
         if self._signal_cycles:
             self._update_signals()
         self._evaluate_storyboard()
-        previous_speed = {name: b.speed for name, b in self.bodies.items()}
-        previous_heading = {name: b.heading for name, b in self.bodies.items()}
-        previous_xy = {name: (b.x, b.y) for name, b in self.bodies.items()}
+        previous = []
         for body in self.bodies.values():
+            previous.append((body, body.speed, body.heading, body.x, body.y))
             body.lateral_velocity = 0.0  # lateral actions that are still running set it again
         if self.init_runtimes:
             for runtime in self.init_runtimes:
@@ -1367,11 +1373,10 @@ class ScenarioEngine:
                 body.odometer += math.hypot(state.x - body.x, state.y - body.y)
                 body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
                 self._locate(body)
-        for body in self.bodies.values():
-            body.acceleration = (body.speed - previous_speed[body.name]) / dt
-            body.yaw_rate = wrap_angle(body.heading - previous_heading[body.name]) / dt
+        for body, speed0, heading0, px, py in previous:
+            body.acceleration = (body.speed - speed0) / dt
+            body.yaw_rate = wrap_angle(body.heading - heading0) / dt
             # velocity from the displacement (as esmini derives it); a jump (teleport) from speed and heading
-            px, py = previous_xy[body.name]
             body.vx, body.vy = (body.x - px) / dt, (body.y - py) / dt
             if math.hypot(body.vx, body.vy) > 2.0 * abs(body.speed) + 1.0:
                 body.vx, body.vy = body.speed * math.cos(body.heading), body.speed * math.sin(body.heading)

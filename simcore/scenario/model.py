@@ -7,6 +7,7 @@ are added here as dataclasses, in the parser as one function each, and in the en
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Literal
 
@@ -52,7 +53,7 @@ class Entity:
     trailer_coupler: float | None = None  # trailers: TrailerCoupler dx
     trailer: str | None = None  # the entity towed from the start (Trailer/TrailerRef)
 
-    @property
+    @cached_property
     def driver(self) -> str:
         """Who moves the entity: "scenario" (default), "sumo" (`carlos.driver=sumo` controller property) or
         "external": the system under test through its control topic (`carlos.driver=external`, or the

@@ -72,9 +72,10 @@ class Body:
     route: list[tuple[str, int]] = field(default_factory=list)  # roads ahead (id, direction) of a route
     external: bool = False  # an external controller is active on it: moved by its control input only
 
-    @property
-    def name(self) -> str:
-        return self.entity.name
+    name: str = field(init=False)  # the entity's (a plain attribute: read on every step)
+
+    def __post_init__(self) -> None:
+        self.name = self.entity.name
 
 
 def lane_shift(road: OpenDrive, road_id: str, s: float, lane_id: int, steps: int, direction: int) -> int:
