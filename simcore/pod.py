@@ -11,7 +11,9 @@ transport `CARLOS_TRANSPORT` names:
   them and can publish `/carlos/<entity>/control`, as with any ROS 2 node; no relay is involved. simcore
   waits until the recorder announced its subscription before it runs, a writer waits for its announced
   subscribers before its first message, and simcore flushes (all data acknowledged) before the verdict,
-  which the recorder handles after draining what arrived before it: the recording loses nothing.
+  which the recorder handles after draining what arrived before it: the recording loses nothing. Without
+  CYCLONEDDS_URI cyclonedds uses its defaults (first interface, multicast discovery, 1344-byte fragments);
+  `simcore.transport.dds.loopback_config()` is the configuration for roles and nodes all in one pod.
 
 - `bridge` (first sidecar): loopback: runs the hub on 127.0.0.1:`CARLOS_BUS_PORT` until SIGTERM. dds: joins
   the domain, accepts connections on 127.0.0.1:`CARLOS_BUS_PORT` for its startup probe, and logs the ROS 2

@@ -36,7 +36,8 @@ What CARLOS adds on top, invisible to ROS 2 nodes (they ignore non-`rt/` topics 
 - Glob subscriptions. `subscribe("*")` (the recorder, like `ros2 bag record -a`) watches the built-in
   DCPSPublication topic and creates a reader for every matching `rt/` topic as it appears (the reader
   adopts the publication's reliability and durability, as rosbag2 does). Readers keep all samples, so a
-  callback slower than the publisher loses nothing on the reading side either.
+  callback slower than the publisher loses nothing on the reading side either. A topic whose type is not
+  in the type store (a user's own message package) is skipped with one warning.
 - Not losing the first messages. DDS delivers a volatile sample only to readers matched when it is
   written, and a glob subscriber creates its reader only after it discovered the writer. So every
   subscription is also announced as a reader of the (non-ROS) topic `carlos/bus/subscriptions` whose
