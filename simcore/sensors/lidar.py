@@ -271,7 +271,7 @@ class Lidar:
             noise *= cfg.range_noise
             rng_t = np.maximum(rng_t + noise, 0.0)
         cls = classes[idx]
-        points = np.empty(len(idx), POINT_DTYPE)
+        points = np.zeros(len(idx), POINT_DTYPE)  # zeros: the padding byte too (reproducible files)
         if distort:
             world = origins[idx] + dirs_world[idx] * rng_t[:, None]
             local = (world - pos) @ rot
