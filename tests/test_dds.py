@@ -114,6 +114,19 @@ def test_ros2_names() -> None:
     )
 
 
+def test_every_type_of_the_type_store_registers_as_a_dds_topic(domain: int) -> None:
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.topic import Topic
+
+    DdsBus(domain, config=CONFIG).close()  # the domain with the loopback config
+    participant = DomainParticipant(domain)
+    names = sorted(TYPESTORE.fielddefs)
+    assert len(names) > 150
+    for i, name in enumerate(names):
+        topic = Topic(participant, f"rt/type{i}", idl_type(name))
+        assert topic.typename == dds_typename(name)
+
+
 def _to_idl(value: Any, typename: str) -> Any:
     """A rosbags message as an instance of the generated IDL type (field by field)."""
     cls = idl_type(typename)
