@@ -16,6 +16,9 @@ the path carries. Serialisation: rosbags' `serialize` (what every path uses; a m
 versus building the cyclonedds IDL object of the generated type and letting cyclonedds serialise it (the
 element-by-element path avoided), and the receiving side's `decode`.
 
+Round trip: a small message (rosgraph_msgs/Clock) to another process that answers at once, through the
+loopback hub and through DDS: the transport's share of a lockstep step (simulator → controller → simulator).
+
 Prints a table and, as its last line, one JSON object with the figures. No assertions: machines are noisy.
 """
 
@@ -80,6 +83,76 @@ SUBSCRIBER = textwrap.dedent(
     bus.close()
     """
 )
+
+
+ECHO = textwrap.dedent(
+    """
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    mode, arg = sys.argv[2], sys.argv[3]
+    if mode == "dds":
+        from simcore.transport.dds import DdsBus, loopback_config
+        bus = DdsBus(int(arg), config=loopback_config())
+    else:
+        from simcore.transport.loopback import LoopbackBus
+        bus = LoopbackBus("127.0.0.1", int(arg))
+    pong = bus.advertise("/pong", "rosgraph_msgs/msg/Clock")
+    bus.subscribe("/ping", lambda m: pong.publish(m.obj(), m.time_s))
+    print("READY", flush=True)
+    sys.stdin.read()
+    bus.close()
+    """
+)
+ROUND_TRIPS = 300
+
+
+def round_trip(mode: str) -> float:
+    """Median ms of publish → other process → reply received (a lockstep step's transport overhead)."""
+    import threading
+
+    hub = None
+    if mode == "dds":
+        from simcore.transport.dds import DdsBus, loopback_config
+
+        arg = str(random.randrange(200, 232))
+    else:
+        from simcore.transport.loopback import LoopbackBus, LoopbackHub
+
+        hub = LoopbackHub("127.0.0.1", 0).start()
+        arg = str(hub.port)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", ECHO, str(ROOT), mode, arg],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None and proc.stdin is not None
+    assert proc.stdout.readline().strip() == "READY"
+    bus: Any = (
+        DdsBus(int(arg), config=loopback_config()) if mode == "dds" else LoopbackBus("127.0.0.1", int(arg))
+    )
+    got = threading.Event()
+    bus.subscribe("/pong", lambda m: got.set())
+    if mode == "dds" and not bus.wait_for_subscribers("/ping", 1, timeout=30):
+        raise RuntimeError("the echo process did not subscribe")
+    ping = bus.advertise("/ping", "rosgraph_msgs/msg/Clock")
+    clock = TYPESTORE.types["rosgraph_msgs/msg/Clock"]
+    stamp = TYPESTORE.types["builtin_interfaces/msg/Time"]
+    times = []
+    for i in range(ROUND_TRIPS + 10):
+        got.clear()
+        start = time.perf_counter()
+        ping.publish(clock(clock=stamp(sec=i, nanosec=0)), float(i))
+        if not got.wait(10):
+            raise RuntimeError(f"{mode}: no reply to ping {i}")
+        if i >= 10:
+            times.append(time.perf_counter() - start)
+    proc.stdin.close()
+    proc.wait(30)
+    bus.close()
+    if hub is not None:
+        hub.close()
+    return statistics.median(times) * 1e3
 
 
 def point_cloud(seed: int = 0) -> Any:
@@ -236,6 +309,7 @@ def main() -> None:
     for row in rows:
         row["ratioToInProcessCdr"] = round(row["messagesPerSecond"] / base, 3)
     ser = serialisation(msg)
+    rtt = {mode: round(round_trip(mode), 3) for mode in ("loopback", "dds")}
     print(f"PointCloud2, {POINTS} points, {size / 1e6:.2f} MB CDR, {COUNT} messages per path")
     header = (
         f"{'path':<18}{'s':>8}{'received':>10}{'msg/s':>11}{'MB/s':>11}{'10 Hz eq.':>11}{'÷ in-proc+cdr':>15}"
@@ -252,6 +326,12 @@ def main() -> None:
     print(f"  rosbags serialize (every path)            {ser['rosbagsSerializeMs']:9.3f}")
     print(f"  cyclonedds IDL object + serialize (avoided){ser['cycloneddsIdlSerializeMs']:9.1f}")
     print(f"  decode on receipt (object + exact bytes)  {ser['decodeMs']:9.3f}")
+    print()
+    print(
+        f"round trip, /ping → other process → /pong (ms, median of {ROUND_TRIPS}; lockstep overhead per step):"
+    )
+    for mode, ms in rtt.items():
+        print(f"  {mode:<10}{ms:9.3f}")
     figures = {
         "bench": "bridge",
         "points": POINTS,
@@ -259,6 +339,7 @@ def main() -> None:
         "count": COUNT,
         "paths": rows,
         "serialisationMs": {k: round(v, 3) for k, v in ser.items()},
+        "roundTripMs": rtt,
         "ddsMessagesPerSecond": next(r for r in rows if r["path"] == "dds")["messagesPerSecond"],
         "ddsMBPerSecond": next(r for r in rows if r["path"] == "dds")["MBPerSecond"],
         "ddsToLoopback": round(
