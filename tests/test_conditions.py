@@ -273,8 +273,13 @@ def test_time_to_collision_is_undefined_when_not_closing_in(tmp_path: Path, road
            <TimeToCollisionConditionTarget><EntityRef entityRef="Lead"/></TimeToCollisionConditionTarget>
            </TimeToCollisionCondition>"""
     )
+    # (from 1 s on: velocities are measured over a step)
     engine = run(
-        scenario(tmp_path, event("Any", stop_ego(), ttc), entities=("Ego", "Lead"), init=init), road, 2.0
+        scenario(
+            tmp_path, event("Any", stop_ego(), ttc + sim_time(1.0)), entities=("Ego", "Lead"), init=init
+        ),
+        road,
+        3.0,
     )
     assert started(engine, "Any") is None  # moving apart: no time to collision, not an infinite one
 
@@ -408,3 +413,20 @@ def test_nurbs_times_belong_to_the_greville_abscissae(tmp_path: Path, road: Open
     y = sum(w * p[1] for w, p in zip(b, points, strict=True))
     ego = engine.bodies["Ego"]
     assert (ego.x, ego.y) == (pytest.approx(x, abs=0.05), pytest.approx(y, abs=0.05))
+
+
+def test_freespace_euclidean_relative_distance(tmp_path: Path, road: OpenDrive) -> None:
+    init = place("Ego", 100.0, speed=30.0) + place("Lead", 200.0, speed=20.0)
+    near = by_ego(
+        """<RelativeDistanceCondition entityRef="Lead" relativeDistanceType="euclidianDistance" freespace="true"
+           value="20" rule="lessThan"/>"""
+    )
+    far = by_ego(
+        """<RelativeDistanceCondition entityRef="Lead" relativeDistanceType="euclidianDistance" freespace="true"
+           value="50" rule="greaterThan"/>"""
+    )
+    events = event("Near", stop_ego(), near) + event("Far", signal_state("1", "x"), far)
+    engine = run(scenario(tmp_path, events, entities=("Ego", "Lead"), init=init), road, 10.0)
+    # between the boxes: 100 − 4.5 m closing at 10 m/s, below 20 m after 7.55 s
+    assert started(engine, "Near") == pytest.approx(7.6, abs=0.051)
+    assert started(engine, "Far") == pytest.approx(0.0)

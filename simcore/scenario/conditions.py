@@ -148,7 +148,7 @@ class Measure:
         euclid = kind in ("euclidianDistance", "cartesianDistance")
         if freespace:
             if system == "entity" or euclid:
-                box_a, box_b = self._box(a), self._box(b)
+                box_a, box_b = self.box(a), self.box(b)
                 lon, lat = _axis_gaps(box_a, box_b)
                 if system == "entity" and kind == "longitudinal":
                     return lon
@@ -181,7 +181,7 @@ class Measure:
         """Signed distance from entity a to the point (x, y) (None: not measurable)."""
         euclid = kind in ("euclidianDistance", "cartesianDistance")
         if freespace and (system == "entity" or euclid):
-            dist, lon, lat = _point_gaps(self._box(a), a.heading, x, y)
+            dist, lon, lat = _point_gaps(self.box(a), a.heading, x, y)
             if system == "entity" and kind == "longitudinal":
                 return lon
             if system == "entity" and kind == "lateral":
@@ -205,7 +205,17 @@ class Measure:
         dx, dy = self.local(a, x, y)
         return dx if kind == "longitudinal" else dy
 
-    def _box(self, body: Body) -> Box:
+    def box_distance_lower_bound(self, a: Body, b: Body) -> float:
+        """A cheap lower bound of the distance between two bounding boxes: their centres' distance less
+        both half diagonals."""
+        ba, bb = a.entity.box, b.entity.box
+        ca, sa = math.cos(a.heading), math.sin(a.heading)
+        cb, sb = math.cos(b.heading), math.sin(b.heading)
+        dx = (b.x + cb * bb.center_x - sb * bb.center_y) - (a.x + ca * ba.center_x - sa * ba.center_y)
+        dy = (b.y + sb * bb.center_x + cb * bb.center_y) - (a.y + sa * ba.center_x + ca * ba.center_y)
+        return math.hypot(dx, dy) - 0.5 * (math.hypot(ba.length, ba.width) + math.hypot(bb.length, bb.width))
+
+    def box(self, body: Body) -> Box:
         """The entity's bounding box footprint (this step)."""
         self._fresh()
         cached = self._boxes.get(body.name)

@@ -942,6 +942,11 @@ class ScenarioEngine:
             other = self.body(c.entity)
             if other.gone:
                 return False
+            if c.freespace and c.distance_type in ("euclidianDistance", "cartesianDistance"):
+                # far apart, a lower bound of the distance between the boxes decides the comparison
+                lower = self.measure.box_distance_lower_bound(body, other)
+                if lower > c.value + 1e-6:
+                    return compare(c.rule, lower, c.value)
             measured = self.measure.to_entity(body, other, c.coordinate_system, c.distance_type, c.freespace)
             return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
         if isinstance(c, m.TimeHeadwayCondition):
