@@ -512,7 +512,7 @@ HILL = """<?xml version="1.0"?>
 """
 
 
-@pytest.mark.parametrize("where", ["valley", "slope", "flat", "distorted", "pole"])
+@pytest.mark.parametrize("where", ["valley", "slope", "flat", "distorted", "pole", "tilted"])
 def test_ray_culling_changes_nothing(
     straight: RoadScene, where: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -520,7 +520,7 @@ def test_ray_culling_changes_nothing(
     every ray is cast, and on a flat road the rays above the horizon are indeed left out."""
     from simcore.sensors.scene import StaticObject
 
-    scene = straight if where in ("flat", "pole") else RoadScene(OpenDrive.from_string(HILL))
+    scene = straight if where in ("flat", "pole", "tilted") else RoadScene(OpenDrive.from_string(HILL))
     if where == "pole":  # a 12 m pole beside the road: upward rays must still reach it
         pole = StaticObject(
             "pole", CLASS_IDS["pole"], np.array([70.0, 1.0, 6.0]), np.eye(3), np.array([0.3, 0.3, 6.0])
@@ -534,6 +534,8 @@ def test_ray_culling_changes_nothing(
     boxes = Boxes.of(frame(ego, ahead))
     config = {"channels": 32, "horizontal_resolution": 360, "vertical_fov": [-25, 15], "range_noise": 0.02}
     config["motion_distortion"] = where == "distorted"
+    if where == "tilted":  # pitched down 5°: directions are no longer level per channel
+        config["mount"] = {"z": 1.8, "pitch": 5}
     cast_sizes: list[int] = []
     original_cast = RoadScene.cast
 
@@ -556,7 +558,7 @@ def test_ray_culling_changes_nothing(
         assert np.count_nonzero(up & (culled.points["label"] == CLASS_IDS["road"])) > 50  # the climb ahead
     if where == "pole":
         assert np.count_nonzero(up & (culled.points["label"] == CLASS_IDS["pole"])) > 5
-    if where == "flat":
+    if where in ("flat", "tilted"):
         assert cast_sizes[0] < culled.rays * 0.75  # the 15° above and the level rays are not cast
 
 

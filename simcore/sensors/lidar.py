@@ -99,6 +99,7 @@ class Lidar:
         self.mount_rot = rotation(math.radians(m.yaw), math.radians(m.pitch), math.radians(m.roll))
         self.mount_pos = np.array([m.x, m.y, m.z])
         self.rng = np.random.default_rng(seed)
+        self._level_cache: dict[bytes, tuple[np.ndarray, list[np.ndarray]]] = {}
 
     @property
     def ray_count(self) -> int:
@@ -139,6 +140,14 @@ class Lidar:
         `r32`: the 3x3 rotation as row operations, no BLAS call, no strided casts."""
         d = self._dirs_t if cols is None else [row[cols] for row in self._dirs_t]
         return [d[0] * r32[k, 0] + d[1] * r32[k, 1] + d[2] * r32[k, 2] for k in rows]
+
+    @staticmethod
+    def _ray_array(k: int, pos: np.ndarray) -> np.ndarray:
+        """(k, 6) float32 rays with their origins at `pos` (directions to fill in)."""
+        rays = np.empty((k, 6), np.float32)
+        for i, p in enumerate(pos.astype(np.float32)):
+            rays[:, i] = p  # one scalar fill per column: 3x faster than broadcasting the row
+        return rays
 
     def _reachable(
         self, road: RoadScene, z0: np.ndarray | float, dz: np.ndarray, lo: np.ndarray, hi: np.ndarray
@@ -193,13 +202,31 @@ class Lidar:
             )
             if cast is not None:
                 rays = rays[cast]
+        elif r32[2, 0] == 0.0 and r32[2, 1] == 0.0 and r32[2, 2] == 1.0:
+            # level (no pitch, no roll): a ray's world z component is its channel's, so the rays that can
+            # reach the scene are whole channels; their index set and directions are cached per channel set
+            kept = self._reachable(
+                road, float(np.float32(pos[2])), self._dirs_t[2, : self.channels], pos[:2], pos[:2]
+            )
+            if kept is None:
+                cast, d = None, list(self._dirs_t)
+            else:
+                key = kept.tobytes()
+                entry = self._level_cache.get(key)
+                if entry is None:
+                    if len(self._level_cache) >= 16:
+                        self._level_cache.clear()
+                    ids = (np.arange(self.columns)[:, None] * self.channels + kept[None, :]).ravel()
+                    entry = self._level_cache[key] = (ids, [row[ids] for row in self._dirs_t])
+                cast, d = entry
+            rays = self._ray_array(len(d[0]), pos)
+            rays[:, 3] = d[0] * r32[0, 0] + d[1] * r32[0, 1] + d[2] * r32[0, 2]
+            rays[:, 4] = d[0] * r32[1, 0] + d[1] * r32[1, 1] + d[2] * r32[1, 2]
+            rays[:, 5] = d[2]
         else:
             dz = self._world_dirs(r32, None, range(2, 3))[0]
             cast = self._reachable(road, float(np.float32(pos[2])), dz, pos[:2], pos[:2])
-            k = n_rays if cast is None else len(cast)
-            rays = np.empty((k, 6), np.float32)
-            for k, p in enumerate(pos.astype(np.float32)):
-                rays[:, k] = p  # one scalar fill per column: 3x faster than broadcasting the row
+            rays = self._ray_array(n_rays if cast is None else len(cast), pos)
             dx, dy = self._world_dirs(r32, cast, range(2))
             rays[:, 3] = dx
             rays[:, 4] = dy
