@@ -64,6 +64,7 @@ from __future__ import annotations
 
 import contextlib
 import fnmatch
+import functools
 import logging
 import os
 import struct
@@ -195,6 +196,7 @@ def decode(data: bytes, typename: str) -> tuple[Any, bytes]:
     return msg, data if end == len(data) else data[:end]
 
 
+@functools.cache
 def _announcement_type() -> type[IdlStruct]:
     return make_idl_struct("Subscription_", "carlos::bus::Subscription_", {"pattern": str})
 
