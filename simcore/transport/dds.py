@@ -560,13 +560,14 @@ class DdsBus:
     def _simtime(self, reader: _Reader, handle: int) -> bool:
         known = self._simtime_writers.get(handle)
         if known is None:
-            known = False
-            with contextlib.suppress(DDSException):
+            try:
                 data = reader.reader.get_matched_publication_data(handle)
-                qos: Any = data.qos if data is not None else None
-                known = (
-                    qos is not None and Policy.Userdata in qos and qos[Policy.Userdata].data == SIMTIME_MARK
-                )
+            except DDSException:
+                data = None
+            if data is None:
+                return False  # not known (yet): this sample gets the fallback time, the next ones ask again
+            qos: Any = data.qos
+            known = qos is not None and Policy.Userdata in qos and qos[Policy.Userdata].data == SIMTIME_MARK
             self._simtime_writers[handle] = known
         return known
 
