@@ -16,9 +16,9 @@ transport `CARLOS_TRANSPORT` names:
   `simcore.transport.dds.loopback_config()` is the configuration for roles and nodes all in one pod.
 
 - `bridge` (first sidecar): loopback: runs the hub on 127.0.0.1:`CARLOS_BUS_PORT` until SIGTERM. dds: joins
-  the domain, accepts connections on 127.0.0.1:`CARLOS_BUS_PORT` for its startup probe, and logs the ROS 2
-  topics (name, type) that appear on the domain, and the list again at SIGTERM: it is the pod's view of the
-  ROS 2 graph (ROS 2 nodes talk to simcore's and the recorder's participants directly).
+  the domain, accepts connections on 127.0.0.1:`CARLOS_BUS_PORT` for its startup probe, and logs every
+  ROS 2 topic (name, type) that appears on the domain until SIGTERM: it is the pod's view of the ROS 2
+  graph (ROS 2 nodes talk to simcore's and the recorder's participants directly, nothing is relayed).
 - `recorder` (second sidecar): subscribes to every topic, then opens 127.0.0.1:`CARLOS_RECORDER_READY_PORT`
   for its startup probe. It writes the MCAP while the run goes on. When simcore's verdict arrives (the final
   `/carlos/status` message, whose values carry the index summary as JSON) — or on SIGTERM — it closes the
