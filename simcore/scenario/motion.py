@@ -3,6 +3,7 @@ of OpenSCENARIO's TransitionDynamics."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -178,12 +179,23 @@ def _leave_vanished_lane(r: object, body: Body) -> None:
     side = 1 if body.lane_id > 0 else -1
     section = r.section_at(body.s, side)  # type: ignore[attr-defined]
     lane = section.lane(body.lane_id)
-    if lane is None or not lane.widths or lane.width_at(body.s - section.s) > 1e-6:
+    if lane is None or not _may_vanish(lane, section) or lane.width_at(body.s - section.s) > 1e-6:
         return
     inner = body.lane_id - side
     if inner != 0 and section.lane(inner) is not None:
         body.lane_id = inner
         body.offset = 0.0
+
+
+def _may_vanish(lane: Any, section: Any) -> bool:
+    """Does the lane's width reach zero somewhere in its section (found once per lane, kept on the lane)?"""
+    found = getattr(lane, "_may_vanish", None)
+    if found is None:
+        ends = [p.s0 for p in lane.widths] + [max(section.end - section.s, 0.0)]
+        probes = [x for a, b in itertools.pairwise(ends) for x in (a, (a + b) / 2, b)]
+        found = bool(lane.widths) and any(lane.width_at(x) <= 1e-6 for x in probes)
+        setattr(lane, "_may_vanish", found)  # noqa: B010 (a cache on a parsed road object)
+    return bool(found)
 
 
 def next_road(road: OpenDrive, body: Body) -> tuple[str, int, int] | None:
