@@ -131,6 +131,10 @@ def test_corpus_subset_agrees_with_esmini() -> None:
         "xosc/two_plus_one_road.xosc",  # RelativeClearance, lanes across lane sections
         "xosc/left-hand-traffic_using_road_rule.xosc",  # OpenDRIVE rule="LHT", edges
         "xosc/velodrome.xosc",  # Init speed transitions
+        "xosc/speed-profile.xosc",  # SpeedProfile, follow (jerk-limited corners) and position modes
+        "xosc/long_dist_action_with_jerk.xosc",  # LongitudinalDistance spring with jerk limits
+        "xosc/trailers.xosc",  # trailer chains dragged by the hitch, a lane narrowing to nothing
+        "xosc/pedestrian_traj_synch.xosc",  # Synchronize with a final speed, trajectory heading vs motion
     ]
     results = conformance.run_directory(
         CORPUS / "resources", CORPUS / "reference", include=subset, cap_seconds=60
