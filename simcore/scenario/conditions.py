@@ -42,6 +42,7 @@ class Measure:
     def __init__(self, engine: ScenarioEngine) -> None:
         self.engine = engine
         self._step = -1
+        self._stale = False
         self._frame: dict[str, float] = {}  # body name → heading of its measuring frame (this step)
         self._road_t: dict[str, float] = {}  # body name → t of its reference point (this step)
         self._boxes: dict[str, Box] = {}  # body name → bounding box footprint (this step)
@@ -49,15 +50,16 @@ class Measure:
         self._points: dict[tuple[float, float, str | None], tuple[str, float, float] | None] = {}
 
     def _fresh(self) -> None:
-        if self._step != self.engine.step_index:
+        if self._stale or self._step != self.engine.step_index:
             self._step = self.engine.step_index
-            self.clear()
+            self._stale = False
+            self._frame.clear()
+            self._road_t.clear()
+            self._boxes.clear()
 
     def clear(self) -> None:
-        """Forget what was measured on the bodies (they moved)."""
-        self._frame.clear()
-        self._road_t.clear()
-        self._boxes.clear()
+        """Forget what was measured on the bodies (they moved); done when next asked."""
+        self._stale = True
 
     # --- frames ---------------------------------------------------------------------------------------
 

@@ -1093,6 +1093,8 @@ class ScenarioEngine:
         return value if signed else abs(value)
 
     def _condition(self, cond: m.Condition, triggering: list[str]) -> bool:
+        if cond.edge == "none" and cond.delay <= 0:
+            return self._value(cond, triggering)  # no edge, no delay: nothing to remember
         state = self.conditions.get(id(cond))
         if state is None:
             state = self.conditions[id(cond)] = ConditionState(cond)
@@ -1117,17 +1119,28 @@ class ScenarioEngine:
         return result
 
     def trigger(self, trigger: m.Trigger | None, triggering: list[str] | None = None) -> bool:
-        """OR over groups, AND within a group. Every condition is evaluated each time (edges need it)."""
+        """OR over groups, AND within a group (as esmini: every group is evaluated; within a group, once a
+        condition does not hold only the conditions with a delay are evaluated, their timers run on). When
+        the trigger fires, its edge conditions start over (the next evaluation only records the value)."""
         if trigger is None:
             return False
         fired = False
         for group in trigger.groups:
             group_entities: list[str] = []
-            results = [self._condition(c, group_entities) for c in group]
-            if all(results):
+            holds = True
+            for c in group:
+                if holds or c.delay > 0:
+                    holds = self._condition(c, group_entities) and holds
+            if holds:
                 fired = True
                 if triggering is not None:
                     triggering.extend(group_entities)
+        if fired:
+            for group in trigger.groups:
+                for c in group:
+                    state = self.conditions.get(id(c))
+                    if state is not None:
+                        state.previous = None
         return fired
 
     # --- storyboard -----------------------------------------------------------------------------------
