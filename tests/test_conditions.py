@@ -430,3 +430,32 @@ def test_freespace_euclidean_relative_distance(tmp_path: Path, road: OpenDrive) 
     # between the boxes: 100 − 4.5 m closing at 10 m/s, below 20 m after 7.55 s
     assert started(engine, "Near") == pytest.approx(7.6, abs=0.051)
     assert started(engine, "Far") == pytest.approx(0.0)
+
+
+def test_angle_conditions(tmp_path: Path, road: OpenDrive) -> None:
+    turned = """<Private entityRef="Side"><PrivateAction><TeleportAction><Position>
+      <LanePosition roadId="1" laneId="-1" s="150" offset="0"><Orientation type="relative" h="0.3"/></LanePosition>
+      </Position></TeleportAction></PrivateAction></Private>"""
+    init = place("Ego", 100.0, speed=0.0) + turned
+    absolute = by_ego("""<AngleCondition angleType="heading" angle="0.02" angleTolerance="0.05"/>""")
+    on_road = by_ego(
+        """<AngleCondition angleType="heading" angle="0.3" angleTolerance="0.01" coordinateSystem="road"/>"""
+    ).replace('entityRef="Ego"', 'entityRef="Side"')
+    relative = by_ego(
+        """<RelativeAngleCondition entityRef="Ego" angleType="heading" angle="0.3" angleTolerance="0.01"/>"""
+    ).replace(
+        '<EntityRef entityRef="Ego"/></TriggeringEntities>',
+        '<EntityRef entityRef="Side"/></TriggeringEntities>',
+    )
+    off = by_ego("""<AngleCondition angleType="heading" angle="0.2" angleTolerance="0.05"/>""")
+    events = (
+        event("Abs", signal_state("a", "1"), absolute)
+        + event("Road", signal_state("b", "1"), on_road)
+        + event("Rel", signal_state("c", "1"), relative)
+        + event("Off", signal_state("d", "1"), off)
+    )
+    engine = run(scenario(tmp_path, events, entities=("Ego", "Side"), init=init), road, 0.5)
+    assert started(engine, "Abs") == pytest.approx(0.0)  # the road heads along +x: 0 is within 0.02 ± 0.05
+    assert started(engine, "Road") == pytest.approx(0.0)
+    assert started(engine, "Rel") == pytest.approx(0.0)
+    assert started(engine, "Off") is None

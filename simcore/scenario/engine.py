@@ -975,11 +975,33 @@ class ScenarioEngine:
                 return self.time - since >= c.duration - 1e-9
             body.extra.pop("offroad_since", None)
             return False
+        if isinstance(c, m.AngleCondition | m.RelativeAngleCondition):
+            return self._angle_condition(c, body)
         if isinstance(c, m.RelativeClearanceCondition):
             return self._clearance(c, body)
         if isinstance(c, m.UnsupportedCondition):
             return False
         raise BadInput(f"condition {type(c).__name__} is not supported", file=self.source)
+
+    def _angle_condition(self, c: m.AngleCondition | m.RelativeAngleCondition, body: Body) -> bool:
+        def angle_of(b: Body, kind: str) -> float:
+            return b.heading if kind == "heading" else b.pitch if kind == "pitch" else b.roll
+
+        value = angle_of(body, c.angle_type)
+        if isinstance(c, m.RelativeAngleCondition):
+            other = self.body(c.entity)
+            if other.gone:
+                return False
+            value -= angle_of(other, c.angle_type)
+        elif c.coordinate_system in ("road", "lane", "trajectory") and c.angle_type == "heading":
+            # relative to the road's reference line (the lane's direction in the lane system)
+            if self.road is None or body.road_id is None:
+                return False
+            reference = self.road.road_to_world(body.road_id, body.s, 0.0).heading
+            if c.coordinate_system != "road" and self.road.drives_backward(body.road_id, body.lane_id):
+                reference += math.pi
+            value -= reference
+        return abs(wrap_angle(value - c.angle)) <= c.tolerance + 1e-9
 
     def _outside_driving_lanes(self, body: Body) -> bool:
         """The reference point is beyond every driving lane of its road (off the road)."""

@@ -654,6 +654,27 @@ class TrafficSignalControllerCondition:
 
 
 @dataclass(frozen=True)
+class AngleCondition:
+    """The triggering entity's heading, pitch or roll is `angle` within `tolerance` (rad): absolute (in
+    the world) by default, relative to the road's or the lane's direction in those coordinate systems."""
+
+    angle_type: Literal["heading", "pitch", "roll"]
+    angle: float
+    tolerance: float
+    coordinate_system: str = "entity"
+
+
+@dataclass(frozen=True)
+class RelativeAngleCondition:
+    """The triggering entity's heading, pitch or roll less that of `entity` is `angle` within `tolerance`."""
+
+    entity: str
+    angle_type: Literal["heading", "pitch", "roll"]
+    angle: float
+    tolerance: float
+
+
+@dataclass(frozen=True)
 class UnsupportedCondition:
     """A condition CARLOS does not evaluate: always false (it is warned about at load)."""
 
@@ -675,6 +696,8 @@ EntityCondition = (
     | EndOfRoadCondition
     | RelativeClearanceCondition
     | OffroadCondition
+    | AngleCondition
+    | RelativeAngleCondition
     | UnsupportedCondition
 )
 ValueCondition = (

@@ -1540,6 +1540,26 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
             lanes=lanes,
         )
     if tag in ("AngleCondition", "RelativeAngleCondition"):
-        reader.warn(f"{tag} is not evaluated: it never holds", c)
-        return m.UnsupportedCondition(tag)
+        angle_type = reader.attr(c, "angleType")
+        if angle_type not in ("heading", "pitch", "roll"):
+            raise reader.fail(f"angleType={angle_type!r}: expected heading, pitch or roll", c)
+        tolerance = reader.num(c, "angleTolerance")
+        if tolerance < 0:
+            raise reader.fail(f"angleTolerance={tolerance:g} is negative", c)
+        if tag == "RelativeAngleCondition":
+            return m.RelativeAngleCondition(
+                entity=reader.attr(c, "entityRef"),
+                angle_type=angle_type,  # type: ignore[arg-type]
+                angle=reader.num(c, "angle"),
+                tolerance=tolerance,
+            )
+        system = reader.attr(c, "coordinateSystem", "entity")
+        if system not in _SYSTEMS:
+            raise reader.fail(f"coordinateSystem={system!r}: expected one of {', '.join(_SYSTEMS)}", c)
+        return m.AngleCondition(
+            angle_type=angle_type,  # type: ignore[arg-type]
+            angle=reader.num(c, "angle"),
+            tolerance=tolerance,
+            coordinate_system=system,
+        )
     raise reader.fail(f"EntityCondition/{tag} is not supported", c)
