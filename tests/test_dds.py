@@ -661,6 +661,7 @@ def test_own_publications_arrive_once_synchronously_and_other_buses_get_them_onc
         b.close()
 
 
+@pytest.mark.slow
 @pytest.mark.s3
 def test_the_operators_pod_template_runs_over_dds(
     domain: int, s3_server: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
