@@ -9,6 +9,12 @@ Per return: range with seeded Gaussian noise, seeded dropout, intensity = reflec
 class id (`simcore.sensors.classes`). With motion distortion every column is fired from the pose its
 carrier had at the column's firing time (constant speed and yaw rate over the sweep) and the points are
 expressed in the sensor frame at the stamp (the sweep's end); other entities are taken at the stamp.
+
+Speed: only the rays that can reach the static scene within `rangeMax` go to open3d (a ray whose height
+over its range stays above or below every road triangle and scenery box within reach cannot hit; on a flat
+road the rays at and above the horizon). This is exact: the scan is the one casting every ray would give
+(tests/test_sensors.py checks it on hills, with scenery, tilted mounts and motion distortion). A level
+lidar (no pitch or roll) culls whole channels and caches the index set per channel set.
 """
 
 from __future__ import annotations
