@@ -1366,36 +1366,42 @@ class ScenarioEngine:
         self._complete_elements()
         self._moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
+        sumo, road, tow_of = self.sumo, self.road, self.tow_of
         for body in self.bodies.values():
             if body.gone:
                 continue
             if body.external:
                 self._move_external(body, dt)
-                if self.sumo is not None and self.sumo.has(body.name):
-                    self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+                if sumo is not None and sumo.has(body.name):
+                    sumo.place(body.name, body.x, body.y, body.heading, body.speed)
                 continue
-            if body.entity.driver == "sumo" or body.name in self.tow_of:
+            if body.entity.driver == "sumo" or (tow_of and body.name in tow_of):
                 continue  # SUMO moves it, or its tow vehicle drags it (below)
-            if body.extra and body.extra.pop("teleported", 0.0):
-                body.extra.pop("move_speed", 0.0)
-                continue
-            speed = body.extra.pop("move_speed", body.speed) if body.extra else body.speed
-            distance = speed * dt
-            if body.lateral_velocity != 0.0 and body.mover is None:
-                # the entity moves at its speed along its path: a lateral motion takes its share of it
-                lateral = min(abs(body.lateral_velocity), abs(speed))
-                distance = math.copysign(math.sqrt(speed**2 - lateral**2), speed) * dt
-            if body.mover is not None:
-                body.mover.move(dt, now)
-            elif self.road is not None and body.road_id is not None:
-                advance_on_road(self.road, body, distance, now)
+            extra = body.extra
+            if extra:
+                if extra.pop("teleported", 0.0):
+                    extra.pop("move_speed", 0.0)
+                    continue
+                speed = extra.pop("move_speed", body.speed)
             else:
-                body.x += distance * math.cos(body.heading)
-                body.y += distance * math.sin(body.heading)
-            if body.mover is None:
+                speed = body.speed
+            distance = speed * dt
+            mover = body.mover
+            if mover is not None:
+                mover.move(dt, now)
+            else:
+                if body.lateral_velocity != 0.0:
+                    # the entity moves at its speed along its path: a lateral motion takes its share of it
+                    lateral = min(abs(body.lateral_velocity), abs(speed))
+                    distance = math.copysign(math.sqrt(speed * speed - lateral * lateral), speed) * dt
+                if road is not None and body.road_id is not None:
+                    advance_on_road(road, body, distance, now)
+                elif distance != 0.0:
+                    body.x += distance * math.cos(body.heading)
+                    body.y += distance * math.sin(body.heading)
                 body.odometer += abs(distance)
-            if self.sumo is not None and self.sumo.has(body.name):
-                self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+            if sumo is not None and sumo.has(body.name):
+                sumo.place(body.name, body.x, body.y, body.heading, body.speed)
         if self.trailer_of:
             self.align_trailers(pull=True)
         if self.sumo is not None:
@@ -1414,13 +1420,16 @@ class ScenarioEngine:
                 body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
                 self._locate(body)
         for body, speed0, heading0, px, py in previous:
-            body.acceleration = (body.speed - speed0) / dt
-            body.yaw_rate = wrap_angle(body.heading - heading0) / dt
+            speed = body.speed
+            body.acceleration = (speed - speed0) / dt
+            turn = body.heading - heading0
+            body.yaw_rate = (turn if -math.pi <= turn < math.pi else wrap_angle(turn)) / dt
             # velocity from the displacement (as esmini derives it); a jump (teleport) from speed and heading
-            body.vx, body.vy = (body.x - px) / dt, (body.y - py) / dt
-            if math.hypot(body.vx, body.vy) > 2.0 * abs(body.speed) + 1.0:
-                body.vx, body.vy = body.speed * math.cos(body.heading), body.speed * math.sin(body.heading)
-            if abs(body.speed) < 1e-3:
+            vx, vy = (body.x - px) / dt, (body.y - py) / dt
+            if vx * vx + vy * vy > (2.0 * abs(speed) + 1.0) ** 2:
+                vx, vy = speed * math.cos(body.heading), speed * math.sin(body.heading)
+            body.vx, body.vy = vx, vy
+            if abs(speed) < 1e-3:
                 if body.standstill_since is None:
                     body.standstill_since = now
             else:
