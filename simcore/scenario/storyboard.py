@@ -24,6 +24,10 @@ class Transition(Enum):
     SKIP = "skipTransition"
 
 
+_STATES = {s.value: s for s in State}
+_TRANSITIONS = {t.value: t for t in Transition}
+
+
 @dataclass(eq=False)
 class Node:
     """One storyboard element at run time."""
@@ -50,13 +54,10 @@ class Node:
 
     def is_(self, state_name: str, step: int) -> bool:
         """Does the element match `state_name` (a state, or a transition seen this step or the previous one)?"""
-        if state_name.endswith("State"):
-            return self.state.value == state_name
-        return (
-            self.last_transition is not None
-            and self.last_transition.value == state_name
-            and self.transition_step >= step - 1
-        )
+        state = _STATES.get(state_name)
+        if state is not None:
+            return self.state is state
+        return self.last_transition is _TRANSITIONS.get(state_name, False) and self.transition_step >= step - 1
 
     def walk(self) -> list[Node]:
         nodes = [self]

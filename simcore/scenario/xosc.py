@@ -1388,14 +1388,32 @@ def _condition(reader: _Reader, element: ET.Element) -> m.Condition:
     raise reader.fail(f"unknown condition <{body.tag}>", body)
 
 
+_ELEMENT_STATES = (
+    "startTransition",
+    "endTransition",
+    "stopTransition",
+    "skipTransition",
+    "completeState",
+    "runningState",
+    "standbyState",
+)
+_ELEMENT_TYPES = ("story", "act", "maneuverGroup", "maneuver", "event", "action")
+
+
 def _value_condition(reader: _Reader, c: ET.Element) -> m.ValueCondition:
     if c.tag == "SimulationTimeCondition":
         return m.SimulationTimeCondition(value=reader.num(c, "value"), rule=_rule(reader, c))
     if c.tag == "StoryboardElementStateCondition":
+        state = reader.attr(c, "state")
+        if state not in _ELEMENT_STATES:
+            raise reader.fail(f"state={state!r}: expected one of {', '.join(_ELEMENT_STATES)}", c)
+        kind = reader.attr(c, "storyboardElementType")
+        if kind not in _ELEMENT_TYPES:
+            raise reader.fail(f"storyboardElementType={kind!r}: expected one of {', '.join(_ELEMENT_TYPES)}", c)
         return m.StoryboardElementStateCondition(
-            element_type=reader.attr(c, "storyboardElementType"),
+            element_type=kind,
             element_ref=reader.attr(c, "storyboardElementRef"),
-            state=reader.attr(c, "state"),
+            state=state,
         )
     if c.tag == "ParameterCondition":
         return m.ParameterCondition(
