@@ -459,3 +459,12 @@ def test_angle_conditions(tmp_path: Path, road: OpenDrive) -> None:
     assert started(engine, "Road") == pytest.approx(0.0)
     assert started(engine, "Rel") == pytest.approx(0.0)
     assert started(engine, "Off") is None
+
+
+def test_unknown_element_state_is_bad_input(tmp_path: Path) -> None:
+    bad = """<Condition name="s" delay="0" conditionEdge="none"><ByValueCondition>
+      <StoryboardElementStateCondition storyboardElementType="event" storyboardElementRef="E" state="finished"/>
+      </ByValueCondition></Condition>"""
+    with pytest.raises(BadInput, match="state='finished': expected one of startTransition") as err:
+        load_scenario(scenario(tmp_path, event("E", stop_ego(), bad)))
+    assert "StoryboardElementStateCondition" in str(err.value)
