@@ -744,3 +744,43 @@ def test_velocity_is_the_displacement_and_time_to_collision_uses_it(tmp_path: Pa
     # gap 60 m closing at 10 m/s: below 2 s (20 m) after 4 s; the step from 4.05 brakes
     assert trace[4.05]["speed"] == pytest.approx(20.0)
     assert trace[4.1]["speed"] == pytest.approx(10.0)
+
+
+def test_an_alks_controller_brakes_for_a_vehicle_in_its_path_without_colliding(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    alks = """<ObjectController><Controller name="ALKS_R157SM_Controller"><Properties>
+      <Property name="model" value="Regulation"/></Properties></Controller></ObjectController>"""
+    activate = """<Private entityRef="Ego"><PrivateAction><ControllerAction>
+      <ActivateControllerAction longitudinal="true" lateral="false"/></ControllerAction></PrivateAction></Private>"""
+    brake = event("Brake", speed_action("linear", "rate", 5.0, 0.0), sim_time("greaterThan", 2.0))
+    path = scenario(
+        tmp_path,
+        brake,
+        entities=("Ego", "Lead", "Side"),
+        init=place("Ego", 100.0, speed=20.0)
+        + place("Lead", 160.0, speed=15.0)
+        + place("Side", 110.0, lane=-1, speed=5.0)  # slower, but in the next lane: no reason to brake
+        + activate,
+    )
+    text = path.read_text().replace('<ScenarioObject name="Ego">', '<ScenarioObject name="Ego">' + alks, 1)
+    # the Vehicle must come first in a ScenarioObject: move the controller after it
+    text = text.replace(alks + "\n  <Vehicle", "\n  <Vehicle").replace(
+        "</Vehicle>\n</ScenarioObject>", "</Vehicle>" + alks + "\n</ScenarioObject>", 1
+    )
+    text = text.replace('<EntityRef entityRef="Ego"/></Actors>', '<EntityRef entityRef="Lead"/></Actors>')
+    path.write_text(text)
+    loaded = load_scenario(path)
+    assert any("R157 safety driver" in w for w in loaded.warnings)
+    engine = ScenarioEngine(loaded, road=road, sumo=None, step_seconds=0.05)
+    ego, lead = engine.bodies["Ego"], engine.bodies["Lead"]
+    speeds = []
+    while engine.time < 15.0:
+        engine.advance()
+        speeds.append(ego.speed)
+        assert lead.s - ego.s > ego.entity.box.length  # never into the vehicle ahead
+    assert speeds[20] == pytest.approx(20.0)  # nothing in its path at first (the Side car is beside it)
+    decelerations = [(a - b) / 0.05 for a, b in itertools.pairwise(speeds)]
+    assert max(decelerations) <= 0.774 * 9.81 + 1e-6
+    assert ego.speed == 0.0 and lead.speed == 0.0
+    assert lead.s - ego.s < 10.0  # stopped close behind it

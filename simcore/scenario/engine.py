@@ -25,8 +25,8 @@ from simcore.scenario.motion import (
     align_trailer,
     lane_at_t,
     lane_shift,
-    shape_peak_rate_factor,
     pull_trailer,
+    shape_peak_rate_factor,
     shape_value,
     update_pose_from_road,
     wrap_angle,
@@ -366,6 +366,9 @@ class ScenarioEngine:
         self.signal_phases: dict[str, str] = {}
         self.action_order: dict[int, int] = {}  # id of an action node → its place in the storyboard
         self.ended_in_move = False  # an action runtime finished while moving its entity this step
+        # entities an ALKS controller may drive (UN R157 driver model), and their drivers once active
+        self._alks = [e.name for e in scenario.entities if m.controller_type(e.controller) in m.ALKS_CONTROLLERS]
+        self.safety_drivers: dict[str, extra_actions.SafetyDriver] = {}
         self._transitions = 0  # state transitions so far, and how many there were at the last completion pass
         self._completed_at = -1
         # trailers: tow vehicle → the entity it tows (Trailer/TrailerRef, ConnectTrailerAction), and back
@@ -1364,6 +1367,12 @@ class ScenarioEngine:
                 self._release(node)
                 self._set(node, Transition.END, State.COMPLETE)
         self._complete_elements()
+        for name in self._alks:
+            if self.controllers[name][1]:  # active on the longitudinal domain: it sets the speed
+                driver = self.safety_drivers.get(name)
+                if driver is None:
+                    driver = self.safety_drivers[name] = extra_actions.SafetyDriver(self, self.bodies[name])
+                driver.step(dt)
         self._moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         sumo, road, tow_of = self.sumo, self.road, self.tow_of

@@ -68,6 +68,8 @@ class Entity:
 
 # controllers of other tools whose entity is moved from outside the scenario (a program, a person)
 EXTERNAL_CONTROLLERS = frozenset({"ExternalController", "InteractiveController"})
+# controllers CARLOS runs as its UN R157 ALKS driver model (simcore.scenario.actions.SafetyDriver)
+ALKS_CONTROLLERS = frozenset({"ALKS_R157SM_Controller"})
 
 
 def controller_type(properties: dict[str, str]) -> str:

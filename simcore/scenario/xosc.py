@@ -553,6 +553,13 @@ def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
         )
     kind = m.controller_type(properties)
     known = properties.get("carlos.driver") in ("sumo", "external") or kind in m.EXTERNAL_CONTROLLERS
+    if kind in m.ALKS_CONTROLLERS:
+        reader.warn(
+            f"controller {kind!r} runs as CARLOS's R157 safety driver (holds its speed, brakes for vehicles "
+            "in its path): an approximation of the regulation's driver models",
+            parent,
+        )
+        known = True
     if not known and kind not in ("", "DefaultController"):
         reader.warn(
             f"controller {kind!r} is not modelled: the entity follows the scenario's actions "
