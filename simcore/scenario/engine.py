@@ -539,7 +539,8 @@ class ScenarioEngine:
                     length = r.road_length(road_id)
                     if not 0.0 <= s_on <= length:
                         message = (
-                            f"{self.source}: LanePosition road {position.road_id} s={position.s:g} lies beyond "
+                            f"{position.source or self.source}: LanePosition: road {position.road_id} "
+                            f"s={position.s:g} lies beyond "
                             f"the lanes' links: placed at the end of road {road_id}"
                         )
                         if message not in self.warnings:

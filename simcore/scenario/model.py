@@ -105,6 +105,7 @@ class LanePosition:
     s: float
     offset: float = 0.0
     orientation: Orientation | None = None
+    source: str = field(default="", compare=False)  # "file:line" (for messages)
 
 
 @dataclass(frozen=True)

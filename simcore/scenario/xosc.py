@@ -1263,6 +1263,7 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
             s=reader.num(p, "s"),
             offset=reader.num(p, "offset", 0.0),
             orientation=_orientation(reader, p),
+            source=reader.source(p),
         )
     if p.tag == "RoadPosition":
         return m.RoadPosition(
