@@ -916,7 +916,9 @@ class ScenarioEngine:
 
     def _entity_condition(self, c: m.EntityCondition, body: Body) -> bool:
         if isinstance(c, m.SpeedCondition):
-            return compare(c.rule, body.speed, c.value)
+            if c.direction is None:
+                return compare(c.rule, body.speed, c.value)
+            return compare(c.rule, _directional(body, body.heading, c.direction), c.value)
         if isinstance(c, m.AccelerationCondition):
             return compare(c.rule, body.acceleration, c.value)
         if isinstance(c, m.TraveledDistanceCondition):
@@ -930,7 +932,14 @@ class ScenarioEngine:
                 body.end_of_road_since is not None and self.time - body.end_of_road_since >= c.duration - 1e-9
             )
         if isinstance(c, m.RelativeSpeedCondition):
-            return compare(c.rule, body.speed - self.body(c.entity).speed, c.value)
+            other = self.body(c.entity)
+            if c.direction is None:
+                return compare(c.rule, body.speed - other.speed, c.value)
+            # both velocities in the reference entity's frame (as esmini)
+            relative = _directional(body, other.heading, c.direction) - _directional(
+                other, other.heading, c.direction
+            )
+            return compare(c.rule, relative, c.value)
         if isinstance(c, m.CollisionCondition):
             others = [self.body(c.entity)] if c.entity else [b for b in self.bodies.values() if b is not body]
             mine = Box.of(self.state_of(body))
@@ -1561,6 +1570,15 @@ def _walk_lane(road: OpenDrive, road_id: str, lane_id: int, s: float) -> tuple[s
         road_id, lane_id, new_dir = nxt
         s = over if new_dir > 0 else road.road_length(road_id) - over
     return road_id, lane_id, s
+
+
+def _directional(body: Body, heading: float, direction: str) -> float:
+    """A body's velocity along (longitudinal) or across (lateral, + left) `heading`; vertical: none here."""
+    if direction == "vertical":
+        return 0.0
+    c, s = math.cos(heading), math.sin(heading)
+    vx, vy = body.vx, body.vy
+    return c * vx + s * vy if direction == "longitudinal" else -s * vx + c * vy
 
 
 def _box_center(body: Body) -> tuple[float, float]:

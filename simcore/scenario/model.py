@@ -546,6 +546,7 @@ class RelativeDistanceCondition:
 class SpeedCondition:
     value: float
     rule: Rule
+    direction: str | None = None  # 1.2+: longitudinal | lateral | vertical (None: the speed)
 
 
 @dataclass(frozen=True)
@@ -553,6 +554,7 @@ class RelativeSpeedCondition:
     entity: str
     value: float
     rule: Rule
+    direction: str | None = None  # 1.2+: in the reference entity's frame
 
 
 @dataclass(frozen=True)

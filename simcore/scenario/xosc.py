@@ -1471,6 +1471,16 @@ def _distance_frame(reader: _Reader, c: ET.Element) -> tuple[str, str]:
     return system, kind
 
 
+def _direction(reader: _Reader, c: ET.Element) -> str | None:
+    """The DirectionalDimension of a speed condition (1.2+), None when absent."""
+    if c.get("direction") is None:
+        return None
+    direction = reader.attr(c, "direction")
+    if direction not in ("longitudinal", "lateral", "vertical"):
+        raise reader.fail(f"direction={direction!r}: expected longitudinal, lateral or vertical", c)
+    return direction
+
+
 def _freespace(reader: _Reader, c: ET.Element) -> bool:
     return reader.boolean(c, "freespace", False)
 
@@ -1490,10 +1500,15 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
             coordinate_system=reader.attr(c, "coordinateSystem", "entity"),
         )
     if tag == "SpeedCondition":
-        return m.SpeedCondition(value=reader.num(c, "value"), rule=_rule(reader, c))
+        return m.SpeedCondition(
+            value=reader.num(c, "value"), rule=_rule(reader, c), direction=_direction(reader, c)
+        )
     if tag == "RelativeSpeedCondition":
         return m.RelativeSpeedCondition(
-            entity=reader.attr(c, "entityRef"), value=reader.num(c, "value"), rule=_rule(reader, c)
+            entity=reader.attr(c, "entityRef"),
+            value=reader.num(c, "value"),
+            rule=_rule(reader, c),
+            direction=_direction(reader, c),
         )
     if tag == "AccelerationCondition":
         return m.AccelerationCondition(value=reader.num(c, "value"), rule=_rule(reader, c))
