@@ -468,3 +468,30 @@ def test_unknown_element_state_is_bad_input(tmp_path: Path) -> None:
     with pytest.raises(BadInput, match="state='finished': expected one of startTransition") as err:
         load_scenario(scenario(tmp_path, event("E", stop_ego(), bad)))
     assert "StoryboardElementStateCondition" in str(err.value)
+
+
+def test_speed_conditions_with_a_direction(tmp_path: Path, road: OpenDrive) -> None:
+    change = """<PrivateAction><LateralAction><LaneChangeAction>
+      <LaneChangeActionDynamics dynamicsShape="sinusoidal" dynamicsDimension="time" value="3"/>
+      <LaneChangeTarget><AbsoluteTargetLane value="-1"/></LaneChangeTarget></LaneChangeAction></LateralAction>
+      </PrivateAction>"""
+    init = place("Ego", 100.0) + place("Other", 50.0, lane=-3)
+    # in the other (straight-driving) entity's frame the lane change is a lateral speed; in the entity's own
+    # frame (it turns toward where it goes) it is none
+    sideways = by_ego(
+        """<RelativeSpeedCondition entityRef="Other" value="1.5" rule="greaterThan" direction="lateral"/>"""
+    )
+    own = by_ego("""<SpeedCondition value="0.1" rule="greaterThan" direction="lateral"/>""")
+    forward = by_ego("""<SpeedCondition value="19.9" rule="greaterThan" direction="longitudinal"/>""")
+    events = (
+        event("Change", change, sim_time(1.0))
+        + event("Sideways", signal_state("a", "1"), sideways)
+        + event("Own", signal_state("b", "1"), own)
+        + event("Forward", signal_state("c", "1"), forward + sim_time(0.5))
+    )
+    engine = run(scenario(tmp_path, events, entities=("Ego", "Other"), init=init), road, 5.0)
+    # 3.5 m over 3 s (sinusoidal): lateral speed 3.5·π/6·sin(π t/3), above 1.5 m/s from t ≈ 0.98 s of it
+    start = started(engine, "Sideways")
+    assert start is not None and 1.9 < start < 2.2
+    assert started(engine, "Own") is None
+    assert started(engine, "Forward") == pytest.approx(0.5)
