@@ -451,7 +451,8 @@ def run_recorder(env: PodEnv) -> int:
     def on_message(message: Message) -> None:
         with lock:
             if recorder is not None and not done.is_set() and recorder.wants(message.topic):
-                recorder.write(message.topic, message.typename, message.obj(), message.time_s)
+                # the CDR as received: no deserialising and serialising again
+                recorder.write(message.topic, message.typename, message.cdr(), message.time_s)
             if message.topic == STATUS_TOPIC:
                 values = _values(message.obj())
                 if SUMMARY_KEY in values:
