@@ -31,7 +31,7 @@ from simcore.scenario.motion import (
     update_pose_from_road,
     wrap_angle,
 )
-from simcore.scenario.storyboard import Node, Registry, State, Transition
+from simcore.scenario.storyboard import Node, Registry, State, Transition, transition_of
 from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
 
 if TYPE_CHECKING:
@@ -354,6 +354,8 @@ class ScenarioEngine:
         self._fixed_points: dict[int, tuple[m.Position, tuple[float, float, float, float]]] = {}
         self.measure = Measure(self)
         self._state_nodes: dict[int, list[Node]] = {}  # StoryboardElementStateCondition → its elements
+        # StoryboardElementStateCondition on a transition → element → how many of it the condition has seen
+        self._seen_transitions: dict[int, dict[int, int]] = {}
         self.owner: Body | None = None  # the actor whose action runs now ("$owner")
         self.parameter_values: dict[str, Any] = dict(scenario.parameters)
         self.variables: dict[str, Any] = dict(scenario.variables)
@@ -896,7 +898,21 @@ class ScenarioEngine:
                     f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
                     file=self.source,
                 )
-            return any(node.is_(c.state, self.step_index) for node in nodes)
+            transition = transition_of(c.state)
+            if transition is None:
+                return any(node.is_(c.state, self.step_index) for node in nodes)
+            # a transition holds when the element went through it since this condition was last evaluated
+            # (every transition counts once for each condition, however late it looks; as esmini)
+            seen = self._seen_transitions.get(id(c))
+            if seen is None:
+                seen = self._seen_transitions[id(c)] = {}
+            happened = False
+            for node in nodes:
+                count = node.counts.get(transition, 0)
+                if count > seen.get(id(node), 0):
+                    happened = True
+                    seen[id(node)] = count
+            return happened
         if isinstance(c, m.TrafficSignalCondition):
             return self.signals.get(c.name) == c.state
         if isinstance(c, m.TrafficSignalControllerCondition):

@@ -43,6 +43,7 @@ class Node:
     transition_step: int = -10
     runtime: Any = None  # action runtime while running
     actors: tuple[str, ...] = ()
+    counts: dict[Transition, int] = field(default_factory=dict)  # transitions so far, by kind
 
     def transition(
         self, transition: Transition, state: State, step: int, log: list[str], time: float
@@ -50,6 +51,7 @@ class Node:
         self.state = state
         self.last_transition = transition
         self.transition_step = step
+        self.counts[transition] = self.counts.get(transition, 0) + 1
         log.append(f"{time:8.3f} {self.kind} {self.name}: {transition.value} → {state.value}")
 
     def is_(self, state_name: str, step: int) -> bool:
@@ -64,6 +66,11 @@ class Node:
         for child in self.children:
             nodes.extend(child.walk())
         return nodes
+
+
+def transition_of(state_name: str) -> Transition | None:
+    """The transition a StoryboardElementStateCondition names (None: it names a state)."""
+    return _TRANSITIONS.get(state_name)
 
 
 class Registry:
