@@ -495,3 +495,26 @@ def test_speed_conditions_with_a_direction(tmp_path: Path, road: OpenDrive) -> N
     assert start is not None and 1.9 < start < 2.2
     assert started(engine, "Own") is None
     assert started(engine, "Forward") == pytest.approx(0.5)
+
+
+def test_a_transition_counts_once_per_condition_however_late_it_is_evaluated(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    def state(element: str, kind: str) -> str:
+        return f"""<Condition name="s" delay="0" conditionEdge="none"><ByValueCondition>
+          <StoryboardElementStateCondition storyboardElementType="event" storyboardElementRef="{element}"
+            state="{kind}"/></ByValueCondition></Condition>"""
+
+    repeat = event("Repeat", signal_state("r", "1"), state("Early", "startTransition")).replace(
+        'maximumExecutionCount="1"', 'maximumExecutionCount="3"'
+    )
+    events = (
+        event("Early", signal_state("e", "1"), sim_time(0.5))
+        # the time condition does not hold before 2 s: the transition is looked at then (as esmini)
+        + event("Late", signal_state("l", "1"), sim_time(2.0) + state("Early", "endTransition"))
+        + repeat
+    )
+    engine = run(scenario(tmp_path, events), road, 3.0)
+    assert started(engine, "Early") == pytest.approx(0.5, abs=0.051)
+    assert started(engine, "Late") == pytest.approx(2.0, abs=0.051)
+    assert sum("event Repeat: startTransition" in line for line in engine.log) == 1
