@@ -784,3 +784,24 @@ def test_an_alks_controller_brakes_for_a_vehicle_in_its_path_without_colliding(
     assert max(decelerations) <= 0.774 * 9.81 + 1e-6
     assert ego.speed == 0.0 and lead.speed == 0.0
     assert lead.s - ego.s < 10.0  # stopped close behind it
+
+
+def test_longitudinal_distance_with_one_limit_takes_the_other_from_the_vehicle(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    # only maxAcceleration: braking to the wanted distance is bounded by the vehicle's maxDeceleration (9)
+    path = scenario(
+        tmp_path,
+        event(
+            "Keep",
+            distance_keeping('<DynamicConstraints maxAcceleration="2"/>'),
+            sim_time("greaterThan", 0.0),
+        ),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0, speed=30.0) + place("Lead", 130.0, speed=10.0),
+    )
+    _, trace = run(path, road, 10.0)
+    acc = accelerations(trace)
+    assert min(acc) == pytest.approx(-9.0, abs=1e-6)
+    assert max(acc) <= 2.0 + 1e-6
+    assert all(0.0 <= v["speed"] <= 70.0 for v in trace.values())

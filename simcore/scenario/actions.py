@@ -315,10 +315,15 @@ class LongitudinalDistanceRuntime(Runtime):
         if not self.action.continuous and abs(error) < self.THRESHOLD:
             self.done = True
         c = self.action.constraints or m.DynamicConstraints()
-        # the limits given are bounded by the vehicle's performance (as esmini does)
+        # the limits given are bounded by the vehicle's performance (as esmini does); one of them missing is
+        # the vehicle's (esmini would take it as unlimited, with absurd speeds as a result)
         perf = a.entity.performance
+        given = c.max_acceleration is not None or c.max_deceleration is not None
         max_acc = min(c.max_acceleration, perf.max_acceleration) if c.max_acceleration is not None else _BIG
         max_dec = min(c.max_deceleration, perf.max_deceleration) if c.max_deceleration is not None else _BIG
+        if given:
+            max_acc = min(max_acc, perf.max_acceleration)
+            max_dec = min(max_dec, perf.max_deceleration)
         if max_acc >= _BIG and max_dec >= _BIG:
             # no dynamics given: the distance is kept exactly
             self.engine.shift_along(a, error)
@@ -338,7 +343,7 @@ class LongitudinalDistanceRuntime(Runtime):
                 acc = min(self.acceleration + jerk * dt, acc)
         self.acceleration = acc
         speed = a.speed + acc * dt
-        limit = c.max_speed if c.max_speed is not None else _BIG
+        limit = c.max_speed if c.max_speed is not None else perf.max_speed
         a.speed = min(max(speed, -limit), limit)
 
 
