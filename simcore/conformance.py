@@ -205,7 +205,7 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
             engine.advance()
             if engine.step_index % every == 0:
                 _sample(trace, engine)
-        result.sim_seconds = engine.time
+        result.sim_seconds = engine.time + getattr(engine, "output_time_offset", 0.0)
         result.ended = engine.ended
         result.status = "ended" if engine.ended else "capped"
         if not engine.ended:
@@ -226,7 +226,7 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
 
 
 def _sample(trace: Trace, engine: Any) -> None:
-    t = round(engine.time, 6)
+    t = round(engine.time + getattr(engine, "output_time_offset", 0.0), 6)  # on the reference's time axis
     for body in engine.bodies.values():
         if not getattr(body, "gone", False) and getattr(body, "placed", True):
             trace.add(t, body.name, body.x, body.y)

@@ -143,3 +143,20 @@ def test_corpus_subset_agrees_with_esmini() -> None:
     for r in results:
         assert r.loaded and r.ended, (r.file, r.message)
         assert r.agreed, (r.file, r.max_rmse, r.worst_entity, r.end_error)
+
+
+def test_a_ghost_head_start_shifts_the_reported_time_axis(tmp_path: Path) -> None:
+    """esmini runs a FollowGhost controller's ghost `headstartTime` ahead and reports every time shifted back
+    by it: results are put on that axis (the storyboard still runs on its own time)."""
+    ghost = """</Vehicle><ObjectController><Controller name="g"><Properties>
+      <Property name="esminiController" value="FollowGhostController"/><Property name="headstartTime" value="1.5"/>
+      </Properties></Controller></ObjectController>"""
+    path = tmp_path / "ghost.xosc"
+    path.write_text(SCENARIO.replace("</Vehicle>", ghost, 1))
+    result, trace = conformance.run_scenario(path, cap_seconds=10)
+    assert result.ended
+    assert result.sim_seconds == pytest.approx(
+        2.05 - 1.5
+    )  # the stop trigger (> 2 s) on the storyboard's time
+    times = [t for t, _, _ in trace.tracks["Car"]]
+    assert times[0] == pytest.approx(-1.5) and times[-1] == pytest.approx(0.5, abs=0.06)

@@ -368,8 +368,21 @@ class ScenarioEngine:
         self.signal_phases: dict[str, str] = {}
         self.action_order: dict[int, int] = {}  # id of an action node → its place in the storyboard
         self.ended_in_move = False  # an action runtime finished while moving its entity this step
+        # a FollowGhost controller (esmini) gives its ghost a head start: esmini reports every time shifted
+        # back by it (the storyboard's time 0 is at -headstart on its time axis); `output_time_offset` is
+        # that shift, for comparisons with such output (the storyboard itself runs on its own time)
+        self.output_time_offset = -max(
+            (
+                _number(e.controller.get("headstartTime"))
+                for e in scenario.entities
+                if m.controller_type(e.controller) == "FollowGhostController"
+            ),
+            default=0.0,
+        )
         # entities an ALKS controller may drive (UN R157 driver model), and their drivers once active
-        self._alks = [e.name for e in scenario.entities if m.controller_type(e.controller) in m.ALKS_CONTROLLERS]
+        self._alks = [
+            e.name for e in scenario.entities if m.controller_type(e.controller) in m.ALKS_CONTROLLERS
+        ]
         self.safety_drivers: dict[str, extra_actions.SafetyDriver] = {}
         self._transitions = 0  # state transitions so far, and how many there were at the last completion pass
         self._completed_at = -1
@@ -679,7 +692,10 @@ class ScenarioEngine:
     def align_trailers(self, tow: Body | None = None, *, pull: bool = False) -> None:
         """Place every trailer (of `tow`, else of every front tow vehicle) behind its tow vehicle, down the
         chain: straight behind, or with `pull` dragged by the hitch from where it was."""
-        fronts = [tow] if tow is not None else [self.bodies[n] for n in self.trailer_of if n not in self.tow_of]
+        if tow is not None:
+            fronts = [tow]
+        else:
+            fronts = [self.bodies[n] for n in self.trailer_of if n not in self.tow_of]
         for front in fronts:
             current = front
             for _ in range(len(self.trailer_of)):
@@ -1382,7 +1398,8 @@ class ScenarioEngine:
                     runtime.step(dt)
             self.init_runtimes = [r for r in self.init_runtimes if not r.done]
         nodes: list[Node] = list({id(n): n for n in self.running.values()}.values())
-        if len(nodes) > 1:  # actions step in the storyboard's order (as esmini), not in the order they started
+        if len(nodes) > 1:
+            # actions step in the storyboard's order (as esmini), not in the order they started
             nodes = sorted(nodes, key=lambda n: self.action_order.get(id(n), 0))
         for node in nodes:
             runtimes: list[Runtime] = node.runtime or []
@@ -1619,6 +1636,13 @@ def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tup
             current = by_name.get(current.reference) if current.reference else None
         out[ctrl.name] = (start, 0)
     return out
+
+
+def _number(text: str | None) -> float:
+    try:
+        return max(float(text or 0.0), 0.0)
+    except ValueError:
+        return 0.0
 
 
 def _added_later(scenario: m.Scenario) -> set[str]:
