@@ -399,6 +399,8 @@ class ScenarioEngine:
                 self.trailer_of[entity.name] = entity.trailer
         self.tow_of: dict[str, str] = {t: tow for tow, t in self.trailer_of.items()}
         self.root = self._build()
+        if road is not None:
+            self._check_signal_names(road)
         self.registry = Registry(self.root)
         self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
         self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
@@ -835,6 +837,40 @@ class ScenarioEngine:
                 )
             self._signal_cycles[ctrl.name] = (self.time, names.index(action.phase))
             self._update_signals()
+
+    def _check_signal_names(self, road: OpenDrive) -> None:
+        """Warn about traffic signals the scenario names (by id or name) that the road network lacks."""
+        known = set(road.signals) | {n for n in road.signals.values() if n}
+        named: dict[str, str] = {}
+        for item in self.scenario.init:
+            if isinstance(item.action, m.TrafficSignalStateAction):
+                named.setdefault(item.action.name, "TrafficSignalStateAction")
+        for ctrl in self.scenario.signal_controllers:
+            for phase in ctrl.phases:
+                for signal, _ in phase.states:
+                    named.setdefault(signal, f"TrafficSignalController[{ctrl.name}]")
+        for node in self.root.walk():
+            definition = node.definition
+            if isinstance(definition, m.Action) and isinstance(
+                definition.global_action, m.TrafficSignalStateAction
+            ):
+                named.setdefault(definition.global_action.name, "TrafficSignalStateAction")
+            for trigger in (getattr(definition, "start_trigger", None), getattr(definition, "stop_trigger", None)):
+                for group in trigger.groups if trigger is not None else ():
+                    for cond in group:
+                        if isinstance(cond.value_condition, m.TrafficSignalCondition):
+                            named.setdefault(cond.value_condition.name, "TrafficSignalCondition")
+        for trigger_ in (self.scenario.stop_trigger,):
+            for group in trigger_.groups if trigger_ is not None else ():
+                for cond in group:
+                    if isinstance(cond.value_condition, m.TrafficSignalCondition):
+                        named.setdefault(cond.value_condition.name, "TrafficSignalCondition")
+        for name, where in named.items():
+            if name not in known:
+                self.warnings.append(
+                    f"{self.source}: {where}: traffic signal {name!r} is not a <signal> of the road network "
+                    f"{road.name} (ids: {', '.join(sorted(road.signals)) or 'none'})"
+                )
 
     def _update_signals(self) -> None:
         """Signal controllers: the phase each is in now, and the signal states that phase sets."""

@@ -852,6 +852,7 @@ class OpenDrive:
         self.roads = roads
         self.junctions = junctions
         self._index: Any = None
+        self.signals: dict[str, str] = {}  # <signal> id → name (traffic signals are otherwise not modelled)
 
     # ---------------------------------------------------------------- construction
     @classmethod
@@ -901,7 +902,11 @@ class OpenDrive:
             junctions[j.id] = j
         if not roads:
             raise OpenDriveError(f"{name}: no <road> elements")
-        return cls(roads, junctions, name)
+        network = cls(roads, junctions, name)
+        for road_el in root.findall("road"):
+            for signal in road_el.iterfind("signals/signal"):
+                network.signals[signal.get("id", "")] = signal.get("name", "")
+        return network
 
     # ---------------------------------------------------------------- basic queries
     def road(self, road_id: str) -> Road:
