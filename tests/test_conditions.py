@@ -518,3 +518,11 @@ def test_a_transition_counts_once_per_condition_however_late_it_is_evaluated(
     assert started(engine, "Early") == pytest.approx(0.5, abs=0.051)
     assert started(engine, "Late") == pytest.approx(2.0, abs=0.051)
     assert sum("event Repeat: startTransition" in line for line in engine.log) == 1
+
+
+def test_a_signal_missing_from_the_road_network_is_warned_about(tmp_path: Path, road: OpenDrive) -> None:
+    green = """<Condition name="g" delay="0" conditionEdge="none"><ByValueCondition>
+      <TrafficSignalCondition name="42" state="off;off;on"/></ByValueCondition></Condition>"""
+    engine = run(scenario(tmp_path, event("Go", stop_ego(), green)), road, 0.1)
+    assert any("TrafficSignalCondition: traffic signal '42' is not a <signal>" in w for w in engine.warnings)
+    assert len([w for w in engine.warnings if "'42'" in w]) == 1
