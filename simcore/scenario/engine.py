@@ -685,7 +685,9 @@ class ScenarioEngine:
         body.heading_offset = 0.0
         orientation = getattr(position, "orientation", None)
         if body.road_id is not None and orientation is not None and orientation.type == "relative":
-            lane_heading = self.road.road_to_world(body.road_id, body.s, 0.0).heading if self.road else heading
+            lane_heading = heading
+            if self.road is not None:
+                lane_heading = self.road.road_to_world(body.road_id, body.s, 0.0).heading
             travel = lane_heading if body.direction > 0 else lane_heading + math.pi
             body.heading_offset = wrap_angle(heading - travel)
         if self.sumo is not None and self.step_index > 0 and self.sumo.has(body.name):
@@ -855,7 +857,8 @@ class ScenarioEngine:
                 definition.global_action, m.TrafficSignalStateAction
             ):
                 named.setdefault(definition.global_action.name, "TrafficSignalStateAction")
-            for trigger in (getattr(definition, "start_trigger", None), getattr(definition, "stop_trigger", None)):
+            triggers = (getattr(definition, "start_trigger", None), getattr(definition, "stop_trigger", None))
+            for trigger in triggers:
                 for group in trigger.groups if trigger is not None else ():
                     for cond in group:
                         if isinstance(cond.value_condition, m.TrafficSignalCondition):

@@ -59,7 +59,10 @@ class Node:
         state = _STATES.get(state_name)
         if state is not None:
             return self.state is state
-        return self.last_transition is _TRANSITIONS.get(state_name, False) and self.transition_step >= step - 1
+        transition = _TRANSITIONS.get(state_name)
+        return (
+            transition is not None and self.last_transition is transition and self.transition_step >= step - 1
+        )
 
     def walk(self) -> list[Node]:
         nodes = [self]

@@ -86,7 +86,7 @@ class _Reader:
         return None if element is None else self.lines.get(id(element))
 
     def source(self, element: ET.Element | None) -> str:
-        """"file:line" of an element (of the scenario, or of the catalog it comes from)."""
+        """The "file:line" of an element (in the scenario, or in the catalog it comes from)."""
         file = self.files.get(id(element), self.path) if element is not None else self.path
         line = self.line(element)
         return f"{file}:{line}" if line else str(file)
