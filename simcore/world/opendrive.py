@@ -952,8 +952,30 @@ class OpenDrive:
     def lane_center_t(self, road_id: str, lane_id: int, s: float) -> float:
         """``t`` of the lane's centre at ``s`` (includes laneOffset; lane 0 gives the laneOffset)."""
         road = self.road(road_id)
-        _, inner, outer = self._lane_borders(road, lane_id, self._check_s(road, s))
-        return 0.5 * (inner + outer)
+        s = self._check_s(road, s)
+        if lane_id == 0:
+            return road.lane_offset(s)
+        side = 1 if lane_id > 0 else -1
+        cache = road.__dict__.get("_borders")
+        if cache is not None and (s, side) in cache:
+            _, inner, outer = self._lane_borders(road, lane_id, s)
+            return 0.5 * (inner + outer)
+        # only the lanes from the centre out to this one (as side_borders computes them)
+        sec = road.section_at(s, side)
+        ds = s - sec.s
+        off = road.lane_offset(s)
+        acc = 0.0
+        for lane in sec.left if side > 0 else sec.right:
+            if lane.widths:
+                w = lane.width_at(ds)
+            else:
+                b = lane.border_at(ds)
+                w = 0.0 if b is None else abs(b) - acc
+            inner = off + side * acc
+            acc += w
+            if lane.id == lane_id:
+                return 0.5 * (inner + (off + side * acc))
+        raise OpenDriveError(f"{self.name}: road id={road.id}: no lane id={lane_id} at s={s:.3f}")
 
     def lane_width(self, road_id: str, lane_id: int, s: float) -> float:
         """Width of the lane at ``s`` (0 for lane 0)."""
