@@ -955,11 +955,20 @@ class OpenDrive:
         s = self._check_s(road, s)
         if lane_id == 0:
             return road.lane_offset(s)
+        centers: dict[tuple[float, int], float] | None = road.__dict__.get("_centers")
+        if centers is None:
+            centers = road.__dict__["_centers"] = {}
+        hit = centers.get((s, lane_id))
+        if hit is not None:
+            return hit
+        if len(centers) > 256:
+            centers.clear()
         side = 1 if lane_id > 0 else -1
         cache = road.__dict__.get("_borders")
         if cache is not None and (s, side) in cache:
             _, inner, outer = self._lane_borders(road, lane_id, s)
-            return 0.5 * (inner + outer)
+            centers[(s, lane_id)] = t = 0.5 * (inner + outer)
+            return t
         # only the lanes from the centre out to this one (as side_borders computes them)
         sec = road.section_at(s, side)
         ds = s - sec.s
@@ -974,7 +983,8 @@ class OpenDrive:
             inner = off + side * acc
             acc += w
             if lane.id == lane_id:
-                return 0.5 * (inner + (off + side * acc))
+                centers[(s, lane_id)] = t = 0.5 * (inner + (off + side * acc))
+                return t
         raise OpenDriveError(f"{self.name}: road id={road.id}: no lane id={lane_id} at s={s:.3f}")
 
     def lane_width(self, road_id: str, lane_id: int, s: float) -> float:
