@@ -212,6 +212,24 @@ def _piecewise_linear(xs: list[float], ys: list[float], x: float) -> float:
     return ys[-1]
 
 
+def _basis_peaks(knots: tuple[float, ...], order: int, count: int, u0: float, u1: float) -> list[float]:
+    """For each control point, the curve parameter at which its B-spline basis function is largest."""
+    samples = 2000
+    best = [(-1.0, u0)] * count
+    for j in range(samples + 1):
+        u = u0 + (u1 - u0) * j / samples
+        if j == samples:
+            u = u1 - 1e-12 * max(1.0, abs(u1))
+        for i in range(count):
+            b = _basis(knots, order, i, u)
+            if b > best[i][0]:
+                best[i] = (b, u)
+    peaks = [u for _, u in best]
+    for i in range(1, count):  # non-decreasing, as time must be along the curve
+        peaks[i] = max(peaks[i], peaks[i - 1])
+    return peaks
+
+
 def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
     pts = [resolve(c.position) for c in shape.control_points]
     weights = [c.weight for c in shape.control_points]
@@ -219,10 +237,9 @@ def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
     timed = all(t is not None for t in times)
     knots = shape.knots
     u0, u1 = knots[shape.order - 1], knots[len(pts)]
-    # a control point's time belongs to its Greville abscissa (the mean of the order - 1 knots after it);
-    # between them time is linear in the curve parameter (as esmini)
-    degree = max(shape.order - 1, 1)
-    greville = [sum(knots[i + 1 : i + 1 + degree]) / degree for i in range(len(pts))]
+    # a control point's time belongs to the parameter where its basis function peaks (the point's greatest
+    # influence); between them time is linear in the curve parameter (as esmini)
+    peaks = _basis_peaks(knots, shape.order, len(pts), u0, u1) if timed else []
     n = max(NURBS_SAMPLES_PER_POINT * len(pts), 2)
     out_pts: list[tuple[float, float, float]] = []
     out_t: list[float] = []
@@ -241,7 +258,7 @@ def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
             continue
         out_pts.append((num_x / den, num_y / den, num_z / den))
         if timed:
-            out_t.append(_piecewise_linear(greville, [float(t or 0.0) for t in times], u))
+            out_t.append(_piecewise_linear(peaks, [float(t or 0.0) for t in times], u))
     return _from_points(out_pts, out_t if timed else None)
 
 
