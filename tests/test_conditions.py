@@ -392,27 +392,38 @@ def test_relative_orientation_is_kept_along_the_lane(tmp_path: Path, road: OpenD
     assert engine.bodies["Ego"].heading == pytest.approx(1.2, abs=1e-6)  # the road heads along +x here
 
 
-def test_nurbs_times_belong_to_the_greville_abscissae(tmp_path: Path, road: OpenDrive) -> None:
-    points = [(100.0, -5.0, 0.0), (200.0, -5.0, 20.0), (260.0, 20.0, 35.0)]
+def test_nurbs_control_point_times_sit_where_their_basis_function_peaks(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    from simcore.scenario.paths import _basis
+
+    points = [
+        (100.0, -5.0, 0.0),
+        (160.0, -5.0, 3.0),
+        (220.0, 5.0, 6.0),
+        (280.0, -5.0, 9.0),
+        (340.0, -5.0, 12.0),
+    ]
+    knots = (0.0, 0.0, 0.0, 1 / 3, 2 / 3, 1.0, 1.0, 1.0)
     control = "".join(
         f"""<ControlPoint time="{t}" weight="1"><Position><WorldPosition x="{x}" y="{y}" z="0" h="0"/></Position>
         </ControlPoint>"""
         for x, y, t in points
     )
+    knot_xml = "".join(f'<Knot value="{k}"/>' for k in knots)
     follow = f"""<PrivateAction><RoutingAction><FollowTrajectoryAction>
-      <TrajectoryRef><Trajectory name="n" closed="false"><Shape><Nurbs order="3">{control}
-        <Knot value="0"/><Knot value="0"/><Knot value="0"/><Knot value="1"/><Knot value="1"/><Knot value="1"/>
+      <TrajectoryRef><Trajectory name="n" closed="false"><Shape><Nurbs order="3">{control}{knot_xml}
       </Nurbs></Shape></Trajectory></TrajectoryRef>
       <TimeReference><Timing domainAbsoluteRelative="relative" scale="1" offset="0"/></TimeReference>
       <TrajectoryFollowingMode followingMode="position"/></FollowTrajectoryAction></RoutingAction></PrivateAction>"""
-    engine = run(scenario(tmp_path, event("Fly", follow, sim_time(0))), road, 10.0)
-    # time 10 is halfway from the first control point (u = 0) to the second (u = 0.5): u = 0.25
-    u = 0.25
-    b = [(1 - u) ** 2, 2 * u * (1 - u), u * u]
+    engine = run(scenario(tmp_path, event("Fly", follow, sim_time(0))), road, 3.0)
+    # control point 1 (time 3) has its basis function's peak at u = 2/9 (not its Greville abscissa 1/6)
+    u = 2 / 9
+    b = [_basis(knots, 3, i, u) for i in range(len(points))]
     x = sum(w * p[0] for w, p in zip(b, points, strict=True))
     y = sum(w * p[1] for w, p in zip(b, points, strict=True))
     ego = engine.bodies["Ego"]
-    assert (ego.x, ego.y) == (pytest.approx(x, abs=0.05), pytest.approx(y, abs=0.05))
+    assert (ego.x, ego.y) == (pytest.approx(x, abs=0.1), pytest.approx(y, abs=0.1))
 
 
 def test_freespace_euclidean_relative_distance(tmp_path: Path, road: OpenDrive) -> None:
