@@ -360,9 +360,46 @@ def relative_name(result: ScenarioResult, base: Path) -> str:
         return result.file
 
 
+def totals_line(results: list[ScenarioResult]) -> str:
+    """One sentence with the totals (the CLI's last line, the Markdown table's first)."""
+    t = totals(results)
+    return (
+        f"{t['scenarios']} scenarios · loaded {t['loaded']} · ran to their own end {t['ended']} · "
+        f"agreed {t['agreed']} of {t['with_reference']} with a reference "
+        f"({t['agreed_end_time_only']} of them on the end time only: every entity controller-driven) "
+        f"(RMSE ≤ {RMSE_LIMIT} m, end ±{END_LIMIT} s) · {t['sim_seconds']:.0f} simulated s in "
+        f"{t['wall_seconds']:.1f} s · {t['warnings']} warnings"
+    )
+
+
+def markdown(results: list[ScenarioResult], base: Path) -> str:
+    """The totals and one table row per file, as Markdown (what the README embeds)."""
+    lines = [
+        f"Totals: {totals_line(results)}.",
+        "",
+        "| scenario | status | end s (CARLOS / reference) | max RMSE m | worst entity | agreed |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        name = relative_name(r, base)
+        status = r.status if r.kind == "scenario" else f"{r.kind} (not run)"
+        if r.status in ("bad_input", "error") and r.message:
+            message = r.message.replace(r.file, name)  # the file is the row's first cell
+            status += ": " + (message[:100] + "…" if len(message) > 100 else message)
+        end = f"{r.sim_seconds:.2f} / {'—' if r.reference_end is None else f'{r.reference_end:.2f}'}"
+        rmse = "" if r.max_rmse is None else f"{r.max_rmse:.3f}"
+        agreed = "yes" if r.agreed else ("" if r.reference is None else "no")
+        cells = [name, status, end if r.loaded else "", rmse, r.worst_entity or "", agreed]
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def write_results(results: list[ScenarioResult], out: Path, base: Path) -> None:
-    """CSV (one row per file) or JSON (rows, entities and totals), by the file suffix."""
+    """CSV (one row per file), JSON (rows, entities and totals) or Markdown (totals and table), by suffix."""
     out.parent.mkdir(parents=True, exist_ok=True)
+    if out.suffix == ".md":
+        out.write_text(markdown(results, base))
+        return
     if out.suffix == ".json":
         payload = {
             "totals": totals(results),

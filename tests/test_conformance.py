@@ -113,6 +113,20 @@ def test_command_prints_totals_and_writes_csv_and_json(suite: tuple[Path, Path],
     assert payload["totals"]["agreed"] == 1
 
 
+def test_markdown_table_has_the_totals_and_a_row_per_file(suite: tuple[Path, Path], tmp_path: Path) -> None:
+    scenarios, reference = suite
+    write_reference(reference / "set__straight.csv.gz", shift=0.6, end=2.05)
+    results = conformance.run_directory(scenarios, reference)
+    out = tmp_path / "table.md"
+    conformance.write_results(results, out, scenarios)
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("Totals: 2 scenarios · loaded 1 · ran to their own end 1 · agreed 0 of 1")
+    rows = {line.split(" | ")[0].lstrip("| "): line for line in lines if line.startswith("| set/")}
+    assert set(rows) == {"set/straight.xosc", "set/broken.xosc"}
+    assert "| ended | 2.05 / 2.00 | 0.600 | Car | no |" in rows["set/straight.xosc"]
+    assert "bad_input: " in rows["set/broken.xosc"] and "not well-formed" in rows["set/broken.xosc"]
+
+
 @pytest.mark.skipif(not CORPUS.is_dir(), reason="esmini corpus not present")
 def test_corpus_subset_agrees_with_esmini() -> None:
     """A few corpus scenarios covering lane changes, speed shapes, trajectories, catalogs and headway
