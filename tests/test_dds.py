@@ -515,7 +515,13 @@ def test_glob_subscriber_in_another_process_gets_every_message_from_the_first(do
         if sub.poll() is None:
             sub.kill()
     got = [(topic, round(t * 1e9), data) for topic, t, data in json.loads(out.strip().splitlines()[-1])]
-    assert got == [(topic, round(t * 1e9), data) for topic, t, data in sent]  # time: ns, as in the MCAP
+    expected = [(topic, round(t * 1e9), data) for topic, t, data in sent]  # time: ns, as in the MCAP
+    # DDS orders samples per topic (one writer each), not across topics: the receive thread may take the
+    # status reader's sample before the last clock samples (seen under load); the pod flushes before its
+    # final message and the recorder drains after it, so nothing is lost, which is what this checks
+    for topic in ("/clock", "/carlos/status"):
+        assert [m for m in got if m[0] == topic] == [m for m in expected if m[0] == topic]
+    assert len(got) == len(expected)
 
 
 # --- the pod's roles as separate processes over DDS ---------------------------------------------------------
