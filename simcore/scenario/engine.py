@@ -337,7 +337,8 @@ class ScenarioEngine:
         self.bodies: dict[str, Body] = {e.name: Body(entity=e) for e in scenario.entities}
         # per entity: [driver of its assigned controller, active longitudinally, active laterally]
         self.controllers: dict[str, list[Any]] = {
-            e.name: [e.driver if e.driver == "external" else "scenario", False, False] for e in scenario.entities
+            e.name: [e.driver if e.driver == "external" else "scenario", False, False]
+            for e in scenario.entities
         }
         self.ego = ego or _default_ego(scenario)
         if self.ego not in self.bodies:

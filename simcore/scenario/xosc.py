@@ -511,7 +511,9 @@ def _trailer(reader: _Reader, body: ET.Element) -> tuple[float | None, float | N
         if ref is not None:
             trailer = reader.attr(ref, "entityRef", "") or None
         else:
-            reader.warn("an inline Trailer is not created (only Trailer/TrailerRef to a declared entity)", towed)
+            reader.warn(
+                "an inline Trailer is not created (only Trailer/TrailerRef to a declared entity)", towed
+            )
     return hitch, coupler, trailer
 
 
@@ -1417,7 +1419,9 @@ def _value_condition(reader: _Reader, c: ET.Element) -> m.ValueCondition:
             raise reader.fail(f"state={state!r}: expected one of {', '.join(_ELEMENT_STATES)}", c)
         kind = reader.attr(c, "storyboardElementType")
         if kind not in _ELEMENT_TYPES:
-            raise reader.fail(f"storyboardElementType={kind!r}: expected one of {', '.join(_ELEMENT_TYPES)}", c)
+            raise reader.fail(
+                f"storyboardElementType={kind!r}: expected one of {', '.join(_ELEMENT_TYPES)}", c
+            )
         return m.StoryboardElementStateCondition(
             element_type=kind,
             element_ref=reader.attr(c, "storyboardElementRef"),
