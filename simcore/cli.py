@@ -14,7 +14,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from simcore.errors import BadInput, CarlosError
+from simcore.errors import BadInput, CarlosError, SimulationError
 
 if TYPE_CHECKING:
     from simcore.transport.bus import Bus
@@ -82,13 +82,25 @@ def run(
             help=(
                 "How nodes in other processes reach the run's topics (one run, e.g. a closed-loop "
                 "controller): `none` (default), `loopback` (a topic hub on 127.0.0.1:--bus-port, "
-                "simcore.transport.loopback.LoopbackBus clients)."
+                "simcore.transport.loopback.LoopbackBus clients) or `dds` (ROS 2 topics on DDS: ROS 2 "
+                "nodes with RMW_IMPLEMENTATION=rmw_cyclonedds_cpp on the same domain see them; "
+                "configuration from CYCLONEDDS_URI, ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST keeps them on "
+                "this host)."
             ),
         ),
     ] = "none",
     bus_port: Annotated[
         int, typer.Option("--bus-port", min=0, max=65535, help="Port of the loopback topic hub.")
     ] = 7447,
+    ros_domain_id: Annotated[
+        int | None,
+        typer.Option(
+            "--ros-domain-id",
+            min=0,
+            max=232,
+            help="DDS domain of --transport dds (default: ROS_DOMAIN_ID, else 0).",
+        ),
+    ] = None,
 ) -> None:
     """Run every scenario × permutation of a SimulationRun on this machine.
 
@@ -104,8 +116,10 @@ def run(
         total = len(Plan(simulation_run.spec))
         _preflight(simulation_run, manifest)
         live = live or simulation_run.spec.live
-        if transport not in ("none", "loopback"):
-            raise BadInput(f"unknown transport {transport!r}: use none or loopback", field="--transport")
+        if transport not in ("none", "loopback", "dds"):
+            raise BadInput(f"unknown transport {transport!r}: use none, loopback or dds", field="--transport")
+        if ros_domain_id is not None and transport != "dds":
+            raise BadInput("--ros-domain-id is for --transport dds", field="--ros-domain-id")
         bus: Bus | None = None
         for flag, wanted in (("--live", live), ("--transport", transport != "none")):
             selected = len(set(index)) if index else total
@@ -125,6 +139,8 @@ def run(
                 ) from None
             bus = LoopbackBus(port=hub.port)
             console.print(f"topics: loopback hub on 127.0.0.1:{hub.port}", highlight=False)
+        elif transport == "dds":
+            bus = _dds_bus(ros_domain_id)
         if live:
             from simcore.live import LiveServer
             from simcore.transport.bus import InProcessBus
@@ -212,6 +228,27 @@ def run(
             hub.close()
     _print_report(report)
     raise typer.Exit(report.exit_code)
+
+
+def _dds_bus(domain_id: int | None) -> Bus:
+    """The run's DDS bus (`--transport dds`): ROS_DOMAIN_ID unless --ros-domain-id, configured as a ROS 2
+    node with rmw_cyclonedds_cpp would be in this environment (simcore.transport.dds_config)."""
+    from simcore.transport.dds_config import config_from_env, describe, domain_id_from_env
+
+    domain = domain_id_from_env() if domain_id is None else domain_id
+    try:
+        from simcore.transport.dds import DdsBus, DdsError
+    except ImportError as exc:  # cyclonedds is a dependency; a broken install is the machine's problem
+        raise SimulationError(f"--transport dds: cyclonedds cannot be imported: {exc}") from None
+    config = config_from_env()
+    try:
+        bus = DdsBus(domain, config=config)
+    except DdsError as exc:
+        if os.environ.get("CYCLONEDDS_URI", "").strip():
+            raise BadInput(f"{exc}", field="CYCLONEDDS_URI") from None
+        raise SimulationError(f"--transport dds: {exc}") from None
+    console.print(f"topics: {describe(domain)}", highlight=False, soft_wrap=True)
+    return bus
 
 
 def _preflight(simulation_run: object, manifest: Path) -> None:

@@ -346,10 +346,17 @@ def _manifest(tmp_path: Path, timeout: float) -> Path:
 
 
 def _processes(
-    tmp_path: Path, timeout: float, stop_after: int | None
+    tmp_path: Path,
+    timeout: float,
+    stop_after: int | None,
+    transport: str = "loopback",
+    extra_env: dict[str, str] | None = None,
 ) -> tuple[subprocess.Popen[str], subprocess.Popen[str]]:
+    """`carlos run --transport …` and the example controller as a process of its own (loopback: on a free
+    port; dds: the domain and config of `extra_env`)."""
     port = _free_port()
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "PYTHONPATH": str(ROOT), **(extra_env or {})}
+    where = ["--bus-port", str(port)] if transport == "loopback" else []
     carlos = subprocess.Popen(
         [
             sys.executable,
@@ -358,9 +365,8 @@ def _processes(
             "run",
             str(_manifest(tmp_path, timeout)),
             "--transport",
-            "loopback",
-            "--bus-port",
-            str(port),
+            transport,
+            *where,
             "-q",
         ],
         cwd=tmp_path,
@@ -373,8 +379,9 @@ def _processes(
         sys.executable,
         "-m",
         "examples.controller",
-        "--port",
-        str(port),
+        "--transport",
+        transport,
+        *(["--port", str(port)] if transport == "loopback" else []),
         "--speed",
         "15",
         "--acceleration",
@@ -389,9 +396,17 @@ def _processes(
 
 
 def test_a_controller_process_drives_the_ego_in_lockstep_over_the_loopback_hub(tmp_path: Path) -> None:
+    carlos, controller = _processes(tmp_path, timeout=20, stop_after=None)
+    check_the_controller_drove_the_ego(tmp_path, carlos, controller)
+
+
+def check_the_controller_drove_the_ego(
+    tmp_path: Path, carlos: subprocess.Popen[str], controller: subprocess.Popen[str]
+) -> None:
+    """The run passed in lockstep with the controller answering all 101 frames, its commands are recorded
+    at the times of the frames they answer, and the ego followed them."""
     from rosbags.highlevel import AnyReader
 
-    carlos, controller = _processes(tmp_path, timeout=20, stop_after=None)
     out, _ = carlos.communicate(timeout=120)
     ctl_out, _ = controller.communicate(timeout=30)
     assert carlos.returncode == 0, out
@@ -424,6 +439,12 @@ def test_a_controller_process_drives_the_ego_in_lockstep_over_the_loopback_hub(t
 
 def test_killing_the_controller_fails_the_run_with_a_clear_message(tmp_path: Path) -> None:
     carlos, controller = _processes(tmp_path, timeout=1.0, stop_after=20)
+    check_the_dead_controller_failed_the_run(tmp_path, carlos, controller)
+
+
+def check_the_dead_controller_failed_the_run(
+    tmp_path: Path, carlos: subprocess.Popen[str], controller: subprocess.Popen[str]
+) -> None:
     ctl_out, _ = controller.communicate(timeout=60)
     assert controller.returncode == 1 and "dying after 20 commands" in ctl_out
     out, _ = carlos.communicate(timeout=120)

@@ -694,3 +694,25 @@ def test_the_operators_pod_template_runs_over_dds(
     recording.write_bytes(store.get_bytes("pod-dds/1/recording.mcap"))
     topics = {topic for topic, _, _ in _messages(recording)}
     assert {"/clock", "/tf", "/carlos/objects", "/carlos/status", "/carlos/Ego/odometry"} <= topics
+
+
+# --- closed loop: `carlos run --transport dds` and a controller process on the same domain -----------------
+
+
+def test_a_controller_process_drives_the_ego_in_lockstep_over_dds(domain: int, tmp_path: Path) -> None:
+    """As over the loopback hub (tests/test_closedloop.py), with the topics on DDS: the controller is a
+    DDS participant of its own, found by discovery; lockstep waits for its odometry subscription, each
+    frame for its answer, and the run's recorder gets its commands at the frames' simulated times."""
+    from tests.test_closedloop import _processes, check_the_controller_drove_the_ego
+
+    env = {"ROS_DOMAIN_ID": str(domain), "CYCLONEDDS_URI": CONFIG}
+    carlos, controller = _processes(tmp_path, timeout=20, stop_after=None, transport="dds", extra_env=env)
+    check_the_controller_drove_the_ego(tmp_path, carlos, controller)
+
+
+def test_killing_the_dds_controller_fails_the_run_with_a_clear_message(domain: int, tmp_path: Path) -> None:
+    from tests.test_closedloop import _processes, check_the_dead_controller_failed_the_run
+
+    env = {"ROS_DOMAIN_ID": str(domain), "CYCLONEDDS_URI": CONFIG}
+    carlos, controller = _processes(tmp_path, timeout=1.0, stop_after=20, transport="dds", extra_env=env)
+    check_the_dead_controller_failed_the_run(tmp_path, carlos, controller)

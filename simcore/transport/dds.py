@@ -32,7 +32,7 @@ What CARLOS adds on top, invisible to ROS 2 nodes (they ignore non-`rt/` topics 
   `publish` (simulated seconds → ns) and marks itself in its USER_DATA (`carlos:simtime`); the receiving
   `DdsBus` hands that time on as `Message.time_s`, so a recorder in another process logs the same times as
   an in-process one. Samples of other writers (a ROS 2 node) get the latest `/clock` time this bus has
-  delivered, or their source timestamp (wall clock) when it has seen no `/clock`.
+  published or delivered, or their source timestamp (wall clock) when it has seen no `/clock`.
 - Glob subscriptions. `subscribe("*")` (the recorder, like `ros2 bag record -a`) watches the built-in
   DCPSPublication topic and creates a reader for every matching `rt/` topic as it appears (the reader
   adopts the publication's reliability and durability, as rosbag2 does). Readers keep all samples, so a
@@ -42,7 +42,11 @@ What CARLOS adds on top, invisible to ROS 2 nodes (they ignore non-`rt/` topics 
   written, and a glob subscriber creates its reader only after it discovered the writer. So every
   subscription is also announced as a reader of the (non-ROS) topic `carlos/bus/subscriptions` whose
   USER_DATA is the pattern; before the first sample of a topic, a writer waits (up to `match_timeout`)
-  until it has matched a reader of every participant that announced a matching pattern.
+  until it has matched a reader of every participant that announced a matching pattern, and of every
+  participant with a reader of that topic of its own (a ROS 2 node's subscription: any reader without
+  CARLOS' USER_DATA mark `carlos:bus`). `subscriber_count(topic)` counts those that subscribed by name
+  (an announced exact name, or a node's reader), not glob subscribers: lockstep waits for them before the
+  first frame (simcore.closedloop).
   `wait_for_subscribers(topic, n)` waits until `n` other participants announced one (the pod's simcore
   waits for the recorder this way before it starts).
 - Own publications reach the bus' own matching subscriptions synchronously in `publish` (as on the
@@ -54,9 +58,11 @@ What CARLOS adds on top, invisible to ROS 2 nodes (they ignore non-`rt/` topics 
   around the end-of-run verdict).
 
 Callbacks of remote messages run on the bus' receive thread, one at a time. Configuration: `config` (XML
-or file URI, as CYCLONEDDS_URI) or else the CYCLONEDDS_URI environment variable, or else cyclonedds'
-defaults (all interfaces, multicast discovery: what a ROS 2 node on the same network uses too).
-`loopback_config()` keeps a bus on 127.0.0.1 with unicast discovery (tests, one pod's loopback).
+or file URI, as CYCLONEDDS_URI) or else what a ROS 2 node with rmw_cyclonedds_cpp would use in this
+environment (simcore.transport.dds_config: CYCLONEDDS_URI; localhost only with
+ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST or ROS_LOCALHOST_ONLY=1; else cyclonedds' defaults, one interface
+and multicast discovery). `loopback_config()` keeps a bus on 127.0.0.1 with unicast discovery (tests, one
+pod's loopback).
 Heavy import: cyclonedds is imported by this module only.
 """
 
@@ -66,12 +72,10 @@ import contextlib
 import fnmatch
 import functools
 import logging
-import os
 import struct
 import threading
 import time
 import uuid
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -87,6 +91,7 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from simcore.transport.bus import Callback, Message, Publisher
+from simcore.transport.dds_config import MAX_DOMAIN_ID, config_from_env, domain_id_from_env, loopback_config
 from simcore.transport.dds_types import UnknownType, dds_typename, idl_type, ros_typename
 
 log = logging.getLogger("carlos.dds")
@@ -95,52 +100,18 @@ log = logging.getLogger("carlos.dds")
 TOPIC_PREFIX = "rt"
 #: the USER_DATA of CARLOS' writers: the source timestamp is simulated time
 SIMTIME_MARK = b"carlos:simtime"
+#: the USER_DATA of CARLOS' readers: not a node of its own (a glob subscriber's reader, e.g. the recorder's)
+READER_MARK = b"carlos:bus"
 #: the DDS topic of subscription announcements (no `rt/` prefix: not a ROS 2 topic)
 ANNOUNCE_TOPIC = "carlos/bus/subscriptions"
 #: topics whose writers are transient-local keep-last 1 (tf2's static broadcaster)
 LATCHED_TOPICS = frozenset({"/tf_static"})
-MAX_DOMAIN_ID = 232  # cyclonedds' default port mapping reaches 65535 at domain 232
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 _TAKE_BATCH = 64
 
 
 class DdsError(ConnectionError):
     """The DDS participant could not be created, or a write failed."""
-
-
-def domain_id_from_env(env: Mapping[str, str] | None = None) -> int:
-    """ROS_DOMAIN_ID as ROS 2 reads it: unset or empty → 0; otherwise an integer 0..232."""
-    raw = (os.environ if env is None else env).get("ROS_DOMAIN_ID", "").strip()
-    if not raw:
-        return 0
-    try:
-        value = int(raw)
-    except ValueError:
-        value = -1
-    if not 0 <= value <= MAX_DOMAIN_ID:
-        from simcore.errors import BadInput
-
-        raise BadInput(
-            f"ROS_DOMAIN_ID={raw!r} is not a domain id (an integer 0..{MAX_DOMAIN_ID})", field="ROS_DOMAIN_ID"
-        )
-    return value
-
-
-def loopback_config(max_participants: int = 32) -> str:
-    """cyclonedds configuration (XML, for `config=` or CYCLONEDDS_URI) for 127.0.0.1 only: the loopback
-    interface has no multicast, so discovery is unicast to the participant ports of 127.0.0.1 (up to
-    `max_participants` per domain on this host). Large fragments: loopback's MTU is 64 KiB."""
-    return (
-        '<CycloneDDS><Domain Id="any"><General>'
-        '<Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
-        "<AllowMulticast>false</AllowMulticast>"
-        "<MaxMessageSize>65000B</MaxMessageSize><FragmentSize>62000B</FragmentSize>"
-        "</General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
-        f"<MaxAutoParticipantIndex>{max_participants - 1}</MaxAutoParticipantIndex>"
-        '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
-        '<Internal><SocketReceiveBufferSize min="default" max="4MB"/></Internal>'
-        "</Domain></CycloneDDS>"
-    )
 
 
 _domains: dict[int, tuple[str, Domain]] = {}
@@ -222,6 +193,7 @@ def _reader_qos(reliable: bool, transient_local: bool) -> Qos:
         Policy.Durability.TransientLocal if transient_local else Policy.Durability.Volatile,
         Policy.DataRepresentation(use_cdrv0_representation=True),
         Policy.IgnoreLocal.Participant,
+        Policy.Userdata(data=READER_MARK),
     )
 
 
@@ -260,6 +232,20 @@ class _Announcements:
     def participants(self, topic: str) -> set[uuid.UUID]:
         return {p for p, pattern in self.by_key.values() if fnmatch.fnmatchcase(topic, pattern)}
 
+    def by_name(self, topic: str) -> set[uuid.UUID]:
+        return {p for p, pattern in self.by_key.values() if pattern == topic}
+
+
+@dataclass
+class _NodeReaders:
+    """DDS readers of ROS 2 topics that other participants created themselves (ROS 2 nodes, not CARLOS'
+    glob readers): endpoint key → (participant key, ROS topic)."""
+
+    by_key: dict[uuid.UUID, tuple[uuid.UUID, str]] = field(default_factory=dict)
+
+    def participants(self, topic: str) -> set[uuid.UUID]:
+        return {p for p, t in self.by_key.values() if t == topic}
+
 
 class DdsBus:
     """A `Bus` on a DDS domain (see the module docstring). Thread-safe: publish from any thread."""
@@ -279,6 +265,8 @@ class DdsBus:
         if history is not None and history < 1:
             raise ValueError(f"history depth {history} is not positive")
         self.history = history
+        if config is None:
+            config = config_from_env()
         try:
             if config is not None:
                 _configure(self.domain_id, config)
@@ -296,6 +284,7 @@ class DdsBus:
         self._routes: dict[str, list[Callback]] = {}
         self._announcers: list[DataReader[Any]] = []
         self._announced = _Announcements()
+        self._node_readers = _NodeReaders()
         self._known_publications: dict[uuid.UUID, Any] = {}
         #: every ROS 2 topic other participants published since this bus started: topic → type
         self.discovered: dict[str, str] = {}
@@ -369,6 +358,8 @@ class DdsBus:
         if not writer.matched:
             self._await_announced(writer)
         data = message.cdr()
+        if message.topic == "/clock":
+            self._last_clock = message.time_s  # the time of the commands of ROS 2 nodes that answer it
         stamp = max(0, round(message.time_s * 1e9))
         ret = ddspy_write_ts(writer.writer._ref, data, stamp)
         if ret < 0:
@@ -425,6 +416,22 @@ class DdsBus:
                 lambda: len(self._announced.participants(topic)) >= count, timeout=timeout
             )
 
+    def subscriber_count(self, topic: str) -> int:
+        """How many other participants subscribed to `topic` by its exact name: a CARLOS bus that announced
+        the name (not a glob such as the recorder's "*"), or any other DDS participant (a ROS 2 node) with a
+        reader of the topic. What lockstep waits for before the first frame."""
+        with self._lock:
+            return len(self._announced.by_name(topic) | self._node_readers.participants(topic))
+
+    def publishers(self, topic: str) -> set[uuid.UUID]:
+        """The participants (other than this one) that currently have a writer of `topic`."""
+        with self._lock:
+            return {
+                e.participant_key
+                for e in self._known_publications.values()
+                if ros_topic(e.topic_name) == topic and e.participant_key != self.guid
+            }
+
     def subscribers(self, topic: str) -> set[uuid.UUID]:
         """The participants (other than this one) that announced a subscription matching `topic`."""
         with self._lock:
@@ -466,7 +473,9 @@ class DdsBus:
         deadline = time.monotonic() + self.match_timeout
         while True:
             with self._lock:
-                expected = self._announced.participants(writer.topic)
+                expected = self._announced.participants(writer.topic) | self._node_readers.participants(
+                    writer.topic
+                )
             missing = expected - self._matched_participants(writer.writer)
             if not missing:
                 break
@@ -526,13 +535,19 @@ class DdsBus:
             self.discovered.setdefault(topic, typename)
 
     def _on_subscription(self, endpoint: Any, alive: bool) -> None:
-        if endpoint.topic_name != ANNOUNCE_TOPIC or endpoint.participant_key == self.guid:
+        if endpoint.participant_key == self.guid:
             return
         if not alive:
             self._announced.by_key.pop(endpoint.key, None)
+            self._node_readers.by_key.pop(endpoint.key, None)
             return
         qos = endpoint.qos
         data = qos[Policy.Userdata].data if qos and Policy.Userdata in qos else b""
+        if endpoint.topic_name != ANNOUNCE_TOPIC:
+            topic = ros_topic(endpoint.topic_name)
+            if topic is not None and data != READER_MARK:
+                self._node_readers.by_key[endpoint.key] = (endpoint.participant_key, topic)
+            return
         with contextlib.suppress(UnicodeDecodeError):
             self._announced.by_key[endpoint.key] = (endpoint.participant_key, data.decode())
 
@@ -647,6 +662,7 @@ class DdsBus:
 __all__ = [
     "ANNOUNCE_TOPIC",
     "LATCHED_TOPICS",
+    "READER_MARK",
     "SIMTIME_MARK",
     "DdsBus",
     "DdsError",
