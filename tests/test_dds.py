@@ -716,3 +716,99 @@ def test_killing_the_dds_controller_fails_the_run_with_a_clear_message(domain: i
     env = {"ROS_DOMAIN_ID": str(domain), "CYCLONEDDS_URI": CONFIG}
     carlos, controller = _processes(tmp_path, timeout=1.0, stop_after=20, transport="dds", extra_env=env)
     check_the_dead_controller_failed_the_run(tmp_path, carlos, controller)
+
+
+ODOMETRY_NODE = textwrap.dedent(
+    """
+    import sys, time
+    from cyclonedds.domain import Domain, DomainParticipant
+    from cyclonedds.qos import Policy, Qos
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+    from simcore.transport.dds_types import idl_type
+
+    Domain(int(sys.argv[1]), sys.argv[2])
+    node = DomainParticipant(int(sys.argv[1]))
+    qos = Qos(Policy.Reliability.Reliable(max_blocking_time=0), Policy.History.KeepAll)
+    topic = Topic(node, "rt/carlos/Ego/odometry", idl_type("nav_msgs/msg/Odometry"))
+    reader = DataReader(node, topic, qos)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        got = reader.take(N=10)
+        if got:
+            print(len(got), got[0].pose.pose.position.x, flush=True)
+            break
+        time.sleep(0.005)
+    """
+)
+
+
+def test_a_ros2_nodes_reader_counts_as_a_subscriber_and_gets_the_first_sample(domain: int) -> None:
+    """What lockstep needs from a real ROS 2 node: its reader of the odometry (a plain DDS reader in a
+    process of its own, no CARLOS announcement) counts for `subscriber_count` — a CARLOS glob subscriber
+    (the recorder's "*") does not — and the first odometry, written as soon as that count is 1, reaches it.
+    A node's commands get the simulated time of the latest /clock the bus published."""
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.qos import Policy, Qos
+    from cyclonedds.topic import Topic
+
+    from simcore.transport import messages as m
+    from simcore.world.state import WorldFrame
+
+    sim, recorder = DdsBus(domain, config=CONFIG), DdsBus(domain, config=CONFIG)
+    node = subprocess.Popen(
+        [sys.executable, "-c", ODOMETRY_NODE, str(domain), CONFIG],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**_env(domain), "PYTHONPATH": str(ROOT)},
+    )
+    writer_node = DomainParticipant(domain)  # the process' domain is configured (loopback) by the buses
+    try:
+        recorder.subscribe("*", lambda message: None)
+        assert sim.wait_for_subscribers("/carlos/Ego/odometry", 1, timeout=20)
+        assert sim.subscriber_count("/carlos/Ego/odometry") == 0  # a glob is no node of that topic
+        deadline = time.monotonic() + 30
+        while sim.subscriber_count("/carlos/Ego/odometry") < 1:
+            assert time.monotonic() < deadline and node.poll() is None, "the node's reader was not discovered"
+            time.sleep(0.005)
+        assert sim.subscriber_count("/carlos/Other/odometry") == 0
+        frame = WorldFrame(step=0, time=0.0, entities=(_entity("Ego", 1.0, 2.0),))
+        sim.advertise("/carlos/Ego/odometry", "nav_msgs/msg/Odometry").publish(m.odometry(frame, "Ego"), 0.0)
+        out, err = node.communicate(timeout=60)
+        assert out.split() == ["1", "1.0"], err
+
+        # a foreign writer's command is stamped with the latest /clock this bus published
+        commands: list[float] = []
+        sim.subscribe("/carlos/Ego/control", lambda message: commands.append(message.time_s))
+        clock = TYPESTORE.types["rosgraph_msgs/msg/Clock"]
+        stamp = TYPESTORE.types["builtin_interfaces/msg/Time"]
+        sim.advertise("/clock", "rosgraph_msgs/msg/Clock").publish(clock(clock=stamp(sec=7, nanosec=0)), 7.0)
+        qos = Qos(Policy.Reliability.Reliable(max_blocking_time=0), Policy.History.KeepAll)
+        control_type = idl_type("ackermann_msgs/msg/AckermannDriveStamped")
+        writer = DataWriter(writer_node, Topic(writer_node, "rt/carlos/Ego/control", control_type), qos)
+        command = _to_idl(_ackermann_sample(), "ackermann_msgs/msg/AckermannDriveStamped")
+        deadline = time.monotonic() + 20
+        while not commands and time.monotonic() < deadline:
+            writer.write(command)
+            time.sleep(0.1)
+        assert commands and commands[0] == 7.0
+    finally:
+        if node.poll() is None:
+            node.kill()
+        sim.close()
+        recorder.close()
+        writer_node.__del__()
+
+
+def _ackermann_sample() -> Any:
+    t = TYPESTORE.types
+    return t["ackermann_msgs/msg/AckermannDriveStamped"](
+        header=t["std_msgs/msg/Header"](
+            stamp=t["builtin_interfaces/msg/Time"](sec=7, nanosec=0), frame_id=""
+        ),
+        drive=t["ackermann_msgs/msg/AckermannDrive"](
+            steering_angle=0.0, steering_angle_velocity=0.0, speed=3.0, acceleration=0.0, jerk=0.0
+        ),
+    )
