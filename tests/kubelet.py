@@ -9,13 +9,16 @@ first and in order, each waited for through its tcpSocket startup probe, then th
 main containers have exited, the sidecars get SIGTERM in reverse order.
 
 One deliberate difference: pods of a real cluster each have their own loopback, these share the host's, so
-the ports of the startup probes (and the env vars naming them) are replaced by free ports per pod.
+the ports of the startup probes (and the env vars naming them) are replaced by free ports per pod, and
+ROS_DOMAIN_ID (the same in every pod of a cluster: DDS stays inside a pod's loopback) by a domain no other
+process on this host uses, the same for all containers of one pod.
 """
 
 from __future__ import annotations
 
 import base64
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -34,6 +37,29 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def _domain_in_use(domain: int) -> bool:
+    """Whether a cyclonedds participant with participant index 0..3 (unicast discovery, as with the pods'
+    loopback config) holds a port of `domain`."""
+    for index in range(4):
+        port = 7400 + 250 * domain + 10 + 2 * index  # cyclonedds' default port mapping
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("", port))
+            except OSError:
+                return True
+    return False
+
+
+def free_domain() -> int:
+    """A DDS domain in 1..99 that no participant on this host uses (tests/test_dds.py takes 100..199)."""
+    candidates = list(range(1, 100))
+    random.shuffle(candidates)
+    for domain in candidates:
+        if not _domain_in_use(domain):
+            return domain
+    raise RuntimeError("no free DDS domain in 1..99")
 
 
 def _wait_port(port: int, timeout: float, proc: subprocess.Popen[bytes]) -> None:
@@ -91,6 +117,7 @@ class Kubelet:
         annotations: Mapping[str, str],
         mounts: list[tuple[str, Path]],
         ports: Mapping[int, int],
+        domain: int,
     ) -> dict[str, str]:
         env = {"PATH": os.environ.get("PATH", ""), "LANG": "C.UTF-8"}
         for source in container.get("envFrom", []):
@@ -111,6 +138,8 @@ class Kubelet:
             if value.isdigit() and int(value) in ports:
                 value = str(ports[int(value)])
             env[item["name"]] = value
+        if "ROS_DOMAIN_ID" in env:
+            env["ROS_DOMAIN_ID"] = str(domain)
         env.update(self.extra_env)
         return env
 
@@ -127,6 +156,7 @@ class Kubelet:
             if "startupProbe" in c
         }
         ports = {port: free_port() for port in probe_ports}
+        domain = free_domain()
         procs: list[tuple[str, subprocess.Popen[bytes], Path]] = []
 
         def start(container: Mapping[str, Any]) -> subprocess.Popen[bytes]:
@@ -134,7 +164,7 @@ class Kubelet:
                 ((m["mountPath"], volumes[m["name"]]) for m in container.get("volumeMounts", [])),
                 key=lambda m: -len(m[0]),
             )
-            env = self._env(container, annotations, mounts, ports)
+            env = self._env(container, annotations, mounts, ports, domain)
             log_path = root / f"{container['name']}.log"
             with open(log_path, "wb") as log_file:
                 proc = subprocess.Popen(

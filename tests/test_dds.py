@@ -667,26 +667,30 @@ def test_own_publications_arrive_once_synchronously_and_other_buses_get_them_onc
         b.close()
 
 
-@pytest.mark.slow
 @pytest.mark.s3
 def test_the_operators_pod_template_runs_over_dds(
-    domain: int, s3_server: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    s3_server: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The operator's own pod template (startup probes on the bus and recorder ports, S3 results), with the
-    transport switched to DDS through the environment only."""
+    """The operator's own pod template as it is (startup probes on the bridge and recorder ports, S3
+    results): its environment puts every role on DDS, in one domain, with the loopback-only config; the
+    test kubelet only moves ROS_DOMAIN_ID to a domain no other pod of this host uses (a cluster's pods each
+    have their own loopback)."""
+    from carlos_operator.builders import POD_DDS_CONFIG
+
     from tests.test_pod import body, kubelet_for, results_store
 
     manifest = body("pod-dds", s3_server.bucket, ["simSeconds <= 100"])
     kubelet, pod = kubelet_for(manifest, s3_server, tmp_path)
-    kubelet.extra_env = {
-        **kubelet.extra_env,
-        "CARLOS_TRANSPORT": "dds",
-        "ROS_DOMAIN_ID": str(domain),
-        "CYCLONEDDS_URI": CONFIG,
-    }
+    containers = [*pod["initContainers"], *pod["containers"]]
+    for container in containers:
+        env = {e["name"]: e.get("value") for e in container["env"]}
+        assert env["CARLOS_TRANSPORT"] == "dds" and env["ROS_DOMAIN_ID"] == "0", container["name"]
+        assert env["CYCLONEDDS_URI"] == POD_DDS_CONFIG == CONFIG
+    assert "hostNetwork" not in pod
     result = kubelet.run_pod(pod, index=1)
     assert result.exit_codes == {"simcore": 0, "bridge": 0, "recorder": 0}, result.logs
-    assert "on DDS domain" in result.logs["bridge"]
+    assert "bridge: on DDS domain" in result.logs["bridge"]
+    assert "ROS 2 topic /carlos/Ego/odometry [nav_msgs/msg/Odometry]" in result.logs["bridge"]
     store = results_store(s3_server, monkeypatch)
     summary = json.loads(store.get_bytes("pod-dds/1/summary.json"))
     assert summary["status"] == "passed" and summary["parameters"] == {"Speed": 20.0}

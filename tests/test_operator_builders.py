@@ -291,3 +291,43 @@ def test_system_under_test_is_a_sidecar_on_the_cluster() -> None:
         check_cluster_spec(load(manifest(systemUnderTest={"module": "pkg.mod:Node"})))
     with pytest.raises(BadInput, match=r"spec.systemUnderTest.name"):
         check_cluster_spec(load(manifest(systemUnderTest={"name": "bridge", "image": "x"})))
+
+
+def test_every_container_of_a_pod_shares_one_dds_domain_inside_the_pod() -> None:
+    """DDS by default: every container (the roles and the system under test) gets CARLOS_TRANSPORT=dds, the
+    same ROS_DOMAIN_ID and a CYCLONEDDS_URI for 127.0.0.1 without multicast, so the system under test's ROS 2
+    node talks to simcore and the recorder and no DDS traffic leaves the pod (its own network namespace:
+    no hostNetwork, no added capabilities). The system under test's container uses rmw_cyclonedds_cpp."""
+    from carlos_operator.builders import POD_DDS_CONFIG
+
+    body = manifest(systemUnderTest={"name": "planner", "image": "ros:jazzy", "command": ["ros2", "run"]})
+    run = load(body)
+    pod = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))["spec"]["template"]["spec"]
+    containers = [*pod["initContainers"], *pod["containers"]]
+    assert [c["name"] for c in containers] == ["bridge", "recorder", "planner", "simcore"]
+    envs = {c["name"]: {e["name"]: e.get("value") for e in c["env"]} for c in containers}
+    for name, env in envs.items():
+        assert env["CARLOS_TRANSPORT"] == "dds", name
+        assert env["ROS_DOMAIN_ID"] == "0", name
+        assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST", name
+        assert env["CYCLONEDDS_URI"] == POD_DDS_CONFIG, name
+    assert envs["planner"]["RMW_IMPLEMENTATION"] == "rmw_cyclonedds_cpp"
+    assert not any("RMW_IMPLEMENTATION" in env for name, env in envs.items() if name != "planner")
+    assert '<NetworkInterface address="127.0.0.1"/>' in POD_DDS_CONFIG
+    assert "<AllowMulticast>false</AllowMulticast>" in POD_DDS_CONFIG
+    assert "hostNetwork" not in pod and "hostPID" not in pod
+    for container in containers:
+        assert container["securityContext"]["capabilities"] == {"drop": ["ALL"]}
+        assert "add" not in container["securityContext"]["capabilities"]
+
+
+def test_the_pod_transport_is_an_operator_setting() -> None:
+    loopback = OperatorSettings.from_env({"CARLOS_POD_TRANSPORT": "loopback"})
+    assert OperatorSettings.from_env({}).pod_transport == "dds"
+    body = manifest()
+    run = load(body)
+    pod = build_job(run, body, loopback, resolve_output(run, SETTINGS))["spec"]["template"]["spec"]
+    env = {e["name"]: e.get("value") for e in pod["containers"][0]["env"]}
+    assert env["CARLOS_TRANSPORT"] == "loopback"
+    with pytest.raises(BadInput, match=r"CARLOS_POD_TRANSPORT='zmq' is not one of dds, loopback"):
+        OperatorSettings.from_env({"CARLOS_POD_TRANSPORT": "zmq"})

@@ -1,5 +1,6 @@
-"""The pod roles as separate processes (bridge hub, recorder, simcore) over loopback TCP, run by the test
-kubelet from the operator's own pod template, with results in the real S3 server."""
+"""The pod roles as separate processes (bridge, recorder, simcore), run by the test kubelet from the
+operator's own pod template, with results in the real S3 server: over DDS (the template's default) and over
+the loopback TCP hub (the operator's `CARLOS_POD_TRANSPORT=loopback`)."""
 
 from __future__ import annotations
 
@@ -40,9 +41,13 @@ def body(name: str, bucket: str, criteria: list[str], **extra: Any) -> dict[str,
     }
 
 
-def kubelet_for(manifest: dict[str, Any], s3: S3Server, tmp_path: Path) -> tuple[Kubelet, dict[str, Any]]:
+def kubelet_for(
+    manifest: dict[str, Any], s3: S3Server, tmp_path: Path, transport: str = "dds"
+) -> tuple[Kubelet, dict[str, Any]]:
     run = parse_manifest(json.loads(json.dumps(manifest)), source="test")
-    settings = OperatorSettings.from_env({"CARLOS_DEFAULT_S3_ENDPOINT": s3.endpoint})
+    settings = OperatorSettings.from_env(
+        {"CARLOS_DEFAULT_S3_ENDPOINT": s3.endpoint, "CARLOS_POD_TRANSPORT": transport}
+    )
     output = resolve_output(run, settings)
     cm = build_configmap(run, manifest, settings)
     job = build_job(run, manifest, settings, output)
@@ -102,21 +107,24 @@ def test_hub_relays_in_order_between_processes_and_acknowledges_subscriptions() 
 
 
 @pytest.mark.s3
+@pytest.mark.parametrize("transport", ["dds", "loopback"])
 def test_pod_roles_run_an_index_and_upload_results(
-    s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    transport: str, s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    manifest = body("pod-pass", s3_server.bucket, ["simSeconds <= 100"])
-    kubelet, pod = kubelet_for(manifest, s3_server, tmp_path)
+    name = f"pod-pass-{transport}"
+    manifest = body(name, s3_server.bucket, ["simSeconds <= 100"])
+    kubelet, pod = kubelet_for(manifest, s3_server, tmp_path, transport)
     result = kubelet.run_pod(pod, index=1)
     assert result.exit_codes == {"simcore": 0, "bridge": 0, "recorder": 0}, result.logs
+    assert ("on DDS domain" in result.logs["bridge"]) == (transport == "dds")
     store = results_store(s3_server, monkeypatch)
-    keys = set(store.list("pod-pass/1/"))
-    assert {"pod-pass/1/recording.mcap", "pod-pass/1/summary.json", "pod-pass/1/log.txt"} <= keys
-    summary = json.loads(store.get_bytes("pod-pass/1/summary.json"))
+    keys = set(store.list(f"{name}/1/"))
+    assert {f"{name}/1/recording.mcap", f"{name}/1/summary.json", f"{name}/1/log.txt"} <= keys
+    summary = json.loads(store.get_bytes(f"{name}/1/summary.json"))
     assert summary["index"] == 1 and summary["status"] == "passed"
     assert summary["parameters"] == {"Speed": 20.0}
     recording = tmp_path / "recording.mcap"
-    recording.write_bytes(store.get_bytes("pod-pass/1/recording.mcap"))
+    recording.write_bytes(store.get_bytes(f"{name}/1/recording.mcap"))
     with recording.open("rb") as f:
         reader = make_reader(f)
         topics = {channel.topic for channel in reader.get_summary().channels.values()}

@@ -1,15 +1,23 @@
 """Pure builders: a SimulationRun → its ConfigMap and Indexed Job (plain dicts, no I/O, no kopf).
 
-One pod per index (DESIGN.md, pod roles): the simulator core is the main container; the bridge (the pod's
-topic hub) and the recorder are native sidecars, i.e. init containers with `restartPolicy: Always` whose
-startup probes make the kubelet start them in order, each ready before the next starts:
+One pod per index (DESIGN.md, pod roles): the simulator core is the main container; the bridge and the
+recorder are native sidecars, i.e. init containers with `restartPolicy: Always` whose startup probes make
+the kubelet start them in order, each ready before the next starts:
 
-1. `bridge`: listens on 127.0.0.1:`BUS_PORT` (loopback topic transport, simcore/transport/loopback.py);
-   ready when the port accepts connections.
-2. `recorder`: subscribes to every topic through the bridge, then opens 127.0.0.1:`RECORDER_READY_PORT`
-   (its startup probe) — so no message simcore publishes can be missed.
+1. `bridge`: listens on 127.0.0.1:`BUS_PORT`; ready when the port accepts connections. Over DDS (the
+   default) it logs the pod's ROS 2 graph; over the loopback transport it is the topic hub.
+2. `recorder`: subscribes to every topic, then opens 127.0.0.1:`RECORDER_READY_PORT` (its startup probe)
+   — so no message simcore publishes can be missed.
 3. `simcore`: runs the index, publishes the topics and the verdict, waits until the recorder has uploaded
    the results, and exits with DESIGN.md's exit code, which the Job's podFailurePolicy acts on.
+
+Topics: `CARLOS_TRANSPORT` on every container, the operator's `pod_transport` (CARLOS_POD_TRANSPORT, Helm
+value `podTransport`): `dds` (default) puts them on DDS as ROS 2 topics, so the system under test's
+container (a ROS 2 node with rmw_cyclonedds_cpp, which the template selects with RMW_IMPLEMENTATION) talks
+to simcore and the recorder directly; `loopback` keeps them on the bridge's TCP hub, which ROS 2 nodes
+cannot reach. Every container of the pod gets the same ROS_DOMAIN_ID and a CYCLONEDDS_URI for 127.0.0.1
+only, without multicast (`POD_DDS_CONFIG`): a pod has its own network namespace (no hostNetwork), so DDS
+traffic stays inside the pod and pods on one node never see each other's topics.
 
 Names are deterministic (`job_name`), every object carries an owner reference to the SimulationRun, so a
 restarted operator adopts what exists and deleting the run deletes them (results in object storage stay).
@@ -29,6 +37,7 @@ import yaml
 from simcore.errors import BadInput, ExitCode
 from simcore.plan import Plan
 from simcore.spec import API_GROUP, API_VERSION, KIND, SimulationRun
+from simcore.transport.dds_config import loopback_config
 
 SPEC_DIR = "/etc/carlos/spec"
 SPEC_FILE = "simulationrun.yaml"
@@ -44,6 +53,13 @@ DEFAULT_PARALLELISM = 10
 #: a per-pod backstop beyond `execution.timeoutSeconds` (simcore enforces the limit itself)
 POD_DEADLINE_GRACE_S = 300
 UID = 65532  # the images' non-root user
+POD_TRANSPORTS = ("dds", "loopback")
+#: the DDS domain of every pod (pods are isolated by their own loopback, not by the domain)
+POD_DOMAIN_ID = 0
+#: cyclonedds configuration of every container of a pod: 127.0.0.1 only, unicast discovery
+POD_DDS_CONFIG = loopback_config()
+#: the ROS 2 middleware of the system under test's container (a ros:jazzy image's default is Fast DDS)
+SUT_RMW = "rmw_cyclonedds_cpp"
 
 
 def _package_version() -> str:
@@ -67,6 +83,7 @@ class OperatorSettings:
     job_ttl_seconds: int = 7 * 86_400
     pull_policies: dict[str, str] = field(default_factory=dict)  # role → imagePullPolicy
     extra_labels: dict[str, str] = field(default_factory=dict)
+    pod_transport: str = "dds"  # CARLOS_TRANSPORT of the pods: dds | loopback
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> OperatorSettings:
@@ -83,7 +100,15 @@ class OperatorSettings:
             for role in ("simcore", "bridge", "recorder")
             if env.get(f"CARLOS_IMAGE_{role.upper()}_PULL_POLICY") in ("Always", "IfNotPresent", "Never")
         }
+        transport = env.get("CARLOS_POD_TRANSPORT", "").strip() or "dds"
+        if transport not in POD_TRANSPORTS:
+            raise BadInput(
+                f"CARLOS_POD_TRANSPORT={transport!r} is not one of {', '.join(POD_TRANSPORTS)} "
+                "(Helm value podTransport)",
+                field="CARLOS_POD_TRANSPORT",
+            )
         return cls(
+            pod_transport=transport,
             pull_policies=policies,
             image_simcore=image("simcore"),
             image_bridge=image("bridge"),
@@ -236,7 +261,7 @@ _RESTRICTED_CONTAINER = {
 }
 
 
-def _env(run: SimulationRun, output: Output) -> list[dict[str, Any]]:
+def _env(run: SimulationRun, output: Output, settings: OperatorSettings) -> list[dict[str, Any]]:
     env: list[dict[str, Any]] = [
         {
             "name": "JOB_COMPLETION_INDEX",
@@ -254,8 +279,10 @@ def _env(run: SimulationRun, output: Output) -> list[dict[str, Any]]:
         {"name": "CARLOS_SCRATCH", "value": SCRATCH_DIR},
         {"name": "CARLOS_BUS_PORT", "value": str(BUS_PORT)},
         {"name": "CARLOS_RECORDER_READY_PORT", "value": str(RECORDER_READY_PORT)},
-        {"name": "ROS_DOMAIN_ID", "value": "0"},
+        {"name": "CARLOS_TRANSPORT", "value": settings.pod_transport},
+        {"name": "ROS_DOMAIN_ID", "value": str(POD_DOMAIN_ID)},
         {"name": "ROS_AUTOMATIC_DISCOVERY_RANGE", "value": "LOCALHOST"},
+        {"name": "CYCLONEDDS_URI", "value": POD_DDS_CONFIG},
         {"name": "HOME", "value": SCRATCH_DIR},
         {"name": "TMPDIR", "value": "/tmp"},
     ]
@@ -274,7 +301,7 @@ def _container(
         "image": getattr(settings, f"image_{role}", ""),
         "imagePullPolicy": settings.pull_policies.get(role, "IfNotPresent"),
         "args": ["pod", "--role", role],
-        "env": _env(run, output),
+        "env": _env(run, output, settings),
         "volumeMounts": mounts,
         "securityContext": dict(_RESTRICTED_CONTAINER),
         "terminationMessagePolicy": "FallbackToLogsOnError",
@@ -356,7 +383,11 @@ def build_job(
             node["command"] = list(sut.command)
         if sut.args:
             node["args"] = list(sut.args)
-        node["env"] = [*node["env"], {"name": "CARLOS_ROLE", "value": "system-under-test"}]
+        node["env"] = [
+            *node["env"],
+            {"name": "CARLOS_ROLE", "value": "system-under-test"},
+            {"name": "RMW_IMPLEMENTATION", "value": SUT_RMW},
+        ]
         sidecars.append(node)
     pod_spec: dict[str, Any] = {
         "restartPolicy": "Never",

@@ -14,6 +14,9 @@ def run_operator(*, namespaces: Sequence[str], liveness_port: int = 8080, metric
     from prometheus_client import start_http_server
 
     import carlos_operator.handlers  # noqa: F401 - registers the handlers
+    from carlos_operator.builders import OperatorSettings
+
+    OperatorSettings.from_env()  # a bad setting (e.g. CARLOS_POD_TRANSPORT) fails here, exit code 2
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     if metrics_port:
