@@ -24,7 +24,8 @@ Modes (`spec.control.mode`):
   received after it). Results then do not depend on machine speed. No answer within `timeoutSeconds`
   fails the run (exit code 3) with a message naming the entity, the topic and the simulated time. Before
   the first frame the simulator waits (up to `startupTimeoutSeconds`) until a node subscribed to each
-  entity's odometry topic by its name, where the transport can tell (in-process and loopback hub).
+  entity's odometry topic by its name, where the transport can tell (in-process, loopback hub, DDS: a
+  ROS 2 node's reader of the topic, or a CARLOS bus that subscribed to the exact name).
 - `freeRunning`: the latest command holds until the next one; nothing waits (real-time use, `--live`).
 """
 

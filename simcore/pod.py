@@ -3,17 +3,20 @@
 Each role is its own process (its own container on a cluster). They exchange ROS 2 messages over the
 transport `CARLOS_TRANSPORT` names:
 
-- `loopback` (the default): the topic hub of simcore/transport/loopback.py on 127.0.0.1:`CARLOS_BUS_PORT`,
-  run by the bridge. ROS 2 nodes do not see these topics.
-- `dds`: DDS (simcore/transport/dds.py, cyclonedds) on domain `ROS_DOMAIN_ID` (default 0), configured by
-  `CYCLONEDDS_URI` if set. Every role is a DDS participant and the topics are ROS 2 topics (`rt/…`, ROS 2
+- `loopback` (the default when unset): the topic hub of simcore/transport/loopback.py on
+  127.0.0.1:`CARLOS_BUS_PORT`, run by the bridge. ROS 2 nodes do not see these topics.
+- `dds` (what the operator's pod template sets, unless the operator runs with CARLOS_POD_TRANSPORT=loopback):
+  DDS (simcore/transport/dds.py, cyclonedds) on domain `ROS_DOMAIN_ID` (default 0), configured as a ROS 2
+  node would be (simcore.transport.dds_config: `CYCLONEDDS_URI`; the template's is 127.0.0.1 only). Every role is a DDS participant and the topics are ROS 2 topics (`rt/…`, ROS 2
   type names and QoS): ROS 2 nodes in the pod (the system under test's container) or on its network see
   them and can publish `/carlos/<entity>/control`, as with any ROS 2 node; no relay is involved. simcore
   waits until the recorder announced its subscription before it runs, a writer waits for its announced
   subscribers before its first message, and simcore flushes (all data acknowledged) before the verdict,
   which the recorder handles after draining what arrived before it: the recording loses nothing. Without
   CYCLONEDDS_URI cyclonedds uses its defaults (first interface, multicast discovery, 1344-byte fragments);
-  `simcore.transport.dds.loopback_config()` is the configuration for roles and nodes all in one pod.
+  `simcore.transport.dds_config.loopback_config()` is the configuration for roles and nodes all in one pod.
+  In lockstep (spec.control) simcore waits before the first frame until a node subscribed to each
+  driven entity's odometry by name (the system under test's reader of /carlos/<entity>/odometry).
 
 - `bridge` (first sidecar): loopback: runs the hub on 127.0.0.1:`CARLOS_BUS_PORT` until SIGTERM. dds: joins
   the domain, accepts connections on 127.0.0.1:`CARLOS_BUS_PORT` for its startup probe, and logs every
@@ -50,7 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from simcore.errors import BadInput, CarlosError, ExitCode
-from simcore.transport.bus import Bus, Callback, Message, Publisher
+from simcore.transport.bus import Callback, Message, Publisher
 
 log = logging.getLogger("carlos.pod")
 
@@ -171,7 +174,7 @@ def _values(msg: Any) -> dict[str, str]:
 class _Borrowed:
     """A bus lent to `simulate`, which closes the bus it is given: here closing is the owner's business."""
 
-    def __init__(self, bus: Bus) -> None:
+    def __init__(self, bus: Any) -> None:  # a LoopbackBus or DdsBus (both count subscribers)
         self._bus = bus
 
     def advertise(self, topic: str, typename: str) -> Publisher:
@@ -179,6 +182,11 @@ class _Borrowed:
 
     def subscribe(self, pattern: str, callback: Callback) -> None:
         self._bus.subscribe(pattern, callback)
+
+    def subscriber_count(self, topic: str) -> int:
+        """For lockstep's start (simcore.closedloop): nodes subscribed to `topic` by name."""
+        count: int = self._bus.subscriber_count(topic)
+        return count
 
     def close(self) -> None:
         pass

@@ -1,7 +1,7 @@
 """A test kubelet: runs one pod of a Job's pod template as local processes.
 
-What it honours from the pod template, as a kubelet would: every container's `args` (run by this
-virtualenv's `carlos` in place of the image's entrypoint), `env` (values, `fieldRef` to the pod's
+What it honours from the pod template, as a kubelet would: every container's `command` and `args` (without
+a command, the args are run by this virtualenv's `carlos` in place of the image's entrypoint), `env` (values, `fieldRef` to the pod's
 annotations), `envFrom` secretRef (the Secret's data, base64-decoded), `volumeMounts` (ConfigMap volumes
 materialised from the given ConfigMaps, emptyDirs as fresh directories; an env value under a mount path is
 rewritten to the local directory), native sidecars (initContainers with `restartPolicy: Always`) started
@@ -168,7 +168,7 @@ class Kubelet:
             log_path = root / f"{container['name']}.log"
             with open(log_path, "wb") as log_file:
                 proc = subprocess.Popen(
-                    [CARLOS, *container.get("args", [])],
+                    [*container.get("command", [CARLOS]), *container.get("args", [])],
                     env=env,
                     cwd=root,
                     stdout=log_file,

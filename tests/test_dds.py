@@ -816,3 +816,45 @@ def _ackermann_sample() -> Any:
             steering_angle=0.0, steering_angle_velocity=0.0, speed=3.0, acceleration=0.0, jerk=0.0
         ),
     )
+
+
+@pytest.mark.s3
+def test_the_system_under_tests_container_drives_the_ego_in_lockstep_inside_the_pod(
+    s3_server: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The operator's pod template with a system under test: its container (here the example controller
+    over DDS, as a ROS 2 node would be) gets the pod's domain and DDS config, and simcore, in lockstep,
+    waits for it before the first frame and for its answer to every frame; the recording holds its
+    commands."""
+    from tests.test_pod import body, kubelet_for, results_store
+
+    manifest = body(
+        "pod-loop",
+        s3_server.bucket,
+        ["simSeconds <= 100"],
+        systemUnderTest={
+            "name": "planner",
+            "image": "ros:jazzy",
+            "command": [sys.executable, "-m", "examples.controller"],
+            "args": ["--transport", "dds", "--speed", "15"],
+        },
+        control={"entities": ["Ego"], "timeoutSeconds": 20, "startupTimeoutSeconds": 60},
+    )
+    manifest["spec"]["scenarios"] = [
+        {"name": "cut-in", "openscenario": (ROOT / "examples/scenarios/cut-in.xosc").as_uri()}
+    ]
+    manifest["spec"]["sweep"] = {}
+    manifest["spec"]["simulation"] = {"stepSeconds": 0.1, "maxSeconds": 3}
+    kubelet, pod = kubelet_for(manifest, s3_server, tmp_path)
+    kubelet.extra_env = {**kubelet.extra_env, "PYTHONPATH": str(ROOT)}
+    result = kubelet.run_pod(pod, index=0)
+    assert result.exit_codes == {"simcore": 0, "bridge": 0, "recorder": 0, "planner": 0}, result.logs
+    assert "end of run after 31 commands" in result.logs["planner"]  # frames at 0, 0.1, …, 3.0 s
+    store = results_store(s3_server, monkeypatch)
+    assert json.loads(store.get_bytes("pod-loop/0/summary.json"))["status"] == "passed"
+    recording = tmp_path / "recording.mcap"
+    recording.write_bytes(store.get_bytes("pod-loop/0/recording.mcap"))
+    messages = _messages(recording)
+    commands = {t for topic, t, _ in messages if topic == "/carlos/Ego/control"}
+    frames = {t for topic, t, _ in messages if topic == "/carlos/Ego/odometry"}
+    assert len(frames) == 31 and frames - {max(frames)} <= commands <= frames
