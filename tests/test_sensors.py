@@ -571,3 +571,47 @@ def test_point_padding_is_zero(straight: RoadScene) -> None:
     raw = scans[0].points.view(np.uint8).reshape(-1, scans[0].points.dtype.itemsize)
     assert len(raw) > 100 and not raw[:, 27].any()
     assert scans[0].points.tobytes() == scans[1].points.tobytes()
+
+
+@pytest.mark.parametrize("where", ["level", "tilted", "distorted", "rolled"])
+def test_box_channel_culling_is_exact(
+    straight: RoadScene, where: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Only the channels whose elevation can reach a box are intersected with it: the same scan as
+    intersecting every channel, for boxes beside, above, below and around the sensor (tall ones, one the
+    sensor sits inside, one out of range)."""
+    speed, yaw_rate = (25.0, 0.3) if where == "distorted" else (0.0, 0.0)
+    roll = 0.1 if where == "rolled" else 0.0
+    ego = EntityState("Ego", "vehicle", "car", 50, -1.75, 0.0, 0.1, 0.0, roll, speed, 0.0, yaw_rate, CAR)
+    tall = BoundingBox(0.0, 0.0, 6.0, 2.0, 2.0, 12.0)
+    overhead = BoundingBox(0.0, 0.0, 0.0, 6.0, 12.0, 0.6)
+    around = BoundingBox(0.0, 0.0, 1.0, 20.0, 20.0, 2.0)
+    others = [
+        car("Near", 55, -1.75),
+        car("Beside", 50, -5.25),
+        car("Behind", 30, -5.25, heading=0.4),
+        car("Far", 140, -1.75),
+        EntityState("Pole", "miscellaneous", "pole", 62, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, tall),
+        EntityState(
+            "Bridge", "miscellaneous", "none", 70, -1.75, 6.0, 0.3, 0.0, 0.0, 0.0, 0.0, 0.0, overhead
+        ),
+        EntityState("Pit", "miscellaneous", "none", 45, -8.0, -3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, CAR),
+    ]
+    config: dict[str, object] = {"channels": 32, "horizontal_resolution": 360, "vertical_fov": [-30, 20]}
+    config["motion_distortion"] = where == "distorted"
+    if where == "tilted":
+        config["mount"] = {"z": 1.8, "pitch": 5, "yaw": 20}
+    for extra in (
+        [],
+        [EntityState("Hall", "miscellaneous", "none", 50, -1.75, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, around)],
+    ):
+        boxes = Boxes.of(frame(ego, *others, *extra))
+        culled = lidar(**config).scan(straight, boxes, ego, 0)
+        with monkeypatch.context() as m:
+            m.setattr(Lidar, "_channels_of", lambda self, *args: None)
+            every = lidar(**config).scan(straight, boxes, ego, 0)
+        assert len(culled.points) == len(every.points) > 100
+        assert culled.points.tobytes() == every.points.tobytes()
+        assert np.array_equal(culled.visible_rays, every.visible_rays)
+        assert np.array_equal(culled.unoccluded_rays, every.unoccluded_rays)
+        assert np.count_nonzero(culled.unoccluded_rays) >= 5

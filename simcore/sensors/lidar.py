@@ -20,6 +20,8 @@ lidar (no pitch or roll) culls whole channels and caches the index set per chann
 from __future__ import annotations
 
 import math
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +39,20 @@ POINT_DTYPE = np.dtype(
         "itemsize": 28,
     }
 )
+
+
+_DRAWS: ThreadPoolExecutor | None = None
+_DRAWS_LOCK = threading.Lock()
+
+
+def _draw_executor() -> ThreadPoolExecutor:
+    """The one thread that draws the lidars' random numbers ahead of their sweeps (numpy's generators
+    release the GIL while they fill an array, so the draws overlap the single-threaded rest of the step)."""
+    global _DRAWS
+    with _DRAWS_LOCK:
+        if _DRAWS is None:
+            _DRAWS = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lidar-draws")
+        return _DRAWS
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,6 +122,28 @@ class Lidar:
         self.mount_pos = np.array([m.x, m.y, m.z])
         self.rng = np.random.default_rng(seed)
         self._level_cache: dict[bytes, tuple[np.ndarray, list[np.ndarray]]] = {}
+        self._tan_elev = np.tan(self.elevations)
+        self._mount_level = bool(self.mount_rot[2, 0] == 0.0 and self.mount_rot[2, 1] == 0.0)
+        self._pending: Future[tuple[np.ndarray | None, np.ndarray | None]] | None = None
+
+    def _draw(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """One sweep's random numbers, one per ray (drawn for every ray, so the sequence does not depend on
+        the scene): a uniform for the dropout and a standard normal for the range noise (None: not used)."""
+        n = len(self.dirs)
+        uniform = self.rng.random(n, dtype=np.float32) if self.config.dropout > 0.0 else None
+        normal = self.rng.standard_normal(n, dtype=np.float32) if self.config.range_noise > 0.0 else None
+        return uniform, normal
+
+    def _next_draws(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """This sweep's random numbers, and the next sweep's drawn ahead on the draw thread: they cost about
+        as much as the rest of the labelling and need nothing of the scene. The generator is only ever used by
+        one thread at a time (the next draw starts after this one is taken), so the sequence is the seed's."""
+        if self.config.dropout <= 0.0 and self.config.range_noise <= 0.0:
+            return None, None
+        pending, self._pending = self._pending, None
+        draws = pending.result() if pending is not None else self._draw()
+        self._pending = _draw_executor().submit(self._draw)
+        return draws
 
     @property
     def ray_count(self) -> int:
@@ -138,6 +176,31 @@ class Lidar:
         if not cols:
             return np.zeros(0, dtype=np.int64)
         return np.unique(np.concatenate(cols))
+
+    def _channels_of(self, corners_sensor: np.ndarray, widen: float) -> np.ndarray | None:
+        """Channels whose elevation can reach a box with these corners (sensor frame, the sensor at the origin
+        or, with `widen` > 0, anywhere within `widen` m of it horizontally at the same height), or None for
+        every channel. A point of the box is at height z in [min, max of the corners' z] and horizontal
+        distance rho in [rho_min, rho_max] (rho_min from the box's bounding circle), so its elevation's tangent
+        z / rho lies between the extremes of those; a ray outside them cannot hit the box (exact: the slab
+        test still decides every ray kept)."""
+        xy = corners_sensor[:, :2]
+        center = xy.mean(axis=0)
+        radius = float(np.max(np.hypot(*(xy - center).T)))
+        rho_min = max(float(np.hypot(*center)) - radius - widen, 0.0)
+        rho_max = float(np.max(np.hypot(*xy.T))) + widen
+        zmin, zmax = float(corners_sensor[:, 2].min()), float(corners_sensor[:, 2].max())
+        if rho_min <= 0.0:
+            lo = -math.inf if zmin < 0.0 else zmin / rho_max
+            hi = math.inf if zmax > 0.0 else zmax / rho_max
+        else:
+            lo = zmin / (rho_min if zmin < 0.0 else rho_max)
+            hi = zmax / (rho_min if zmax > 0.0 else rho_max)
+        if lo == -math.inf and hi == math.inf:
+            return None
+        margin = 1e-4  # float rounding of the directions, with room to spare
+        tan = self._tan_elev
+        return np.flatnonzero((tan >= lo - margin * (1.0 + abs(lo))) & (tan <= hi + margin * (1.0 + abs(hi))))
 
     def _world_dirs(
         self, r32: np.ndarray, cols: np.ndarray | None, rows: range = range(3)
@@ -260,8 +323,13 @@ class Lidar:
             rel = boxes.centers - pos
             radius = np.linalg.norm(boxes.half, axis=1)
             near = np.linalg.norm(rel, axis=1) - radius <= reach
+            widen: float | None = (
+                0.0  # how far the rays' origins are from `pos` horizontally; None: not level
+            )
             if distort:
                 shift = np.hypot(*carrier.velocity) * self.period
+                level = self._mount_level and carrier.pitch == 0.0 and carrier.roll == 0.0
+                widen = float(np.max(np.hypot(*(col_pos[:, :2] - pos[:2]).T))) if level else None
             for i in np.flatnonzero(near):
                 if i == carrier_index:
                     continue  # a sensor does not see its own carrier
@@ -271,10 +339,15 @@ class Lidar:
                     dist = max(float(np.linalg.norm(rel[i])) - float(radius[i]), 0.5)
                     pad += math.ceil((shift / dist + abs(carrier.yaw_rate) * self.period) / self.col_width)
                 cols = self._columns_of(corners, pad)
-                if cols is None:
+                chans = None if widen is None else self._channels_of(corners, widen)
+                if cols is None and chans is None:
                     idx = np.arange(n_rays)
                 else:
-                    idx = (cols[:, None] * self.channels + np.arange(self.channels)[None, :]).ravel()
+                    if cols is None:
+                        cols = np.arange(self.columns)
+                    if chans is None:
+                        chans = np.arange(self.channels)
+                    idx = (cols[:, None] * self.channels + chans[None, :]).ravel()
                 if not len(idx):
                     continue
                 if distort:
@@ -294,15 +367,17 @@ class Lidar:
         idx = np.flatnonzero((t >= cfg.range_min) & (t <= cfg.range_max))
         ids = object_id[idx]
         visible = np.bincount(ids, minlength=nbox + 1)[1 : nbox + 1]
-        if cfg.dropout > 0.0:
-            kept = self.rng.random(n_rays, dtype=np.float32)[idx] >= cfg.dropout
+        uniform, normal = self._next_draws()
+        if uniform is not None:
+            kept = uniform[idx] >= cfg.dropout
             idx = idx[kept]
             ids = ids[kept]
         rng_t = t[idx]
-        if cfg.range_noise > 0.0:
-            noise = self.rng.standard_normal(len(idx), dtype=np.float32)
+        if normal is not None:
+            noise = normal[idx]
             noise *= cfg.range_noise
-            rng_t = np.maximum(rng_t + noise, 0.0)
+            noise += rng_t
+            rng_t = np.maximum(noise, 0.0, out=noise)
         cls = classes[idx]
         points = np.zeros(len(idx), POINT_DTYPE)  # zeros: the padding byte too (reproducible files)
         if distort:
@@ -312,8 +387,7 @@ class Lidar:
             points["x"] = local[:, 0]
             points["y"] = local[:, 1]
             points["z"] = local[:, 2]
-        else:
-            points["time"] = 0.0
+        else:  # time: 0 (the zeros)
             points["x"] = self._dirs_t[0, idx] * rng_t
             points["y"] = self._dirs_t[1, idx] * rng_t
             points["z"] = self._dirs_t[2, idx] * rng_t
