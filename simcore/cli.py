@@ -192,6 +192,12 @@ def run(
             key = {"passed": "passed", "failed": "failed"}.get(summary["status"], "errors")
             state[key] += 1
             progress.update(task, advance=1, stats=stats())
+            if summary["status"] == "error" and bus is not None and not progress.live.is_started:
+                # one run with other processes on its topics: say why it failed (a controller died, …)
+                console.print(
+                    f"index {summary['index']}: {summary['error']}", highlight=False, soft_wrap=True
+                )
+                return
             if quiet or not progress.live.is_started:
                 return
             if summary["status"] == "error":

@@ -452,3 +452,4 @@ def check_the_dead_controller_failed_the_run(
     summary = json.loads((tmp_path / "results" / "remote" / "0" / "summary.json").read_text())
     assert summary["status"] == "error"
     assert "no command on /carlos/Ego/control answering t=1.00 s within 1 s" in summary["error"]
+    assert "no command on /carlos/Ego/control answering t=1.00 s" in out  # said on the console too

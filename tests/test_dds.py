@@ -858,3 +858,48 @@ def test_the_system_under_tests_container_drives_the_ego_in_lockstep_inside_the_
     commands = {t for topic, t, _ in messages if topic == "/carlos/Ego/control"}
     frames = {t for topic, t, _ in messages if topic == "/carlos/Ego/odometry"}
     assert len(frames) == 31 and frames - {max(frames)} <= commands <= frames
+
+
+def test_lockstep_over_dds_without_a_controller_fails_at_the_start_naming_the_topic(
+    domain: int, tmp_path: Path
+) -> None:
+    from tests.test_closedloop import _manifest
+
+    manifest = _manifest(tmp_path, timeout=1.0)
+    body = yaml.safe_load(manifest.read_text())
+    body["spec"]["control"]["startupTimeoutSeconds"] = 1
+    manifest.write_text(yaml.safe_dump(body))
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "CYCLONEDDS_URI": CONFIG}
+    run = subprocess.run(
+        [CARLOS, "run", str(manifest), "--transport", "dds", "-q"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+        env=env,
+    )
+    assert run.returncode == 3, run.stdout + run.stderr
+    assert f"DDS domain {domain}" in run.stderr
+    assert "no node subscribed to /carlos/Ego/odometry within 1 s" in run.stderr
+
+
+def test_carlos_run_checks_the_dds_options(tmp_path: Path) -> None:
+    from tests.test_closedloop import _manifest
+
+    manifest = str(_manifest(tmp_path, timeout=1.0))
+    for args, env, message in (
+        (["--transport", "zmq"], {}, "use none, loopback or dds"),
+        (["--ros-domain-id", "3"], {}, "--ros-domain-id is for --transport dds"),
+        (["--transport", "dds"], {"ROS_DOMAIN_ID": "x"}, "ROS_DOMAIN_ID='x' is not a domain id"),
+        (["--transport", "dds", "--ros-domain-id", "300"], {}, "--ros-domain-id"),
+    ):
+        run = subprocess.run(
+            [CARLOS, "run", manifest, *args, "-q"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            cwd=tmp_path,
+            env={**os.environ, "COLUMNS": "200", **env},
+        )
+        assert run.returncode == 2, (args, run.stdout + run.stderr)
+        assert message in run.stdout + run.stderr, (args, run.stdout + run.stderr)
