@@ -29,6 +29,7 @@ after an fsync; a run that dies never leaves a file under the final name. On an 
 
 from __future__ import annotations
 
+import dataclasses
 import fnmatch
 import os
 import queue
@@ -41,6 +42,8 @@ from importlib import metadata as importlib_metadata
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, Literal, Self
+
+import numpy as np
 
 from simcore.spec import Recording
 from simcore.store import fsync_dir
@@ -117,17 +120,85 @@ class RecorderError(RuntimeError):
     """The recording cannot be written (bad arguments, closed recorder, I/O error)."""
 
 
-def _compressor(compression: str) -> Callable[[bytes], bytes] | None:
+#: A record piece: bytes, or a read-only view of a message's big array (taken as it is, not copied).
+Piece = bytes | memoryview
+
+
+def _compressor(compression: str) -> Callable[[list[Piece], int], list[Piece]] | None:
+    """A function compressing a chunk's pieces (total `size` bytes) into one frame as a list of pieces:
+    streamed piece by piece (the compressors release the GIL), never joined into one buffer first."""
     if compression == "zstd":
         import zstandard
 
-        return zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress
+        context = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
+
+        def zstd(pieces: list[Piece], size: int) -> list[Piece]:
+            stream = context.compressobj(size=size)  # the frame records the size, as compress() would
+            out: list[Piece] = [stream.compress(piece) for piece in pieces]
+            out.append(stream.flush())
+            return out
+
+        return zstd
     if compression == "lz4":
         import lz4.frame
 
-        compress: Callable[[bytes], bytes] = lz4.frame.compress
-        return compress
+        def lz4_frame(pieces: list[Piece], size: int) -> list[Piece]:
+            stream = lz4.frame.LZ4FrameCompressor()
+            out: list[Piece] = [stream.begin(source_size=size)]
+            out.extend(stream.compress(piece) for piece in pieces)
+            out.append(stream.flush())
+            return out
+
+        return lz4_frame
     return None
+
+
+#: Message types whose bulk is one uint8[] `data` field: serialised around it, the array itself is a piece
+#: of the chunk (no copy when it is read-only), with the bytes the CDR has after the array.
+_BLOB_TYPES = {"sensor_msgs/msg/PointCloud2": 1, "sensor_msgs/msg/Image": 0}
+_NO_BYTES = np.zeros(0, np.uint8)
+
+
+def _cdr_pieces(msg: Any, after: int) -> tuple[bytes, Piece, bytes]:
+    """The CDR of a message with a big uint8[] `data` field as (before the array, the array, after it):
+    the rosbags serialisation of the message with an empty array gives the rest. A read-only contiguous
+    numpy array is taken as immutable and referenced (a lidar's clouds are read-only); anything else is
+    copied once."""
+    data = msg.data
+    if isinstance(data, np.ndarray) and not data.flags.writeable and data.flags.c_contiguous:
+        blob: Piece = data.data.cast("B")
+    else:
+        blob = bytes(np.ascontiguousarray(data, np.uint8)) if isinstance(data, np.ndarray) else bytes(data)
+    empty = serialize(dataclasses.replace(msg, data=_NO_BYTES))
+    cut = len(empty) - 4 - after  # the array's uint32 length (aligned the same whatever the length)
+    return (
+        empty[:cut] + _U32.pack(blob.nbytes if isinstance(blob, memoryview) else len(blob)),
+        blob,
+        empty[cut + 4 :],
+    )
+
+
+#: Pieces below this size are joined before they are checksummed, compressed or written.
+_SMALL = 64 * 1024
+
+
+def _coalesce(pieces: list[Piece]) -> list[Piece]:
+    """The pieces with every run of small ones joined: the checksum, the compressors and the file release
+    the GIL per call, and each call needs it back, so few big calls leave the simulation thread alone (a
+    large piece, a point cloud, is passed as it is: no copy)."""
+    out: list[Piece] = []
+    run: list[Piece] = []
+    for piece in pieces:
+        if len(piece) < _SMALL:
+            run.append(piece)
+            continue
+        if run:
+            out.append(b"".join(run))
+            run = []
+        out.append(piece)
+    if run:
+        out.append(b"".join(run))
+    return out
 
 
 @dataclass
@@ -135,7 +206,7 @@ class _Chunk:
     """An open chunk: its records as pieces (record heads and message data), message indexes per channel
     as flat [log time, offset, …] lists, the time range."""
 
-    pieces: list[bytes] = field(default_factory=list)
+    pieces: list[Piece] = field(default_factory=list)
     size: int = 0
     indexes: dict[int, list[int]] = field(default_factory=dict)
     start: int = 0
@@ -199,29 +270,24 @@ class _FileWriter(threading.Thread):
         )
 
     def _chunk(self, chunk: _Chunk) -> None:
+        pieces = _coalesce(chunk.pieces)
+        crc = 0
+        for piece in pieces:
+            crc = zlib.crc32(piece, crc)
         if self.compress is None:
-            crc = 0
-            for piece in chunk.pieces:
-                crc = zlib.crc32(piece, crc)
-            data: bytes | None = None
+            data = pieces
             compressed_size = chunk.size
         else:
-            raw = b"".join(chunk.pieces)
-            crc = zlib.crc32(raw)
-            data = self.compress(raw)
-            del raw
-            compressed_size = len(data)
+            data = self.compress(pieces, chunk.size)
+            compressed_size = sum(len(piece) for piece in data)  # compressor output: bytes
         tail = _string(self.compression) + _U64.pack(compressed_size)
         content_length = 8 + 8 + 8 + 4 + len(tail) + compressed_size
         start = self.position
         self._write(
             struct.pack("<BQQQQI", _OP_CHUNK, content_length, chunk.start, chunk.end, chunk.size, crc) + tail
         )
-        if data is None:
-            self.file.writelines(chunk.pieces)
-            self.position += chunk.size
-        else:
-            self._write(data)
+        self.file.writelines(data)
+        self.position += compressed_size
         end = self.position
         offsets: list[bytes] = []
         indexes: list[bytes] = []
@@ -414,12 +480,15 @@ class McapRecorder:
             self._check_open()
         if not self.wants(topic):
             return False
+        pieces: tuple[Piece, ...]
         if isinstance(msg, bytes):
-            data = msg
+            pieces = (msg,)
         elif isinstance(msg, bytearray | memoryview):
-            data = bytes(msg)
+            pieces = (bytes(msg),)
         else:
-            data = serialize(msg)
+            after = _BLOB_TYPES.get(typename)
+            pieces = (serialize(msg),) if after is None else _cdr_pieces(msg, after)
+        size = sum(len(piece) if isinstance(piece, bytes) else piece.nbytes for piece in pieces)
         channel_id = self._channel(topic, typename)
         ns = _ns(time_s)
         seq = self._sequence[channel_id] = (self._sequence[channel_id] + 1) & 0xFFFFFFFF
@@ -430,10 +499,10 @@ class McapRecorder:
             index = chunk.indexes[channel_id] = []
         index.append(ns)
         index.append(chunk.size)
-        head = _MESSAGE_HEAD.pack(_OP_MESSAGE, _MESSAGE_FIXED + len(data), channel_id, seq, ns, ns)
+        head = _MESSAGE_HEAD.pack(_OP_MESSAGE, _MESSAGE_FIXED + size, channel_id, seq, ns, ns)
         chunk.pieces.append(head)
-        chunk.pieces.append(data)
-        chunk.size += len(head) + len(data)
+        chunk.pieces.extend(pieces)
+        chunk.size += len(head) + size
         if chunk.messages == 0:
             chunk.start = chunk.end = ns
         elif ns < chunk.start:

@@ -371,3 +371,46 @@ def test_write_errors_reach_the_caller(tmp_path: Path) -> None:
     with pytest.raises(RecorderError, match="No space left"):
         rec.close()
     assert not path.exists()
+
+
+@pytest.mark.parametrize("frame_id", ["", "a", "Ego/lidar", "ego_car/front_lidar"])
+@pytest.mark.parametrize("n", [0, 1, 3, 1000])
+def test_big_arrays_are_serialised_around_as_rosbags_does(frame_id: str, n: int) -> None:
+    """PointCloud2 and Image are written as (CDR before the array, the array, CDR after it): the same
+    bytes as rosbags' serialisation, whatever the lengths (alignment)."""
+    import numpy as np
+
+    from simcore.recorder import _BLOB_TYPES, _cdr_pieces
+    from simcore.sensors import ros
+    from simcore.sensors.lidar import POINT_DTYPE
+
+    points = np.zeros(n, POINT_DTYPE)
+    points["x"] = np.arange(n)
+    points.flags.writeable = False
+    cloud = ros.pointcloud2(points, 1.25, frame_id)
+    image = ros.image(np.arange(n * 3, dtype=np.float32).reshape(-1, 3), "32FC1", 2.5, frame_id)
+    for msg, typename in ((cloud, ros.POINTCLOUD2), (image, ros.IMAGE)):
+        pieces = _cdr_pieces(msg, _BLOB_TYPES[typename])
+        assert b"".join(bytes(p) for p in pieces) == messages.serialize(msg)
+    assert isinstance(_cdr_pieces(cloud, 1)[1], memoryview)  # read-only: referenced, not copied
+
+
+def test_a_writable_array_is_copied_when_written(tmp_path: Path) -> None:
+    """A cloud whose array is changed after `write` is recorded as it was written (read-only arrays are
+    referenced until the chunk is written; anything else is copied)."""
+    import numpy as np
+
+    from simcore.sensors import ros
+    from simcore.sensors.lidar import POINT_DTYPE
+
+    path = tmp_path / "clouds.mcap"
+    points = np.zeros(100, POINT_DTYPE)
+    frozen = np.zeros(100, POINT_DTYPE)
+    frozen["x"] = 7.0
+    frozen.flags.writeable = False
+    with McapRecorder(path, compression="zstd") as rec:
+        rec.write("/a", ros.POINTCLOUD2, ros.pointcloud2(points, 0.0, "a"), 0.0)
+        rec.write("/b", ros.POINTCLOUD2, ros.pointcloud2(frozen, 0.0, "b"), 0.0)
+        points["x"] = 5.0  # after the write, before the chunk is compressed
+    got = {topic: ros.read_pointcloud2(msg) for topic, _, _, msg in _read_mcap(path)[0]}
+    assert np.all(got["/a"]["x"] == 0.0) and np.all(got["/b"]["x"] == 7.0)

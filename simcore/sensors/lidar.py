@@ -396,6 +396,7 @@ class Lidar:
         points["ring"] = self.ring[idx]
         points["label"] = cls
         counts = np.bincount(ids, minlength=nbox + 1)[1 : nbox + 1]
+        points.flags.writeable = False  # immutable: messages and recordings reference it without a copy
         return LidarScan(
             points=points, object_points=counts, visible_rays=visible, unoccluded_rays=unoccluded, rays=n_rays
         )

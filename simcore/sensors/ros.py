@@ -86,9 +86,13 @@ def read_pointcloud2(msg: Any) -> np.ndarray:
         formats.append(("<" if not msg.is_bigendian else ">") + inverse[f.datatype])
         offsets.append(f.offset)
     dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": msg.point_step})
-    return np.frombuffer(
-        np.asarray(msg.data, dtype=np.uint8).tobytes(), dtype=dtype, count=msg.width * msg.height
+    data = msg.data  # a numpy array (rosbags) or bytes (mcap_ros2)
+    raw = (
+        bytes(data)
+        if isinstance(data, bytes | bytearray | memoryview)
+        else np.asarray(data, np.uint8).tobytes()
     )
+    return np.frombuffer(raw, dtype=dtype, count=msg.width * msg.height)
 
 
 def image(array: np.ndarray, encoding: str, time_s: float, frame_id: str) -> Any:
