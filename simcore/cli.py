@@ -7,14 +7,14 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from simcore.errors import BadInput, CarlosError, SimulationError
+from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
 
 if TYPE_CHECKING:
     from simcore.transport.bus import Bus
@@ -257,6 +257,33 @@ def _dds_bus(domain_id: int | None) -> Bus:
     return bus
 
 
+def _local_scenarios(simulation_run: object, manifest: Path) -> list[tuple[int, Any, Path]]:
+    """(position, scenario reference, file) of every scenario the manifest names on this machine; ConfigMaps
+    (cluster) and s3:// objects are checked by the run itself. A named file that is missing is bad input."""
+    from simcore.spec import SimulationRun
+
+    assert isinstance(simulation_run, SimulationRun)
+    base_dir = manifest.parent.resolve()
+    found = []
+    for position, scenario in enumerate(simulation_run.spec.scenarios):
+        source = scenario.openscenario
+        if source is None or source.startswith("s3://"):
+            continue
+        path = (
+            Path(source.removeprefix("file://")).expanduser()
+            if source.startswith("file://")
+            else base_dir / source
+        )
+        if not path.is_file():
+            raise BadInput(
+                f"scenario file {str(path)!r} not found",
+                file=str(manifest),
+                field=f"spec.scenarios[{position}].openscenario",
+            )
+        found.append((position, scenario, path))
+    return found
+
+
 def _preflight(simulation_run: object, manifest: Path) -> None:
     """Check what can be checked before any worker starts, so a typo fails at once with exit code 2: every
     local scenario file parses with the first permutation's parameters (all matrix, spec and scenario
@@ -268,19 +295,7 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
     assert isinstance(simulation_run, SimulationRun)
     spec = simulation_run.spec
     plan = Plan(spec)
-    base_dir = manifest.parent.resolve()
-    for position, scenario in enumerate(spec.scenarios):
-        source = scenario.openscenario
-        if source is None or source.startswith("s3://"):
-            continue  # a ConfigMap (cluster) or an object: checked by the run itself
-        path = (
-            Path(source.removeprefix("file://")).expanduser()
-            if source.startswith("file://")
-            else base_dir / source
-        )
-        field = f"spec.scenarios[{position}].openscenario"
-        if not path.is_file():
-            raise BadInput(f"scenario file {str(path)!r} not found", file=str(manifest), field=field)
+    for position, scenario, path in _local_scenarios(simulation_run, manifest):
         declared = declared_parameters(path)
         names = {**spec.parameters, **scenario.parameters, **spec.sweep.matrix}
         unknown = sorted(set(names) - set(declared))
@@ -342,20 +357,85 @@ def _print_report(report: object) -> None:
 
 
 @app.command()
-def validate(manifest: Annotated[Path, typer.Argument(help="SimulationRun manifest (YAML).")]) -> None:
+def validate(
+    manifest: Annotated[
+        Path,
+        typer.Argument(help="SimulationRun manifest (YAML), or OpenSCENARIO files (.xosc) with --schema."),
+    ],
+    more: Annotated[list[Path] | None, typer.Argument(help="More .xosc files (with --schema).")] = None,
+    schema: Annotated[
+        bool,
+        typer.Option(
+            "--schema",
+            help="Also check every local scenario against the official ASAM XSD of the revision it declares "
+            "(1.0–1.3); violations are listed with their line and fail the check (exit 2).",
+        ),
+    ] = False,
+) -> None:
     """Check a manifest and its scenarios without running anything."""
     from simcore.manifest import load_manifest
     from simcore.plan import Plan
 
+    files = [manifest, *(more or [])]
+    if any(f.suffix == ".xosc" for f in files):
+        if not schema or not all(f.suffix == ".xosc" for f in files):
+            raise _fail(
+                BadInput("OpenSCENARIO files are checked with --schema, one manifest without", field="FILE")
+            )
+        raise typer.Exit(_check_schemas(files))
+    if more:
+        raise _fail(BadInput("one manifest at a time", field="MANIFEST"))
     try:
         simulation_run = load_manifest(manifest)
         _preflight(simulation_run, manifest)
+        paths = [path for _, _, path in _local_scenarios(simulation_run, manifest)] if schema else []
     except CarlosError as exc:
         raise _fail(exc) from None
+    if schema and _check_schemas(list(dict.fromkeys(paths))) != 0:
+        raise typer.Exit(int(ExitCode.BAD_INPUT))
     plan = Plan(simulation_run.spec)
     out.print(
         f"{manifest}: valid · {len(plan)} runs ({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})"
     )
+
+
+def _check_schemas(paths: list[Path]) -> int:
+    """Print each file's XSD verdict and its violations; 0 when all are valid, else 2 (bad input)."""
+    from simcore.scenario.schema import check_openscenario
+
+    invalid = 0
+    for path in paths:
+        try:
+            report = check_openscenario(path)
+        except CarlosError as exc:
+            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            invalid += 1
+            continue
+        note = f" ({report.note})" if report.note else ""
+        if report.valid:
+            out.print(
+                f"{path}: valid against OpenSCENARIO {report.version} XSD{note}",
+                highlight=False,
+                soft_wrap=True,
+            )
+            continue
+        invalid += 1
+        more = " (first ones)" if report.truncated else ""
+        console.print(
+            f"[bold red]{path}[/]: {len(report.issues)} violation(s){more} of the OpenSCENARIO "
+            f"{report.version} XSD{note}",
+            highlight=False,
+            soft_wrap=True,
+        )
+        for issue in report.issues:
+            line = "?" if issue.line is None else issue.line
+            console.print(
+                f"  {path}:{line}: {issue.path}: {issue.reason}",
+                highlight=False,
+                soft_wrap=True,
+                markup=False,
+            )
+    return int(ExitCode.BAD_INPUT) if invalid else 0
 
 
 @app.command()

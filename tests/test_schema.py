@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -143,3 +146,41 @@ def test_every_corpus_file_is_valid_against_its_declared_revision() -> None:
         if not (r := schema.check_openscenario(f)).valid
     }
     assert invalid == {}
+
+
+def _carlos(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "simcore.cli", "validate", *args],
+        capture_output=True,
+        text=True,
+        check=False,
+        cwd=ROOT,
+        env={**os.environ, "COLUMNS": "300"},
+    )
+
+
+def test_carlos_validate_schema_on_files_lists_violations_and_exits_2(tmp_path: Path) -> None:
+    good = write(tmp_path)
+    bad = tmp_path / "bad.xosc"
+    bad.write_text(
+        good.read_text().replace(
+            'dynamicsShape="step" value="0" dynamicsDimension="time"/>\n        <SpeedActionTarget><AbsoluteTargetSpeed value="10"',
+            'dynamicsShape="wobbly" value="0" dynamicsDimension="time"/>\n        <SpeedActionTarget><AbsoluteTargetSpeed value="10"',
+        )
+    )
+    line = next(n for n, text in enumerate(bad.read_text().splitlines(), 1) if "wobbly" in text)
+    proc = _carlos(str(good), str(bad), "--schema")
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert f"{good}: valid against OpenSCENARIO 1.2.0 XSD" in proc.stdout
+    assert f"{bad}: 1 violation(s) of the OpenSCENARIO 1.2.0 XSD" in proc.stderr
+    assert f"{bad}:{line}: /OpenSCENARIO/Storyboard/Init/" in proc.stderr and "wobbly" in proc.stderr
+    assert _carlos(str(good), "--schema").returncode == 0
+    refused = _carlos(str(good))  # a scenario file without --schema: the command says how
+    assert refused.returncode == 2 and "--schema" in refused.stderr
+
+
+def test_carlos_validate_schema_checks_a_manifests_scenarios() -> None:
+    proc = _carlos("examples/runs/automated-testing.yaml", "--schema")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.count("valid against OpenSCENARIO 1.2.0 XSD") == 4
+    assert "examples/runs/automated-testing.yaml: valid · 4 runs" in proc.stdout
