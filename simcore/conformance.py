@@ -17,7 +17,6 @@ import json
 import math
 import time
 import traceback
-import xml.etree.ElementTree as ET
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -126,32 +125,24 @@ def reference_end_times(reference_dir: Path) -> dict[str, float]:
 
 
 def controlled_entities(path: Path) -> set[str]:
-    """Entities a controller drives (ObjectController or Assign/ActivateController actions): their motion is
-    the controller's, not the script's, so they are reported but do not decide agreement."""
-    from simcore.scenario.xosc import read_xml
+    """Entities a controller CARLOS does not run as the reference player does drives (ObjectController or
+    AssignControllerAction with a controller other than the default one and those of
+    `simcore.scenario.model.MODELLED_CONTROLLERS`, e.g. esmini's ACC/ALKS controllers): their motion is the
+    controller's, not the script's, so they are reported but do not decide agreement."""
+    from simcore.scenario.xosc import load_scenario
 
-    root = read_xml(path, what="OpenSCENARIO file")
-    out: set[str] = set()
-    for obj in root.iter("ScenarioObject"):
-        oc = obj.find("ObjectController")
-        if oc is not None and (oc.find("Controller") is not None or oc.find("CatalogReference") is not None):
-            out.add(obj.get("name", ""))
-    for private in root.iter("Private"):
-        if _has_controller_action(private):
-            out.add(private.get("entityRef", ""))
-    for group in root.iter("ManeuverGroup"):
-        if _has_controller_action(group):
-            actors = group.find("Actors")
-            if actors is not None:
-                out.update(r.get("entityRef", "") for r in actors.findall("EntityRef"))
-    return out
+    return uncompared_entities(load_scenario(path))
 
 
-def _has_controller_action(element: ET.Element) -> bool:
-    for action in element.iter("ControllerAction"):
-        if action.find("AssignControllerAction") is not None or action.find("OverrideControllerValueAction"):
-            return True
-    return False
+def uncompared_entities(scenario: Any) -> set[str]:
+    """The entities of a loaded scenario that `controlled_entities` names."""
+    from simcore.scenario import model as m
+
+    return {
+        name
+        for name, kinds in m.controller_kinds(scenario).items()
+        if any(kind not in m.MODELLED_CONTROLLERS for kind in kinds)
+    }
 
 
 # --- running one scenario ----------------------------------------------------------------------------------
@@ -162,6 +153,7 @@ class Trace:
     """Our positions at every REFERENCE_PERIOD of simulated time."""
 
     tracks: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)
+    controlled: set[str] | None = None  # entities not compared (`controlled_entities`), once loaded
 
     def add(self, time_s: float, name: str, x: float, y: float) -> None:
         self.tracks.setdefault(name, []).append((time_s, x, y))
@@ -184,6 +176,7 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
 
         scenario = load_scenario(path)
         result.warnings = list(scenario.warnings)
+        trace.controlled = uncompared_entities(scenario)
         road = None
         if scenario.road_file is not None and scenario.road_file.suffix == ".xodr":
             try:
@@ -288,10 +281,7 @@ def _one(args: tuple[str, str | None, float, float | None]) -> ScenarioResult:
         ref_path = Path(reference_dir) / reference_name(path)
         if ref_path.is_file():
             result.reference = ref_path.name
-            try:
-                controlled = controlled_entities(path)
-            except CarlosError:
-                controlled = set()
+            controlled = trace.controlled if trace.controlled is not None else set()
             compare(result, trace, read_reference(ref_path), reference_end, controlled)
     return result
 

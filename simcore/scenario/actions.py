@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING
 from simcore.errors import BadInput
 from simcore.scenario import model as m
 from simcore.scenario import paths
-from simcore.scenario.motion import Body, shape_value, wrap_angle
+from simcore.scenario.conditions import _axis_gaps
+from simcore.scenario.motion import Body, lane_at_t, shape_value, wrap_angle
 
 if TYPE_CHECKING:
     from simcore.scenario.engine import ScenarioEngine
@@ -803,3 +804,122 @@ class SafetyDriver:
             a.speed = max(a.speed - min(need, self.MAX_DECELERATION) * dt, 0.0)
         elif a.speed < self.set_speed and not blocked:
             a.speed = min(a.speed + self.RESUME_ACCELERATION * dt, self.set_speed)
+
+
+class AccDriver:
+    """esmini's ACCController (and ALKSController, which is the same controller): a longitudinal driver
+    that holds a set speed and keeps a time gap to the vehicle ahead in its lane. Its semantics as esmini
+    implements them:
+
+    - properties `timeGap` (s, default 1.5), `setSpeed` (m/s; default: the speed at activation), `lateralDist`
+      (m, default 5: vehicles farther across are not followed), `mode` (`override`, `additive`; without the
+      property, additive), `virtual` (true: it only computes, the entity is not moved by it);
+    - activation takes the entity's speed as its current speed, and as set speed in additive mode or when no
+      `setSpeed` is given; while it runs, a speed other than the one it set last (a speed action in additive
+      mode) becomes the new set speed;
+    - the vehicle to follow: the nearest entity ahead along the road in the same lane, within `lateralDist`,
+      bumper to bumper, looked for up to max(50 m, 6 m + v²/max deceleration); also a very close entity just
+      in front (bounding boxes less than its length + 1 m apart, lateral gap within -0.5…0.2 m);
+    - following: closer than 1 m it stops at once; else it accelerates by
+      2.5·f − f·(v − v_set) − (1 − f)·(v − min(v_set, v_lead)), f = min(1, (gap − d)/d), d = 3 m + timeGap·
+      max(v, v_lead), within the entity's acceleration/deceleration limits, and never above its set speed;
+    - free road: toward the set speed at 0.7·max acceleration per m/s of difference, at most 0.7·max
+      acceleration, without overshooting;
+    - it steps after every entity has moved (as esmini steps controllers after the default motion): in
+      override mode it then moves its entity with the new speed (speed actions on it end without effect);
+      in additive mode the entity moves on with its speed and the new speed applies from the next step."""
+
+    MIN_DISTANCE = 3.0  # m kept at standstill
+    ACCELERATION_FACTOR = 0.7
+
+    def __init__(self, engine: ScenarioEngine, actor: Body, properties: dict[str, str]) -> None:
+        self.engine = engine
+        self.actor = actor
+        self.time_gap = _float(properties.get("timeGap"), 1.5)
+        self.lateral_dist = _float(properties.get("lateralDist"), 5.0)
+        mode = properties.get("mode")
+        self.override = mode is not None and mode != "additive"
+        self.virtual = properties.get("virtual", "").strip().lower() == "true"
+        self.current_speed = actor.speed
+        given = properties.get("setSpeed")
+        self.set_speed = actor.speed if (not self.override or given is None) else _float(given, actor.speed)
+        self.lead: str | None = None  # the entity it follows (None: free road)
+
+    def step(self, dt: float) -> None:
+        a, engine = self.actor, self.engine
+        if self.virtual:
+            self.current_speed = a.speed
+        elif abs(a.speed - self.current_speed) > 1e-3:
+            self.set_speed = a.speed  # set by someone else (a speed action): respected as the new set speed
+        perf = a.entity.performance
+        v = self.current_speed
+        lookahead = max(50.0, 2 * self.MIN_DISTANCE + v * v / max(perf.max_deceleration, 1e-9))
+        box_a = a.entity.box
+        front_a = box_a.length / 2 + box_a.center_x
+        best_gap, lead = _BIG, None
+        measure = engine.measure
+        for other in engine.bodies.values():
+            if other is a or other.gone or not other.placed:
+                continue
+            box_b = other.entity.box
+            delta = measure._road_delta_entity(a, other) if a.road_id is not None else None
+            if delta is not None and abs(delta[0]) <= lookahead:
+                ds, dt_lat = delta
+                turn = abs(wrap_angle(other.heading - a.heading))
+                rear_b = (
+                    box_b.length / 2 - box_b.center_x
+                    if turn < math.pi / 2
+                    else box_b.length / 2 + box_b.center_x
+                )
+                gap = ds - front_a - rear_b
+                if 0.0 < gap < best_gap and abs(dt_lat) < self.lateral_dist and _same_lane(engine, a, other):
+                    best_gap, lead = gap, other
+            if lead is not other:
+                # a very close entity just in front (whatever the lanes say)
+                reach = box_a.length + box_b.length + 1.0 + 0.5 * max(0.0, v - other.speed)
+                if abs(other.x - a.x) < reach and abs(other.y - a.y) < reach:
+                    lon, lat = _axis_gaps(measure.box(a), measure.box(other))
+                    if 0.0 < lon < 1.0 + box_b.length + 0.5 * max(0.0, v - other.speed) and -0.5 < lat < 0.2:
+                        best_gap, lead = lon, other
+        if lead is not None:
+            if best_gap < 1.0:
+                v = 0.0
+            else:
+                follow = self.MIN_DISTANCE + self.time_gap * abs(max(v, lead.speed))
+                factor = min(1.0, (best_gap - follow) / follow)
+                dv_min = v - min(self.set_speed, lead.speed)
+                dv_set = v - self.set_speed
+                acc = 2.5 * factor - factor * dv_set - (1.0 - factor) * dv_min
+                acc = min(max(acc, -perf.max_deceleration), perf.max_acceleration)
+                v = min(max(0.0, v + acc * dt), self.set_speed)
+        else:
+            gain = self.ACCELERATION_FACTOR * perf.max_acceleration
+            acc = min(max((self.set_speed - v) * gain, -perf.max_deceleration), gain)
+            ahead = v + acc * dt
+            v = self.set_speed if abs(ahead - self.set_speed) > abs(v - self.set_speed) else ahead
+        self.lead = lead.name if lead is not None else None
+        self.current_speed = v
+        if not self.virtual:
+            a.speed = v
+
+
+def _float(text: str | None, default: float) -> float:
+    if text is None or text.strip() == "":
+        return default
+    try:
+        return float(text)
+    except ValueError:
+        return default
+
+
+def _same_lane(engine: ScenarioEngine, a: Body, b: Body) -> bool:
+    """b is in a's lane (esmini: no lane change between them along the road): the lanes their reference
+    points are in now (during a lane change, the one it has reached), by id (across a road link too: the
+    corpus's roads keep lane ids across links)."""
+    road = engine.road
+    if road is None or a.road_id is None or b.road_id is None:
+        return a.lane_id == b.lane_id
+    measure = engine.measure
+    lane_a = lane_at_t(road, a.road_id, a.s, measure._t_of(a))[0] if a.offset else a.lane_id
+    lane_b = lane_at_t(road, b.road_id, b.s, measure._t_of(b))[0] if b.offset else b.lane_id
+    return lane_a == lane_b

@@ -251,6 +251,7 @@ class ControllerRuntime(ActionRuntime):
         if self.action.lateral is not None:
             control[2] = self.action.lateral
         external = control[0] == "external" and (control[1] or control[2])
+        self._driver_model(control, bool(external))
         if external != self.actor.external:
             self.actor.external = bool(external)
             self.actor.mover = None
@@ -259,6 +260,21 @@ class ControllerRuntime(ActionRuntime):
                 f"{'activated: moved by its control input' if external else 'deactivated'}"
             )
         self.done = True
+
+    def _driver_model(self, control: list[Any], external: bool) -> None:
+        """(Re)start or stop the driver model of an esmini controller CARLOS runs (ACC/ALKS): activated on
+        the longitudinal domain, it starts from the entity's speed now (as esmini's Activate)."""
+        e, name = self.engine, self.actor.name
+        if self.action.assign is not None:
+            e.assigned_controller[name] = dict(self.action.controller)
+        properties = e.assigned_controller.get(name, self.actor.entity.controller)
+        if external or not control[1] or m.controller_type(properties) not in m.ACC_CONTROLLERS:
+            if e.acc_drivers.pop(name, None) is not None:
+                e.log.append(f"t={e.time:.2f} {name}: ACC controller deactivated")
+            return
+        if self.action.longitudinal or self.action.assign is not None or name not in e.acc_drivers:
+            e.acc_drivers[name] = extra_actions.AccDriver(e, self.actor, properties)
+            e.log.append(f"t={e.time:.2f} {name}: ACC controller activated at {self.actor.speed:.2f} m/s")
 
 
 class IgnoredRuntime(ActionRuntime):
@@ -277,6 +293,10 @@ def make_runtime(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -
         return ControllerRuntime(engine, actor, action)
     if actor.external and not isinstance(action, m.TeleportAction | m.NoMotionAction | m.AssignRouteAction):
         return IgnoredRuntime(engine, actor, action)
+    if engine.acc_drivers and getattr(action, "domain", "") == "longitudinal":
+        acc = engine.acc_drivers.get(actor.name)
+        if acc is not None and acc.override and not acc.virtual:
+            return IgnoredRuntime(engine, actor, action)  # an override controller moves it (esmini ends it)
     other = extra_actions.make(engine, actor, action)
     if other is not None:
         return other
@@ -385,6 +405,10 @@ class ScenarioEngine:
             e.name for e in scenario.entities if m.controller_type(e.controller) in m.ALKS_CONTROLLERS
         ]
         self.safety_drivers: dict[str, extra_actions.SafetyDriver] = {}
+        # the properties of each entity's controller assigned during the run (AssignControllerAction), and
+        # the ACC/ALKS driver models (esmini's ACCController) active on the longitudinal domain now
+        self.assigned_controller: dict[str, dict[str, str]] = {}
+        self.acc_drivers: dict[str, extra_actions.AccDriver] = {}
         self._transitions = 0  # state transitions so far, and how many there were at the last completion pass
         self._completed_at = -1
         # trailers: tow vehicle → the entity it tows (Trailer/TrailerRef, ConnectTrailerAction), and back
@@ -1459,6 +1483,12 @@ class ScenarioEngine:
         self._moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         sumo, road, tow_of = self.sumo, self.road, self.tow_of
+        # entities an override-mode ACC moves itself, after the others (below)
+        deferred = (
+            {n for n, d in self.acc_drivers.items() if d.override and not d.virtual}
+            if self.acc_drivers
+            else ()
+        )
         for body in self.bodies.values():
             if body.gone:
                 continue
@@ -1469,6 +1499,8 @@ class ScenarioEngine:
                 continue
             if body.entity.driver == "sumo" or (tow_of and body.name in tow_of):
                 continue  # SUMO moves it, or its tow vehicle drags it (below)
+            if deferred and body.name in deferred:
+                continue
             extra = body.extra
             if extra:
                 if extra.pop("teleported", 0.0):
@@ -1511,6 +1543,8 @@ class ScenarioEngine:
                 body.odometer += math.hypot(state.x - body.x, state.y - body.y)
                 body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
                 self._locate(body)
+        if self.acc_drivers:
+            self._step_acc(dt, now)
         for body, speed0, heading0, px, py in previous:
             speed = body.speed
             body.acceleration = (speed - speed0) / dt
@@ -1540,6 +1574,42 @@ class ScenarioEngine:
         self.step_index += 1
         self._moved()
         self._check_stop()
+
+    def _step_acc(self, dt: float, now: float) -> None:
+        """esmini steps its controllers after the default motion of every entity: an ACC sees the others
+        where they are after this step, sets its entity's speed, and in override mode moves it with it."""
+        for driver in list(self.acc_drivers.values()):
+            body = driver.actor
+            if body.gone or body.external:
+                continue
+            self.measure.clear()
+            driver.step(dt)
+            if driver.override and not driver.virtual:
+                self._move_body(body, dt, now)
+        self._moved()
+
+    def _move_body(self, body: Body, dt: float, now: float) -> None:
+        """One step of default motion of one body at its speed (as in `advance`)."""
+        extra = body.extra
+        if extra.pop("teleported", 0.0):
+            extra.pop("move_speed", 0.0)
+            return
+        speed = extra.pop("move_speed", body.speed)
+        distance = speed * dt
+        if body.mover is not None:
+            body.mover.move(dt, now)
+        else:
+            if body.lateral_velocity != 0.0:
+                lateral = min(abs(body.lateral_velocity), abs(speed))
+                distance = math.copysign(math.sqrt(speed * speed - lateral * lateral), speed) * dt
+            if self.road is not None and body.road_id is not None:
+                advance_on_road(self.road, body, distance, now)
+            elif distance != 0.0:
+                body.x += distance * math.cos(body.heading)
+                body.y += distance * math.sin(body.heading)
+            body.odometer += abs(distance)
+        if self.sumo is not None and self.sumo.has(body.name):
+            self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
 
     def drive_externally(self, name: str) -> None:
         """Make `name` externally driven from now on (`spec.control.entities`), as if its external

@@ -70,6 +70,11 @@ class Entity:
 EXTERNAL_CONTROLLERS = frozenset({"ExternalController", "InteractiveController"})
 # controllers CARLOS runs as its UN R157 ALKS driver model (simcore.scenario.actions.SafetyDriver)
 ALKS_CONTROLLERS = frozenset({"ALKS_R157SM_Controller"})
+# esmini's driver controllers CARLOS runs with esmini's algorithm (simcore.scenario.actions.AccDriver): the
+# ALKS controller is esmini's ACC controller under another name
+ACC_CONTROLLERS = frozenset({"ACCController", "ALKSController"})
+# controllers whose entities move as under the reference player: compared in conformance like scripted ones
+MODELLED_CONTROLLERS = ACC_CONTROLLERS | {"", "DefaultController"}
 
 
 def controller_type(properties: dict[str, str]) -> str:
@@ -429,6 +434,7 @@ class ControllerAction:
     assign: str | None = None
     longitudinal: bool | None = None
     lateral: bool | None = None
+    controller: tuple[tuple[str, str], ...] = ()  # the assigned controller's properties (with its "name")
     domain = "none"
 
 
@@ -821,3 +827,32 @@ class Scenario:
     signal_controllers: tuple[SignalController, ...] = ()
     #: unsupported elements that do not change motion: "file:line: element: what was ignored"
     warnings: tuple[str, ...] = ()
+
+
+def controller_kinds(scenario: Scenario) -> dict[str, set[str]]:
+    """Entity name → the kinds of every controller it is given (ObjectController, AssignControllerAction in
+    Init or in a story, to the group's actors); entities without one are left out. `carlos.driver` sumo or
+    external counts as a kind of its own."""
+    out: dict[str, set[str]] = {}
+
+    def kind(properties: dict[str, str]) -> str:
+        driver = properties.get("carlos.driver", "scenario")
+        return f"carlos.driver={driver}" if driver != "scenario" else controller_type(properties)
+
+    for entity in scenario.entities:
+        if entity.controller:
+            out.setdefault(entity.name, set()).add(kind(entity.controller))
+    for item in scenario.init:
+        if isinstance(item.action, ControllerAction) and item.action.controller:
+            out.setdefault(item.entity, set()).add(kind(dict(item.action.controller)))
+    for story in scenario.stories:
+        for act in story.acts:
+            for group in act.groups:
+                for maneuver in group.maneuvers:
+                    for event in maneuver.events:
+                        for action in event.actions:
+                            private = action.private
+                            if isinstance(private, ControllerAction) and private.controller:
+                                for actor in group.actors:
+                                    out.setdefault(actor, set()).add(kind(dict(private.controller)))
+    return out

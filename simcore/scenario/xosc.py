@@ -555,6 +555,8 @@ def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
         )
     kind = m.controller_type(properties)
     known = properties.get("carlos.driver") in ("sumo", "external") or kind in m.EXTERNAL_CONTROLLERS
+    if kind in m.ACC_CONTROLLERS:
+        known = True  # runs as esmini's ACC controller (simcore.scenario.actions.AccDriver)
     if kind in m.ALKS_CONTROLLERS:
         reader.warn(
             f"controller {kind!r} runs as CARLOS's R157 safety driver (holds its speed, brakes for vehicles "
@@ -775,6 +777,7 @@ def _controller_action(reader: _Reader, inner: ET.Element) -> m.PrivateAction:
     assign: str | None = None
     longitudinal: bool | None = None
     lateral: bool | None = None
+    controller: tuple[tuple[str, str], ...] = ()
     for child in inner:
         if child.tag == "AssignControllerAction":
             properties = _controller(reader, child)
@@ -786,6 +789,7 @@ def _controller_action(reader: _Reader, inner: ET.Element) -> m.PrivateAction:
                 )
             external = driver == "external" or m.controller_type(properties) in m.EXTERNAL_CONTROLLERS
             assign = "external" if external else "scenario"
+            controller = tuple(properties.items())
             longitudinal = flag(child, "activateLongitudinal")
             lateral = flag(child, "activateLateral")
         elif child.tag == "ActivateControllerAction":
@@ -793,7 +797,9 @@ def _controller_action(reader: _Reader, inner: ET.Element) -> m.PrivateAction:
             lateral = flag(child, "lateral")
         elif child.tag.startswith("Override"):
             reader.warn(f"{child.tag} is ignored (no driver model to override)", child)
-    return m.ControllerAction(assign=assign, longitudinal=longitudinal, lateral=lateral)
+    return m.ControllerAction(
+        assign=assign, longitudinal=longitudinal, lateral=lateral, controller=controller
+    )
 
 
 _MODIFY_RULES: dict[str, Literal["add", "multiply"]] = {"AddValue": "add", "MultiplyByValue": "multiply"}
