@@ -133,7 +133,8 @@ def test_corpus_subset_agrees_with_esmini() -> None:
     triggers: each loads, ends on its own and agrees with esmini."""
     subset = [
         "xosc/cut-in.xosc",  # lane change, headway triggers, parameters in Story scope
-        "xosc/acc-test.xosc",  # speed rates bounded by performance, lateral share of speed
+        "xosc/acc-test.xosc",  # esmini's ACC controller (override mode), speed rates bounded by performance
+        "xosc/alks-test.xosc",  # esmini's ALKS controller (the ACC in additive mode) on a curved road
         "xosc/cut-in_cr.xosc",  # LaneOffset, qualified Event::Action names
         "xosc/lane-change_trajectory_wp.xosc",  # polyline trajectory
         "xosc/lane-change_clothoid_based_trajectory.xosc",  # chained clothoids
