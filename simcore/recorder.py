@@ -178,24 +178,30 @@ def _cdr_pieces(msg: Any, after: int) -> tuple[bytes, Piece, bytes]:
     )
 
 
-#: Pieces below this size are joined before they are checksummed, compressed or written.
-_SMALL = 64 * 1024
+#: Pieces below this size are joined before they are checksummed, compressed or written; larger ones are
+#: handed over in slices of at most this size.
+_SLICE = 128 * 1024
 
 
-def _coalesce(pieces: list[Piece]) -> list[Piece]:
-    """The pieces with every run of small ones joined: the checksum, the compressors and the file release
-    the GIL per call, and each call needs it back, so few big calls leave the simulation thread alone (a
-    large piece, a point cloud, is passed as it is: no copy)."""
+def _slices(pieces: list[Piece]) -> list[Piece]:
+    """The pieces as the writer thread feeds them to the checksum, the compressor and the file: runs of
+    small ones joined, large ones (point clouds) cut into views of at most `_SLICE` bytes (no copy).
+
+    Why slices: each of these calls releases the GIL while it works and needs it back to start, and the
+    simulation thread holds the GIL through open3d's cast (which uses every core). With short calls the
+    writer thread waits out the cast instead of taking a core from it, and works in the single-threaded
+    phases of the step (scenario, labels, messages), where a core is idle."""
     out: list[Piece] = []
     run: list[Piece] = []
     for piece in pieces:
-        if len(piece) < _SMALL:
+        if len(piece) < _SLICE:
             run.append(piece)
             continue
         if run:
             out.append(b"".join(run))
             run = []
-        out.append(piece)
+        view = memoryview(piece)
+        out.extend(view[i : i + _SLICE] for i in range(0, len(view), _SLICE))
     if run:
         out.append(b"".join(run))
     return out
@@ -270,7 +276,7 @@ class _FileWriter(threading.Thread):
         )
 
     def _chunk(self, chunk: _Chunk) -> None:
-        pieces = _coalesce(chunk.pieces)
+        pieces = _slices(chunk.pieces)
         crc = 0
         for piece in pieces:
             crc = zlib.crc32(piece, crc)

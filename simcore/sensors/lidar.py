@@ -20,8 +20,6 @@ lidar (no pitch or roll) culls whole channels and caches the index set per chann
 from __future__ import annotations
 
 import math
-import threading
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,20 +37,6 @@ POINT_DTYPE = np.dtype(
         "itemsize": 28,
     }
 )
-
-
-_DRAWS: ThreadPoolExecutor | None = None
-_DRAWS_LOCK = threading.Lock()
-
-
-def _draw_executor() -> ThreadPoolExecutor:
-    """The one thread that draws the lidars' random numbers ahead of their sweeps (numpy's generators
-    release the GIL while they fill an array, so the draws overlap the single-threaded rest of the step)."""
-    global _DRAWS
-    with _DRAWS_LOCK:
-        if _DRAWS is None:
-            _DRAWS = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lidar-draws")
-        return _DRAWS
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,26 +108,6 @@ class Lidar:
         self._level_cache: dict[bytes, tuple[np.ndarray, list[np.ndarray]]] = {}
         self._tan_elev = np.tan(self.elevations)
         self._mount_level = bool(self.mount_rot[2, 0] == 0.0 and self.mount_rot[2, 1] == 0.0)
-        self._pending: Future[tuple[np.ndarray | None, np.ndarray | None]] | None = None
-
-    def _draw(self) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """One sweep's random numbers, one per ray (drawn for every ray, so the sequence does not depend on
-        the scene): a uniform for the dropout and a standard normal for the range noise (None: not used)."""
-        n = len(self.dirs)
-        uniform = self.rng.random(n, dtype=np.float32) if self.config.dropout > 0.0 else None
-        normal = self.rng.standard_normal(n, dtype=np.float32) if self.config.range_noise > 0.0 else None
-        return uniform, normal
-
-    def _next_draws(self) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """This sweep's random numbers, and the next sweep's drawn ahead on the draw thread: they cost about
-        as much as the rest of the labelling and need nothing of the scene. The generator is only ever used by
-        one thread at a time (the next draw starts after this one is taken), so the sequence is the seed's."""
-        if self.config.dropout <= 0.0 and self.config.range_noise <= 0.0:
-            return None, None
-        pending, self._pending = self._pending, None
-        draws = pending.result() if pending is not None else self._draw()
-        self._pending = _draw_executor().submit(self._draw)
-        return draws
 
     @property
     def ray_count(self) -> int:
@@ -367,14 +331,13 @@ class Lidar:
         idx = np.flatnonzero((t >= cfg.range_min) & (t <= cfg.range_max))
         ids = object_id[idx]
         visible = np.bincount(ids, minlength=nbox + 1)[1 : nbox + 1]
-        uniform, normal = self._next_draws()
-        if uniform is not None:
-            kept = uniform[idx] >= cfg.dropout
+        if cfg.dropout > 0.0:
+            kept = self.rng.random(n_rays, dtype=np.float32)[idx] >= cfg.dropout
             idx = idx[kept]
             ids = ids[kept]
         rng_t = t[idx]
-        if normal is not None:
-            noise = normal[idx]
+        if cfg.range_noise > 0.0:
+            noise = self.rng.standard_normal(len(idx), dtype=np.float32)
             noise *= cfg.range_noise
             noise += rng_t
             rng_t = np.maximum(noise, 0.0, out=noise)

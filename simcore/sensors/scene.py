@@ -265,6 +265,7 @@ class RoadScene:
             vertices, triangles = np.concatenate(verts), np.concatenate(tris)
             self.triangle_classes = np.concatenate(classes)
         self.scenery = tuple(scenery)
+        self._class_table = np.append(self.triangle_classes, np.uint8(0))
         self.triangle_count = len(triangles)
         # per triangle: its xy bounding box and z range, for `z_range` (which rays can reach the scene)
         if len(triangles):
@@ -320,9 +321,6 @@ class RoadScene:
         if self.triangle_count == 0:
             return np.full(m, np.inf, np.float32), np.zeros((m, 3), np.float32), np.zeros(m, np.uint8)
         out = self.scene.cast_rays(self._o3d.core.Tensor.from_numpy(np.ascontiguousarray(rays, np.float32)))
-        t = out["t_hit"].numpy()
-        prim = out["primitive_ids"].numpy()
-        hit = np.isfinite(t)
-        classes = np.zeros(m, np.uint8)
-        classes[hit] = self.triangle_classes[prim[hit]]
-        return t, out["primitive_normals"].numpy(), classes
+        # a miss has the invalid primitive id 2^32 - 1: clipped to the table's last entry, class 0
+        classes = np.take(self._class_table, out["primitive_ids"].numpy(), mode="clip")
+        return out["t_hit"].numpy(), out["primitive_normals"].numpy(), classes
