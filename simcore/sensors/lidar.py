@@ -51,6 +51,18 @@ class LidarScan:
     rays: int
 
 
+@dataclass(frozen=True, slots=True)
+class _LevelRays:
+    """The rays a level sweep casts (whole channels): their indices (None: every ray), the channels as a
+    slice when contiguous, their sensor-frame directions (float32 rows) and a reusable (K, 6) float32 ray
+    buffer whose z direction is already filled in (the scan writes origins and x, y directions)."""
+
+    ids: np.ndarray | None
+    block: slice | np.ndarray
+    dirs: list[np.ndarray]
+    rays: np.ndarray
+
+
 def mount_pose(
     entity: EntityState, mount_rot: np.ndarray, mount_pos: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -105,9 +117,28 @@ class Lidar:
         self.mount_rot = rotation(math.radians(m.yaw), math.radians(m.pitch), math.radians(m.roll))
         self.mount_pos = np.array([m.x, m.y, m.z])
         self.rng = np.random.default_rng(seed)
-        self._level_cache: dict[bytes, tuple[np.ndarray, list[np.ndarray]]] = {}
+        self._level_cache: dict[bytes, _LevelRays] = {}
         self._tan_elev = np.tan(self.elevations)
         self._mount_level = bool(self.mount_rot[2, 0] == 0.0 and self.mount_rot[2, 1] == 0.0)
+
+    def _level_rays(self, kept: np.ndarray | None) -> _LevelRays:
+        """The cast rays of a level sweep whose channels `kept` (None: all) can reach the scene: cached per
+        channel set (a sensor keeps the same set while the ground below stays the same)."""
+        key = b"all" if kept is None else kept.tobytes()
+        entry = self._level_cache.get(key)
+        if entry is not None:
+            return entry
+        if len(self._level_cache) >= 16:
+            self._level_cache.clear()
+        channels = np.arange(self.channels) if kept is None else kept
+        ids = (np.arange(self.columns)[:, None] * self.channels + channels[None, :]).ravel()
+        dirs = [row[ids] for row in self._dirs_t]
+        rays = np.empty((len(ids), 6), np.float32)
+        rays[:, 5] = dirs[2]  # level: the world z component is the sensor's
+        contiguous = len(channels) > 0 and channels[-1] - channels[0] + 1 == len(channels)
+        block: slice | np.ndarray = slice(int(channels[0]), int(channels[-1]) + 1) if contiguous else channels
+        entry = self._level_cache[key] = _LevelRays(None if kept is None else ids, block, dirs, rays)
+        return entry
 
     @property
     def ray_count(self) -> int:
@@ -212,6 +243,8 @@ class Lidar:
         n_rays = len(self.dirs)
         r32 = rot.astype(np.float32)
         distort = cfg.motion_distortion and (carrier.speed != 0.0 or carrier.yaw_rate != 0.0)
+        level_sweep = not distort and r32[2, 0] == 0.0 and r32[2, 1] == 0.0 and r32[2, 2] == 1.0
+        block: slice | np.ndarray | None = None
         # the road cast: only the rays that can reach the static scene, (K, 6) float32 for open3d
         if distort:
             # per column: the carrier's pose at the column's firing time (constant speed and yaw rate)
@@ -235,27 +268,24 @@ class Lidar:
             )
             if cast is not None:
                 rays = rays[cast]
-        elif r32[2, 0] == 0.0 and r32[2, 1] == 0.0 and r32[2, 2] == 1.0:
+        elif level_sweep:
             # level (no pitch, no roll): a ray's world z component is its channel's, so the rays that can
-            # reach the scene are whole channels; their index set and directions are cached per channel set
+            # reach the scene are whole channels; their index set, directions and ray buffer are cached
             kept = self._reachable(
                 road, float(np.float32(pos[2])), self._dirs_t[2, : self.channels], pos[:2], pos[:2]
             )
-            if kept is None:
-                cast, d = None, list(self._dirs_t)
-            else:
-                key = kept.tobytes()
-                entry = self._level_cache.get(key)
-                if entry is None:
-                    if len(self._level_cache) >= 16:
-                        self._level_cache.clear()
-                    ids = (np.arange(self.columns)[:, None] * self.channels + kept[None, :]).ravel()
-                    entry = self._level_cache[key] = (ids, [row[ids] for row in self._dirs_t])
-                cast, d = entry
-            rays = self._ray_array(len(d[0]), pos)
-            rays[:, 3] = d[0] * r32[0, 0] + d[1] * r32[0, 1] + d[2] * r32[0, 2]
-            rays[:, 4] = d[0] * r32[1, 0] + d[1] * r32[1, 1] + d[2] * r32[1, 2]
-            rays[:, 5] = d[2]
+            cached = self._level_rays(kept)
+            cast, block, rays = cached.ids, cached.block, cached.rays
+            for axis, value in enumerate(pos.astype(np.float32)):
+                rays[:, axis] = value  # one scalar fill per column: faster than broadcasting the row
+            d0, d1, d2 = cached.dirs
+            for row, col in ((0, 3), (1, 4)):
+                # r32[row, 2] is 0 for a level sensor (bar a float32 underflow): that term adds nothing
+                a = d0 * r32[row, 0]
+                a += d1 * r32[row, 1]
+                if r32[row, 2] != 0.0:
+                    a += d2 * r32[row, 2]
+                rays[:, col] = a
         else:
             dz = self._world_dirs(r32, None, range(2, 3))[0]
             cast = self._reachable(road, float(np.float32(pos[2])), dz, pos[:2], pos[:2])
@@ -264,6 +294,8 @@ class Lidar:
             rays[:, 3] = dx
             rays[:, 4] = dy
             rays[:, 5] = dz if cast is None else dz[cast]
+        if not level_sweep:
+            block = None
         t_cast, normals, classes_cast = road.cast(rays)
         # |cos(incidence)| of the road returns: direction . normal (a miss has a zero normal)
         cos_cast = rays[:, 3] * normals[:, 0]
@@ -272,6 +304,15 @@ class Lidar:
         np.abs(cos_cast, out=cos_cast)
         if cast is None:
             t, classes, cos_inc = t_cast, classes_cast, cos_cast
+        elif block is not None:  # whole channels: block copies into the (column, channel) grid
+            shape = (self.columns, self.channels)
+            t = np.full(shape, np.inf, np.float32)
+            t[:, block] = t_cast.reshape(self.columns, -1)
+            classes = np.zeros(shape, np.uint8)
+            classes[:, block] = classes_cast.reshape(self.columns, -1)
+            cos_inc = np.zeros(shape, np.float32)
+            cos_inc[:, block] = cos_cast.reshape(self.columns, -1)
+            t, classes, cos_inc = t.reshape(-1), classes.reshape(-1), cos_inc.reshape(-1)
         else:
             t = np.full(n_rays, np.inf, np.float32)
             t[cast] = t_cast
