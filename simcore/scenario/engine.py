@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 from simcore.errors import BadInput, SimulationError
 from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
 from simcore.scenario import actions as extra_actions
+from simcore.scenario import ghost, paths
 from simcore.scenario import model as m
-from simcore.scenario import paths
 from simcore.scenario.actions import Runtime
 from simcore.scenario.conditions import LARGE, Measure
 from simcore.scenario.motion import (
@@ -221,6 +221,10 @@ class TeleportRuntime(ActionRuntime):
 
     def start(self) -> None:
         self.done = True
+        ghosts = self.engine.ghosts
+        if ghosts is not None and id(self.action) in ghosts.setup.teleports:
+            ghosts.teleport(self.actor)  # the ghost put on its entity (esmini's AddedGhostTeleport)
+            return
         if self.actor.name in self.engine.tow_of:
             return  # a towed trailer goes where its tow vehicle takes it (as esmini)
         self.engine.place(self.actor, self.action.position)
@@ -252,6 +256,9 @@ class ControllerRuntime(ActionRuntime):
             control[2] = self.action.lateral
         external = control[0] == "external" and (control[1] or control[2])
         self._driver_model(control, bool(external))
+        ghosts = self.engine.ghosts
+        if ghosts is not None and ghosts.entity is self.actor:
+            ghosts.activate(not external and (control[1] or control[2]))
         if external != self.actor.external:
             self.actor.external = bool(external)
             self.actor.mover = None
@@ -343,6 +350,8 @@ class ScenarioEngine:
         ego: str | None = None,
         external: ExternalDriver | None = None,
     ) -> None:
+        # esmini's FollowGhostController: a ghost entity runs the scenario's actions ahead (simcore.scenario.ghost)
+        scenario, ghost_setup = ghost.setup(scenario)
         self.scenario = scenario
         self.external = external  # moves the entities whose external controller is active
         self.source = str(scenario.path)
@@ -392,14 +401,8 @@ class ScenarioEngine:
         # a FollowGhost controller (esmini) gives its ghost a head start: esmini reports every time shifted
         # back by it (the storyboard's time 0 is at -headstart on its time axis); `output_time_offset` is
         # that shift, for comparisons with such output (the storyboard itself runs on its own time)
-        self.output_time_offset = -max(
-            (
-                _number(e.controller.get("headstartTime"))
-                for e in scenario.entities
-                if m.controller_type(e.controller) == "FollowGhostController"
-            ),
-            default=0.0,
-        )
+        self.output_time_offset = -ghost_setup.headstart if ghost_setup is not None else 0.0
+        self.ghosts = ghost.Ghosts(self, ghost_setup) if ghost_setup is not None else None
         # entities an ALKS controller may drive (UN R157 driver model), and their drivers once active
         self._alks = [
             e.name for e in scenario.entities if m.controller_type(e.controller) in m.ALKS_CONTROLLERS
@@ -430,6 +433,8 @@ class ScenarioEngine:
         self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
         self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
         self._init()
+        if self.ghosts is not None:
+            self.ghosts.start()
 
     # --- set-up ---------------------------------------------------------------------------------------
 
@@ -1449,6 +1454,9 @@ class ScenarioEngine:
     def advance(self) -> None:
         """Advance one step without building the frame (headless runs that read the bodies directly)."""
         dt = self.dt
+        ghosts = self.ghosts
+        if ghosts is not None:
+            ghosts.begin_step()
         if self._signal_cycles:
             self._update_signals()
         self._evaluate_storyboard()
@@ -1484,11 +1492,13 @@ class ScenarioEngine:
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         sumo, road, tow_of = self.sumo, self.road, self.tow_of
         # entities an override-mode ACC moves itself, after the others (below)
-        deferred = (
+        deferred: set[str] | tuple[()] = (
             {n for n, d in self.acc_drivers.items() if d.override and not d.virtual}
             if self.acc_drivers
             else ()
         )
+        if ghosts is not None:
+            deferred = ghosts.frozen().union(deferred)
         for body in self.bodies.values():
             if body.gone:
                 continue
@@ -1545,6 +1555,9 @@ class ScenarioEngine:
                 self._locate(body)
         if self.acc_drivers:
             self._step_acc(dt, now)
+        if ghosts is not None:
+            ghosts.end_step(dt)
+            self._moved()
         for body, speed0, heading0, px, py in previous:
             speed = body.speed
             body.acceleration = (speed - speed0) / dt
@@ -1688,7 +1701,10 @@ class ScenarioEngine:
         )
 
     def frame(self) -> WorldFrame:
-        entities = tuple(self.state_of(b) for b in self.bodies.values())
+        bodies = self.bodies.values()
+        if self.ghosts is not None:  # a ghost is no object of the world (esmini shows it as a shadow)
+            bodies = [b for b in bodies if b.name not in self.ghosts.names]  # type: ignore[assignment]
+        entities = tuple(self.state_of(b) for b in bodies)
         return WorldFrame(step=self.step_index, time=self.time, entities=entities, ego=self.ego)
 
     @property
@@ -1746,13 +1762,6 @@ def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tup
             current = by_name.get(current.reference) if current.reference else None
         out[ctrl.name] = (start, 0)
     return out
-
-
-def _number(text: str | None) -> float:
-    try:
-        return max(float(text or 0.0), 0.0)
-    except ValueError:
-        return 0.0
 
 
 def _added_later(scenario: m.Scenario) -> set[str]:

@@ -74,7 +74,9 @@ ALKS_CONTROLLERS = frozenset({"ALKS_R157SM_Controller"})
 # ALKS controller is esmini's ACC controller under another name
 ACC_CONTROLLERS = frozenset({"ACCController", "ALKSController"})
 # controllers whose entities move as under the reference player: compared in conformance like scripted ones
-MODELLED_CONTROLLERS = ACC_CONTROLLERS | {"", "DefaultController"}
+# esmini's FollowGhostController (simcore.scenario.ghost): a ghost runs the actions ahead, the entity follows it
+FOLLOW_GHOST_CONTROLLERS = frozenset({"FollowGhostController"})
+MODELLED_CONTROLLERS = ACC_CONTROLLERS | FOLLOW_GHOST_CONTROLLERS | {"", "DefaultController"}
 
 
 def controller_type(properties: dict[str, str]) -> str:
