@@ -58,6 +58,8 @@ _COMPRESSIONS = ("zstd", "lz4", "none")
 #: zstd level of the chunks: level 1 compresses point clouds as well as the default level 3 here
 #: (float coordinates are the bulk and barely compress) at about 1.5x the speed.
 ZSTD_LEVEL = 1
+#: Bytes the writer thread writes between two fdatasync calls (see `_FileWriter._sync`).
+_SYNC_EVERY = 16 * 1024 * 1024
 #: Chunks waiting for the writer thread before `write` blocks.
 _QUEUE_CHUNKS = 4
 
@@ -239,6 +241,7 @@ class _FileWriter(threading.Thread):
         self.queue: queue.Queue[tuple[str, Any]] = queue.Queue(maxsize=_QUEUE_CHUNKS)
         self.error: BaseException | None = None
         self.position = 0
+        self.synced = 0  # file position up to which the data was last handed to the disk
         self.chunk_indexes: list[bytes] = []
         self.metadata_indexes: list[bytes] = []
 
@@ -321,6 +324,16 @@ class _FileWriter(threading.Thread):
                 + struct.pack("<QQ", compressed_size, chunk.size),
             )
         )
+        if self.position - self.synced >= _SYNC_EVERY:
+            self._sync()
+
+    def _sync(self) -> None:
+        """Hand what is written so far to the disk (fdatasync, without the GIL, on this thread): the fsync
+        in `close` then waits only for the tail instead of the whole recording (a 150 MB uncompressed
+        recording took 60 ms to fsync at the end of a 1.3 s run)."""
+        self.file.flush()
+        os.fdatasync(self.file.fileno())
+        self.synced = self.position
 
     def _finish(self, summary: _Summary) -> None:
         self._write(_record(_OP_DATA_END, _U32.pack(0)))
