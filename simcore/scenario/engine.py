@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from simcore.errors import BadInput, SimulationError
 from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
 from simcore.scenario import actions as extra_actions
-from simcore.scenario import ghost, paths
+from simcore.scenario import drivers, ghost, paths
 from simcore.scenario import model as m
 from simcore.scenario.actions import Runtime
 from simcore.scenario.conditions import LARGE, Measure
@@ -275,7 +275,14 @@ class ControllerRuntime(ActionRuntime):
         if self.action.assign is not None:
             e.assigned_controller[name] = dict(self.action.controller)
         properties = e.assigned_controller.get(name, self.actor.entity.controller)
-        if external or not control[1] or m.controller_type(properties) not in m.ACC_CONTROLLERS:
+        kind = m.controller_type(properties)
+        if kind in m.VEHICLE_CONTROLLERS and not external and (control[1] or control[2]):
+            if self.action.assign is not None or name not in e.vehicle_drivers:
+                e.vehicle_drivers[name] = drivers.OffroadFollower(e, self.actor, properties)
+                e.log.append(f"t={e.time:.2f} {name}: {kind} controller activated")
+        elif e.vehicle_drivers.pop(name, None) is not None:
+            e.log.append(f"t={e.time:.2f} {name}: {kind or 'its'} controller deactivated")
+        if external or not control[1] or kind not in m.ACC_CONTROLLERS:
             if e.acc_drivers.pop(name, None) is not None:
                 e.log.append(f"t={e.time:.2f} {name}: ACC controller deactivated")
             return
@@ -412,6 +419,8 @@ class ScenarioEngine:
         # the ACC/ALKS driver models (esmini's ACCController) active on the longitudinal domain now
         self.assigned_controller: dict[str, dict[str, str]] = {}
         self.acc_drivers: dict[str, extra_actions.AccDriver] = {}
+        # esmini's controllers that drive a vehicle model of their own (OffroadFollower), active now
+        self.vehicle_drivers: dict[str, drivers.OffroadFollower] = {}
         self._transitions = 0  # state transitions so far, and how many there were at the last completion pass
         self._completed_at = -1
         # trailers: tow vehicle → the entity it tows (Trailer/TrailerRef, ConnectTrailerAction), and back
@@ -1499,6 +1508,8 @@ class ScenarioEngine:
         )
         if ghosts is not None:
             deferred = ghosts.frozen().union(deferred)
+        if self.vehicle_drivers:
+            deferred = set(self.vehicle_drivers).union(deferred)
         for body in self.bodies.values():
             if body.gone:
                 continue
@@ -1555,6 +1566,12 @@ class ScenarioEngine:
                 self._locate(body)
         if self.acc_drivers:
             self._step_acc(dt, now)
+        if self.vehicle_drivers:
+            for follower in list(self.vehicle_drivers.values()):
+                if not follower.actor.gone and not follower.actor.external:
+                    self.measure.clear()
+                    follower.step(dt)
+            self._moved()
         if ghosts is not None:
             ghosts.end_step(dt)
             self._moved()

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from simcore.scenario import model as m
+from simcore.scenario.drivers import Vehicle, put
 
 if TYPE_CHECKING:
     from simcore.scenario.engine import ScenarioEngine
@@ -51,7 +52,6 @@ SAMPLE_TIME = 0.2  # s between trail samples (esmini's GHOST_TRAIL_SAMPLE_TIME)
 SMALL = 1e-10  # esmini's SMALL_NUMBER
 MAX_ACCELERATION = 10.0  # m/s² (the controller's vehicle model)
 MAX_SPEED = 100.0
-MAX_WHEEL_ANGLE = math.radians(60.0)
 
 # actions that move to the ghost (esmini: the event's actions of these types; CARLOS: the group's actors)
 _GHOST_ACTIONS = (
@@ -366,10 +366,11 @@ class GhostFollower:
         self.min_lookahead_speed = _number(properties.get("minLookaheadSpeed"), 0.1)
         self.lookahead_steering = _number(properties.get("lookaheadSteering"), 1.0)
         self.min_lookahead_steering = _number(properties.get("minLookaheadSteering"), 1.0)
-        self.steering_scale = _number(properties.get("steeringSpeedInertia"), 0.01)
-        self.length = actor.entity.box.length
-        # the vehicle model's state (esmini keeps it apart from the entity's)
-        self.x, self.y, self.heading, self.speed = actor.x, actor.y, actor.heading, actor.speed
+        # the vehicle model (esmini keeps its state apart from the entity's)
+        self.vehicle = Vehicle(actor)
+        self.vehicle.max_acc = MAX_ACCELERATION
+        self.vehicle.max_speed = MAX_SPEED
+        self.vehicle.steering_scale = _number(properties.get("steeringSpeedInertia"), 0.01)
         self.follow_index = 0
         self.closest_s = 0.0
         self.target: tuple[float, float] = (actor.x, actor.y)  # the steering target last used
@@ -409,22 +410,7 @@ class GhostFollower:
             dx, dy = 0.0, 0.0
         cross = math.cos(a.heading) * dy - math.sin(a.heading) * dx
         steering = math.asin(min(max(cross, -1.0), 1.0))
-        self._drive(dt, target_speed, steering)
-
-    def _drive(self, dt: float, target_speed: float, steering: float) -> None:
-        """vehicle::Vehicle::DrivingControlTarget and Update."""
-        acc = min(max(MAX_ACCELERATION * (target_speed - self.speed), -MAX_ACCELERATION), MAX_ACCELERATION)
-        v = min(max(self.speed + acc * dt, -MAX_SPEED), MAX_SPEED)
-        self.speed = v
-        limit = MAX_WHEEL_ANGLE / (1.0 + self.steering_scale * v * v)
-        wheel = min(max(steering, -limit), limit)
-        slip = math.atan(0.15 * math.tan(wheel))
-        direction = slip + self.heading
-        heading_rate = v * math.sin(slip) / (self.length * 0.15)
-        heading = math.fmod(self.heading + dt * heading_rate, 2 * math.pi)
-        self.heading = heading + 2 * math.pi if heading < 0 else heading
-        self.x += dt * v * math.cos(direction)
-        self.y += dt * v * math.sin(direction)
+        self.vehicle.control_target(dt, target_speed, steering)
 
 
 class Ghosts:
@@ -477,16 +463,7 @@ class Ghosts:
         follower = self.follower
         if follower is not None and not self.restarting and not self.entity.gone:
             follower.step(dt, self.trail, clock)
-            body = self.entity
-            body.odometer += math.hypot(follower.x - body.x, follower.y - body.y)
-            body.x, body.y, body.heading, body.speed = (
-                follower.x,
-                follower.y,
-                follower.heading,
-                follower.speed,
-            )
-            body.mover = None
-            self.engine._locate(body)
+            put(self.engine, self.entity, follower.vehicle)
         g = self.ghost
         if not g.gone:
             self.trail.sample(g.x, g.y, clock, g.speed)

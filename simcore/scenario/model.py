@@ -76,7 +76,11 @@ ACC_CONTROLLERS = frozenset({"ACCController", "ALKSController"})
 # controllers whose entities move as under the reference player: compared in conformance like scripted ones
 # esmini's FollowGhostController (simcore.scenario.ghost): a ghost runs the actions ahead, the entity follows it
 FOLLOW_GHOST_CONTROLLERS = frozenset({"FollowGhostController"})
-MODELLED_CONTROLLERS = ACC_CONTROLLERS | FOLLOW_GHOST_CONTROLLERS | {"", "DefaultController"}
+# esmini's controllers with a vehicle model of their own CARLOS runs (simcore.scenario.drivers)
+VEHICLE_CONTROLLERS = frozenset({"OffroadFollower"})
+MODELLED_CONTROLLERS = (
+    ACC_CONTROLLERS | FOLLOW_GHOST_CONTROLLERS | VEHICLE_CONTROLLERS | {"", "DefaultController"}
+)
 
 
 def controller_type(properties: dict[str, str]) -> str:
