@@ -119,6 +119,28 @@ def test_ray_box_intersection_is_exact() -> None:
     assert np.all(np.isinf(t_in))
 
 
+def test_row_wise_box_intersection_matches_the_slab_test() -> None:
+    """`intersect_box_rows` (one origin, directions as x/y/z rows) gives `intersect_box`'s distances and
+    |cos| of the incidence angle, also for rays parallel to a face and starting in its plane."""
+    from simcore.sensors.scene import intersect_box_rows
+
+    rng = np.random.default_rng(1)
+    rot = rotation(0.3, 0.05, -0.02)
+    center, half = np.array([10.0, 2.0, 1.0]), np.array([2.0, 1.0, 0.5])
+    dirs = rng.normal(size=(5000, 3))
+    dirs[:100, 2] = 0.0  # level rays
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    for origin, r in ((np.array([0.0, 0.0, 1.0]), rot), (np.array([16.0, 2.0, 1.5]), np.eye(3))):
+        # the second origin lies in the plane of the top face: level rays are parallel to it, in it
+        t, normals = intersect_box(origin, dirs, center, r, half)
+        t_rows, cos = intersect_box_rows(origin, list(dirs.astype(np.float32).T), center, r, half)
+        t32, _ = intersect_box(origin, dirs.astype(np.float32), center, r, half)
+        assert np.array_equal(np.isfinite(t_rows), np.isfinite(t32)) and np.isfinite(t).sum() > 10
+        hit = np.isfinite(t_rows)
+        assert np.allclose(t_rows[hit], t32[hit], rtol=1e-12, atol=1e-12)
+        assert np.allclose(cos[hit], np.abs(np.einsum("ij,ij->i", dirs[hit], normals[hit])), atol=1e-6)
+
+
 # --- lidar -------------------------------------------------------------------------------------------
 
 

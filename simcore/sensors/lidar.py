@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simcore.sensors.scene import Boxes, RoadScene, intersect_box, rotation
+from simcore.sensors.scene import Boxes, RoadScene, intersect_box, intersect_box_rows, rotation
 from simcore.spec import LidarSensor
 from simcore.world.state import EntityState
 
@@ -356,17 +356,22 @@ class Lidar:
                 if not len(idx):
                     continue
                 if distort:
-                    o, dw = origins[idx], dirs_world[idx]
+                    dw = dirs_world[idx]
+                    tb, nb = intersect_box(
+                        origins[idx], dw, boxes.centers[i], boxes.rotations[i], boxes.half[i]
+                    )
+                    cos_box = np.abs(np.einsum("ij,ij->i", dw, nb.astype(np.float32)))
                 else:
-                    o, dw = pos, np.stack(self._world_dirs(r32, idx), axis=1)
-                tb, nb = intersect_box(o, dw, boxes.centers[i], boxes.rotations[i], boxes.half[i])
+                    tb, cos_box = intersect_box_rows(
+                        pos, self._world_dirs(r32, idx), boxes.centers[i], boxes.rotations[i], boxes.half[i]
+                    )
                 in_range = (tb >= cfg.range_min) & (tb <= cfg.range_max)
                 unoccluded[i] = int(np.count_nonzero(in_range))
                 closer = tb < t[idx]
                 if np.any(closer):
                     sel = idx[closer]
                     t[sel] = tb[closer]
-                    cos_inc[sel] = np.abs(np.einsum("ij,ij->i", dw[closer], nb[closer].astype(np.float32)))
+                    cos_inc[sel] = cos_box[closer]
                     classes[sel] = boxes.classes[i]
                     object_id[sel] = boxes.ids[i]
         idx = np.flatnonzero((t >= cfg.range_min) & (t <= cfg.range_max))
