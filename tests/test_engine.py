@@ -589,6 +589,68 @@ def test_lateral_distance_with_acceleration_limit_is_a_damped_spring(tmp_path: P
     assert any("Side: endTransition" in line for line in engine.log)  # within 1 cm it ends
 
 
+def with_lead_event(path: Path, lead_event: str) -> Path:
+    """The scenario with one more event, for the Lead (its own act)."""
+    text = path.read_text().replace(
+        "</Act></Story>",
+        f"""</Act><Act name="B"><ManeuverGroup name="L" maximumExecutionCount="1"><Actors selectTriggeringEntities="false">
+        <EntityRef entityRef="Lead"/></Actors><Maneuver name="LM">{lead_event}
+        </Maneuver></ManeuverGroup><StartTrigger><ConditionGroup>{sim_time("greaterOrEqual", 0)}</ConditionGroup>
+        </StartTrigger></Act></Story>""",
+    )
+    path.write_text(text)
+    return path
+
+
+def test_lateral_distance_spring_is_damped_on_the_lateral_speed_relative_to_the_other_entity(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    # the Lead drifts right at a constant rate (a linear lane offset of 3 m: ~0.19 m/s from 3 s to ~18 s,
+    # its heading kept along the road): damped on the relative lateral speed, the spring follows the ramp
+    # with no lag (damped on its own speed it would lag 2·sqrt(k)·v/k ≈ 0.27 m behind)
+    offset = """<PrivateAction><LateralAction><LaneOffsetAction continuous="false">
+      <LaneOffsetActionDynamics maxLateralAcc="0.05" dynamicsShape="linear"/>
+      <LaneOffsetTarget><AbsoluteTargetLaneOffset value="-3"/></LaneOffsetTarget></LaneOffsetAction></LateralAction>
+      </PrivateAction>"""
+    keep = lateral_distance('<DynamicConstraints maxAcceleration="5"/>')
+    path = scenario(
+        tmp_path,
+        event("Side", keep, sim_time("greaterThan", 0.0)),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0) + place("Lead", 130.0),
+    )
+    path = with_lead_event(path, event("Shift", offset, sim_time("greaterOrEqual", 3.0)))
+    engine = ScenarioEngine(load_scenario(path), road=road, sumo=None, step_seconds=0.05)
+    ego, lead = engine.bodies["Ego"], engine.bodies["Lead"]
+    gaps, lead_moves = [], []
+    while engine.time < 12.0 - 1e-9:
+        y = lead.y
+        engine.advance()
+        if engine.time > 7.0:
+            gaps.append(ego.y - lead.y)
+            lead_moves.append(lead.y - y)
+    assert all(move < -0.009 for move in lead_moves)  # the Lead is moving sideways all along
+    assert all(gap == pytest.approx(4.0, abs=0.002) for gap in gaps)
+
+
+def test_lateral_speed_of_the_distance_spring_stays_below_the_entity_speed(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    # Ego at 1 m/s, maxSpeed 3 m/s: the lateral speed is at most the entity's 1 m/s (as esmini)
+    keep = lateral_distance('<DynamicConstraints maxSpeed="3" maxAcceleration="50"/>')
+    path = scenario(
+        tmp_path,
+        event("Side", keep, sim_time("greaterThan", 0.0)),
+        entities=("Ego", "Lead"),
+        init=place("Ego", 100.0, speed=1.0) + place("Lead", 130.0, speed=1.0),
+    )
+    _, trace = run(path, road, 3.0)
+    ys = [trace[t]["y"] for t in sorted(trace)]
+    moves = [b - a for a, b in itertools.pairwise(ys)]
+    assert max(moves) == pytest.approx(1.0 * 0.05, abs=1e-9)
+    assert min(moves) >= 0.0
+
+
 TRUCK = """
 <ScenarioObject name="Truck">
   <Vehicle name="truck" vehicleCategory="truck">

@@ -14,6 +14,7 @@ from simcore.scenario.motion import Body, lane_at_t, shape_value, wrap_angle
 
 if TYPE_CHECKING:
     from simcore.scenario.engine import ScenarioEngine
+    from simcore.world.opendrive import OpenDrive
 
 _BIG = 1e10  # no limit (esmini's LARGE_NUMBER)
 _EPS = 1e-10
@@ -223,8 +224,10 @@ class LaneOffsetRuntime(Runtime):
 class LateralDistanceRuntime(Runtime):
     """Keeps a lateral distance (in road t) to another entity on the same road. Without dynamic constraints
     the distance is taken at once; with maxSpeed the lateral speed is limited; with maxAcceleration a
-    critically damped spring (stiffness scaled by the limit) pulls the entity there. The action's first
-    step moves nothing (as esmini, which steps it with the time elapsed since its start)."""
+    critically damped spring (stiffness scaled by the limit) pulls the entity there, damped on the lateral
+    speed relative to the other entity's (its velocity across its own heading, as esmini's
+    LateralDistanceAction takes it). The lateral speed stays below maxSpeed and the entity's own speed. The
+    action's first step moves nothing (as esmini, which steps it with the time elapsed since its start)."""
 
     domain = "lateral"
     SPRING = 0.4
@@ -262,9 +265,14 @@ class LateralDistanceRuntime(Runtime):
             return
         c = self.action.constraints or m.DynamicConstraints()
         max_speed = c.max_speed if c.max_speed is not None else _BIG
+        if c.max_speed is not None or c.max_acceleration is not None:
+            # moving with dynamics, the lateral speed takes a share of the entity's speed, never all of it
+            # (as esmini; without dynamics it is put at the distance at once)
+            max_speed = min(max_speed, abs(a.speed))
         if c.max_acceleration is not None:
             stiffness = c.max_acceleration * self.SPRING
-            acc = error * stiffness - self.velocity * 2.0 * math.sqrt(stiffness)
+            relative = self.velocity - self._reference_lateral_speed(road, ref)
+            acc = error * stiffness - relative * 2.0 * math.sqrt(stiffness)
             acc = min(max(acc, -c.max_acceleration), c.max_acceleration)
             self.velocity = min(max(self.velocity + acc * dt, -max_speed), max_speed)
             move = self.velocity * dt
@@ -272,6 +280,21 @@ class LateralDistanceRuntime(Runtime):
             move = min(max(error, -max_speed * dt), max_speed * dt)
         a.offset += move
         a.lateral_velocity = move / dt
+
+    @staticmethod
+    def _reference_lateral_speed(road: OpenDrive, ref: Body) -> float:
+        """The referenced entity's velocity across its own heading (+ to its left), as esmini takes it: the
+        velocity of its last step's displacement seen from the heading it has now (a lateral action of its
+        that stepped before this one has already turned it)."""
+        heading = ref.heading
+        if ref.lateral_velocity != 0.0 and ref.road_id is not None and abs(ref.speed) > 0.1:
+            pose = road.road_to_world(ref.road_id, ref.s, road.lane_center_t(ref.road_id, ref.lane_id, ref.s))
+            travel = pose.heading if ref.direction > 0 else pose.heading + math.pi
+            drift = math.atan2(ref.lateral_velocity * ref.direction, abs(ref.speed))
+            # esmini turns a lane-changing entity by the lateral rate at the start of the step: about the
+            # mean of the heading it had and the one this step's lateral motion gives
+            heading = ref.heading + 0.5 * wrap_angle(travel + drift + ref.heading_offset - ref.heading)
+        return ref.vy * math.cos(heading) - ref.vx * math.sin(heading)
 
 
 # --- longitudinal ------------------------------------------------------------------------------------------
