@@ -151,6 +151,7 @@ def test_corpus_subset_agrees_with_esmini() -> None:
         "xosc/trailers.xosc",  # trailer chains dragged by the hitch, a lane narrowing to nothing
         "xosc/pedestrian_traj_synch.xosc",  # Synchronize with a final speed, trajectory heading vs motion
         "xosc/follow_ghost.xosc",  # FollowGhost: a ghost ahead in time, the entity following its trail
+        "xosc/highway_driver.xosc",  # esmini's NaturalDriver: IDM speed, lane changes past slower traffic
         "xosc/keep_lateral_distance.xosc",  # LateralDistance springs damped relative to a lane-changing entity
     ]
     results = conformance.run_directory(

@@ -1,5 +1,6 @@
-"""Driver models of esmini's controllers that steer a simple vehicle model of their own (vehicle::Vehicle):
-the OffroadFollower here, the FollowGhost controller in `simcore.scenario.ghost`.
+"""Driver models of esmini's controllers: the NaturalDriver (IDM speed, lane changes) and those that steer a
+simple vehicle model of their own (vehicle::Vehicle): the OffroadFollower here, the FollowGhost controller in
+`simcore.scenario.ghost`.
 
 esmini's vehicle model (vehicle.cpp), as these controllers use it:
 
@@ -19,6 +20,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from simcore.scenario.motion import lane_at_t, wrap_angle
+
 if TYPE_CHECKING:
     from simcore.scenario.engine import ScenarioEngine
     from simcore.scenario.motion import Body
@@ -26,6 +29,7 @@ if TYPE_CHECKING:
 MAX_WHEEL_ANGLE = math.radians(60.0)
 SMALL = 1e-10  # esmini's SMALL_NUMBER
 NO_ROAD_SPEED_LIMIT = 70 / 3.6  # esmini's speed limit off every road
+_BIG = 1e10  # esmini's LARGE_NUMBER
 
 
 def _float(text: str | None, default: float) -> float:
@@ -145,3 +149,237 @@ class OffroadFollower:
         throttle = min(max(0.5 * (distance - self.target_distance) - 0.5 * (a.speed - lead.speed), -1.0), 1.0)
         vehicle.control_analog(dt, throttle, steering)
         put(self.engine, a, vehicle)
+
+
+# --- esmini's NaturalDriver ----------------------------------------------------------------------------------
+
+# the vehicles around a NaturalDriver: the nearest ahead and behind in its lane and in the lanes beside it
+LEAD, FOLLOWING, LEFT_LEAD, LEFT_FOLLOW, RIGHT_LEAD, RIGHT_FOLLOW = range(6)
+
+
+class NaturalDriver:
+    """esmini's NaturalDriver controller (ControllerNaturalDriver): the Intelligent Driver Model for the
+    speed and MOBIL-like lane changes, on the longitudinal domain. Its semantics as esmini implements them:
+
+    - properties `desiredSpeed` (m/s, default 15), `desiredDistance` (IDM s0, m, 20), `thw` (IDM T, s, 2),
+      `maxAcc` (IDM a, 3), `maxDec` (IDM −b, −3; also the lowest acceleration applied), `lookAheadDistance`
+      (m, 115: vehicles farther, centre to centre, are not seen), `laneChangeDuration` (s, 3),
+      `laneChangeDelay` (s, 1), `maxImposedBraking` (m/s², 3), `laneChangeAccGain` (m/s², 0.2), `politeness`
+      (0.5), `route` (the lane id it aims for, −1);
+    - IDM: acceleration a·(1 − (v/v0)⁴) − a·(s*/s)², s* = s0 + max(0, v·T + v·(v − v_lead)/(2·sqrt(a·b))), s
+      the bumper-to-bumper gap along the road to the nearest vehicle ahead in its lane (every other entity
+      counts, whatever drives it); the entity's speed is integrated, within [0, desiredSpeed] and its maximum
+      speed, and it moves itself with it (esmini's override mode);
+    - lane changes, while driving (not changing lanes) and at least laneChangeDuration + laneChangeDelay
+      after the last one began: to the left lane first, else the right, when the vehicle behind there would
+      not have to brake harder than maxImposedBraking behind it, and either the lane is `route` and its own
+      predicted acceleration there is not below −maxImposedBraking, or the gain (its acceleration there less
+      here, plus politeness × the changes it causes to the followers' accelerations) exceeds
+      laneChangeAccGain; not when another NaturalDriver close ahead is changing into the same lane. The lane
+      change is a sinusoidal one of laneChangeDuration, started at the next step; meanwhile the speed is
+      kept;
+    - esmini steps it once at activation in Init with a zero time step (its first frame): a lane change it
+      decides there starts with the first step.
+
+    The `mode` property is ignored (esmini moves the entity from the controller in either mode)."""
+
+    def __init__(self, engine: ScenarioEngine, actor: Body, properties: dict[str, str]) -> None:
+        self.engine = engine
+        self.actor = actor
+        p = properties.get
+        self.desired_distance = _float(p("desiredDistance"), 20.0)
+        self.desired_speed = _float(p("desiredSpeed"), 15.0)
+        self.lane_change_duration = _float(p("laneChangeDuration"), 3.0)
+        self.lookahead = _float(p("lookAheadDistance"), 115.0)
+        self.max_deceleration = _float(p("maxDec"), -3.0)
+        self.max_acceleration = _float(p("maxAcc"), 3.0)
+        self.lane_change_delay = _float(p("laneChangeDelay"), 1.0)
+        self.thw = _float(p("thw"), 2.0)
+        self.max_imposed_braking = _float(p("maxImposedBraking"), 3.0)
+        self.acc_gain = _float(p("laneChangeAccGain"), 0.2)
+        self.politeness = _float(p("politeness"), 0.5)
+        try:
+            self.route = int(float(p("route") or -1))
+        except ValueError:
+            self.route = -1
+        self.current_speed = actor.speed
+        self.changing = False  # state CHANGE_LANE: the speed is kept
+        self.injected = False  # a lane change began less than duration + delay ago
+        self.cooldown = self.lane_change_duration + self.lane_change_delay
+        self.target_lane = 0
+        self.pending_lane: int | None = None  # a lane change to start (the engine starts it)
+        self.around: list[tuple[Body, float] | None] = [None] * 6  # vehicles of interest, with their ds
+
+    # the IDM
+    def _gap(self, follow: Body, lead: Body, ds: float) -> float:
+        """esmini's EstimateFreespace: the road distance less the boxes' extents (0 at most when behind)."""
+        if abs(wrap_angle(follow.heading - lead.heading)) >= math.pi / 2:
+            return ds
+        bf, bl = follow.entity.box, lead.entity.box
+        extents = (bf.length / 2 + bf.center_x) + (bl.length / 2 - bl.center_x)
+        return max(ds - extents, 0.0) if ds > 0 else min(ds + extents, 0.0)
+
+    def _desired_gap(self, follow_speed: float, lead_speed: float) -> float:
+        ab = -self.max_acceleration * self.max_deceleration
+        relative = follow_speed - lead_speed
+        return self.desired_distance + max(
+            0.0, follow_speed * self.thw + follow_speed * relative / (2 * math.sqrt(ab))
+        )
+
+    def _acceleration(self, follow: Body | None, lead: Body | None) -> float:
+        if follow is None:
+            return 0.0
+        v = follow.speed
+        acc = self.max_acceleration * (1 - (v / self.desired_speed) ** 4)
+        if lead is not None:
+            delta = (
+                self.engine.measure._road_delta_entity(follow, lead) if follow.road_id is not None else None
+            )
+            ds = delta[0] if delta is not None else _BIG
+            gap = self._gap(follow, lead, ds)
+            if gap == 0:
+                gap = SMALL
+            acc -= self.max_acceleration * (self._desired_gap(v, lead.speed) / gap) ** 2
+        return acc
+
+    # the surroundings
+    def _lane(self, body: Body) -> int:
+        road = self.engine.road
+        if road is None or body.road_id is None or not body.offset:
+            return body.lane_id
+        return lane_at_t(road, body.road_id, body.s, self.engine.measure._t_of(body))[0]
+
+    def _update_surroundings(self) -> list[Body]:
+        a, engine = self.actor, self.engine
+        around: list[tuple[Body, float] | None] = [None] * 6
+        seen: list[Body] = []
+        if a.road_id is None:
+            self.around = around
+            return seen
+        my_lane = self._lane(a)
+        side = -1 if my_lane < 0 else 1
+        for other in engine.bodies.values():
+            if other is a or other.gone or not other.placed:
+                continue
+            if math.hypot(other.x - a.x, other.y - a.y) > self.lookahead:
+                continue
+            seen.append(other)
+            delta = engine.measure._road_delta_entity(a, other)
+            if delta is None:
+                continue
+            ds = delta[0]
+            lanes = (self._lane(other) - my_lane) * -side
+            if lanes == 0:
+                ahead, behind = LEAD, FOLLOWING
+            elif lanes == 1:
+                ahead, behind = LEFT_LEAD, LEFT_FOLLOW
+            elif lanes == -1:
+                ahead, behind = RIGHT_LEAD, RIGHT_FOLLOW
+            else:
+                continue
+            if ds >= 0:
+                best = around[ahead]
+                if best is None or ds < best[1]:
+                    around[ahead] = (other, ds)
+            else:
+                best = around[behind]
+                if best is None or ds > best[1]:
+                    around[behind] = (other, ds)
+        self.around = around
+        return seen
+
+    def _vehicle(self, kind: int) -> Body | None:
+        found = self.around[kind]
+        return found[0] if found is not None else None
+
+    def _adjacent_lanes(self) -> tuple[int, int]:
+        """(left, right) driving lanes beside it on its side of the road (0: none)."""
+        a, road = self.actor, self.engine.road
+        if road is None or a.road_id is None:
+            return 0, 0
+        lane = self._lane(a)
+        sign = 1 if lane > 0 else -1
+        driving = [x for x in road.lane_ids(a.road_id, a.s, driving_only=True) if x * sign > 0]
+        if len(driving) <= 1:
+            return 0, 0
+        left, right = lane - sign, lane + sign
+        return (left if left in driving else 0), (right if right in driving else 0)
+
+    def _lane_change_possible(self, lane: int, left: bool) -> bool:
+        a = self.actor
+        adj_lead = self._vehicle(LEFT_LEAD if left else RIGHT_LEAD)
+        adj_follow = self._vehicle(LEFT_FOLLOW if left else RIGHT_FOLLOW)
+        new_follow = self._acceleration(adj_follow, adj_lead)
+        new_follow_predicted = self._acceleration(adj_follow, a)
+        if new_follow_predicted < -self.max_imposed_braking:
+            return False
+        predicted = self._acceleration(a, adj_lead)
+        if lane == self.route:
+            return predicted >= -self.max_imposed_braking
+        lead, following = self._vehicle(LEAD), self._vehicle(FOLLOWING)
+        now = self._acceleration(a, lead)
+        old_follow = self._acceleration(following, a)
+        old_follow_predicted = self._acceleration(following, lead)
+        gain = predicted - now
+        gain += self.politeness * (new_follow_predicted - new_follow + old_follow_predicted - old_follow)
+        return gain > self.acc_gain + SMALL
+
+    def _abort(self, seen: list[Body]) -> bool:
+        """Another NaturalDriver close ahead (within its desired gap) is changing into the same lane."""
+        drivers = self.engine.natural_drivers
+        for other in seen:
+            driver = drivers.get(other.name)
+            if driver is None or not driver.injected or driver.target_lane != self.target_lane:
+                continue
+            if self._lane(other) == self._lane(self.actor):
+                continue
+            delta = self.engine.measure._road_delta_entity(self.actor, other)
+            if delta is None:
+                continue
+            gap = self._gap(self.actor, other, delta[0])
+            if 0 <= gap < self._desired_gap(other.speed, self.current_speed):
+                return True
+        return False
+
+    def step(self, dt: float) -> None:
+        a = self.actor
+        seen = self._update_surroundings()
+        acceleration = 0.0
+        initiate = False
+        if not self.changing:
+            acceleration = max(self._acceleration(a, self._vehicle(LEAD)), self.max_deceleration)
+            if not self.injected:
+                left, right = self._adjacent_lanes()
+                if left or right:
+                    for lane, is_left in ((left, True), (right, False)):
+                        if lane == 0:
+                            continue
+                        initiate = self._lane_change_possible(lane, is_left)
+                        if initiate and a.speed > 0:
+                            self.target_lane = lane
+                            self.changing = True
+                            break
+        if initiate and self.target_lane != 0:
+            if self._abort(seen):
+                self.target_lane = 0
+                self.changing = False
+            else:
+                self.pending_lane = self.target_lane
+                self.injected = True
+        if self.injected:
+            self.cooldown -= dt
+            if self.changing and self.cooldown <= self.lane_change_delay:
+                self.target_lane = 0
+                self.changing = False
+            if self.cooldown < 0.0:
+                self.cooldown = self.lane_change_delay + self.lane_change_duration
+                self.injected = False
+        v = self.current_speed + acceleration * dt
+        if v >= self.desired_speed:
+            v = self.desired_speed
+        elif v > a.entity.performance.max_speed:
+            v = a.entity.performance.max_speed
+        elif v < 0.0:
+            v = 0.0
+        self.current_speed = v
+        a.speed = v

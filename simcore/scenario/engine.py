@@ -282,6 +282,12 @@ class ControllerRuntime(ActionRuntime):
                 e.log.append(f"t={e.time:.2f} {name}: {kind} controller activated")
         elif e.vehicle_drivers.pop(name, None) is not None:
             e.log.append(f"t={e.time:.2f} {name}: {kind or 'its'} controller deactivated")
+        if kind in m.NATURAL_DRIVER_CONTROLLERS and not external and control[1]:
+            if self.action.longitudinal or self.action.assign is not None or name not in e.natural_drivers:
+                e.natural_drivers[name] = drivers.NaturalDriver(e, self.actor, properties)
+                e.log.append(f"t={e.time:.2f} {name}: NaturalDriver activated at {self.actor.speed:.2f} m/s")
+        elif e.natural_drivers.pop(name, None) is not None:
+            e.log.append(f"t={e.time:.2f} {name}: NaturalDriver deactivated")
         if external or not control[1] or kind not in m.ACC_CONTROLLERS:
             if e.acc_drivers.pop(name, None) is not None:
                 e.log.append(f"t={e.time:.2f} {name}: ACC controller deactivated")
@@ -311,6 +317,9 @@ def make_runtime(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -
         acc = engine.acc_drivers.get(actor.name)
         if acc is not None and acc.override and not acc.virtual:
             return IgnoredRuntime(engine, actor, action)  # an override controller moves it (esmini ends it)
+    natural = engine.natural_drivers
+    if natural and actor.name in natural and getattr(action, "domain", "") == "longitudinal":
+        return IgnoredRuntime(engine, actor, action)  # the NaturalDriver moves it (esmini ends it)
     other = extra_actions.make(engine, actor, action)
     if other is not None:
         return other
@@ -421,6 +430,8 @@ class ScenarioEngine:
         self.acc_drivers: dict[str, extra_actions.AccDriver] = {}
         # esmini's controllers that drive a vehicle model of their own (OffroadFollower), active now
         self.vehicle_drivers: dict[str, drivers.OffroadFollower] = {}
+        # esmini's NaturalDriver controllers active on the longitudinal domain now (they move their entity)
+        self.natural_drivers: dict[str, drivers.NaturalDriver] = {}
         self._transitions = 0  # state transitions so far, and how many there were at the last completion pass
         self._completed_at = -1
         # trailers: tow vehicle → the entity it tows (Trailer/TrailerRef, ConnectTrailerAction), and back
@@ -502,6 +513,10 @@ class ScenarioEngine:
                 self.init_runtimes.append(runtime)
         for runtime in self.init_runtimes:
             runtime.start()
+        for driver in self.natural_drivers.values():
+            # esmini's first frame steps the controllers activated in Init with a zero time step
+            driver.step(0.0)
+            self._start_lane_change(driver)
         if self.trailer_of:
             self.align_trailers()
         for body in self.bodies.values():
@@ -1510,6 +1525,8 @@ class ScenarioEngine:
             deferred = ghosts.frozen().union(deferred)
         if self.vehicle_drivers:
             deferred = set(self.vehicle_drivers).union(deferred)
+        if self.natural_drivers:
+            deferred = set(self.natural_drivers).union(deferred)
         for body in self.bodies.values():
             if body.gone:
                 continue
@@ -1566,6 +1583,8 @@ class ScenarioEngine:
                 self._locate(body)
         if self.acc_drivers:
             self._step_acc(dt, now)
+        if self.natural_drivers:
+            self._step_natural(dt, now)
         if self.vehicle_drivers:
             for follower in list(self.vehicle_drivers.values()):
                 if not follower.actor.gone and not follower.actor.external:
@@ -1617,6 +1636,43 @@ class ScenarioEngine:
             if driver.override and not driver.virtual:
                 self._move_body(body, dt, now)
         self._moved()
+
+    def _step_natural(self, dt: float, now: float) -> None:
+        """esmini's NaturalDriver steps after the default motion of every entity: it sets its entity's speed
+        and moves it; a lane change it decides starts from the next step (esmini injects it as an action)."""
+        for driver in list(self.natural_drivers.values()):
+            body = driver.actor
+            if body.gone or body.external:
+                continue
+            self.measure.clear()
+            driver.step(dt)
+            self._move_body(body, dt, now)
+            self._start_lane_change(driver)
+        self._moved()
+
+    def _start_lane_change(self, driver: drivers.NaturalDriver) -> None:
+        """The lane change a NaturalDriver decided: sinusoidal, over its laneChangeDuration, to its target
+        lane; it overrides a lateral action running on the entity."""
+        lane, driver.pending_lane = driver.pending_lane, None
+        if lane is None:
+            return
+        body = driver.actor
+        change = m.LaneChangeAction(
+            dynamics=m.TransitionDynamics("sinusoidal", "time", driver.lane_change_duration),
+            target=m.AbsoluteTargetLane(lane),
+        )
+        runtime = LaneChangeRuntime(self, body, change)
+        running = self.running.get((body.name, "lateral"))
+        if running is not None:
+            self._release(running)
+            self._set(running, Transition.STOP, State.COMPLETE)
+        self.init_runtimes = [
+            r for r in self.init_runtimes if not (r.actor is body and r.domain == "lateral")
+        ]
+        runtime.start()
+        self.log.append(f"t={self.time:.2f} {body.name}: NaturalDriver changes to lane {lane}")
+        if not runtime.done:
+            self.init_runtimes.append(runtime)  # stepped with the Init actions still running
 
     def _move_body(self, body: Body, dt: float, now: float) -> None:
         """One step of default motion of one body at its speed (as in `advance`)."""

@@ -78,8 +78,14 @@ ACC_CONTROLLERS = frozenset({"ACCController", "ALKSController"})
 FOLLOW_GHOST_CONTROLLERS = frozenset({"FollowGhostController"})
 # esmini's controllers with a vehicle model of their own CARLOS runs (simcore.scenario.drivers)
 VEHICLE_CONTROLLERS = frozenset({"OffroadFollower"})
+# esmini's NaturalDriver (simcore.scenario.drivers.NaturalDriver): IDM speed and lane changes of its own
+NATURAL_DRIVER_CONTROLLERS = frozenset({"NaturalDriver"})
 MODELLED_CONTROLLERS = (
-    ACC_CONTROLLERS | FOLLOW_GHOST_CONTROLLERS | VEHICLE_CONTROLLERS | {"", "DefaultController"}
+    ACC_CONTROLLERS
+    | FOLLOW_GHOST_CONTROLLERS
+    | VEHICLE_CONTROLLERS
+    | NATURAL_DRIVER_CONTROLLERS
+    | {"", "DefaultController"}
 )
 
 

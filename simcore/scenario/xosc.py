@@ -559,6 +559,8 @@ def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
         known = True  # runs as esmini's ACC controller (simcore.scenario.actions.AccDriver)
     if kind in m.VEHICLE_CONTROLLERS:
         known = True  # drives a vehicle model of its own as esmini's (simcore.scenario.drivers)
+    if kind in m.NATURAL_DRIVER_CONTROLLERS:
+        known = True  # esmini's IDM driver with lane changes (simcore.scenario.drivers.NaturalDriver)
     if kind in m.FOLLOW_GHOST_CONTROLLERS:
         known = True  # a ghost runs the actions ahead, the entity follows it (simcore.scenario.ghost)
     if kind in m.ALKS_CONTROLLERS:
