@@ -41,6 +41,43 @@ run 0.9 ms, zstd recording of the 0.7 MB cloud about 1.5 CPU ms, labels/noise/in
 the messages about 3-4 CPU ms (numpy over 65k rays, ~35 array passes). So the bound rows (20-28×) leave no
 room for the rest; the measured 9-10× is what 13-16 CPU ms per sweep give on 2 shared cores. 80% of the
 raw rate means the whole step in 1.25 casts: the sensorless run alone is a third of a cast.
+
+Measured 2026-11-24 (2 cores, quiet but for this bench; the machine's speed drifted by ~30% over the day,
+so before and after ran back to back), best of 3, before = commit 41f8b2e, after = this version:
+
+| | before | after |
+|---|---|---|
+| full run + recording (zstd), wall ms/sweep (× real time) | 7.18 (13.9×) | 5.95 (16.8×) |
+| ... CPU ms/sweep | 10.62 | 9.54 |
+| full run + recording (lz4) | 8.51 (11.7×) | 5.48 (18.2×) |
+| full run + recording (none) | 7.00 (14.3×) | 5.88 (17.0×) |
+| full run, no recording | 6.32 (15.8×) | 5.58 (17.9×) |
+| scan inside the run (rig split) | 5.00 ms | 4.01 ms |
+| full step / raw cast rate | 46% | 59% |
+
+What the figures showed, and what changed:
+- open3d's `cast_rays` holds the GIL for the whole cast (a Python thread stalls for all of it) and uses
+  both cores. The recorder's writer thread compressed a joined 4 MiB chunk in one call: it took a core from
+  the cast and, joining under the GIL, stalled the simulation thread. It now compresses and checksums
+  the chunk's pieces as a stream in 128 KiB slices (runs of small records joined, clouds sliced, no copy),
+  so it waits the cast out and works in the single-threaded phases. Recorded clouds are referenced, not
+  serialised (read-only arrays; the CDR around them comes from rosbags with an empty array).
+- "recording (none)" was slower than zstd because `close()` fsynced ~150 MB at the end of the run (60 ms,
+  0.3 ms per sweep). The writer thread now fdatasyncs every 16 MiB; `close()` flushes the tail only.
+- Why the scan is slower inside the run than the one-pose `Lidar.scan` row: mostly the poses (the replayed
+  row: the early sweeps have a car a few metres away, up to 13k box rays), the rest the recording thread
+  and the scenario sharing the cores and caches (the road cast: 2.22 ms inside, 2.02 ms replayed).
+- Boxes only meet the channels whose elevation can reach them, row-wise (no (M, 3) arrays, no normals);
+  a level lidar reuses its ray buffer and copies the returns back in channel blocks.
+
+Tried, no gain: drawing the noise/dropout numbers a sweep ahead on a thread (the cast holds the GIL and
+the cores are busy: more CPU, no wall gain); culling the rays that can only miss the road footprint (a miss
+costs Embree ~15 ns, a hit ~50 ns: at most 0.3 ms to win, about as much numpy to find them); zstd level -1
+or lz4 (less CPU, within the noise on the wall); (N, 3) gathers for the points (4x slower than rows).
+Still open: 20× needs 5 ms per sweep; the cast is ~2 ms of it (irreducible here), the scenario ~0.9 ms,
+the labels/noise/points ~1.6 ms of numpy (the random draws alone 0.45 ms), messages and recording ~0.6 ms.
+A compiled per-ray kernel (labels, noise, points in one pass) or an open3d that releases the GIL (the
+writer and the next step could overlap the cast) are what is left.
 """
 
 from __future__ import annotations
