@@ -15,9 +15,12 @@ message indexes; a summary with the schemas, channels, statistics, chunk and met
 offsets; every chunk carries the CRC-32 of its uncompressed records, the footer the summary's CRC.
 
 Speed: the writer is this module's own (no per-message record objects): `write` serialises the message
-(or takes CDR bytes as they are, see `write`), packs the 31-byte record header and appends both to the
-open chunk; full chunks go to a writer thread that compresses them (zstd level 1 by default, lz4, or none;
-the compressors run without the GIL), checksums and writes them while the simulation goes on. At most
+(or takes CDR bytes as they are, see `write`; a PointCloud2 or Image is serialised around its data array,
+which is referenced, not copied, when it is read-only, as a lidar's clouds are), packs the 31-byte record
+header and appends both to the open chunk; full chunks go to a writer thread that checksums, compresses
+(zstd level 1 by default, lz4, or none) and writes them in 128 KiB slices while the simulation goes on:
+each slice is one call without the GIL, so the thread waits out open3d's GIL-holding cast instead of taking
+a core from it. The writer thread fdatasyncs every 16 MiB, so `close` only waits for the tail. At most
 `_QUEUE_CHUNKS` chunks wait for the writer thread (the caller blocks beyond that: bounded memory, nothing
 is dropped); `close`/`abort` write every chunk before the summary.
 

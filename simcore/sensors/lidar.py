@@ -14,7 +14,9 @@ Speed: only the rays that can reach the static scene within `rangeMax` go to ope
 over its range stays above or below every road triangle and scenery box within reach cannot hit; on a flat
 road the rays at and above the horizon). This is exact: the scan is the one casting every ray would give
 (tests/test_sensors.py checks it on hills, with scenery, tilted mounts and motion distortion). A level
-lidar (no pitch or roll) culls whole channels and caches the index set per channel set.
+lidar (no pitch or roll) culls whole channels and caches the index set (and a ray buffer) per channel set.
+A box is intersected only with the columns its corners span and the channels whose elevation can reach it
+(exact as well: the slab test still decides every ray kept), row-wise on x/y/z component rows.
 """
 
 from __future__ import annotations
