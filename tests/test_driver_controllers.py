@@ -45,10 +45,8 @@ def activate(longitudinal: bool = True) -> str:
     )
 
 
-def write(tmp_path: Path, ego_controller: str, init: str, events: str = "", *, target: bool = True) -> Path:
-    entities = f'<ScenarioObject name="Ego">{VEHICLE}{ego_controller}</ScenarioObject>'
-    if target:
-        entities += f'<ScenarioObject name="Target">{VEHICLE}</ScenarioObject>'
+def highway_scenario(path: Path, entities: str, init: str, events: str = "") -> Path:
+    """A scenario on the test highway: these entities and Init actions, events in one maneuver of Ego."""
     story = ""
     if events:
         story = f"""<Story name="S"><Act name="A">
@@ -56,7 +54,6 @@ def write(tmp_path: Path, ego_controller: str, init: str, events: str = "", *, t
         <Maneuver name="M">{events}</Maneuver></ManeuverGroup>
       <StartTrigger><ConditionGroup>{sim_time("greaterOrEqual", 0)}</ConditionGroup></StartTrigger>
     </Act></Story>"""
-    path = tmp_path / "acc.xosc"
     path.write_text(f"""<?xml version="1.0"?>
 <OpenSCENARIO>
   <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
@@ -65,6 +62,13 @@ def write(tmp_path: Path, ego_controller: str, init: str, events: str = "", *, t
   <Storyboard><Init><Actions>{init}</Actions></Init>{story}<StopTrigger/></Storyboard>
 </OpenSCENARIO>""")
     return path
+
+
+def write(tmp_path: Path, ego_controller: str, init: str, events: str = "", *, target: bool = True) -> Path:
+    entities = f'<ScenarioObject name="Ego">{VEHICLE}{ego_controller}</ScenarioObject>'
+    if target:
+        entities += f'<ScenarioObject name="Target">{VEHICLE}</ScenarioObject>'
+    return highway_scenario(tmp_path / "acc.xosc", entities, init, events)
 
 
 @pytest.fixture(scope="module")

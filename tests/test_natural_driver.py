@@ -16,7 +16,7 @@ from simcore.scenario import model as m
 from simcore.scenario.engine import ScenarioEngine
 from simcore.scenario.xosc import load_scenario
 from simcore.world.opendrive import OpenDrive
-from tests.test_driver_controllers import VEHICLE, activate, controller, private
+from tests.test_driver_controllers import VEHICLE, activate, controller, highway_scenario, private
 from tests.test_engine import HIGHWAY, event, sim_time, speed_action
 
 # road 1 of the test highway: driving lanes -1, -2, -3 (left to right), 3.5 m wide, straight along +x
@@ -44,22 +44,7 @@ def write(
 ) -> Path:
     ego = f'<ScenarioObject name="Ego">{VEHICLE}{controller("NaturalDriver", **properties)}</ScenarioObject>'
     entities = ego + "".join(f'<ScenarioObject name="{n}">{VEHICLE}</ScenarioObject>' for n in others)
-    story = ""
-    if events:
-        story = f"""<Story name="S"><Act name="A">
-      <ManeuverGroup name="G" maximumExecutionCount="1"><Actors selectTriggeringEntities="false"><EntityRef entityRef="Ego"/></Actors>
-        <Maneuver name="M">{events}</Maneuver></ManeuverGroup>
-      <StartTrigger><ConditionGroup>{sim_time("greaterOrEqual", 0)}</ConditionGroup></StartTrigger>
-    </Act></Story>"""
-    path = tmp_path / "natural.xosc"
-    path.write_text(f"""<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
-  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/></RoadNetwork>
-  <Entities>{entities}</Entities>
-  <Storyboard><Init><Actions>{init}</Actions></Init>{story}<StopTrigger/></Storyboard>
-</OpenSCENARIO>""")
-    return path
+    return highway_scenario(tmp_path / "natural.xosc", entities, init, events)
 
 
 @pytest.fixture(scope="module")

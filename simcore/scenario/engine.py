@@ -1840,14 +1840,9 @@ def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tup
 def _added_later(scenario: m.Scenario) -> set[str]:
     """Entities an AddEntityAction brings in (they may have no initial position)."""
     out: set[str] = set()
-    for story in scenario.stories:
-        for act in story.acts:
-            for group in act.groups:
-                for maneuver in group.maneuvers:
-                    for event in maneuver.events:
-                        for action in event.actions:
-                            if isinstance(action.global_action, m.AddEntityAction):
-                                out.add(action.global_action.entity)
+    for _, action in m.story_actions(scenario):
+        if isinstance(action.global_action, m.AddEntityAction):
+            out.add(action.global_action.entity)
     return out
 
 

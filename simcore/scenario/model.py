@@ -6,6 +6,7 @@ are added here as dataclasses, in the parser as one function each, and in the en
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -841,6 +842,17 @@ class Scenario:
     warnings: tuple[str, ...] = ()
 
 
+def story_actions(scenario: Scenario) -> Iterator[tuple[ManeuverGroup, Action]]:
+    """Every action of every story, with the maneuver group it belongs to (its actors), in document order."""
+    for story in scenario.stories:
+        for act in story.acts:
+            for group in act.groups:
+                for maneuver in group.maneuvers:
+                    for event in maneuver.events:
+                        for action in event.actions:
+                            yield group, action
+
+
 def controller_kinds(scenario: Scenario) -> dict[str, set[str]]:
     """Entity name → the kinds of every controller it is given (ObjectController, AssignControllerAction in
     Init or in a story, to the group's actors); entities without one are left out. `carlos.driver` sumo or
@@ -857,14 +869,9 @@ def controller_kinds(scenario: Scenario) -> dict[str, set[str]]:
     for item in scenario.init:
         if isinstance(item.action, ControllerAction) and item.action.controller:
             out.setdefault(item.entity, set()).add(kind(dict(item.action.controller)))
-    for story in scenario.stories:
-        for act in story.acts:
-            for group in act.groups:
-                for maneuver in group.maneuvers:
-                    for event in maneuver.events:
-                        for action in event.actions:
-                            private = action.private
-                            if isinstance(private, ControllerAction) and private.controller:
-                                for actor in group.actors:
-                                    out.setdefault(actor, set()).add(kind(dict(private.controller)))
+    for group, action in story_actions(scenario):
+        private = action.private
+        if isinstance(private, ControllerAction) and private.controller:
+            for actor in group.actors:
+                out.setdefault(actor, set()).add(kind(dict(private.controller)))
     return out
