@@ -165,8 +165,9 @@ def replayed_scans(run: Any) -> dict[str, float]:
     costs the scan; the replayed mean against the one-pose `Lidar.scan` row is what the poses cost."""
     import simcore.sensors.lidar as lidar_module
     from simcore.sensors.scene import RoadScene
+    from tests.test_sensors import numpy_scan  # the numpy reference of the kernels
 
-    scan, cast = lidar_module.Lidar.scan, RoadScene.cast
+    scan, cast = lidar_module.Lidar.scan, RoadScene.cast_ids
     calls: list[tuple[Any, ...]] = []
     timed: dict[str, list[float]] = {"scan": [], "cast": []}
 
@@ -189,7 +190,7 @@ def replayed_scans(run: Any) -> dict[str, float]:
         return sum(values) / max(len(values), 1)
 
     lidar_module.Lidar.scan = scan_spy  # type: ignore[method-assign]
-    RoadScene.cast = cast_spy  # type: ignore[method-assign]
+    RoadScene.cast_ids = cast_spy  # type: ignore[method-assign]
     try:
         in_run: list[tuple[float, float]] = []
         for _ in range(REPEAT + 1):
@@ -206,12 +207,26 @@ def replayed_scans(run: Any) -> dict[str, float]:
             for _config, *args in list(calls):  # a copy: the spy appends to `calls`
                 scan_spy(lidar, *args)
             replayed.append((mean(timed["scan"]), mean(timed["cast"])))
+        numpy_scans: list[float] = []
+        for _ in range(REPEAT):  # the numpy reference of the per-ray kernels on the same sweeps
+            lidar = lidar_module.Lidar(calls[0][0], seed=0)
+            started = time.perf_counter()
+            for _config, *args in list(calls):
+                numpy_scan(lidar, *args)
+            numpy_scans.append((time.perf_counter() - started) / max(len(calls), 1))
     finally:
         lidar_module.Lidar.scan = scan  # type: ignore[method-assign]
-        RoadScene.cast = cast  # type: ignore[method-assign]
+        RoadScene.cast_ids = cast  # type: ignore[method-assign]
     run_scan, run_cast = min(in_run[1:])
     alone_scan, alone_cast = min(replayed)
-    return {"inRunScan": run_scan, "inRunCast": run_cast, "replayScan": alone_scan, "replayCast": alone_cast}
+    reference = min(numpy_scans)
+    return {
+        "inRunScan": run_scan,
+        "inRunCast": run_cast,
+        "replayScan": alone_scan,
+        "replayCast": alone_cast,
+        "replayNumpyScan": reference,
+    }
 
 
 def best(run: Any) -> tuple[float, float, dict[str, float], Any, float]:
@@ -322,7 +337,28 @@ def raw_cast() -> dict[str, float]:
     }
 
 
+def kernel_compile() -> tuple[float, float, float]:
+    """(import numba + the kernels module, compiling the lidar's kernels with an empty cache, loading them
+    from the cache) in seconds, each in a fresh process with its own NUMBA_CACHE_DIR."""
+    import subprocess
+
+    code = (
+        "import time; t0 = time.perf_counter(); from simcore.sensors import kernels; t1 = time.perf_counter(); "
+        "kernels.warm(); print(t1 - t0, time.perf_counter() - t1)"
+    )
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        runs = [
+            subprocess.run(
+                [sys.executable, "-c", code], cwd=ROOT, env=env, check=True, capture_output=True, text=True
+            ).stdout.split()
+            for _ in range(2)
+        ]
+    return float(runs[1][0]), float(runs[0][1]), float(runs[1][1])
+
+
 def main() -> None:
+    import_s, compile_s, load_s = kernel_compile()
     raw = raw_cast()
     plain_wall, plain_sim, _, _, plain_cpu = best(manifest(sensors=False, detector=False))
     wall, sim, _, timings, cpu = best(manifest(sensors=True, detector=False))
@@ -384,6 +420,13 @@ def main() -> None:
             None,
         ),
         (
+            "  ... numpy reference (no kernels)",
+            replay["replayNumpyScan"] * 1e3,
+            None,
+            raw["rays"] / replay["replayNumpyScan"],
+            None,
+        ),
+        (
             "  ... as timed inside the full run",
             replay["inRunScan"] * 1e3,
             None,
@@ -438,6 +481,10 @@ def main() -> None:
         f"{replay['inRunCast'] * 1e3:.2f} ms inside the run, {replay['replayCast'] * 1e3:.2f} ms replayed alone"
     )
     print(
+        f"lidar kernels (numba): import {import_s:.2f} s, compile {compile_s:.2f} s (empty cache: once per "
+        f"machine or pod), load from the cache {load_s:.2f} s (in the Lidar's constructor, not the first sweep)"
+    )
+    print(
         f"full step / raw cast rate: {full_rate / raw['rawRaysPerSecond']:.0%} (goal 80%; the bound above: "
         f"{(rays / scans / bound_ms * 1e3) / raw['rawRaysPerSecond']:.0%} without culling, "
         f"{(rays / scans / bound_reachable_ms * 1e3) / raw['rawRaysPerSecond']:.0%} with it); "
@@ -477,6 +524,8 @@ def main() -> None:
         "rigMsPerSweep": {k: round(v, 3) for k, v in per_scan.items()},
         "scanMsInRun": round(replay["inRunScan"] * 1e3, 3),
         "scanMsReplayed": round(replay["replayScan"] * 1e3, 3),
+        "scanMsReplayedNumpy": round(replay["replayNumpyScan"] * 1e3, 3),
+        "kernelCompileSeconds": round(compile_s, 3),
         "roadCastMsInRun": round(replay["inRunCast"] * 1e3, 3),
         "roadCastMsReplayed": round(replay["replayCast"] * 1e3, 3),
     }

@@ -14,9 +14,17 @@ from simcore.errors import BadInput
 from simcore.sensors import ros
 from simcore.sensors.camera import Camera
 from simcore.sensors.classes import CLASS_IDS
-from simcore.sensors.lidar import Lidar
+from simcore.sensors.lidar import POINT_DTYPE, Lidar, LidarScan, mount_pose
 from simcore.sensors.rig import SensorRig, ground_truth
-from simcore.sensors.scene import Boxes, RoadScene, intersect_box, road_mesh, rotation
+from simcore.sensors.scene import (
+    Boxes,
+    RoadScene,
+    StaticObject,
+    intersect_box,
+    intersect_box_rows,
+    road_mesh,
+    rotation,
+)
 from simcore.spec import CameraSensor, LidarSensor, SimulationRunSpec
 from simcore.transport.bus import InProcessBus, Message
 from simcore.transport.messages import deserialize, serialize
@@ -139,6 +147,47 @@ def test_row_wise_box_intersection_matches_the_slab_test() -> None:
         hit = np.isfinite(t_rows)
         assert np.allclose(t_rows[hit], t32[hit], rtol=1e-12, atol=1e-12)
         assert np.allclose(cos[hit], np.abs(np.einsum("ij,ij->i", dirs[hit], normals[hit])), atol=1e-6)
+
+
+def test_box_kernel_matches_the_row_wise_slab_test() -> None:
+    """`kernels.box_returns` is `intersect_box_rows` ray by ray (the same float64 arithmetic): the same
+    ranges (as float32) and |cos|, also for rays parallel to a face and starting in its plane; it only
+    takes the rays where the box is closer, and counts the hits within range."""
+    from simcore.sensors import kernels
+
+    rng = np.random.default_rng(2)
+    dirs = rng.normal(size=(20000, 3))
+    dirs[:500, 2] = 0.0  # level rays
+    dirs[500:700, 1] = 0.0
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    dirs_t = np.ascontiguousarray(dirs.astype(np.float32).T)
+    center, half = np.array([10.0, 2.0, 1.0]), np.array([2.0, 1.0, 0.5])
+    cases = [
+        (np.array([0.0, 0.0, 1.0]), rotation(0.3, 0.05, -0.02), np.eye(3)),
+        (np.array([16.0, 2.0, 1.5]), np.eye(3), np.eye(3)),  # in the plane of the top face
+        (np.array([1.0, -1.0, 1.2]), rotation(-0.4), rotation(0.7, 0.0, 0.01)),  # a rotated sensor
+    ]
+    for origin, rot, sensor in cases:
+        r32 = sensor.astype(np.float32)
+        world = [dirs_t[0] * r32[k, 0] + dirs_t[1] * r32[k, 1] + dirs_t[2] * r32[k, 2] for k in range(3)]
+        want_t, want_cos = intersect_box_rows(origin, world, center, rot, half)
+        # a third of the rays have a return closer than the box, a third one farther
+        t = np.select([np.arange(len(dirs)) % 3 == k for k in (0, 1)], [want_t * 0.9, want_t * 1.1], np.inf)
+        t = t.astype(np.float32)
+        before = t.copy()
+        cos = np.zeros(len(dirs), np.float32)
+        classes = np.zeros(len(dirs), np.uint8)
+        ids = np.zeros(len(dirs), np.uint32)
+        hits = kernels.box_returns(
+            t, cos, classes, ids, np.arange(len(dirs)), np.zeros(1, np.int64), 1, dirs_t, r32,
+            (origin - center) @ rot, rot, half, 0.5, 12.0, np.uint8(3), np.uint32(7),
+        )  # fmt: skip
+        closer = want_t < before
+        assert closer.sum() > 10 and (~closer & np.isfinite(want_t)).sum() > 10
+        assert np.array_equal(t, np.where(closer, want_t, before).astype(np.float32))
+        assert np.array_equal(cos[closer], want_cos[closer]) and not cos[~closer].any()
+        assert np.array_equal(classes != 0, closer) and np.array_equal(ids != 0, closer)
+        assert hits == np.count_nonzero((want_t >= 0.5) & (want_t <= 12.0))
 
 
 # --- lidar -------------------------------------------------------------------------------------------
@@ -540,7 +589,6 @@ def test_ray_culling_changes_nothing(
 ) -> None:
     """Rays that cannot reach the static scene within range are not cast: the scan is the same as when
     every ray is cast, and on a flat road the rays above the horizon are indeed left out."""
-    from simcore.sensors.scene import StaticObject
 
     scene = straight if where in ("flat", "pole", "tilted") else RoadScene(OpenDrive.from_string(HILL))
     if where == "pole":  # a 12 m pole beside the road: upward rays must still reach it
@@ -559,13 +607,13 @@ def test_ray_culling_changes_nothing(
     if where == "tilted":  # pitched down 5°: directions are no longer level per channel
         config["mount"] = {"z": 1.8, "pitch": 5}
     cast_sizes: list[int] = []
-    original_cast = RoadScene.cast
+    original_cast = RoadScene.cast_ids
 
     def counting(self: RoadScene, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         cast_sizes.append(len(rays))
         return original_cast(self, rays)
 
-    monkeypatch.setattr(RoadScene, "cast", counting)
+    monkeypatch.setattr(RoadScene, "cast_ids", counting)
     culled = lidar(**config).scan(scene, boxes, ego, 0)
     with monkeypatch.context() as m:
         m.setattr(Lidar, "_reachable", lambda self, *args: None)
@@ -637,3 +685,232 @@ def test_box_channel_culling_is_exact(
         assert np.array_equal(culled.visible_rays, every.visible_rays)
         assert np.array_equal(culled.unoccluded_rays, every.unoccluded_rays)
         assert np.count_nonzero(culled.unoccluded_rays) >= 5
+
+
+# --- the compiled kernels against the numpy reference ----------------------------------------------------
+
+
+def numpy_scan(
+    self: Lidar, road: RoadScene, boxes: Boxes, carrier: EntityState, carrier_index: int
+) -> LidarScan:
+    """The numpy reference of `Lidar.scan` (its implementation before the numba kernels)."""
+    cfg = self.config
+    rot, pos = mount_pose(carrier, self.mount_rot, self.mount_pos)
+    n_rays = len(self.dirs)
+    r32 = rot.astype(np.float32)
+    distort = cfg.motion_distortion and (carrier.speed != 0.0 or carrier.yaw_rate != 0.0)
+    level_sweep = not distort and r32[2, 0] == 0.0 and r32[2, 1] == 0.0 and r32[2, 2] == 1.0
+    # the road cast: only the rays that can reach the static scene, (K, 6) float32 for open3d
+    if distort:
+        # per column: the carrier's pose at the column's firing time (constant speed and yaw rate)
+        tau = self.column_time
+        heading = carrier.heading + carrier.yaw_rate * tau
+        vx, vy = carrier.velocity
+        rots = np.stack([rotation(float(h), carrier.pitch, carrier.roll) for h in heading])  # (C,3,3)
+        base = np.stack([carrier.x + vx * tau, carrier.y + vy * tau, np.full_like(tau, carrier.z)], axis=1)
+        col_rot = rots @ self.mount_rot
+        col_pos = base + rots @ self.mount_pos
+        d3 = self.dirs.reshape(self.columns, self.channels, 3)
+        dirs_world = np.einsum("cij,ckj->cki", col_rot, d3).reshape(-1, 3)
+        origins = np.repeat(col_pos, self.channels, axis=0)
+        rays = np.empty((n_rays, 6), np.float32)
+        rays[:, :3] = origins
+        rays[:, 3:] = dirs_world
+        cast = self._reachable(
+            road, rays[:, 2], rays[:, 5], col_pos[:, :2].min(axis=0), col_pos[:, :2].max(axis=0)
+        )
+        if cast is not None:
+            rays = rays[cast]
+    elif level_sweep:
+        # level (no pitch, no roll): a ray's world z component is its channel's, so the rays that can
+        # reach the scene are whole channels; their index set, directions and ray buffer are cached
+        kept = self._reachable(
+            road, float(np.float32(pos[2])), self._dirs_t[2, : self.channels], pos[:2], pos[:2]
+        )
+        cached = self._level_rays(kept)
+        cast, rays = cached.ids, cached.rays
+        for axis, value in enumerate(pos.astype(np.float32)):
+            rays[:, axis] = value  # one scalar fill per column: faster than broadcasting the row
+        d0, d1, d2 = cached.dirs
+        for row, col in ((0, 3), (1, 4)):
+            # r32[row, 2] is 0 for a level sensor (bar a float32 underflow): that term adds nothing
+            a = d0 * r32[row, 0]
+            a += d1 * r32[row, 1]
+            if r32[row, 2] != 0.0:
+                a += d2 * r32[row, 2]
+            rays[:, col] = a
+    else:
+        dz = self._world_dirs(r32, None, range(2, 3))[0]
+        cast = self._reachable(road, float(np.float32(pos[2])), dz, pos[:2], pos[:2])
+        rays = self._ray_array(n_rays if cast is None else len(cast), pos)
+        dx, dy = self._world_dirs(r32, cast, range(2))
+        rays[:, 3] = dx
+        rays[:, 4] = dy
+        rays[:, 5] = dz if cast is None else dz[cast]
+    t_cast, normals, classes_cast = road.cast(rays)
+    # |cos(incidence)| of the road returns: direction . normal (a miss has a zero normal)
+    cos_cast = rays[:, 3] * normals[:, 0]
+    cos_cast += rays[:, 4] * normals[:, 1]
+    cos_cast += rays[:, 5] * normals[:, 2]
+    np.abs(cos_cast, out=cos_cast)
+    if cast is None:
+        t, classes, cos_inc = t_cast, classes_cast, cos_cast
+    else:
+        t = np.full(n_rays, np.inf, np.float32)
+        t[cast] = t_cast
+        classes = np.zeros(n_rays, np.uint8)
+        classes[cast] = classes_cast
+        cos_inc = np.zeros(n_rays, np.float32)
+        cos_inc[cast] = cos_cast
+    object_id = np.zeros(n_rays, np.uint32)
+    nbox = len(boxes.names)
+    unoccluded = np.zeros(nbox, np.int64)
+    reach = cfg.range_max
+    if nbox:
+        rel = boxes.centers - pos
+        radius = np.linalg.norm(boxes.half, axis=1)
+        near = np.linalg.norm(rel, axis=1) - radius <= reach
+        widen: float | None = 0.0  # how far the rays' origins are from `pos` horizontally; None: not level
+        if distort:
+            shift = np.hypot(*carrier.velocity) * self.period
+            level = self._mount_level and carrier.pitch == 0.0 and carrier.roll == 0.0
+            widen = float(np.max(np.hypot(*(col_pos[:, :2] - pos[:2]).T))) if level else None
+        for i in np.flatnonzero(near):
+            if i == carrier_index:
+                continue  # a sensor does not see its own carrier
+            corners = (boxes.corners(int(i)) - pos) @ rot
+            pad = 1
+            if distort:
+                dist = max(float(np.linalg.norm(rel[i])) - float(radius[i]), 0.5)
+                pad += math.ceil((shift / dist + abs(carrier.yaw_rate) * self.period) / self.col_width)
+            cols = self._columns_of(corners, pad)
+            chans = None if widen is None else self._channels_of(corners, widen)
+            if cols is None and chans is None:
+                idx = np.arange(n_rays)
+            else:
+                if cols is None:
+                    cols = np.arange(self.columns)
+                if chans is None:
+                    chans = np.arange(self.channels)
+                idx = (cols[:, None] * self.channels + chans[None, :]).ravel()
+            if not len(idx):
+                continue
+            if distort:
+                dw = dirs_world[idx]
+                tb, nb = intersect_box(origins[idx], dw, boxes.centers[i], boxes.rotations[i], boxes.half[i])
+                cos_box = np.abs(np.einsum("ij,ij->i", dw, nb.astype(np.float32)))
+            else:
+                tb, cos_box = intersect_box_rows(
+                    pos, self._world_dirs(r32, idx), boxes.centers[i], boxes.rotations[i], boxes.half[i]
+                )
+            in_range = (tb >= cfg.range_min) & (tb <= cfg.range_max)
+            unoccluded[i] = int(np.count_nonzero(in_range))
+            closer = tb < t[idx]
+            if np.any(closer):
+                sel = idx[closer]
+                t[sel] = tb[closer]
+                cos_inc[sel] = cos_box[closer]
+                classes[sel] = boxes.classes[i]
+                object_id[sel] = boxes.ids[i]
+    idx = np.flatnonzero((t >= cfg.range_min) & (t <= cfg.range_max))
+    ids = object_id[idx]
+    visible = np.bincount(ids, minlength=nbox + 1)[1 : nbox + 1]
+    if cfg.dropout > 0.0:
+        kept = self.rng.random(n_rays, dtype=np.float32)[idx] >= cfg.dropout
+        idx = idx[kept]
+        ids = ids[kept]
+    rng_t = t[idx]
+    if cfg.range_noise > 0.0:
+        noise = self.rng.standard_normal(len(idx), dtype=np.float32)
+        noise *= cfg.range_noise
+        noise += rng_t
+        rng_t = np.maximum(noise, 0.0, out=noise)
+    cls = classes[idx]
+    points = np.zeros(len(idx), POINT_DTYPE)  # zeros: the padding byte too (reproducible files)
+    if distort:
+        world = origins[idx] + dirs_world[idx] * rng_t[:, None]
+        local = (world - pos) @ rot
+        points["time"] = np.repeat(self.column_time, self.channels)[idx]
+        points["x"] = local[:, 0]
+        points["y"] = local[:, 1]
+        points["z"] = local[:, 2]
+    else:  # time: 0 (the zeros)
+        points["x"] = self._dirs_t[0, idx] * rng_t
+        points["y"] = self._dirs_t[1, idx] * rng_t
+        points["z"] = self._dirs_t[2, idx] * rng_t
+    points["intensity"] = road.reflectivity[cls] * cos_inc[idx]
+    points["object_id"] = ids
+    points["ring"] = self.ring[idx]
+    points["label"] = cls
+    counts = np.bincount(ids, minlength=nbox + 1)[1 : nbox + 1]
+    points.flags.writeable = False  # immutable: messages and recordings reference it without a copy
+    return LidarScan(
+        points=points, object_points=counts, visible_rays=visible, unoccluded_rays=unoccluded, rays=n_rays
+    )
+
+
+@pytest.mark.parametrize(
+    "where",
+    ["level", "tilted", "distorted", "rolled", "hill", "fov", "plain", "noise", "dropout", "empty", "pole"],
+)
+def test_scan_equals_the_numpy_reference(straight: RoadScene, where: str) -> None:
+    """`Lidar.scan` (numba kernels) gives the cloud the numpy passes gave, bit for bit (intensity within one
+    float32 ulp), the same per-object counts, and draws the same random numbers, sweep after sweep."""
+    scene = {
+        "hill": lambda: RoadScene(OpenDrive.from_string(HILL)),
+        "empty": lambda: RoadScene(None),
+        "pole": lambda: RoadScene(
+            OpenDrive.from_string(STRAIGHT),
+            scenery=[
+                StaticObject(
+                    "pole",
+                    CLASS_IDS["pole"],
+                    np.array([70.0, 1.0, 6.0]),
+                    np.eye(3),
+                    np.array([0.3, 0.3, 6.0]),
+                )
+            ],
+        ),
+    }.get(where, lambda: straight)()
+    config: dict[str, object] = {
+        "channels": 32,
+        "horizontal_resolution": 360,
+        "vertical_fov": [-30, 20],
+        "range_noise": 0.0 if where in ("plain", "dropout") else 0.05,
+        "dropout": 0.0 if where in ("plain", "noise") else 0.1,
+        "motion_distortion": where == "distorted",
+    }
+    if where == "tilted":
+        config["mount"] = {"z": 1.8, "pitch": 5, "yaw": 20}
+    if where == "fov":
+        config["horizontal_fov"] = 120.0
+    speed, yaw_rate = (25.0, 0.3) if where == "distorted" else (0.0, 0.0)
+    roll = 0.1 if where == "rolled" else 0.0
+    z = 0.002 * 150**2 if where == "hill" else 0.0
+    compiled, reference = lidar(**config), lidar(**config)
+    for sweep in range(3):
+        x = (150.0 if where == "hill" else 50.0) + 2.5 * sweep
+        ego = EntityState("Ego", "vehicle", "car", x, -1.75, z, 0.1, 0.0, roll, speed, 0.0, yaw_rate, CAR)
+        others = [
+            EntityState("Near", "vehicle", "car", x + 6, -1.75, z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, CAR),
+            car("Beside", x, -5.25),
+            car("Behind", x - 20, -5.25, heading=0.4),
+            car("Far", x + 90, -1.75),
+        ]
+        boxes = Boxes.of(frame(ego, *others))
+        got = compiled.scan(scene, boxes, ego, 0)
+        want = numpy_scan(reference, scene, boxes, ego, 0)
+        assert len(got.points) == len(want.points) > (0 if where == "empty" else 100)
+        for name in got.points.dtype.names or ():
+            if name != "intensity":
+                assert got.points[name].tobytes() == want.points[name].tobytes(), (sweep, name)
+        ulps = got.points["intensity"].view(np.int32).astype(np.int64) - want.points["intensity"].view(
+            np.int32
+        )
+        assert np.abs(ulps).max(initial=0) <= 1
+        assert not got.points.view(np.uint8).reshape(-1, POINT_DTYPE.itemsize)[:, 27].any()
+        assert np.array_equal(got.object_points, want.object_points)
+        assert np.array_equal(got.visible_rays, want.visible_rays)
+        assert np.array_equal(got.unoccluded_rays, want.unoccluded_rays)
+        assert got.rays == want.rays
+        assert compiled.rng.bit_generator.state == reference.rng.bit_generator.state

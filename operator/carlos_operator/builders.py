@@ -285,6 +285,8 @@ def _env(run: SimulationRun, output: Output, settings: OperatorSettings) -> list
         {"name": "CYCLONEDDS_URI", "value": POD_DDS_CONFIG},
         {"name": "HOME", "value": SCRATCH_DIR},
         {"name": "TMPDIR", "value": "/tmp"},
+        # numba's compiled-kernel cache (the lidar's kernels): the root filesystem is read-only, /tmp is not
+        {"name": "NUMBA_CACHE_DIR", "value": "/tmp/numba-cache"},
     ]
     if output.endpoint:
         env.append({"name": "AWS_ENDPOINT_URL", "value": output.endpoint})

@@ -16,7 +16,14 @@ road the rays at and above the horizon). This is exact: the scan is the one cast
 (tests/test_sensors.py checks it on hills, with scenery, tilted mounts and motion distortion). A level
 lidar (no pitch or roll) culls whole channels and caches the index set (and a ray buffer) per channel set.
 A box is intersected only with the columns its corners span and the channels whose elevation can reach it
-(exact as well: the slab test still decides every ray kept), row-wise on x/y/z component rows.
+(exact as well: the slab test still decides every ray kept).
+
+Everything per ray around the open3d cast is one compiled pass each (`simcore.sensors.kernels`, numba,
+GIL released): the level ray buffer, the road returns (class, |cos|) into per-sweep buffers reused across
+sweeps, each box's slab test over its columns × channels, the range/dropout selection and the point
+records. The random numbers are numpy's (the same draws as before, into reused buffers), so the cloud is
+bit for bit the one of the numpy passes (tests/test_sensors.py keeps them as the reference). With motion
+distortion the boxes and the point coordinates stay numpy (per-column poses, (M, 3) arrays).
 """
 
 from __future__ import annotations
@@ -26,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simcore.sensors.scene import Boxes, RoadScene, intersect_box, intersect_box_rows, rotation
+from simcore.sensors import kernels
+from simcore.sensors.scene import Boxes, RoadScene, intersect_box, rotation
 from simcore.spec import LidarSensor
 from simcore.world.state import EntityState
 
@@ -39,6 +47,9 @@ POINT_DTYPE = np.dtype(
         "itemsize": 28,
     }
 )
+_ALL = np.zeros(0, np.int64)  # no index set: the cast rays are every ray, in order
+_NONE32 = np.zeros(0, np.float32)  # no random numbers drawn
+_NO_POINTS = np.zeros((0, 3))  # no motion distortion: the kernel computes the points
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,12 +66,10 @@ class LidarScan:
 
 @dataclass(frozen=True, slots=True)
 class _LevelRays:
-    """The rays a level sweep casts (whole channels): their indices (None: every ray), the channels as a
-    slice when contiguous, their sensor-frame directions (float32 rows) and a reusable (K, 6) float32 ray
+    """The rays a level sweep casts (whole channels): their indices (None: every ray), their sensor-frame directions (float32 rows) and a reusable (K, 6) float32 ray
     buffer whose z direction is already filled in (the scan writes origins and x, y directions)."""
 
     ids: np.ndarray | None
-    block: slice | np.ndarray
     dirs: list[np.ndarray]
     rays: np.ndarray
 
@@ -122,6 +131,18 @@ class Lidar:
         self._level_cache: dict[bytes, _LevelRays] = {}
         self._tan_elev = np.tan(self.elevations)
         self._mount_level = bool(self.mount_rot[2, 0] == 0.0 and self.mount_rot[2, 1] == 0.0)
+        n_rays = len(self.dirs)
+        # per-sweep buffers (a Lidar scans one sweep at a time)
+        self._t = np.empty(n_rays, np.float32)
+        self._classes = np.empty(n_rays, np.uint8)
+        self._cos = np.empty(n_rays, np.float32)
+        self._object_id = np.empty(n_rays, np.uint32)
+        self._drop = np.empty(n_rays, np.float32)
+        self._noise = np.empty(n_rays, np.float32)
+        self._kept = np.empty(n_rays, np.int64)
+        self._all_columns = np.arange(self.columns)
+        self._all_channels = np.arange(self.channels)
+        kernels.warm()  # compiled (or loaded from numba's cache) here, not in the first sweep
 
     def _level_rays(self, kept: np.ndarray | None) -> _LevelRays:
         """The cast rays of a level sweep whose channels `kept` (None: all) can reach the scene: cached per
@@ -137,9 +158,7 @@ class Lidar:
         dirs = [row[ids] for row in self._dirs_t]
         rays = np.empty((len(ids), 6), np.float32)
         rays[:, 5] = dirs[2]  # level: the world z component is the sensor's
-        contiguous = len(channels) > 0 and channels[-1] - channels[0] + 1 == len(channels)
-        block: slice | np.ndarray = slice(int(channels[0]), int(channels[-1]) + 1) if contiguous else channels
-        entry = self._level_cache[key] = _LevelRays(None if kept is None else ids, block, dirs, rays)
+        entry = self._level_cache[key] = _LevelRays(None if kept is None else ids, dirs, rays)
         return entry
 
     @property
@@ -246,7 +265,6 @@ class Lidar:
         r32 = rot.astype(np.float32)
         distort = cfg.motion_distortion and (carrier.speed != 0.0 or carrier.yaw_rate != 0.0)
         level_sweep = not distort and r32[2, 0] == 0.0 and r32[2, 1] == 0.0 and r32[2, 2] == 1.0
-        block: slice | np.ndarray | None = None
         # the road cast: only the rays that can reach the static scene, (K, 6) float32 for open3d
         if distort:
             # per column: the carrier's pose at the column's firing time (constant speed and yaw rate)
@@ -277,17 +295,9 @@ class Lidar:
                 road, float(np.float32(pos[2])), self._dirs_t[2, : self.channels], pos[:2], pos[:2]
             )
             cached = self._level_rays(kept)
-            cast, block, rays = cached.ids, cached.block, cached.rays
-            for axis, value in enumerate(pos.astype(np.float32)):
-                rays[:, axis] = value  # one scalar fill per column: faster than broadcasting the row
+            cast, rays = cached.ids, cached.rays
             d0, d1, d2 = cached.dirs
-            for row, col in ((0, 3), (1, 4)):
-                # r32[row, 2] is 0 for a level sensor (bar a float32 underflow): that term adds nothing
-                a = d0 * r32[row, 0]
-                a += d1 * r32[row, 1]
-                if r32[row, 2] != 0.0:
-                    a += d2 * r32[row, 2]
-                rays[:, col] = a
+            kernels.fill_level_rays(rays, d0, d1, d2, pos.astype(np.float32), r32)
         else:
             dz = self._world_dirs(r32, None, range(2, 3))[0]
             cast = self._reachable(road, float(np.float32(pos[2])), dz, pos[:2], pos[:2])
@@ -296,33 +306,22 @@ class Lidar:
             rays[:, 3] = dx
             rays[:, 4] = dy
             rays[:, 5] = dz if cast is None else dz[cast]
-        if not level_sweep:
-            block = None
-        t_cast, normals, classes_cast = road.cast(rays)
-        # |cos(incidence)| of the road returns: direction . normal (a miss has a zero normal)
-        cos_cast = rays[:, 3] * normals[:, 0]
-        cos_cast += rays[:, 4] * normals[:, 1]
-        cos_cast += rays[:, 5] * normals[:, 2]
-        np.abs(cos_cast, out=cos_cast)
-        if cast is None:
-            t, classes, cos_inc = t_cast, classes_cast, cos_cast
-        elif block is not None:  # whole channels: block copies into the (column, channel) grid
-            shape = (self.columns, self.channels)
-            t = np.full(shape, np.inf, np.float32)
-            t[:, block] = t_cast.reshape(self.columns, -1)
-            classes = np.zeros(shape, np.uint8)
-            classes[:, block] = classes_cast.reshape(self.columns, -1)
-            cos_inc = np.zeros(shape, np.float32)
-            cos_inc[:, block] = cos_cast.reshape(self.columns, -1)
-            t, classes, cos_inc = t.reshape(-1), classes.reshape(-1), cos_inc.reshape(-1)
-        else:
-            t = np.full(n_rays, np.inf, np.float32)
-            t[cast] = t_cast
-            classes = np.zeros(n_rays, np.uint8)
-            classes[cast] = classes_cast
-            cos_inc = np.zeros(n_rays, np.float32)
-            cos_inc[cast] = cos_cast
-        object_id = np.zeros(n_rays, np.uint32)
+        t_cast, normals, primitives = road.cast_ids(rays)
+        # per ray of the sweep (buffers reused across sweeps): range, class, |cos(incidence)|, object id
+        t, classes, cos_inc, object_id = self._t, self._classes, self._cos, self._object_id
+        kernels.road_returns(
+            cast is None,
+            _ALL if cast is None else cast,
+            t_cast,
+            normals,
+            primitives,
+            rays,
+            road.class_table,
+            t,
+            classes,
+            cos_inc,
+            object_id,
+        )
         nbox = len(boxes.names)
         unoccluded = np.zeros(nbox, np.int64)
         reach = cfg.range_max
@@ -347,26 +346,40 @@ class Lidar:
                     pad += math.ceil((shift / dist + abs(carrier.yaw_rate) * self.period) / self.col_width)
                 cols = self._columns_of(corners, pad)
                 chans = None if widen is None else self._channels_of(corners, widen)
+                if not distort:
+                    o = (pos - boxes.centers[i]) @ boxes.rotations[i]  # the origin in the box frame
+                    unoccluded[i] = kernels.box_returns(
+                        t,
+                        cos_inc,
+                        classes,
+                        object_id,
+                        self._all_columns if cols is None else cols,
+                        self._all_channels if chans is None else chans,
+                        self.channels,
+                        self._dirs_t,
+                        r32,
+                        o,
+                        boxes.rotations[i],
+                        boxes.half[i],
+                        cfg.range_min,
+                        cfg.range_max,
+                        boxes.classes[i],
+                        boxes.ids[i],
+                    )
+                    continue
                 if cols is None and chans is None:
                     idx = np.arange(n_rays)
                 else:
                     if cols is None:
-                        cols = np.arange(self.columns)
+                        cols = self._all_columns
                     if chans is None:
-                        chans = np.arange(self.channels)
+                        chans = self._all_channels
                     idx = (cols[:, None] * self.channels + chans[None, :]).ravel()
                 if not len(idx):
                     continue
-                if distort:
-                    dw = dirs_world[idx]
-                    tb, nb = intersect_box(
-                        origins[idx], dw, boxes.centers[i], boxes.rotations[i], boxes.half[i]
-                    )
-                    cos_box = np.abs(np.einsum("ij,ij->i", dw, nb.astype(np.float32)))
-                else:
-                    tb, cos_box = intersect_box_rows(
-                        pos, self._world_dirs(r32, idx), boxes.centers[i], boxes.rotations[i], boxes.half[i]
-                    )
+                dw = dirs_world[idx]
+                tb, nb = intersect_box(origins[idx], dw, boxes.centers[i], boxes.rotations[i], boxes.half[i])
+                cos_box = np.abs(np.einsum("ij,ij->i", dw, nb.astype(np.float32)))
                 in_range = (tb >= cfg.range_min) & (tb <= cfg.range_max)
                 unoccluded[i] = int(np.count_nonzero(in_range))
                 closer = tb < t[idx]
@@ -376,38 +389,57 @@ class Lidar:
                     cos_inc[sel] = cos_box[closer]
                     classes[sel] = boxes.classes[i]
                     object_id[sel] = boxes.ids[i]
-        idx = np.flatnonzero((t >= cfg.range_min) & (t <= cfg.range_max))
-        ids = object_id[idx]
-        visible = np.bincount(ids, minlength=nbox + 1)[1 : nbox + 1]
-        if cfg.dropout > 0.0:
-            kept = self.rng.random(n_rays, dtype=np.float32)[idx] >= cfg.dropout
-            idx = idx[kept]
-            ids = ids[kept]
-        rng_t = t[idx]
-        if cfg.range_noise > 0.0:
-            noise = self.rng.standard_normal(len(idx), dtype=np.float32)
-            noise *= cfg.range_noise
-            noise += rng_t
-            rng_t = np.maximum(noise, 0.0, out=noise)
-        cls = classes[idx]
-        points = np.zeros(len(idx), POINT_DTYPE)  # zeros: the padding byte too (reproducible files)
+        drop = self.rng.random(dtype=np.float32, out=self._drop) if cfg.dropout > 0.0 else _NONE32
+        visible = np.empty(nbox + 1, np.int64)
+        n = kernels.select_returns(
+            t,
+            object_id,
+            np.float32(cfg.range_min),
+            np.float32(cfg.range_max),
+            drop,
+            np.float32(cfg.dropout),
+            self._kept,
+            visible,
+        )
+        kept = self._kept[:n]
+        noise = (
+            self.rng.standard_normal(dtype=np.float32, out=self._noise[:n])
+            if cfg.range_noise > 0.0
+            else _NONE32
+        )
+        local = _NO_POINTS
         if distort:
-            world = origins[idx] + dirs_world[idx] * rng_t[:, None]
-            local = (world - pos) @ rot
-            points["time"] = np.repeat(self.column_time, self.channels)[idx]
-            points["x"] = local[:, 0]
-            points["y"] = local[:, 1]
-            points["z"] = local[:, 2]
-        else:  # time: 0 (the zeros)
-            points["x"] = self._dirs_t[0, idx] * rng_t
-            points["y"] = self._dirs_t[1, idx] * rng_t
-            points["z"] = self._dirs_t[2, idx] * rng_t
-        points["intensity"] = road.reflectivity[cls] * cos_inc[idx]
-        points["object_id"] = ids
-        points["ring"] = self.ring[idx]
-        points["label"] = cls
-        counts = np.bincount(ids, minlength=nbox + 1)[1 : nbox + 1]
+            rng_t = t[kept]
+            if len(noise):
+                noisy = noise * np.float32(cfg.range_noise)
+                noisy += rng_t
+                rng_t = np.maximum(noisy, 0.0, out=noisy)
+            world = origins[kept] + dirs_world[kept] * rng_t[:, None]
+            local = np.ascontiguousarray((world - pos) @ rot)
+        points = np.empty(n, POINT_DTYPE)  # every byte written, the padding byte 0 (reproducible files)
+        counts = np.empty(nbox + 1, np.int64)
+        kernels.fill_points(
+            points.view(np.uint32).reshape(n, 7),
+            kept,
+            t,
+            noise,
+            np.float32(cfg.range_noise),
+            self._dirs_t,
+            local,
+            self.column_time,
+            classes,
+            cos_inc,
+            road.reflectivity,
+            object_id,
+            self.ring,
+            self.channels,
+            counts,
+        )
         points.flags.writeable = False  # immutable: messages and recordings reference it without a copy
         return LidarScan(
-            points=points, object_points=counts, visible_rays=visible, unoccluded_rays=unoccluded, rays=n_rays
+            points=points,
+            object_points=counts[1:],
+            visible_rays=visible[1:],
+            unoccluded_rays=unoccluded,
+            rays=n_rays,
         )

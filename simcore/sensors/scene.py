@@ -299,7 +299,7 @@ class RoadScene:
             vertices, triangles = np.concatenate(verts), np.concatenate(tris)
             self.triangle_classes = np.concatenate(classes)
         self.scenery = tuple(scenery)
-        self._class_table = np.append(self.triangle_classes, np.uint8(0))
+        self.class_table = np.append(self.triangle_classes, np.uint8(0))
         self.triangle_count = len(triangles)
         # per triangle: its xy bounding box and z range, for `z_range` (which rays can reach the scene)
         if len(triangles):
@@ -351,10 +351,19 @@ class RoadScene:
         """Cast rays (M, 6) float32 (origin, unit direction) against the road.
 
         Returns (t (M,) float32, inf on a miss; normals (M, 3) float32; classes (M,) uint8, 0 on a miss)."""
+        t, normals, primitives = self.cast_ids(rays)
+        # a miss has the invalid primitive id 2^32 - 1: clipped to the table's last entry, class 0
+        return t, normals, np.take(self.class_table, primitives, mode="clip")
+
+    def cast_ids(self, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`cast` with the triangles' primitive ids (M,) uint32 (2^32 - 1 on a miss) instead of classes: the
+        class of id i is `class_table[min(i, T)]` (entry T, past the triangles, is 0)."""
         m = len(rays)
         if self.triangle_count == 0:
-            return np.full(m, np.inf, np.float32), np.zeros((m, 3), np.float32), np.zeros(m, np.uint8)
+            return (
+                np.full(m, np.inf, np.float32),
+                np.zeros((m, 3), np.float32),
+                np.full(m, np.iinfo(np.uint32).max, np.uint32),
+            )
         out = self.scene.cast_rays(self._o3d.core.Tensor.from_numpy(np.ascontiguousarray(rays, np.float32)))
-        # a miss has the invalid primitive id 2^32 - 1: clipped to the table's last entry, class 0
-        classes = np.take(self._class_table, out["primitive_ids"].numpy(), mode="clip")
-        return out["t_hit"].numpy(), out["primitive_normals"].numpy(), classes
+        return out["t_hit"].numpy(), out["primitive_normals"].numpy(), out["primitive_ids"].numpy()
