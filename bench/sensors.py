@@ -78,6 +78,36 @@ Still open: 20× needs 5 ms per sweep; the cast is ~2 ms of it (irreducible here
 the labels/noise/points ~1.6 ms of numpy (the random draws alone 0.45 ms), messages and recording ~0.6 ms.
 A compiled per-ray kernel (labels, noise, points in one pass) or an open3d that releases the GIL (the
 writer and the next step could overlap the cast) are what is left.
+
+Measured 2026-11-24 evening (2 cores; the machine ~30% slower than in the afternoon and noisy: the run
+without sensors took 0.8-1.2 ms per sweep between runs), before = commit 673c777, after = the numba kernels
+(simcore/sensors/kernels.py). Interleaved A/B, 3 rounds of before/after in turn, best of 3 each:
+
+| | before | after |
+|---|---|---|
+| full run, no recording, ms/sweep (× real time) | 5.59-6.18 (17.8-16.2×) | 4.34-4.72 (23.0-21.1×) |
+| ... CPU ms/sweep | 7.45-8.11 | 6.25-6.59 |
+| full run + recording (zstd), ms/sweep (× real time) | 6.17-7.36 (16.2-13.6×) | 6.03-7.05 (16.5-14.2×) |
+| ... CPU ms/sweep | 9.83-11.61 | 9.33-10.47 |
+
+The bench back to back (one run each): `Lidar.scan` over the run's sweeps 4.81 -> 3.38 ms (the numpy
+reference in the same run 4.48 ms), inside the run 5.54 -> 4.11 ms; zstd 7.51 -> 7.10 ms (13.3 -> 14.0×);
+no recording 6.87 -> 4.91 ms (14.5 -> 20.3×). Kernels: compile 2.0-2.6 s with an empty cache (once per
+machine, or per pod: NUMBA_CACHE_DIR=/tmp/numba-cache), then import numba 0.25 s + load 0.3-0.4 s, in the
+Lidar's constructor.
+
+What the figures showed:
+- The scan's post-processing went from ~1.7 ms of numpy (+0.45 ms of per-box numpy) to ~0.5 ms of kernels
+  (road returns 0.13, box slab test 0.05, selection 0.07, point records 0.14, level ray buffer 0.06 ms)
+  plus the two numpy draws (0.35 ms, kept: the same streams), ~0.2 ms of Python around them.
+- With zstd recording the run is bound by the recorder's writer thread, not the sensors: it was busy
+  7.0 ms of each 7.4 ms sweep (chunk checksum + compression + write) and the simulation thread blocked
+  0.8 ms per sweep on its full queue. Likely cause: it needs the GIL between its 128 KiB slices, and the
+  simulation thread hands it over only at the switch interval (5 ms) or when it releases it (numba kernels, numpy draws; not
+  open3d's 2 ms cast). `sys.setswitchinterval(0.0002)` gave 5-10% in a quick in-process A/B (noisy); a
+  writer that needs the GIL less often (larger slices, zstd's own worker threads) is where the zstd figure
+  is; recorder.py was out of scope here.
+- Tried, no gain: `time.sleep(0)` before the cast to hand the writer the GIL (within the noise).
 """
 
 from __future__ import annotations
