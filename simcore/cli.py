@@ -380,7 +380,11 @@ def validate(
     if any(f.suffix == ".xosc" for f in files):
         if not schema or not all(f.suffix == ".xosc" for f in files):
             raise _fail(
-                BadInput("OpenSCENARIO files are checked with --schema, one manifest without", field="FILE")
+                BadInput(
+                    "OpenSCENARIO files are checked against the XSD: carlos validate FILE.xosc [FILE.xosc …] "
+                    "--schema (a manifest is validated on its own)",
+                    field="FILE",
+                )
             )
         raise typer.Exit(_check_schemas(files))
     if more:

@@ -114,7 +114,7 @@ class PodEnv:
             )
         domain_id = 0
         if transport == "dds":
-            from simcore.transport.dds import domain_id_from_env
+            from simcore.transport.dds_config import domain_id_from_env  # no cyclonedds import to read env
 
             domain_id = domain_id_from_env(env)
         return cls(

@@ -258,6 +258,33 @@ class Lidar:
         reachable = (low <= zmax) & (high >= zmin)
         return None if reachable.all() else np.flatnonzero(reachable)
 
+    def _distorted_rays(
+        self, road: RoadScene, carrier: EntityState
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
+        """A sweep with motion distortion: every column fired from the carrier's pose at its firing time
+        (constant speed and yaw rate). Returns the rays to cast ((K, 6) float32, only those that can reach
+        the static scene), their indices (None: all), and per column its origin, per ray its origin and
+        world direction."""
+        tau = self.column_time
+        heading = carrier.heading + carrier.yaw_rate * tau
+        vx, vy = carrier.velocity
+        rots = np.stack([rotation(float(h), carrier.pitch, carrier.roll) for h in heading])  # (C,3,3)
+        base = np.stack([carrier.x + vx * tau, carrier.y + vy * tau, np.full_like(tau, carrier.z)], axis=1)
+        col_rot = rots @ self.mount_rot
+        col_pos = base + rots @ self.mount_pos
+        d3 = self.dirs.reshape(self.columns, self.channels, 3)
+        dirs_world = np.einsum("cij,ckj->cki", col_rot, d3).reshape(-1, 3)
+        origins = np.repeat(col_pos, self.channels, axis=0)
+        rays = np.empty((len(self.dirs), 6), np.float32)
+        rays[:, :3] = origins
+        rays[:, 3:] = dirs_world
+        cast = self._reachable(
+            road, rays[:, 2], rays[:, 5], col_pos[:, :2].min(axis=0), col_pos[:, :2].max(axis=0)
+        )
+        if cast is not None:
+            rays = rays[cast]
+        return rays, cast, col_pos, origins, dirs_world
+
     def scan(self, road: RoadScene, boxes: Boxes, carrier: EntityState, carrier_index: int) -> LidarScan:
         cfg = self.config
         rot, pos = mount_pose(carrier, self.mount_rot, self.mount_pos)
@@ -267,27 +294,7 @@ class Lidar:
         level_sweep = not distort and r32[2, 0] == 0.0 and r32[2, 1] == 0.0 and r32[2, 2] == 1.0
         # the road cast: only the rays that can reach the static scene, (K, 6) float32 for open3d
         if distort:
-            # per column: the carrier's pose at the column's firing time (constant speed and yaw rate)
-            tau = self.column_time
-            heading = carrier.heading + carrier.yaw_rate * tau
-            vx, vy = carrier.velocity
-            rots = np.stack([rotation(float(h), carrier.pitch, carrier.roll) for h in heading])  # (C,3,3)
-            base = np.stack(
-                [carrier.x + vx * tau, carrier.y + vy * tau, np.full_like(tau, carrier.z)], axis=1
-            )
-            col_rot = rots @ self.mount_rot
-            col_pos = base + rots @ self.mount_pos
-            d3 = self.dirs.reshape(self.columns, self.channels, 3)
-            dirs_world = np.einsum("cij,ckj->cki", col_rot, d3).reshape(-1, 3)
-            origins = np.repeat(col_pos, self.channels, axis=0)
-            rays = np.empty((n_rays, 6), np.float32)
-            rays[:, :3] = origins
-            rays[:, 3:] = dirs_world
-            cast = self._reachable(
-                road, rays[:, 2], rays[:, 5], col_pos[:, :2].min(axis=0), col_pos[:, :2].max(axis=0)
-            )
-            if cast is not None:
-                rays = rays[cast]
+            rays, cast, col_pos, origins, dirs_world = self._distorted_rays(road, carrier)
         elif level_sweep:
             # level (no pitch, no roll): a ray's world z component is its channel's, so the rays that can
             # reach the scene are whole channels; their index set, directions and ray buffer are cached
