@@ -24,6 +24,20 @@ from simcore.plan import Plan
 from simcore.runner import simulate
 from simcore.transport.bus import InProcessBus, Message
 from simcore.transport.messages import TYPESTORE
+from tests.xosc_fixtures import (
+    act,
+    event,
+    openscenario,
+    private_actions,
+    road_network,
+    scenario_object,
+    sim_time,
+    speed_action,
+    story,
+    teleport_lane,
+    vehicle,
+    write_scenario,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 CUT_IN = ROOT / "examples" / "scenarios" / "cut-in.xosc"
@@ -124,58 +138,26 @@ def _scenario(tmp_path: Path, controller: str, activate: str, assign_later: str 
         """
     )
     (tmp_path / "straight.xodr").write_text(road)
-    event = ""
+    stories = ""
     if assign_later:
-        event = f"""
-      <Story name="S"><Act name="A"><ManeuverGroup name="G" maximumExecutionCount="1">
-        <Actors selectTriggeringEntities="false"><EntityRef entityRef="Ego"/></Actors>
-        <Maneuver name="M"><Event name="E" priority="overwrite">
-          <Action name="Later"><PrivateAction>{assign_later}</PrivateAction></Action>
-          <StartTrigger><ConditionGroup><Condition name="c" delay="0" conditionEdge="none">
-            <ByValueCondition><SimulationTimeCondition value="2" rule="greaterThan"/></ByValueCondition>
-          </Condition></ConditionGroup></StartTrigger>
-        </Event></Maneuver>
-      </ManeuverGroup>
-      <StartTrigger><ConditionGroup><Condition name="go" delay="0" conditionEdge="none">
-        <ByValueCondition><SimulationTimeCondition value="0" rule="greaterThan"/></ByValueCondition>
-      </Condition></ConditionGroup></StartTrigger></Act></Story>"""
-    xosc = f"""<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="closed loop"/>
-  <RoadNetwork><LogicFile filepath="straight.xodr"/></RoadNetwork>
-  <Entities>
-    <ScenarioObject name="Ego">
-      <Vehicle name="car" vehicleCategory="car">
-        <BoundingBox><Center x="1.4" y="0" z="0.75"/><Dimensions width="1.8" length="4.5" height="1.5"/></BoundingBox>
-        <Performance maxSpeed="50" maxAcceleration="3" maxDeceleration="8"/>
-        <Axles>
-          <FrontAxle maxSteering="0.5" wheelDiameter="0.6" trackWidth="1.6" positionX="2.8" positionZ="0.3"/>
-          <RearAxle maxSteering="0" wheelDiameter="0.6" trackWidth="1.6" positionX="0" positionZ="0.3"/>
-        </Axles>
-        <Properties/>
-      </Vehicle>
-      {controller}
-    </ScenarioObject>
-  </Entities>
-  <Storyboard>
-    <Init><Actions><Private entityRef="Ego">
-      <PrivateAction><TeleportAction><Position><LanePosition roadId="1" laneId="-1" s="10" offset="0"/></Position></TeleportAction></PrivateAction>
-      {activate}
-      <PrivateAction><LongitudinalAction><SpeedAction>
-        <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
-        <SpeedActionTarget><AbsoluteTargetSpeed value="20"/></SpeedActionTarget>
-      </SpeedAction></LongitudinalAction></PrivateAction>
-    </Private></Actions></Init>
-    {event}
-    <StopTrigger><ConditionGroup><Condition name="end" delay="0" conditionEdge="none">
-      <ByValueCondition><SimulationTimeCondition value="4" rule="greaterThan"/></ByValueCondition>
-    </Condition></ConditionGroup></StopTrigger>
-  </Storyboard>
-</OpenSCENARIO>
-"""
-    path = tmp_path / "closed.xosc"
-    path.write_text(xosc)
-    return path
+        later = event(
+            "E",
+            f"<PrivateAction>{assign_later}</PrivateAction>",
+            sim_time("greaterThan", 2, name="c"),
+            "overwrite",
+        )
+        stories = story(act(later, start=sim_time("greaterThan", 0, name="go")))
+    ego = vehicle(max_speed=50, max_acceleration=3, max_deceleration=8)
+    speed = speed_action("step", "time", 0, 20)
+    xosc = openscenario(
+        description="closed loop",
+        road=road_network("straight.xodr"),
+        entities=scenario_object("Ego", ego, controller),
+        init=private_actions("Ego", teleport_lane(10, lane=-1), activate, speed),
+        stories=stories,
+        stop=sim_time("greaterThan", 4, name="end"),
+    )
+    return write_scenario(tmp_path, xosc, "closed.xosc")
 
 
 EXTERNAL = """<ObjectController><Controller name="ext"><Properties>

@@ -12,28 +12,21 @@ from simcore.errors import BadInput
 from simcore.scenario.engine import ScenarioEngine
 from simcore.scenario.xosc import load_scenario
 from simcore.world.opendrive import OpenDrive
+from tests.xosc_fixtures import (
+    HIGHWAY,
+    act,
+    file_header,
+    openscenario,
+    place,
+    road_network,
+    scenario_object,
+    story,
+    vehicle,
+    write_scenario,
+)
 
-ROOT = Path(__file__).resolve().parents[1]
-HIGHWAY = ROOT / "examples" / "maps" / "highway.xodr"
-
-CAR = """
-<ScenarioObject name="{name}">
-  <Vehicle name="car" vehicleCategory="car">
-    <BoundingBox><Center x="1.4" y="0" z="0.75"/><Dimensions width="1.8" length="4.5" height="1.5"/></BoundingBox>
-    <Performance maxSpeed="70" maxAcceleration="5" maxDeceleration="9"/>
-  </Vehicle>
-</ScenarioObject>"""
-
-
-def place(name: str, s: float, lane: int = -2, speed: float = 20.0) -> str:
-    return f"""
-<Private entityRef="{name}">
-  <PrivateAction><TeleportAction><Position><LanePosition roadId="1" laneId="{lane}" s="{s}" offset="0"/></Position></TeleportAction></PrivateAction>
-  <PrivateAction><LongitudinalAction><SpeedAction>
-    <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
-    <SpeedActionTarget><AbsoluteTargetSpeed value="{speed}"/></SpeedActionTarget>
-  </SpeedAction></LongitudinalAction></PrivateAction>
-</Private>"""
+# moved by the scenario alone: no axles needed
+CAR = vehicle(track_width=None)
 
 
 def sim_time(value: float) -> str:
@@ -73,26 +66,14 @@ def scenario(
     network_extra: str = "",
     header_minor: int = 2,
 ) -> Path:
-    init = init or place("Ego", 100.0)
-    text = f"""<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="{header_minor}" date="2025-01-01T00:00:00" author="test" description="t"/>
-  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/>{network_extra}</RoadNetwork>
-  <Entities>{"".join(CAR.format(name=n) for n in entities)}</Entities>
-  <Storyboard>
-    <Init><Actions>{init}</Actions></Init>
-    <Story name="S"><Act name="A">
-      <ManeuverGroup name="G" maximumExecutionCount="1"><Actors selectTriggeringEntities="false"><EntityRef entityRef="Ego"/></Actors>
-        <Maneuver name="M">{events}</Maneuver>
-      </ManeuverGroup>
-      <StartTrigger><ConditionGroup>{sim_time(0)}</ConditionGroup></StartTrigger>
-    </Act></Story>
-    <StopTrigger/>
-  </Storyboard>
-</OpenSCENARIO>"""
-    path = tmp_path / "s.xosc"
-    path.write_text(text)
-    return path
+    text = openscenario(
+        minor=header_minor,
+        road=road_network(HIGHWAY, network_extra),
+        entities="".join(scenario_object(n, CAR) for n in entities),
+        init=init or place("Ego", 100.0),
+        stories=story(act(events, start=sim_time(0))),
+    )
+    return write_scenario(tmp_path, text)
 
 
 @pytest.fixture(scope="module")
@@ -307,19 +288,17 @@ def test_bad_coordinate_system_names_the_element(tmp_path: Path) -> None:
 
 
 def test_missing_catalog_directory_is_named_with_its_declaration(tmp_path: Path) -> None:
-    text = f"""<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
-  <CatalogLocations>
+    catalogs = """<CatalogLocations>
     <VehicleCatalog><Directory path="../nowhere/Vehicles"/></VehicleCatalog>
-  </CatalogLocations>
-  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/></RoadNetwork>
-  <Entities><ScenarioObject name="Ego"><CatalogReference catalogName="VehicleCatalog" entryName="car_white"/>
-  </ScenarioObject></Entities>
-  <Storyboard><Init><Actions/></Init><StopTrigger/></Storyboard>
-</OpenSCENARIO>"""
-    path = tmp_path / "s.xosc"
-    path.write_text(text)
+  </CatalogLocations>"""
+    text = openscenario(
+        catalogs=catalogs,  # the Directory on line 5
+        road=road_network(HIGHWAY),
+        entities=scenario_object(
+            "Ego", '<CatalogReference catalogName="VehicleCatalog" entryName="car_white"/>'
+        ),
+    )
+    path = write_scenario(tmp_path, text)
     with pytest.raises(BadInput) as err:
         load_scenario(path)
     message = str(err.value)
@@ -331,30 +310,22 @@ def test_missing_catalog_directory_is_named_with_its_declaration(tmp_path: Path)
 def test_catalog_directory_may_name_the_catalog_file(tmp_path: Path) -> None:
     (tmp_path / "cat").mkdir()
     (tmp_path / "cat" / "Cars.xosc").write_text(
-        """<?xml version="1.0"?><OpenSCENARIO><FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00"
-        author="t" description="t"/><Catalog name="Cars">"""
-        + CAR.format(name="x").replace('<ScenarioObject name="x">', "").replace("</ScenarioObject>", "")
-        + "</Catalog></OpenSCENARIO>"
+        f'<?xml version="1.0"?><OpenSCENARIO>{file_header()}<Catalog name="Cars">{CAR}</Catalog></OpenSCENARIO>'
     )
-    text = f"""<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
-  <CatalogLocations><VehicleCatalog><Directory path="cat/Cars.xosc"/></VehicleCatalog></CatalogLocations>
-  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/></RoadNetwork>
-  <Entities><ScenarioObject name="Ego"><CatalogReference catalogName="Cars" entryName="car"/></ScenarioObject></Entities>
-  <Storyboard><Init><Actions/></Init><StopTrigger/></Storyboard>
-</OpenSCENARIO>"""
-    path = tmp_path / "s.xosc"
-    path.write_text(text)
-    scenario_ = load_scenario(path)
+    text = openscenario(
+        catalogs='<CatalogLocations><VehicleCatalog><Directory path="cat/Cars.xosc"/></VehicleCatalog></CatalogLocations>',
+        road=road_network(HIGHWAY),
+        entities=scenario_object("Ego", '<CatalogReference catalogName="Cars" entryName="car"/>'),
+    )
+    scenario_ = load_scenario(write_scenario(tmp_path, text))
     assert scenario_.entities[0].box.length == 4.5
 
 
 def test_warning_in_a_catalog_entry_names_the_catalog_file_and_line(tmp_path: Path) -> None:
     (tmp_path / "man").mkdir()
     (tmp_path / "man" / "Lights.xosc").write_text(
-        """<?xml version="1.0"?>
-<OpenSCENARIO><FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="t" description="t"/>
+        f"""<?xml version="1.0"?>
+<OpenSCENARIO>{file_header()}
 <Catalog name="Lights">
   <Maneuver name="Blink">
     <Event name="On" priority="parallel"><Action name="OnAction"><PrivateAction><AppearanceAction>
@@ -366,15 +337,16 @@ def test_warning_in_a_catalog_entry_names_the_catalog_file_and_line(tmp_path: Pa
   </Maneuver>
 </Catalog></OpenSCENARIO>"""
     )
-    path = scenario(tmp_path, "")
-    text = path.read_text()
-    text = text.replace(
-        '<Maneuver name="M"></Maneuver>', '<CatalogReference catalogName="Lights" entryName="Blink"/>'
-    ).replace(
-        "<RoadNetwork>",
-        '<CatalogLocations><ManeuverCatalog><Directory path="man"/></ManeuverCatalog></CatalogLocations><RoadNetwork>',
+    text = openscenario(
+        catalogs='<CatalogLocations><ManeuverCatalog><Directory path="man"/></ManeuverCatalog></CatalogLocations>',
+        road=road_network(HIGHWAY),
+        entities=scenario_object("Ego", CAR),
+        init=place("Ego", 100.0),
+        stories=story(
+            act(maneuvers='<CatalogReference catalogName="Lights" entryName="Blink"/>', start=sim_time(0))
+        ),
     )
-    path.write_text(text)
+    path = write_scenario(tmp_path, text)
     warnings = load_scenario(path).warnings
     assert any(
         w.startswith(f"{tmp_path / 'man' / 'Lights.xosc'}:5: ") and "LightStateAction" in w for w in warnings

@@ -12,39 +12,30 @@ from pathlib import Path
 import pytest
 
 from simcore import conformance
+from tests.xosc_fixtures import (
+    openscenario,
+    private_actions,
+    scenario_object,
+    sim_time,
+    speed_action,
+    teleport_world,
+    vehicle,
+    write_scenario,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT.parent / "shared" / "corpus" / "esmini"
 
-SCENARIO = """<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="1" date="2024-01-01T00:00:00" description="t" author="t"/>
-  <Entities>
-    <ScenarioObject name="Car">
-      <Vehicle name="car" vehicleCategory="car">
-        <BoundingBox><Center x="1.4" y="0" z="0.8"/><Dimensions width="2" length="4.5" height="1.5"/></BoundingBox>
-        <Performance maxSpeed="50" maxAcceleration="5" maxDeceleration="10"/>
-        <Axles>
-          <FrontAxle maxSteering="0.5" wheelDiameter="0.6" trackWidth="1.8" positionX="2.8" positionZ="0.3"/>
-          <RearAxle maxSteering="0" wheelDiameter="0.6" trackWidth="1.8" positionX="0" positionZ="0.3"/>
-        </Axles>
-      </Vehicle>
-    </ScenarioObject>
-  </Entities>
-  <Storyboard>
-    <Init><Actions><Private entityRef="Car">
-      <PrivateAction><TeleportAction><Position><WorldPosition x="0" y="0" h="0"/></Position></TeleportAction></PrivateAction>
-      <PrivateAction><LongitudinalAction><SpeedAction>
-        <SpeedActionDynamics dynamicsShape="step" value="0" dynamicsDimension="time"/>
-        <SpeedActionTarget><AbsoluteTargetSpeed value="10"/></SpeedActionTarget>
-      </SpeedAction></LongitudinalAction></PrivateAction>
-    </Private></Actions></Init>
-    <StopTrigger><ConditionGroup><Condition name="end" delay="0" conditionEdge="none">
-      <ByValueCondition><SimulationTimeCondition value="2" rule="greaterThan"/></ByValueCondition>
-    </Condition></ConditionGroup></StopTrigger>
-  </Storyboard>
-</OpenSCENARIO>
-"""
+
+def straight(controller: str = "") -> str:
+    """Car (with `controller`) on no road, from the origin along +x at 10 m/s until t > 2 s."""
+    car = vehicle(z=0.8, width=2, max_speed=50, max_deceleration=10, track_width=1.8)
+    return openscenario(
+        minor=1,
+        entities=scenario_object("Car", car, controller),
+        init=private_actions("Car", teleport_world(0), speed_action("step", "time", 0, 10)),
+        stop=sim_time("greaterThan", 2, name="end"),
+    )
 
 
 def write_reference(path: Path, shift: float, end: float = 2.0) -> None:
@@ -60,7 +51,7 @@ def write_reference(path: Path, shift: float, end: float = 2.0) -> None:
 def suite(tmp_path: Path) -> tuple[Path, Path]:
     scenarios = tmp_path / "scenarios" / "set"
     scenarios.mkdir(parents=True)
-    (scenarios / "straight.xosc").write_text(SCENARIO)
+    (scenarios / "straight.xosc").write_text(straight())
     (scenarios / "broken.xosc").write_text("<OpenSCENARIO><Storyboard></OpenSCENARIO>")
     reference = tmp_path / "reference"
     reference.mkdir()
@@ -168,11 +159,10 @@ def test_a_ghost_head_start_shifts_the_reported_time_axis(tmp_path: Path) -> Non
     by it: results are put on that axis. The stop trigger's simulation time is on that axis too (esmini only
     shifts the triggers of the acts and of the events the ghost acts in); during the head start only the
     ghost moves."""
-    ghost = """</Vehicle><ObjectController><Controller name="g"><Properties>
+    ghost = """<ObjectController><Controller name="g"><Properties>
       <Property name="esminiController" value="FollowGhostController"/><Property name="headstartTime" value="1.5"/>
       </Properties></Controller></ObjectController>"""
-    path = tmp_path / "ghost.xosc"
-    path.write_text(SCENARIO.replace("</Vehicle>", ghost, 1))
+    path = write_scenario(tmp_path, straight(controller=ghost), "ghost.xosc")
     result, trace = conformance.run_scenario(path, cap_seconds=10)
     assert result.ended
     assert result.sim_seconds == pytest.approx(2.05)  # the stop trigger (> 2 s) on esmini's time axis

@@ -13,15 +13,19 @@ from simcore.scenario import model as m
 from simcore.scenario.engine import ScenarioEngine
 from simcore.scenario.xosc import load_scenario
 from simcore.world.opendrive import OpenDrive
-from tests.test_engine import HIGHWAY, event, sim_time, speed_action
-
-VEHICLE = """
-  <Vehicle name="car" vehicleCategory="car">
-    <BoundingBox><Center x="1.4" y="0" z="0.75"/><Dimensions width="1.8" length="4.5" height="1.5"/></BoundingBox>
-    <Performance maxSpeed="70" maxAcceleration="5" maxDeceleration="9"/>
-    <Axles><FrontAxle maxSteering="0.5" wheelDiameter="0.6" trackWidth="1.6" positionX="2.8" positionZ="0.3"/>
-      <RearAxle maxSteering="0" wheelDiameter="0.6" trackWidth="1.6" positionX="0" positionZ="0.3"/></Axles>
-  </Vehicle>"""
+from tests.xosc_fixtures import (
+    HIGHWAY,
+    act,
+    event,
+    openscenario,
+    private_actions,
+    road_network,
+    scenario_object,
+    sim_time,
+    speed_action,
+    story,
+    teleport_lane,
+)
 
 
 def controller(kind: str, **properties: float | str) -> str:
@@ -30,11 +34,7 @@ def controller(kind: str, **properties: float | str) -> str:
 
 
 def private(name: str, s: float, speed: float, lane: int = -2, extra: str = "") -> str:
-    return f"""<Private entityRef="{name}">
-  <PrivateAction><TeleportAction><Position><LanePosition roadId="1" laneId="{lane}" s="{s}" offset="0"/></Position></TeleportAction></PrivateAction>
-  {speed_action("step", "time", 0.0, speed)}
-  {extra}
-</Private>"""
+    return private_actions(name, teleport_lane(s, lane), speed_action("step", "time", 0.0, speed), extra)
 
 
 def activate(longitudinal: bool = True) -> str:
@@ -47,27 +47,15 @@ def activate(longitudinal: bool = True) -> str:
 
 def highway_scenario(path: Path, entities: str, init: str, events: str = "") -> Path:
     """A scenario on the test highway: these entities and Init actions, events in one maneuver of Ego."""
-    story = ""
-    if events:
-        story = f"""<Story name="S"><Act name="A">
-      <ManeuverGroup name="G" maximumExecutionCount="1"><Actors selectTriggeringEntities="false"><EntityRef entityRef="Ego"/></Actors>
-        <Maneuver name="M">{events}</Maneuver></ManeuverGroup>
-      <StartTrigger><ConditionGroup>{sim_time("greaterOrEqual", 0)}</ConditionGroup></StartTrigger>
-    </Act></Story>"""
-    path.write_text(f"""<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
-  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/></RoadNetwork>
-  <Entities>{entities}</Entities>
-  <Storyboard><Init><Actions>{init}</Actions></Init>{story}<StopTrigger/></Storyboard>
-</OpenSCENARIO>""")
+    stories = story(act(events)) if events else ""
+    path.write_text(openscenario(road=road_network(HIGHWAY), entities=entities, init=init, stories=stories))
     return path
 
 
 def write(tmp_path: Path, ego_controller: str, init: str, events: str = "", *, target: bool = True) -> Path:
-    entities = f'<ScenarioObject name="Ego">{VEHICLE}{ego_controller}</ScenarioObject>'
+    entities = scenario_object("Ego", controller=ego_controller)
     if target:
-        entities += f'<ScenarioObject name="Target">{VEHICLE}</ScenarioObject>'
+        entities += scenario_object("Target")
     return highway_scenario(tmp_path / "acc.xosc", entities, init, events)
 
 

@@ -14,73 +14,60 @@ from simcore.errors import BadInput
 from simcore.scenario.engine import ScenarioEngine
 from simcore.scenario.xosc import load_scenario
 from simcore.world.opendrive import OpenDrive
+from tests.xosc_fixtures import (
+    HIGHWAY,
+    act,
+    event,
+    openscenario,
+    place,
+    road_network,
+    scenario_object,
+    sim_time,
+    speed_action,
+    story,
+    vehicle,
+    write_scenario,
+)
 
-ROOT = Path(__file__).resolve().parents[1]
-HIGHWAY = ROOT / "examples" / "maps" / "highway.xodr"
-
-CAR = """
-<ScenarioObject name="{name}">
-  <Vehicle name="car" vehicleCategory="car">
-    <BoundingBox><Center x="1.4" y="0" z="0.75"/><Dimensions width="1.8" length="4.5" height="1.5"/></BoundingBox>
-    <Performance maxSpeed="70" maxAcceleration="5" maxDeceleration="9"/>
-    <Axles><FrontAxle maxSteering="0.5" wheelDiameter="0.6" trackWidth="1.6" positionX="2.8" positionZ="0.3"/>
-      <RearAxle maxSteering="0" wheelDiameter="0.6" trackWidth="1.6" positionX="0" positionZ="0.3"/></Axles>
-  </Vehicle>
-</ScenarioObject>"""
-
-
-def place(name: str, s: float, lane: int = -2, speed: float = 20.0) -> str:
-    return f"""
-<Private entityRef="{name}">
-  <PrivateAction><TeleportAction><Position><LanePosition roadId="1" laneId="{lane}" s="{s}" offset="0"/></Position></TeleportAction></PrivateAction>
-  <PrivateAction><LongitudinalAction><SpeedAction>
-    <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
-    <SpeedActionTarget><AbsoluteTargetSpeed value="{speed}"/></SpeedActionTarget>
-  </SpeedAction></LongitudinalAction></PrivateAction>
-</Private>"""
-
-
-def sim_time(rule: str, value: float, edge: str = "none", delay: float = 0.0) -> str:
-    return f"""<Condition name="t" delay="{delay}" conditionEdge="{edge}"><ByValueCondition>
-  <SimulationTimeCondition value="{value}" rule="{rule}"/></ByValueCondition></Condition>"""
-
-
-def speed_action(shape: str, dimension: str, value: float, target: float) -> str:
-    return f"""<PrivateAction><LongitudinalAction><SpeedAction>
-  <SpeedActionDynamics dynamicsShape="{shape}" dynamicsDimension="{dimension}" value="{value}"/>
-  <SpeedActionTarget><AbsoluteTargetSpeed value="{target}"/></SpeedActionTarget></SpeedAction></LongitudinalAction></PrivateAction>"""
-
-
-def event(name: str, action: str, trigger: str, priority: str = "override", count: int = 1) -> str:
-    return f"""<Event name="{name}" priority="{priority}" maximumExecutionCount="{count}">
-  <Action name="{name}Action">{action}</Action>
-  <StartTrigger><ConditionGroup>{trigger}</ConditionGroup></StartTrigger></Event>"""
+CAR = vehicle()
+TARGET = (
+    '<ParameterDeclarations><ParameterDeclaration name="Target" parameterType="double" value="10"/>'
+    "</ParameterDeclarations>"
+)
 
 
 def scenario(
-    tmp_path: Path, events: str, *, stop: str = "", entities: tuple[str, ...] = ("Ego",), init: str = ""
+    tmp_path: Path,
+    events: str,
+    *,
+    stop: str = "",
+    entities: tuple[str, ...] = ("Ego",),
+    init: str = "",
+    actor: str = "Ego",
+    lead_events: str = "",
+    controllers: dict[str, str] | None = None,
+    more_entities: str = "",
+    minor: int = 2,
+    road_file: Path = HIGHWAY,
 ) -> Path:
-    init = init or place("Ego", 100.0)
-    text = f"""<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
-  <ParameterDeclarations><ParameterDeclaration name="Target" parameterType="double" value="10"/></ParameterDeclarations>
-  <RoadNetwork><LogicFile filepath="{HIGHWAY}"/></RoadNetwork>
-  <Entities>{"".join(CAR.format(name=n) for n in entities)}</Entities>
-  <Storyboard>
-    <Init><Actions>{init}</Actions></Init>
-    <Story name="S"><Act name="A">
-      <ManeuverGroup name="G" maximumExecutionCount="1"><Actors selectTriggeringEntities="false"><EntityRef entityRef="Ego"/></Actors>
-        <Maneuver name="M">{events}</Maneuver>
-      </ManeuverGroup>
-      <StartTrigger><ConditionGroup>{sim_time("greaterOrEqual", 0)}</ConditionGroup></StartTrigger>
-    </Act></Story>
-    <StopTrigger>{f"<ConditionGroup>{stop}</ConditionGroup>" if stop else ""}</StopTrigger>
-  </Storyboard>
-</OpenSCENARIO>"""
-    path = tmp_path / "s.xosc"
-    path.write_text(text)
-    return path
+    """A scenario on the highway (or `road_file`) declaring the parameter Target: cars named `entities`
+    (with `controllers` by name) then `more_entities`; `init` (default: Ego at s = 100 m, 20 m/s); `events`
+    in one maneuver of `actor`, and `lead_events` in one of the Lead in an act of its own; the stop
+    trigger's conditions `stop`."""
+    controllers = controllers or {}
+    acts = act(events, actor=actor)
+    if lead_events:
+        acts += act(lead_events, actor="Lead", name="B", group="L", maneuver="LM")
+    text = openscenario(
+        minor=minor,
+        parameters=TARGET,
+        road=road_network(road_file),
+        entities="".join(scenario_object(n, CAR, controllers.get(n, "")) for n in entities) + more_entities,
+        init=init or place("Ego", 100.0),
+        stories=story(acts),
+        stop=stop,
+    )
+    return write_scenario(tmp_path, text)
 
 
 @pytest.fixture(scope="module")
@@ -428,21 +415,14 @@ def test_continuous_relative_speed_in_init_follows_the_other_within_performance(
       <SpeedActionTarget><RelativeTargetSpeed entityRef="Lead" value="0" speedTargetValueType="delta" continuous="true"/>
       </SpeedActionTarget></SpeedAction></LongitudinalAction></PrivateAction></Private>"""
     lead = speed_action("step", "time", 0, 0.0)
+    # the Lead stops at 1 s (its own maneuver group), Ego follows its speed down at its maxDeceleration (9)
     path = scenario(
         tmp_path,
         "",
         entities=("Lead", "Ego"),
         init=place("Lead", 500.0, speed=20.0) + place("Ego", 100.0, speed=0.0) + follow,
+        lead_events=event("Stop", lead, sim_time("greaterOrEqual", 1.0)),
     )
-    # the Lead stops at 1 s (its own maneuver group), Ego follows its speed down at its maxDeceleration (9)
-    text = path.read_text().replace(
-        "</Act></Story>",
-        f"""</Act><Act name="B"><ManeuverGroup name="L" maximumExecutionCount="1"><Actors selectTriggeringEntities="false">
-        <EntityRef entityRef="Lead"/></Actors><Maneuver name="LM">{event("Stop", lead, sim_time("greaterOrEqual", 1.0))}
-        </Maneuver></ManeuverGroup><StartTrigger><ConditionGroup>{sim_time("greaterOrEqual", 0)}</ConditionGroup>
-        </StartTrigger></Act></Story>""",
-    )
-    path.write_text(text)
     _, trace = run(path, road, 4.0)
     assert trace[0.5]["speed"] == pytest.approx(20.0)  # took the Lead's speed at once
     assert trace[1.5]["speed"] == pytest.approx(20.0 - 9.0 * 0.5, abs=1e-6)
@@ -589,19 +569,6 @@ def test_lateral_distance_with_acceleration_limit_is_a_damped_spring(tmp_path: P
     assert any("Side: endTransition" in line for line in engine.log)  # within 1 cm it ends
 
 
-def with_lead_event(path: Path, lead_event: str) -> Path:
-    """The scenario with one more event, for the Lead (its own act)."""
-    text = path.read_text().replace(
-        "</Act></Story>",
-        f"""</Act><Act name="B"><ManeuverGroup name="L" maximumExecutionCount="1"><Actors selectTriggeringEntities="false">
-        <EntityRef entityRef="Lead"/></Actors><Maneuver name="LM">{lead_event}
-        </Maneuver></ManeuverGroup><StartTrigger><ConditionGroup>{sim_time("greaterOrEqual", 0)}</ConditionGroup>
-        </StartTrigger></Act></Story>""",
-    )
-    path.write_text(text)
-    return path
-
-
 def test_lateral_distance_spring_is_damped_on_the_lateral_speed_relative_to_the_other_entity(
     tmp_path: Path, road: OpenDrive
 ) -> None:
@@ -618,8 +585,8 @@ def test_lateral_distance_spring_is_damped_on_the_lateral_speed_relative_to_the_
         event("Side", keep, sim_time("greaterThan", 0.0)),
         entities=("Ego", "Lead"),
         init=place("Ego", 100.0) + place("Lead", 130.0),
+        lead_events=event("Shift", offset, sim_time("greaterOrEqual", 3.0)),
     )
-    path = with_lead_event(path, event("Shift", offset, sim_time("greaterOrEqual", 3.0)))
     engine = ScenarioEngine(load_scenario(path), road=road, sumo=None, step_seconds=0.05)
     ego, lead = engine.bodies["Ego"], engine.bodies["Lead"]
     gaps, lead_moves = [], []
@@ -675,16 +642,15 @@ TRUCK = """
 
 def trailer_scenario(tmp_path: Path, events: str, *, towing: bool) -> Path:
     trailer = '<Trailer><TrailerRef entityRef="Trailer"/></Trailer>' if towing else ""
-    path = scenario(
+    return scenario(
         tmp_path,
         events,
         entities=("Ego",),
         init=place("Ego", 300.0) + place("Truck", 100.0, speed=10.0) + place("Trailer", 80.0, speed=0.0),
+        actor="Truck",
+        more_entities=TRUCK.format(trailer=trailer),
+        minor=3,
     )
-    text = path.read_text().replace("</Entities>", TRUCK.format(trailer=trailer) + "</Entities>")
-    text = text.replace('<EntityRef entityRef="Ego"/></Actors>', '<EntityRef entityRef="Truck"/></Actors>')
-    path.write_text(text.replace('revMinor="2"', 'revMinor="3"'))
-    return path
 
 
 def test_a_towed_trailer_follows_the_hitch_of_its_tow_vehicle(tmp_path: Path, road: OpenDrive) -> None:
@@ -737,8 +703,7 @@ def test_an_entity_in_a_lane_that_narrows_to_nothing_moves_to_the_next_inner_lan
               <width sOffset="70" a="0" b="0" c="0" d="0"/></lane>
           </right></laneSection></lanes></road></OpenDRIVE>"""
     )
-    path = scenario(tmp_path, "", init=place("Ego", 10.0, speed=10.0))
-    path.write_text(path.read_text().replace(str(HIGHWAY), str(xodr)))
+    path = scenario(tmp_path, "", init=place("Ego", 10.0, speed=10.0), road_file=xodr)
     _, trace = run(path, OpenDrive.from_file(xodr), 8.0)
     assert trace[5.0]["lane"] == -2  # s = 60: still 0.5 m wide
     assert trace[7.0]["lane"] == -1 and trace[7.0]["y"] == pytest.approx(-1.75)  # s = 80: at lane -1's centre
@@ -752,18 +717,13 @@ def synchronize(final: str) -> str:
 
 
 def synch_scenario(tmp_path: Path, final: str, ego_speed: float) -> Path:
-    path = scenario(
+    return scenario(
         tmp_path,
         event("Sync", synchronize(final), sim_time("greaterThan", 0.0)),
         entities=("Ego", "Lead"),
         init=place("Ego", 100.0, speed=ego_speed) + place("Lead", 100.0, lane=-1, speed=10.0),
+        actor="Lead",
     )
-    path.write_text(
-        path.read_text().replace(
-            '<EntityRef entityRef="Ego"/></Actors>', '<EntityRef entityRef="Lead"/></Actors>'
-        )
-    )
-    return path
 
 
 def test_synchronize_reaches_the_target_with_the_final_speed_when_the_master_reaches_its_own(
@@ -824,14 +784,9 @@ def test_an_alks_controller_brakes_for_a_vehicle_in_its_path_without_colliding(
         + place("Lead", 160.0, speed=15.0)
         + place("Side", 110.0, lane=-1, speed=5.0)  # slower, but in the next lane: no reason to brake
         + activate,
+        actor="Lead",
+        controllers={"Ego": alks},
     )
-    text = path.read_text().replace('<ScenarioObject name="Ego">', '<ScenarioObject name="Ego">' + alks, 1)
-    # the Vehicle must come first in a ScenarioObject: move the controller after it
-    text = text.replace(alks + "\n  <Vehicle", "\n  <Vehicle").replace(
-        "</Vehicle>\n</ScenarioObject>", "</Vehicle>" + alks + "\n</ScenarioObject>", 1
-    )
-    text = text.replace('<EntityRef entityRef="Ego"/></Actors>', '<EntityRef entityRef="Lead"/></Actors>')
-    path.write_text(text)
     loaded = load_scenario(path)
     assert any("R157 safety driver" in w for w in loaded.warnings)
     engine = ScenarioEngine(loaded, road=road, sumo=None, step_seconds=0.05)

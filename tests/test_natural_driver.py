@@ -16,8 +16,8 @@ from simcore.scenario import model as m
 from simcore.scenario.engine import ScenarioEngine
 from simcore.scenario.xosc import load_scenario
 from simcore.world.opendrive import OpenDrive
-from tests.test_driver_controllers import VEHICLE, activate, controller, highway_scenario, private
-from tests.test_engine import HIGHWAY, event, sim_time, speed_action
+from tests.test_driver_controllers import activate, controller, highway_scenario, private
+from tests.xosc_fixtures import HIGHWAY, event, scenario_object, sim_time, speed_action
 
 # road 1 of the test highway: driving lanes -1, -2, -3 (left to right), 3.5 m wide, straight along +x
 DRIVER = {
@@ -42,8 +42,8 @@ LENGTH = 4.5
 def write(
     tmp_path: Path, properties: dict[str, float], init: str, others: tuple[str, ...], events: str = ""
 ) -> Path:
-    ego = f'<ScenarioObject name="Ego">{VEHICLE}{controller("NaturalDriver", **properties)}</ScenarioObject>'
-    entities = ego + "".join(f'<ScenarioObject name="{n}">{VEHICLE}</ScenarioObject>' for n in others)
+    ego = scenario_object("Ego", controller=controller("NaturalDriver", **properties))
+    entities = ego + "".join(scenario_object(n) for n in others)
     return highway_scenario(tmp_path / "natural.xosc", entities, init, events)
 
 

@@ -11,71 +11,52 @@ import pytest
 
 from simcore.errors import BadInput
 from simcore.scenario import schema
+from tests.xosc_fixtures import (
+    act,
+    event,
+    openscenario,
+    private_actions,
+    road_network,
+    scenario_object,
+    sim_time,
+    speed_action,
+    story,
+    teleport_world,
+    vehicle,
+    write_scenario,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT.parent / "shared" / "corpus" / "esmini" / "resources"
 
-SCENARIO = """<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="{minor}" date="2024-01-01T00:00:00" description="t" author="t"/>
-  <ParameterDeclarations/>
-  <CatalogLocations/>
-  <RoadNetwork/>
-  <Entities>
-    <ScenarioObject name="Car">
-      <Vehicle name="car" vehicleCategory="car">
-        <ParameterDeclarations/>
-        <BoundingBox><Center x="1.4" y="0" z="0.8"/><Dimensions width="2" length="4.5" height="1.5"/></BoundingBox>
-        <Performance maxSpeed="50" maxAcceleration="5" maxDeceleration="10"/>
-        <Axles>
-          <FrontAxle maxSteering="0.5" wheelDiameter="0.6" trackWidth="1.8" positionX="2.8" positionZ="0.3"/>
-          <RearAxle maxSteering="0" wheelDiameter="0.6" trackWidth="1.8" positionX="0" positionZ="0.3"/>
-        </Axles>
-        <Properties/>
-      </Vehicle>
-    </ScenarioObject>
-  </Entities>
-  <Storyboard>
-    <Init><Actions><Private entityRef="Car">
-      <PrivateAction><TeleportAction><Position><WorldPosition x="0" y="0" h="0"/></Position></TeleportAction></PrivateAction>
-      <PrivateAction><LongitudinalAction><SpeedAction{speed_extra}>
-        <SpeedActionDynamics dynamicsShape="{shape}" value="0" dynamicsDimension="time"/>
-        <SpeedActionTarget><AbsoluteTargetSpeed value="10"/></SpeedActionTarget>
-      </SpeedAction></LongitudinalAction></PrivateAction>
-    </Private></Actions></Init>
-    <Story name="s">
-      <Act name="a">
-        <ManeuverGroup name="g" maximumExecutionCount="1">
-          <Actors selectTriggeringEntities="false"><EntityRef entityRef="Car"/></Actors>
-          <Maneuver name="m">
-            <Event name="e" priority="{priority}">
-              <Action name="x"><PrivateAction><LongitudinalAction><SpeedAction>
-                <SpeedActionDynamics dynamicsShape="step" value="0" dynamicsDimension="time"/>
-                <SpeedActionTarget><AbsoluteTargetSpeed value="5"/></SpeedActionTarget>
-              </SpeedAction></LongitudinalAction></PrivateAction></Action>
-              <StartTrigger><ConditionGroup><Condition name="c" delay="0" conditionEdge="none">
-                <ByValueCondition><SimulationTimeCondition value="1" rule="greaterThan"/></ByValueCondition>
-              </Condition></ConditionGroup></StartTrigger>
-            </Event>
-          </Maneuver>
-        </ManeuverGroup>
-        <StartTrigger><ConditionGroup><Condition name="go" delay="0" conditionEdge="none">
-          <ByValueCondition><SimulationTimeCondition value="0" rule="greaterThan"/></ByValueCondition>
-        </Condition></ConditionGroup></StartTrigger>
-      </Act>
-    </Story>
-    <StopTrigger/>
-  </Storyboard>
-</OpenSCENARIO>
-"""
+# a car, its speed set in Init and changed by one event: valid against the XSD of revisions 1.0 to 1.2
+CAR = vehicle(
+    z=0.8, width=2, max_speed=50, max_deceleration=10, track_width=1.8, parameters="<ParameterDeclarations/>"
+)
 
 
 def write(
-    tmp_path: Path, minor: str = "2", shape: str = "step", extra: str = "", priority: str = "override"
+    tmp_path: Path,
+    minor: str = "2",
+    shape: str = "step",
+    extra: str = "",
+    priority: str = "override",
+    name: str = "s.xosc",
 ) -> Path:
-    path = tmp_path / "s.xosc"
-    path.write_text(SCENARIO.format(minor=minor, shape=shape, speed_extra=extra, priority=priority))
-    return path
+    """The scenario of revision 1.`minor`, with the Init SpeedAction's `shape` and `extra` attributes and the
+    event's `priority`."""
+    init_speed = speed_action(shape, "time", 0, 10).replace("<SpeedAction>", f"<SpeedAction{extra}>")
+    change = event("e", speed_action("step", "time", 0, 5), sim_time("greaterThan", 1, name="c"), priority)
+    text = openscenario(
+        minor=minor,
+        parameters="<ParameterDeclarations/>",
+        catalogs="<CatalogLocations/>",
+        road=road_network(),
+        entities=scenario_object("Car", CAR),
+        init=private_actions("Car", teleport_world(0), init_speed),
+        stories=story(act(change, actor="Car", start=sim_time("greaterThan", 0, name="go"))),
+    )
+    return write_scenario(tmp_path, text, name)
 
 
 def test_a_valid_scenario_has_no_issues_and_names_the_schema(tmp_path: Path) -> None:
@@ -161,13 +142,7 @@ def _carlos(*args: str) -> subprocess.CompletedProcess[str]:
 
 def test_carlos_validate_schema_on_files_lists_violations_and_exits_2(tmp_path: Path) -> None:
     good = write(tmp_path)
-    bad = tmp_path / "bad.xosc"
-    bad.write_text(
-        good.read_text().replace(
-            'dynamicsShape="step" value="0" dynamicsDimension="time"/>\n        <SpeedActionTarget><AbsoluteTargetSpeed value="10"',
-            'dynamicsShape="wobbly" value="0" dynamicsDimension="time"/>\n        <SpeedActionTarget><AbsoluteTargetSpeed value="10"',
-        )
-    )
+    bad = write(tmp_path, shape="wobbly", name="bad.xosc")  # in the Init's SpeedAction
     line = next(n for n, text in enumerate(bad.read_text().splitlines(), 1) if "wobbly" in text)
     proc = _carlos(str(good), str(bad), "--schema")
     assert proc.returncode == 2, proc.stdout + proc.stderr

@@ -15,8 +15,18 @@ from simcore.scenario import ghost as g
 from simcore.scenario.engine import ScenarioEngine
 from simcore.scenario.xosc import load_scenario
 from simcore.world.opendrive import OpenDrive
-from tests.test_driver_controllers import VEHICLE, controller, private, write
-from tests.test_engine import HIGHWAY, event, sim_time, speed_action
+from tests.test_driver_controllers import controller, private, write
+from tests.xosc_fixtures import (
+    HIGHWAY,
+    event,
+    openscenario,
+    private_actions,
+    scenario_object,
+    sim_time,
+    speed_action,
+    teleport_world,
+    write_scenario,
+)
 
 LANE_CHANGE = """<PrivateAction><LateralAction><LaneChangeAction>
   <LaneChangeActionDynamics dynamicsShape="sinusoidal" value="2" dynamicsDimension="time"/>
@@ -140,18 +150,12 @@ def offroad_scenario(tmp_path: Path, lead: str = "Lead", lead_y: float = 0.0) ->
         targetDistance=20.0,
         steeringRate=4.0,
     )
-    path = tmp_path / "offroad.xosc"
-    path.write_text(f"""<?xml version="1.0"?>
-<OpenSCENARIO>
-  <FileHeader revMajor="1" revMinor="2" date="2025-01-01T00:00:00" author="test" description="t"/>
-  <Entities><ScenarioObject name="Lead">{VEHICLE}</ScenarioObject>
-    <ScenarioObject name="Follower">{VEHICLE}{follower}</ScenarioObject></Entities>
-  <Storyboard><Init><Actions>
-    <Private entityRef="Lead"><PrivateAction><TeleportAction><Position><WorldPosition x="60" y="{lead_y}" h="0"/></Position></TeleportAction></PrivateAction></Private>
-    <Private entityRef="Follower"><PrivateAction><TeleportAction><Position><WorldPosition x="0" y="0" h="0"/></Position></TeleportAction></PrivateAction>{BOTH}</Private>
-  </Actions></Init><StopTrigger/></Storyboard>
-</OpenSCENARIO>""")
-    return path
+    text = openscenario(
+        entities=scenario_object("Lead") + scenario_object("Follower", controller=follower),
+        init=private_actions("Lead", teleport_world(60, lead_y))
+        + private_actions("Follower", teleport_world(0), BOTH),
+    )
+    return write_scenario(tmp_path, text, "offroad.xosc")
 
 
 def test_offroad_follower_stops_at_its_target_distance_behind_a_standing_lead(tmp_path: Path) -> None:

@@ -10,8 +10,9 @@ from simcore.errors import BadInput
 from simcore.plan import Plan
 from simcore.scenario.distribution import load_distribution
 from simcore.spec import SimulationRunSpec
+from tests.xosc_fixtures import file_header
 
-HEAD = '<?xml version="1.0"?><OpenSCENARIO><FileHeader revMajor="1" revMinor="2" date="2024-01-01T00:00:00" description="d" author="t"/>'
+HEAD = f'<?xml version="1.0"?><OpenSCENARIO>{file_header()}'
 
 
 def write(tmp_path: Path, body: str) -> Path:
