@@ -20,7 +20,9 @@ which is referenced, not copied, when it is read-only, as a lidar's clouds are),
 header and appends both to the open chunk; full chunks go to a writer thread that checksums, compresses
 (zstd level 1 by default, lz4, or none) and writes them in 128 KiB slices while the simulation goes on:
 each slice is one call without the GIL, so the thread waits out open3d's GIL-holding cast instead of taking
-a core from it. The writer thread fdatasyncs every 16 MiB, so `close` only waits for the tail. At most
+a core from it. zstd compresses on its own native worker thread, which needs no GIL at all: the writer
+thread only hands it the slices (a Python thread doing the compression itself got the GIL back too
+rarely between slices and fell behind the simulation; bench/sensors.py). The writer thread fdatasyncs every 16 MiB, so `close` only waits for the tail. At most
 `_QUEUE_CHUNKS` chunks wait for the writer thread (the caller blocks beyond that: bounded memory, nothing
 is dropped); `close`/`abort` write every chunk before the summary.
 
@@ -61,6 +63,8 @@ _COMPRESSIONS = ("zstd", "lz4", "none")
 #: zstd level of the chunks: level 1 compresses point clouds as well as the default level 3 here
 #: (float coordinates are the bulk and barely compress) at about 1.5x the speed.
 ZSTD_LEVEL = 1
+#: zstd worker threads of a recorder (native threads, outside the GIL; see `_compressor`).
+ZSTD_WORKERS = 1
 #: Bytes the writer thread writes between two fdatasync calls (see `_FileWriter._sync`).
 _SYNC_EVERY = 16 * 1024 * 1024
 #: fdatasync where there is one (Linux), else fsync (macOS).
@@ -137,7 +141,9 @@ def _compressor(compression: str) -> Callable[[list[Piece], int], list[Piece]] |
     if compression == "zstd":
         import zstandard
 
-        context = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
+        # zstd's own worker thread compresses (no GIL: it goes on while open3d's cast holds it); this thread
+        # only hands it the slices. The frames are the same whatever the number of workers >= 1.
+        context = zstandard.ZstdCompressor(level=ZSTD_LEVEL, threads=ZSTD_WORKERS)
 
         def zstd(pieces: list[Piece], size: int) -> list[Piece]:
             stream = context.compressobj(size=size)  # the frame records the size, as compress() would

@@ -3,6 +3,7 @@ camera, ground truth, ROS 2 messages, scheduling and the spec models."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -617,6 +618,7 @@ def test_ray_culling_changes_nothing(
     culled = lidar(**config).scan(scene, boxes, ego, 0)
     with monkeypatch.context() as m:
         m.setattr(Lidar, "_reachable", lambda self, *args: None)
+        m.setattr(Lidar, "_level_rays", every_level_ray)
         every_ray = lidar(**config).scan(scene, boxes, ego, 0)
     assert cast_sizes[1] == culled.rays
     for name in culled.points.dtype.names or ():
@@ -630,6 +632,17 @@ def test_ray_culling_changes_nothing(
         assert np.count_nonzero(up & (culled.points["label"] == CLASS_IDS["pole"])) > 5
     if where in ("flat", "tilted"):
         assert cast_sizes[0] < culled.rays * 0.75  # the 15° above and the level rays are not cast
+    if where == "flat":  # per column: the downward rays that meet the ground past the road's edge neither
+        downward = culled.rays * np.count_nonzero(np.asarray(lidar(**config).elevations) < 0) // 32
+        assert cast_sizes[0] < downward * 0.8
+
+
+def every_level_ray(self: Lidar, road: RoadScene, pos: np.ndarray, r32: np.ndarray) -> tuple[np.ndarray, ...]:
+    """`Lidar._level_rays` casting every ray of the sweep."""
+    rays = self._ray_array(self.ray_count, pos)
+    rays[:, 3], rays[:, 4] = self._world_dirs(r32, None, range(2))
+    rays[:, 5] = self._dirs_t[2]
+    return np.arange(self.ray_count), rays
 
 
 def test_point_padding_is_zero(straight: RoadScene) -> None:
@@ -710,11 +723,13 @@ def numpy_scan(
         kept = self._reachable(
             road, float(np.float32(pos[2])), self._dirs_t[2, : self.channels], pos[:2], pos[:2]
         )
-        cached = self._level_rays(kept)
-        cast, rays = cached.ids, cached.rays
+        channels = np.arange(self.channels) if kept is None else kept
+        cast = (np.arange(self.columns)[:, None] * self.channels + channels[None, :]).ravel()
+        d0, d1, d2 = (row[cast] for row in self._dirs_t)
+        rays = np.empty((len(cast), 6), np.float32)
+        rays[:, 5] = d2  # level: the world z component is the sensor's
         for axis, value in enumerate(pos.astype(np.float32)):
             rays[:, axis] = value  # one scalar fill per column: faster than broadcasting the row
-        d0, d1, d2 = cached.dirs
         for row, col in ((0, 3), (1, 4)):
             # r32[row, 2] is 0 for a level sensor (bar a float32 underflow): that term adds nothing
             a = d0 * r32[row, 0]
@@ -897,3 +912,69 @@ def test_scan_equals_the_numpy_reference(straight: RoadScene, where: str) -> Non
         assert np.array_equal(got.unoccluded_rays, want.unoccluded_rays)
         assert got.rays == want.rays
         assert compiled.rng.bit_generator.state == reference.rng.bit_generator.state
+
+
+@pytest.mark.parametrize("fov", [360.0, 100.0])
+def test_column_culling_is_exact_on_the_curved_highway(monkeypatch: pytest.MonkeyPatch, fov: float) -> None:
+    """A level sweep casts, per column, only the channels that can meet a triangle the column spans: on the
+    curved highway (in and out of the curves, across lanes, turned against the road, a limited field of
+    view on a yawed mount) the scan is the one casting every ray gives, and far fewer rays are cast."""
+    road = OpenDrive.from_file(HIGHWAY)
+    scene = RoadScene(road)
+    config: dict[str, object] = {
+        "channels": 32,
+        "horizontal_resolution": round(720 * fov / 360),
+        "horizontal_fov": fov,
+        "vertical_fov": [-25, 10],
+        "range_max": 80.0,
+        "mount": {"x": 1.0, "z": 1.9, "yaw": 0.0 if fov == 360 else 35.0},
+    }
+    cast_sizes: list[int] = []
+    original_cast = RoadScene.cast_ids
+
+    def counting(self: RoadScene, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        cast_sizes.append(len(rays))
+        return original_cast(self, rays)
+
+    monkeypatch.setattr(RoadScene, "cast_ids", counting)
+    for s, lane, turn in ((300.0, -1, 0.0), (700.0, -2, 0.7), (1500.0, -3, -2.0), (1100.0, -4, math.pi)):
+        p = road.lane_to_world("1", lane, s)
+        ego = car("Ego", p.x, p.y, heading=p.heading + turn)
+        ego = dataclasses.replace(ego, z=p.z)
+        ahead = car(
+            "Ahead", p.x + 12 * math.cos(p.heading), p.y + 12 * math.sin(p.heading), heading=p.heading
+        )
+        boxes = Boxes.of(frame(ego, ahead))
+        culled = lidar(**config).scan(scene, boxes, ego, 0)
+        with monkeypatch.context() as m:
+            m.setattr(Lidar, "_level_rays", every_level_ray)
+            every = lidar(**config).scan(scene, boxes, ego, 0)
+        assert cast_sizes[-1] == culled.rays and cast_sizes[-2] < culled.rays * 0.6, (s, cast_sizes[-2:])
+        assert len(culled.points) == len(every.points) > 100
+        assert culled.points.tobytes() == every.points.tobytes(), (s, lane, turn)
+        assert np.array_equal(culled.visible_rays, every.visible_rays)
+        assert np.array_equal(culled.unoccluded_rays, every.unoccluded_rays)
+
+
+def test_triangle_groups_and_grid_cover_every_triangle() -> None:
+    """The culling's groups are runs of consecutive triangles within 5 m of their centre, and the xy grid
+    lists every group in every cell its bounding box meets."""
+    from simcore.sensors.scene import triangle_groups, xy_grid
+
+    scene = RoadScene(OpenDrive.from_file(HIGHWAY))
+    start = scene.group_start
+    assert start[0] == 0 and start[-1] == scene.triangle_count and np.all(np.diff(start) >= 1)
+    assert len(start) - 1 < scene.triangle_count / 4  # neighbours do group
+    lo, hi = scene.corners.min(axis=1), scene.corners.max(axis=1)
+    for g in range(len(start) - 1):
+        a, b = lo[start[g] : start[g + 1]].min(axis=0), hi[start[g] : start[g + 1]].max(axis=0)
+        assert np.hypot(*(b - a)[:2]) <= 10.0 + 1e-9
+        assert scene.groups[g, 2] >= np.hypot(*(b - a)[:2]) / 2
+    grid, cell_start, cell_groups = xy_grid(lo, hi, cell=50.0)
+    x0, y0, size, nx, ny = grid
+    for j in (0, 17, scene.triangle_count - 1):
+        for x in (lo[j, 0], hi[j, 0]):
+            for y in (lo[j, 1], hi[j, 1]):
+                cell = int((x - x0) // size) * int(ny) + int((y - y0) // size)
+                assert j in cell_groups[cell_start[cell] : cell_start[cell + 1]]
+    assert list(triangle_groups(np.zeros((0, 3)), np.zeros((0, 3)))) == [0]

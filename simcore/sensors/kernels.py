@@ -18,34 +18,349 @@ from numba import njit
 _kernel = njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
 
 
+#: Slack of the reachability test (`level_bounds`) for the float32 rounding of the cast: metres, plus this
+#: fraction of the distance (as `Lidar._reachable`), and the relative slack of a ray's slope.
+_SLACK_M = 0.01
+_SLACK_REL = 1e-4
+
+
+@_kernel
+def level_bounds(
+    cell_start: np.ndarray,
+    cell_groups: np.ndarray,
+    grid: np.ndarray,
+    groups: np.ndarray,
+    group_start: np.ndarray,
+    circles: np.ndarray,
+    corners: np.ndarray,
+    seen: np.ndarray,
+    origin: np.ndarray,
+    yaw: float,
+    fov: float,
+    full_circle: bool,
+    range_max: float,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> int:  # pragma: no cover - compiled
+    """Per column of a level sweep from `origin` (x, y, z; sensor heading `yaw`), the slopes (tan of the
+    elevation) a ray needs to reach a static triangle within `range_max`: every ray of column c whose slope
+    is outside [lo[c], hi[c]] misses the whole scene (lo > hi: every ray of the column misses).
+
+    A ray with slope s from height z0 is at z0 + rho * s at horizontal distance rho. It can only hit a
+    triangle whose xy projection it crosses at some rho in [rho_min, rho_max] (the distance of its nearest
+    point, of its farthest; at most `range_max`: farther returns are out of range), in a column whose
+    azimuth the triangle spans, with z0 + rho * s in the triangle's z range. Bounds are widened for the
+    float32 rounding of the cast (`_SLACK_M`, `_SLACK_REL`) and by one column each side.
+
+    The triangles come in groups of neighbours (`groups`: bounding circle x, y, radius and z min, z max;
+    the group's triangles are group_start[g]..group_start[g + 1]), found through an xy grid of the groups
+    (`grid` = x0, y0, cell size, cells in x, cells in y; `cell_start`/`cell_groups` the groups per cell).
+    A far group (beyond 4 radii + 1 m) counts as its bounding circle; in a near one each triangle counts, as
+    its bounding circle (`circles`, as `groups`) when far, else exactly (`corners`); one within 5 cm of the
+    sensor spans every column. `seen` (one int per group, the last entry a stamp kept across calls) skips a
+    group met in several cells. Returns the number of groups and triangles looked at."""
+    columns = lo.shape[0]
+    for c in range(columns):
+        lo[c] = np.inf
+        hi[c] = -np.inf
+    blocks = (columns + _BLOCK - 1) // _BLOCK
+    block_lo = np.full(blocks, np.inf)
+    block_hi = np.full(blocks, -np.inf)
+    every = np.array([np.inf, -np.inf])  # the bounds of every column
+    ox, oy, oz = origin[0], origin[1], origin[2]
+    x0, y0, size = grid[0], grid[1], grid[2]
+    nx, ny = int(grid[3]), int(grid[4])
+    reach = range_max
+    width = fov / columns
+    stamp = seen[seen.shape[0] - 1] + 1
+    seen[seen.shape[0] - 1] = stamp
+    cx0 = max(int(np.floor((ox - reach - x0) / size)), 0)
+    cx1 = min(int(np.floor((ox + reach - x0) / size)), nx - 1)
+    cy0 = max(int(np.floor((oy - reach - y0) / size)), 0)
+    cy1 = min(int(np.floor((oy + reach - y0) / size)), ny - 1)
+    looked = 0
+    for cx in range(cx0, cx1 + 1):
+        for cy in range(cy0, cy1 + 1):
+            cell = cx * ny + cy
+            for k in range(cell_start[cell], cell_start[cell + 1]):
+                g = cell_groups[k]
+                if seen[g] == stamp:
+                    continue
+                seen[g] = stamp
+                looked += 1
+                near = _circle(groups, g, ox, oy, oz, yaw, reach, fov, full_circle, width, lo, hi,
+                               block_lo, block_hi, every)  # fmt: skip
+                if not near:
+                    continue
+                for j in range(group_start[g], group_start[g + 1]):
+                    looked += 1
+                    if _circle(circles, j, ox, oy, oz, yaw, reach, fov, full_circle, width, lo, hi,
+                               block_lo, block_hi, every):  # fmt: skip
+                        _triangle(corners, circles, j, ox, oy, oz, yaw, reach, fov, full_circle, width, lo,
+                                  hi, block_lo, block_hi, every)  # fmt: skip
+    for c in range(columns):
+        b = c // _BLOCK
+        lo[c] = min(lo[c], block_lo[b], every[0])
+        hi[c] = max(hi[c], block_hi[b], every[1])
+    return looked
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+def _circle(
+    circles: np.ndarray,
+    j: int,
+    ox: float,
+    oy: float,
+    oz: float,
+    yaw: float,
+    reach: float,
+    fov: float,
+    full_circle: bool,
+    width: float,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    block_lo: np.ndarray,
+    block_hi: np.ndarray,
+    every: np.ndarray,
+) -> bool:  # pragma: no cover - compiled
+    """`level_bounds` for the bounding circle `circles[j]` (x, y, radius, z min, z max) when it is far
+    (beyond 4 radii + 1 m): widens the bounds, returns False; out of reach: False; near: True (the caller
+    looks closer)."""
+    dist = np.hypot(circles[j, 0] - ox, circles[j, 1] - oy)
+    radius = circles[j, 2]
+    if dist - radius > reach + _SLACK_M + _SLACK_REL * reach:
+        return False
+    if dist <= 4.0 * radius + 1.0:
+        return True
+    a_mid = np.arctan2(circles[j, 1] - oy, circles[j, 0] - ox) - yaw
+    a_half = np.arcsin(radius / dist)
+    _apply(dist - radius, dist + radius, circles[j, 3] - oz, circles[j, 4] - oz, a_mid - a_half,
+           a_mid + a_half, reach, fov, full_circle, width, lo, hi, block_lo, block_hi, every)  # fmt: skip
+    return False
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+def _triangle(
+    corners: np.ndarray,
+    circles: np.ndarray,
+    j: int,
+    ox: float,
+    oy: float,
+    oz: float,
+    yaw: float,
+    reach: float,
+    fov: float,
+    full_circle: bool,
+    width: float,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    block_lo: np.ndarray,
+    block_hi: np.ndarray,
+    every: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """`level_bounds` for triangle j near the sensor: its own distances and arc."""
+    ax, ay = corners[j, 0, 0] - ox, corners[j, 0, 1] - oy
+    bx, by = corners[j, 1, 0] - ox, corners[j, 1, 1] - oy
+    qx, qy = corners[j, 2, 0] - ox, corners[j, 2, 1] - oy
+    rho_max = max(np.hypot(ax, ay), np.hypot(bx, by), np.hypot(qx, qy))
+    # the nearest point of the triangle's projection to the origin: 0 inside, else an edge's
+    d1 = ax * by - ay * bx
+    d2 = bx * qy - by * qx
+    d3 = qx * ay - qy * ax
+    inside = (d1 >= 0.0 and d2 >= 0.0 and d3 >= 0.0) or (d1 <= 0.0 and d2 <= 0.0 and d3 <= 0.0)
+    rho_min = 0.0
+    if not inside:
+        rho_min = min(
+            _segment_distance(ax, ay, bx, by),
+            _segment_distance(bx, by, qx, qy),
+            _segment_distance(qx, qy, ax, ay),
+        )
+    a_lo = a_hi = 0.0
+    if rho_min > 0.05:  # the arc it spans (< pi: it does not hold the origin)
+        a0 = np.arctan2(ay, ax)
+        e1 = _wrap(np.arctan2(by, bx) - a0)
+        e2 = _wrap(np.arctan2(qy, qx) - a0)
+        a_lo = a0 + min(0.0, e1, e2) - yaw
+        a_hi = a0 + max(0.0, e1, e2) - yaw
+    _apply(rho_min, rho_max, circles[j, 3] - oz, circles[j, 4] - oz, a_lo, a_hi, reach, fov, full_circle,
+           width, lo, hi, block_lo, block_hi, every)  # fmt: skip
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+def _apply(
+    rho_min: float,
+    rho_max: float,
+    dz_lo: float,
+    dz_hi: float,
+    a_lo: float,
+    a_hi: float,
+    reach: float,
+    fov: float,
+    full_circle: bool,
+    width: float,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    block_lo: np.ndarray,
+    block_hi: np.ndarray,
+    every: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """Widen the bounds of the columns of azimuths a_lo..a_hi (sensor frame; every column when rho_min is
+    within 5 cm) by the slopes from heights dz_lo..dz_hi (relative to the sensor) at horizontal distances
+    rho_min..rho_max, with the slack for float32 rounding."""
+    rho_min -= _SLACK_M + _SLACK_REL * rho_min
+    if rho_min > reach:
+        return
+    rho_max = min(rho_max, reach) + _SLACK_M + _SLACK_REL * reach
+    zslack = _SLACK_M + _SLACK_REL * reach
+    dz_lo -= zslack
+    dz_hi += zslack
+    if rho_min <= 0.0:
+        s_lo = -np.inf if dz_lo < 0.0 else dz_lo / rho_max
+        s_hi = np.inf if dz_hi > 0.0 else dz_hi / rho_max
+    else:
+        s_lo = dz_lo / (rho_min if dz_lo < 0.0 else rho_max)
+        s_hi = dz_hi / (rho_min if dz_hi > 0.0 else rho_max)
+    columns = lo.shape[0]
+    if rho_min <= 0.05:  # (nearly) under the sensor: every column
+        every[0] = min(every[0], s_lo)
+        every[1] = max(every[1], s_hi)
+        return
+    half = fov / 2.0
+    # column of azimuth a: (half - a) / width - 0.5 (decreasing in a)
+    for shift in (0.0, -2.0 * np.pi, 2.0 * np.pi):
+        b_lo, b_hi = a_lo + shift, a_hi + shift
+        if not full_circle:
+            b_lo, b_hi = max(b_lo, -half), min(b_hi, half)
+            if b_lo > b_hi:
+                continue
+        c0 = int(np.floor((half - b_hi) / width - 0.5)) - 1
+        c1 = int(np.ceil((half - b_lo) / width - 0.5)) + 1
+        if full_circle:
+            n = c1 - c0 + 1
+            if n >= columns:
+                every[0] = min(every[0], s_lo)
+                every[1] = max(every[1], s_hi)
+                return
+            c0 %= columns
+            c1 = c0 + n - 1
+            if c1 < columns:
+                _widen(lo, hi, block_lo, block_hi, c0, c1, s_lo, s_hi)
+            else:
+                _widen(lo, hi, block_lo, block_hi, c0, columns - 1, s_lo, s_hi)
+                _widen(lo, hi, block_lo, block_hi, 0, c1 - columns, s_lo, s_hi)
+            return  # one pass covers the arc, whatever its wrap
+        c0, c1 = max(c0, 0), min(c1, columns - 1)
+        if c0 <= c1:
+            _widen(lo, hi, block_lo, block_hi, c0, c1, s_lo, s_hi)
+
+
+#: Columns per block of `_widen` (a wide arc widens whole blocks, not each of their columns).
+_BLOCK = 32
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+def _widen(
+    lo: np.ndarray,
+    hi: np.ndarray,
+    block_lo: np.ndarray,
+    block_hi: np.ndarray,
+    c0: int,
+    c1: int,
+    s_lo: float,
+    s_hi: float,
+) -> None:  # pragma: no cover - compiled
+    """Widen the slope bounds of columns c0..c1 (0 <= c0 <= c1 < columns) to [s_lo, s_hi]: the blocks of
+    `_BLOCK` columns wholly inside the range as blocks, the columns at its ends one by one."""
+    b0 = (c0 + _BLOCK - 1) // _BLOCK  # the first block starting at or after c0
+    b1 = (c1 + 1) // _BLOCK - 1  # the last block ending at or before c1
+    if b0 > b1:
+        for c in range(c0, c1 + 1):
+            lo[c] = min(lo[c], s_lo)
+            hi[c] = max(hi[c], s_hi)
+        return
+    for c in range(c0, b0 * _BLOCK):
+        lo[c] = min(lo[c], s_lo)
+        hi[c] = max(hi[c], s_hi)
+    for b in range(b0, b1 + 1):
+        block_lo[b] = min(block_lo[b], s_lo)
+        block_hi[b] = max(block_hi[b], s_hi)
+    for c in range((b1 + 1) * _BLOCK, c1 + 1):
+        lo[c] = min(lo[c], s_lo)
+        hi[c] = max(hi[c], s_hi)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+def _segment_distance(ax: float, ay: float, bx: float, by: float) -> float:  # pragma: no cover - compiled
+    """Distance from the origin to the segment a-b."""
+    dx, dy = bx - ax, by - ay
+    length2 = dx * dx + dy * dy
+    u = 0.0 if length2 <= 0.0 else min(max(-(ax * dx + ay * dy) / length2, 0.0), 1.0)
+    return float(np.hypot(ax + u * dx, ay + u * dy))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+def _wrap(a: float) -> float:  # pragma: no cover - compiled
+    """An angle in (-pi, pi]."""
+    while a > np.pi:
+        a -= 2.0 * np.pi
+    while a <= -np.pi:
+        a += 2.0 * np.pi
+    return a
+
+
 @_kernel
 def fill_level_rays(
-    rays: np.ndarray, d0: np.ndarray, d1: np.ndarray, d2: np.ndarray, pos32: np.ndarray, r32: np.ndarray
-) -> None:  # pragma: no cover - compiled
-    """A level sweep's (K, 6) float32 ray buffer: origins `pos32` and the world x, y direction components
-    (d0 * r[row, 0] + d1 * r[row, 1] (+ d2 * r[row, 2] unless that is 0, as it is bar a float32 underflow);
-    the z components are already in place)."""
+    rays: np.ndarray,
+    ids: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    tan_elev: np.ndarray,
+    dirs_t: np.ndarray,
+    pos32: np.ndarray,
+    r32: np.ndarray,
+) -> int:  # pragma: no cover - compiled
+    """The rays of a level sweep that can reach the static scene (`level_bounds`): writes their indices to
+    the front of `ids` and their (K, 6) float32 rows to the front of `rays` (origin `pos32`, world direction
+    x = d0 * r[0, 0] + d1 * r[0, 1] (+ d2 * r[0, 2] unless that is 0, as it is bar a float32 underflow), y
+    alike, z = the sensor frame's: level); returns K. A ray of column c and channel k is kept when its
+    slope tan_elev[k] is within [lo[c], hi[c]] widened by `_SLACK_REL`."""
+    channels = tan_elev.shape[0]
     px, py, pz = pos32[0], pos32[1], pos32[2]
     r00, r01, r02 = r32[0, 0], r32[0, 1], r32[0, 2]
     r10, r11, r12 = r32[1, 0], r32[1, 1], r32[1, 2]
     z0 = r02 != 0.0
     z1 = r12 != 0.0
-    for j in range(rays.shape[0]):
-        a = d0[j]
-        b = d1[j]
-        rays[j, 0] = px
-        rays[j, 1] = py
-        rays[j, 2] = pz
-        x = a * r00
-        x += b * r01
-        y = a * r10
-        y += b * r11
-        if z0:
-            x += d2[j] * r02
-        if z1:
-            y += d2[j] * r12
-        rays[j, 3] = x
-        rays[j, 4] = y
+    n = 0
+    for c in range(lo.shape[0]):
+        s_lo, s_hi = lo[c], hi[c]
+        if s_lo > s_hi:
+            continue
+        s_lo -= _SLACK_REL * (1.0 + abs(s_lo))
+        s_hi += _SLACK_REL * (1.0 + abs(s_hi))
+        for k in range(channels):
+            s = tan_elev[k]
+            if s < s_lo or s > s_hi:
+                continue
+            g = c * channels + k
+            a = dirs_t[0, g]
+            b = dirs_t[1, g]
+            rays[n, 0] = px
+            rays[n, 1] = py
+            rays[n, 2] = pz
+            x = a * r00
+            x += b * r01
+            y = a * r10
+            y += b * r11
+            if z0:
+                x += dirs_t[2, g] * r02
+            if z1:
+                y += dirs_t[2, g] * r12
+            rays[n, 3] = x
+            rays[n, 4] = y
+            rays[n, 5] = dirs_t[2, g]
+            ids[n] = g
+            n += 1
+    return n
 
 
 @_kernel
@@ -235,7 +550,13 @@ def warm() -> None:
     """Compile (or load from the cache) every kernel for the argument types the lidar passes."""
     f32, u8, u16, u32, i64 = np.float32, np.uint8, np.uint16, np.uint32, np.int64
     rays = np.zeros((1, 6), f32)
-    fill_level_rays(rays, *(np.zeros(1, f32),) * 3, np.zeros(3, f32), np.eye(3, dtype=f32))
+    one_f, ones = np.zeros(1), np.ones(1)
+    level_bounds(
+        np.zeros(2, i64), np.zeros(0, i64), np.array([0.0, 0.0, 1.0, 1.0, 1.0]), np.zeros((0, 5)),
+        np.zeros(1, i64), np.zeros((0, 5)), np.zeros((0, 3, 3)), np.zeros(1, i64), np.zeros(3), 0.0, 1.0, True, 1.0, one_f, ones,
+    )  # fmt: skip
+    fill_level_rays(rays, np.zeros(1, i64), one_f, ones, one_f, np.zeros((3, 1), f32), np.zeros(3, f32),
+                    np.eye(3, dtype=f32))  # fmt: skip
     t, cos, classes, oid = np.zeros(1, f32), np.zeros(1, f32), np.zeros(1, u8), np.zeros(1, u32)
     for every in (True, False):
         road_returns(

@@ -14,7 +14,9 @@ Speed: only the rays that can reach the static scene within `rangeMax` go to ope
 over its range stays above or below every road triangle and scenery box within reach cannot hit; on a flat
 road the rays at and above the horizon). This is exact: the scan is the one casting every ray would give
 (tests/test_sensors.py checks it on hills, with scenery, tilted mounts and motion distortion). A level
-lidar (no pitch or roll) culls whole channels and caches the index set (and a ray buffer) per channel set.
+lidar (no pitch or roll) culls per column: a column keeps the channels whose slope can meet a triangle its
+azimuth spans (`kernels.level_bounds`, through an xy grid of the scene), so the rays to the side past the
+road's edge (misses, a third of a highway sweep) are not cast either.
 A box is intersected only with the columns its corners span and the channels whose elevation can reach it
 (exact as well: the slab test still decides every ray kept).
 
@@ -62,16 +64,6 @@ class LidarScan:
     visible_rays: np.ndarray  # (N,) int: rays whose first return is the object (before dropout)
     unoccluded_rays: np.ndarray  # (N,) int: rays that would hit it were nothing in front
     rays: int
-
-
-@dataclass(frozen=True, slots=True)
-class _LevelRays:
-    """The rays a level sweep casts (whole channels): their indices (None: every ray), their sensor-frame directions (float32 rows) and a reusable (K, 6) float32 ray
-    buffer whose z direction is already filled in (the scan writes origins and x, y directions)."""
-
-    ids: np.ndarray | None
-    dirs: list[np.ndarray]
-    rays: np.ndarray
 
 
 def mount_pose(
@@ -128,7 +120,6 @@ class Lidar:
         self.mount_rot = rotation(math.radians(m.yaw), math.radians(m.pitch), math.radians(m.roll))
         self.mount_pos = np.array([m.x, m.y, m.z])
         self.rng = np.random.default_rng(seed)
-        self._level_cache: dict[bytes, _LevelRays] = {}
         self._tan_elev = np.tan(self.elevations)
         self._mount_level = bool(self.mount_rot[2, 0] == 0.0 and self.mount_rot[2, 1] == 0.0)
         n_rays = len(self.dirs)
@@ -140,26 +131,45 @@ class Lidar:
         self._drop = np.empty(n_rays, np.float32)
         self._noise = np.empty(n_rays, np.float32)
         self._kept = np.empty(n_rays, np.int64)
+        self._cast_ids = np.empty(n_rays, np.int64)
+        self._cast_rays = np.empty((n_rays, 6), np.float32)
+        self._slope_lo = np.empty(self.columns)
+        self._slope_hi = np.empty(self.columns)
         self._all_columns = np.arange(self.columns)
         self._all_channels = np.arange(self.channels)
         kernels.warm()  # compiled (or loaded from numba's cache) here, not in the first sweep
 
-    def _level_rays(self, kept: np.ndarray | None) -> _LevelRays:
-        """The cast rays of a level sweep whose channels `kept` (None: all) can reach the scene: cached per
-        channel set (a sensor keeps the same set while the ground below stays the same)."""
-        key = b"all" if kept is None else kept.tobytes()
-        entry = self._level_cache.get(key)
-        if entry is not None:
-            return entry
-        if len(self._level_cache) >= 16:
-            self._level_cache.clear()
-        channels = np.arange(self.channels) if kept is None else kept
-        ids = (np.arange(self.columns)[:, None] * self.channels + channels[None, :]).ravel()
-        dirs = [row[ids] for row in self._dirs_t]
-        rays = np.empty((len(ids), 6), np.float32)
-        rays[:, 5] = dirs[2]  # level: the world z component is the sensor's
-        entry = self._level_cache[key] = _LevelRays(None if kept is None else ids, dirs, rays)
-        return entry
+    def _level_rays(self, road: RoadScene, pos: np.ndarray, r32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rays of a level sweep (no pitch, no roll: a ray's slope is its channel's) that can reach the
+        static scene within range, as (indices, (K, 6) float32 rays): per column, only the channels whose
+        slope can meet a triangle the column's azimuth spans (`kernels.level_bounds`; exact, the rays left
+        out miss). On a road, the rays to the side beyond the road's edge are left out, not only those
+        above the horizon."""
+        if road.triangle_count == 0:
+            return self._cast_ids[:0], self._cast_rays[:0]
+        pos32 = pos.astype(np.float32)
+        kernels.level_bounds(
+            road.cell_start,
+            road.cell_groups,
+            road.grid,
+            road.groups,
+            road.group_start,
+            road.circles,
+            road.corners,
+            road.seen,
+            pos32.astype(np.float64),
+            math.atan2(float(r32[1, 0]), float(r32[0, 0])),
+            self.fov,
+            self.full_circle,
+            float(self.config.range_max),
+            self._slope_lo,
+            self._slope_hi,
+        )
+        n = kernels.fill_level_rays(
+            self._cast_rays, self._cast_ids, self._slope_lo, self._slope_hi, self._tan_elev, self._dirs_t,
+            pos32, r32,
+        )  # fmt: skip
+        return self._cast_ids[:n], self._cast_rays[:n]
 
     @property
     def ray_count(self) -> int:
@@ -296,15 +306,7 @@ class Lidar:
         if distort:
             rays, cast, col_pos, origins, dirs_world = self._distorted_rays(road, carrier)
         elif level_sweep:
-            # level (no pitch, no roll): a ray's world z component is its channel's, so the rays that can
-            # reach the scene are whole channels; their index set, directions and ray buffer are cached
-            kept = self._reachable(
-                road, float(np.float32(pos[2])), self._dirs_t[2, : self.channels], pos[:2], pos[:2]
-            )
-            cached = self._level_rays(kept)
-            cast, rays = cached.ids, cached.rays
-            d0, d1, d2 = cached.dirs
-            kernels.fill_level_rays(rays, d0, d1, d2, pos.astype(np.float32), r32)
+            cast, rays = self._level_rays(road, pos, r32)
         else:
             dz = self._world_dirs(r32, None, range(2, 3))[0]
             cast = self._reachable(road, float(np.float32(pos[2])), dz, pos[:2], pos[:2])

@@ -271,6 +271,59 @@ def intersect_box_rows(
 
 
 _Z_GRID = 16.0  # m: the grid of RoadScene.z_range's cache
+_XY_CELL = 32.0  # m: the cells of RoadScene's triangle grid
+
+
+def bounding_circles(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(N, 5) float64 per box lo..hi (N, 3): the xy circle around it (centre x, y, radius: half the xy
+    diagonal, a hair larger) and its z range (min, max)."""
+    centre = (lo[:, :2] + hi[:, :2]) / 2.0
+    radius = np.hypot(*(hi[:, :2] - lo[:, :2]).T) / 2.0 if len(lo) else np.zeros(0)
+    return np.column_stack([centre, radius * (1.0 + 1e-9) + 1e-9, lo[:, 2], hi[:, 2]])
+
+
+def triangle_groups(lo: np.ndarray, hi: np.ndarray, radius: float = 5.0, most: int = 64) -> np.ndarray:
+    """Runs of consecutive triangles (by index: a road mesh lists a lane's triangles along it) whose joint xy
+    bounding box has at most `radius` m half-diagonal, at most `most` each: the start index of each run and,
+    last, the number of triangles."""
+    starts = [0] if len(lo) else []
+    x0, y0, x1, y1 = (lo[0, 0], lo[0, 1], hi[0, 0], hi[0, 1]) if len(lo) else (0.0, 0.0, 0.0, 0.0)
+    limit = (2.0 * radius) ** 2
+    rows = zip(lo[:, 0].tolist(), lo[:, 1].tolist(), hi[:, 0].tolist(), hi[:, 1].tolist(), strict=True)
+    for i, (a, b, c, d) in enumerate(rows):
+        nx0, ny0, nx1, ny1 = min(x0, a), min(y0, b), max(x1, c), max(y1, d)
+        if i - starts[-1] >= most or (nx1 - nx0) ** 2 + (ny1 - ny0) ** 2 > limit:
+            starts.append(i)
+            nx0, ny0, nx1, ny1 = a, b, c, d
+        x0, y0, x1, y1 = nx0, ny0, nx1, ny1
+    return np.array([*starts, len(lo)], np.int64)
+
+
+def xy_grid(
+    lo: np.ndarray, hi: np.ndarray, cell: float = _XY_CELL
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A uniform xy grid over boxes (T, >= 2) `lo`..`hi`: (x0, y0, cell, cells in x, cells in y) as
+    float64, and per cell (index cx * cells in y + cy) the boxes meeting it as CSR arrays (start (cells + 1,),
+    box indices), each box listed in every cell its xy bounds meet."""
+    if not len(lo):
+        return np.array([0.0, 0.0, cell, 1.0, 1.0]), np.zeros(2, np.int64), np.zeros(0, np.int64)
+    x0, y0 = float(lo[:, 0].min()), float(lo[:, 1].min())
+    c_lo = np.floor((lo[:, :2] - (x0, y0)) / cell).astype(np.int64)
+    c_hi = np.floor((hi[:, :2] - (x0, y0)) / cell).astype(np.int64)
+    nx, ny = int(c_hi[:, 0].max()) + 1, int(c_hi[:, 1].max()) + 1
+    span = c_hi - c_lo
+    cells: list[np.ndarray] = []
+    boxes: list[np.ndarray] = []
+    for dx in range(int(span[:, 0].max()) + 1):
+        for dy in range(int(span[:, 1].max()) + 1):
+            here = np.flatnonzero((span[:, 0] >= dx) & (span[:, 1] >= dy))
+            cells.append((c_lo[here, 0] + dx) * ny + c_lo[here, 1] + dy)
+            boxes.append(here)
+    cell_of, box = np.concatenate(cells), np.concatenate(boxes)
+    order = np.argsort(cell_of, kind="stable")
+    start = np.zeros(nx * ny + 1, np.int64)
+    np.cumsum(np.bincount(cell_of, minlength=nx * ny), out=start[1:])
+    return np.array([x0, y0, cell, float(nx), float(ny)]), start, box[order].astype(np.int64)
 
 
 class RoadScene:
@@ -307,7 +360,23 @@ class RoadScene:
             self._lo = corners.min(axis=1)
             self._hi = corners.max(axis=1)
         else:
+            corners = np.zeros((0, 3, 3))
             self._lo = self._hi = np.zeros((0, 3))
+        # for `kernels.level_bounds` (which rays of a level sweep can reach the scene): the triangles'
+        # corners (T, 3, 3) float64, as cast, and bounding circles; groups of neighbouring triangles, their
+        # bounding circles and an xy grid of them; per group the stamp of the last sweep that looked at it
+        self.corners = corners
+        self.circles = bounding_circles(self._lo, self._hi)
+        self.group_start = triangle_groups(self._lo, self._hi)
+        first = self.group_start[:-1]
+        if len(first):
+            g_lo = np.minimum.reduceat(self._lo, first)
+            g_hi = np.maximum.reduceat(self._hi, first)
+        else:
+            g_lo = g_hi = np.zeros((0, 3))
+        self.groups = bounding_circles(g_lo, g_hi)
+        self.grid, self.cell_start, self.cell_groups = xy_grid(g_lo, g_hi)
+        self.seen = np.zeros(len(first) + 1, np.int64)
         self._z_cache: dict[tuple[int, int, int, int], tuple[float, float] | None] = {}
         if len(triangles):
             self.scene.add_triangles(
