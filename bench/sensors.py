@@ -335,13 +335,10 @@ def raw_cast() -> dict[str, float]:
         scene.cast_rays(tensor)
         raw.append(time.perf_counter() - t0)
         raw_cpu.append(time.process_time() - c0)
-    # the rays the lidar hands to open3d: those that can reach the static scene within range
-    r32 = rot.astype(np.float32)
-    dz = lidar._world_dirs(r32, None, range(2, 3))[0]
-    reachable = lidar._reachable(
-        road_scene(road, scenario.road_file), float(np.float32(pos[2])), dz, pos[:2], pos[:2]
-    )
-    subset = rays if reachable is None else np.ascontiguousarray(rays[reachable])
+    # the rays the lidar hands to open3d: those that can reach the static scene within range (a level
+    # sweep: per column, the channels that can meet a triangle the column spans)
+    _, reachable = lidar._level_rays(road_scene(road, scenario.road_file), pos, rot.astype(np.float32))
+    subset = np.ascontiguousarray(reachable)
     sub_tensor = o3d.core.Tensor.from_numpy(subset)
     culled = []
     for _ in range(max(REPEAT, 3) * 5):

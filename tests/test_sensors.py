@@ -12,7 +12,7 @@ import pytest
 from pydantic import ValidationError
 
 from simcore.errors import BadInput
-from simcore.sensors import ros
+from simcore.sensors import kernels, ros
 from simcore.sensors.camera import Camera
 from simcore.sensors.classes import CLASS_IDS
 from simcore.sensors.lidar import POINT_DTYPE, Lidar, LidarScan, mount_pose
@@ -154,7 +154,6 @@ def test_box_kernel_matches_the_row_wise_slab_test() -> None:
     """`kernels.box_returns` is `intersect_box_rows` ray by ray (the same float64 arithmetic): the same
     ranges (as float32) and |cos|, also for rays parallel to a face and starting in its plane; it only
     takes the rays where the box is closer, and counts the hits within range."""
-    from simcore.sensors import kernels
 
     rng = np.random.default_rng(2)
     dirs = rng.normal(size=(20000, 3))
@@ -692,12 +691,47 @@ def test_box_channel_culling_is_exact(
         culled = lidar(**config).scan(straight, boxes, ego, 0)
         with monkeypatch.context() as m:
             m.setattr(Lidar, "_channels_of", lambda self, *args: None)
+            m.setattr(kernels, "boxes_returns", every_box_ray)
             every = lidar(**config).scan(straight, boxes, ego, 0)
         assert len(culled.points) == len(every.points) > 100
         assert culled.points.tobytes() == every.points.tobytes()
         assert np.array_equal(culled.visible_rays, every.visible_rays)
         assert np.array_equal(culled.unoccluded_rays, every.unoccluded_rays)
         assert np.count_nonzero(culled.unoccluded_rays) >= 5
+
+
+def every_box_ray(
+    t: np.ndarray,
+    cos_inc: np.ndarray,
+    classes: np.ndarray,
+    object_id: np.ndarray,
+    centers: np.ndarray,
+    rotations: np.ndarray,
+    halves: np.ndarray,
+    box_classes: np.ndarray,
+    box_ids: np.ndarray,
+    skip: int,
+    pos: np.ndarray,
+    rot: np.ndarray,
+    r32: np.ndarray,
+    dirs_t: np.ndarray,
+    tan_elev: np.ndarray,
+    columns: int,
+    *_: object,
+) -> None:
+    """`kernels.boxes_returns` intersecting every box (but the carrier) with every ray of the sweep."""
+    range_min, range_max, unoccluded = _[-3:]
+    for i in range(len(centers)):
+        unoccluded[i] = 0  # type: ignore[index]
+        if i == skip:
+            continue
+        r = [float(centers[i, a] - pos[a]) for a in range(3)]
+        o = np.array([-(r[0] * rotations[i, 0, a] + r[1] * rotations[i, 1, a] + r[2] * rotations[i, 2, a])
+                      for a in range(3)])  # fmt: skip
+        unoccluded[i] = kernels.box_returns(  # type: ignore[index]
+            t, cos_inc, classes, object_id, np.arange(columns), np.arange(len(tan_elev)), len(tan_elev),
+            dirs_t, r32, o, rotations[i], halves[i], range_min, range_max, box_classes[i], box_ids[i],
+        )  # fmt: skip
 
 
 # --- the compiled kernels against the numpy reference ----------------------------------------------------
@@ -971,7 +1005,7 @@ def test_triangle_groups_and_grid_cover_every_triangle() -> None:
         assert np.hypot(*(b - a)[:2]) <= 10.0 + 1e-9
         assert scene.groups[g, 2] >= np.hypot(*(b - a)[:2]) / 2
     grid, cell_start, cell_groups = xy_grid(lo, hi, cell=50.0)
-    x0, y0, size, nx, ny = grid
+    x0, y0, size, _nx, ny = grid
     for j in (0, 17, scene.triangle_count - 1):
         for x in (lo[j, 0], hi[j, 0]):
             for y in (lo[j, 1], hi[j, 1]):

@@ -464,6 +464,142 @@ def box_returns(
 
 
 @_kernel
+def boxes_returns(
+    t: np.ndarray,
+    cos_inc: np.ndarray,
+    classes: np.ndarray,
+    object_id: np.ndarray,
+    centers: np.ndarray,
+    rotations: np.ndarray,
+    halves: np.ndarray,
+    box_classes: np.ndarray,
+    box_ids: np.ndarray,
+    skip: int,
+    pos: np.ndarray,
+    rot: np.ndarray,
+    r32: np.ndarray,
+    dirs_t: np.ndarray,
+    tan_elev: np.ndarray,
+    columns: int,
+    fov: float,
+    full_circle: bool,
+    range_min: float,
+    range_max: float,
+    unoccluded: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """`box_returns` for every box of the frame but `skip` (the carrier) within `range_max` of a sweep from
+    `pos` with rotation `rot` (float64; `r32` as float32): each box only with the columns its corners span
+    (one column of slack each side; every column when they surround the sensor) and the channels whose
+    elevation can reach it (`tan_elev`: the slope of each channel, with 1e-4 relative slack). Writes each
+    box's rays hitting it within range to `unoccluded`."""
+    channels = tan_elev.shape[0]
+    width = fov / columns
+    half_fov = fov / 2.0
+    marks = np.zeros(columns, np.uint8)
+    cols = np.empty(columns, np.int64)
+    chans = np.empty(channels, np.int64)
+    corner = np.empty((8, 3))
+    angles = np.empty(8)
+    for i in range(centers.shape[0]):
+        unoccluded[i] = 0
+        if i == skip:
+            continue  # a sensor does not see its own carrier
+        hx, hy, hz = halves[i, 0], halves[i, 1], halves[i, 2]
+        rx = centers[i, 0] - pos[0]
+        ry = centers[i, 1] - pos[1]
+        rz = centers[i, 2] - pos[2]
+        if np.sqrt(rx * rx + ry * ry + rz * rz) - np.sqrt(hx * hx + hy * hy + hz * hz) > range_max:
+            continue
+        # the corners in the sensor frame
+        for k in range(8):
+            sx = hx if k & 4 else -hx
+            sy = hy if k & 2 else -hy
+            sz = hz if k & 1 else -hz
+            wx = rx + rotations[i, 0, 0] * sx + rotations[i, 0, 1] * sy + rotations[i, 0, 2] * sz
+            wy = ry + rotations[i, 1, 0] * sx + rotations[i, 1, 1] * sy + rotations[i, 1, 2] * sz
+            wz = rz + rotations[i, 2, 0] * sx + rotations[i, 2, 1] * sy + rotations[i, 2, 2] * sz
+            for a in range(3):
+                corner[k, a] = wx * rot[0, a] + wy * rot[1, a] + wz * rot[2, a]
+            angles[k] = np.arctan2(corner[k, 1], corner[k, 0]) % (2.0 * np.pi)
+        # columns: the smallest arc holding every corner's azimuth (none: they surround the sensor)
+        angles.sort()
+        gap, j = angles[0] + 2.0 * np.pi - angles[7], 7
+        for k in range(7):
+            if angles[k + 1] - angles[k] > gap:
+                gap, j = angles[k + 1] - angles[k], k
+        n_cols = 0
+        if gap <= np.pi:
+            for c in range(columns):
+                cols[c] = c
+            n_cols = columns
+        else:
+            a_lo = angles[(j + 1) % 8]
+            a_hi = a_lo + 2.0 * np.pi - gap
+            if full_circle:
+                c0 = int(np.floor((half_fov - a_hi) / width - 0.5)) - 1
+                c1 = int(np.ceil((half_fov - a_lo) / width - 0.5)) + 1
+                if c1 - c0 + 1 >= columns:
+                    c0, c1 = 0, columns - 1
+                for c in range(c0, c1 + 1):
+                    cols[n_cols] = c % columns
+                    n_cols += 1
+            else:
+                marks[:] = 0
+                for shift in (0.0, -2.0 * np.pi, 2.0 * np.pi):
+                    b_lo, b_hi = max(a_lo + shift, -half_fov), min(a_hi + shift, half_fov)
+                    if b_lo > b_hi:
+                        continue
+                    c0 = max(int(np.floor((half_fov - b_hi) / width - 0.5)) - 1, 0)
+                    c1 = min(int(np.ceil((half_fov - b_lo) / width - 0.5)) + 1, columns - 1)
+                    for c in range(c0, c1 + 1):
+                        marks[c] = 1
+                for c in range(columns):
+                    if marks[c]:
+                        cols[n_cols] = c
+                        n_cols += 1
+        if n_cols == 0:
+            continue
+        # channels: the slopes z / rho of the box's points (z within the corners', rho from its bounding
+        # circle's nearest point to its farthest corner)
+        mx = my = 0.0
+        zmin, zmax = np.inf, -np.inf
+        for k in range(8):
+            mx += corner[k, 0] / 8.0
+            my += corner[k, 1] / 8.0
+            zmin = min(zmin, corner[k, 2])
+            zmax = max(zmax, corner[k, 2])
+        radius = 0.0
+        rho_max = 0.0
+        for k in range(8):
+            radius = max(radius, np.hypot(corner[k, 0] - mx, corner[k, 1] - my))
+            rho_max = max(rho_max, np.hypot(corner[k, 0], corner[k, 1]))
+        rho_min = max(np.hypot(mx, my) - radius, 0.0)
+        if rho_min <= 0.0:
+            s_lo = -np.inf if zmin < 0.0 else zmin / rho_max
+            s_hi = np.inf if zmax > 0.0 else zmax / rho_max
+        else:
+            s_lo = zmin / (rho_min if zmin < 0.0 else rho_max)
+            s_hi = zmax / (rho_min if zmax > 0.0 else rho_max)
+        s_lo -= _SLACK_REL * (1.0 + abs(s_lo))
+        s_hi += _SLACK_REL * (1.0 + abs(s_hi))
+        n_chans = 0
+        for k in range(channels):
+            if tan_elev[k] >= s_lo and tan_elev[k] <= s_hi:
+                chans[n_chans] = k
+                n_chans += 1
+        if n_chans == 0:
+            continue
+        # the ray origin in the box frame
+        o = np.empty(3)
+        for a in range(3):
+            o[a] = -(rx * rotations[i, 0, a] + ry * rotations[i, 1, a] + rz * rotations[i, 2, a])
+        unoccluded[i] = box_returns(
+            t, cos_inc, classes, object_id, cols[:n_cols], chans[:n_chans], channels, dirs_t, r32, o,
+            rotations[i], halves[i], range_min, range_max, box_classes[i], box_ids[i],
+        )  # fmt: skip
+
+
+@_kernel
 def select_returns(
     t: np.ndarray,
     object_id: np.ndarray,
@@ -576,6 +712,11 @@ def warm() -> None:
     box_returns(
         t, cos, classes, oid, one, one, 1, np.zeros((3, 1), f32), np.eye(3, dtype=f32),
         np.zeros(3), np.eye(3), np.ones(3), 0.0, 1.0, u8(1), u32(1),
+    )  # fmt: skip
+    boxes_returns(
+        t, cos, classes, oid, np.zeros((1, 3)), np.eye(3)[None], np.ones((1, 3)), np.zeros(1, u8),
+        np.ones(1, u32), 0, np.zeros(3), np.eye(3), np.eye(3, dtype=f32), np.zeros((3, 1), f32), np.zeros(1),
+        1, 1.0, True, 0.0, 1.0, np.zeros(1, i64),
     )  # fmt: skip
     kept, counts = np.zeros(1, i64), np.zeros(2, i64)
     select_returns(t, oid, f32(0), f32(1), np.zeros(0, f32), f32(0), kept, counts)

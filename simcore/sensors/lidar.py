@@ -334,48 +334,28 @@ class Lidar:
         nbox = len(boxes.names)
         unoccluded = np.zeros(nbox, np.int64)
         reach = cfg.range_max
-        if nbox:
+        if nbox and not distort:
+            kernels.boxes_returns(
+                t, cos_inc, classes, object_id, boxes.centers, boxes.rotations, boxes.half, boxes.classes,
+                boxes.ids, carrier_index, pos, rot, r32, self._dirs_t, self._tan_elev, self.columns,
+                self.fov, self.full_circle, float(cfg.range_min), float(reach), unoccluded,
+            )  # fmt: skip
+        elif nbox:  # motion distortion: per-column origins, numpy
             rel = boxes.centers - pos
             radius = np.linalg.norm(boxes.half, axis=1)
             near = np.linalg.norm(rel, axis=1) - radius <= reach
-            widen: float | None = (
-                0.0  # how far the rays' origins are from `pos` horizontally; None: not level
-            )
-            if distort:
-                shift = np.hypot(*carrier.velocity) * self.period
-                level = self._mount_level and carrier.pitch == 0.0 and carrier.roll == 0.0
-                widen = float(np.max(np.hypot(*(col_pos[:, :2] - pos[:2]).T))) if level else None
+            shift = np.hypot(*carrier.velocity) * self.period
+            level = self._mount_level and carrier.pitch == 0.0 and carrier.roll == 0.0
+            # how far the rays' origins are from `pos` horizontally; None: not level
+            widen = float(np.max(np.hypot(*(col_pos[:, :2] - pos[:2]).T))) if level else None
             for i in np.flatnonzero(near):
                 if i == carrier_index:
                     continue  # a sensor does not see its own carrier
                 corners = (boxes.corners(int(i)) - pos) @ rot
-                pad = 1
-                if distort:
-                    dist = max(float(np.linalg.norm(rel[i])) - float(radius[i]), 0.5)
-                    pad += math.ceil((shift / dist + abs(carrier.yaw_rate) * self.period) / self.col_width)
+                dist = max(float(np.linalg.norm(rel[i])) - float(radius[i]), 0.5)
+                pad = 1 + math.ceil((shift / dist + abs(carrier.yaw_rate) * self.period) / self.col_width)
                 cols = self._columns_of(corners, pad)
                 chans = None if widen is None else self._channels_of(corners, widen)
-                if not distort:
-                    o = (pos - boxes.centers[i]) @ boxes.rotations[i]  # the origin in the box frame
-                    unoccluded[i] = kernels.box_returns(
-                        t,
-                        cos_inc,
-                        classes,
-                        object_id,
-                        self._all_columns if cols is None else cols,
-                        self._all_channels if chans is None else chans,
-                        self.channels,
-                        self._dirs_t,
-                        r32,
-                        o,
-                        boxes.rotations[i],
-                        boxes.half[i],
-                        cfg.range_min,
-                        cfg.range_max,
-                        boxes.classes[i],
-                        boxes.ids[i],
-                    )
-                    continue
                 if cols is None and chans is None:
                     idx = np.arange(n_rays)
                 else:
