@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -1582,9 +1583,9 @@ class ScenarioEngine:
                 body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
                 self._locate(body)
         if self.acc_drivers:
-            self._step_acc(dt, now)
+            self._step_drivers(self.acc_drivers.values(), dt, now)
         if self.natural_drivers:
-            self._step_natural(dt, now)
+            self._step_drivers(self.natural_drivers.values(), dt, now)
         if self.vehicle_drivers:
             for follower in list(self.vehicle_drivers.values()):
                 if not follower.actor.gone and not follower.actor.external:
@@ -1624,30 +1625,24 @@ class ScenarioEngine:
         self._moved()
         self._check_stop()
 
-    def _step_acc(self, dt: float, now: float) -> None:
-        """esmini steps its controllers after the default motion of every entity: an ACC sees the others
-        where they are after this step, sets its entity's speed, and in override mode moves it with it."""
-        for driver in list(self.acc_drivers.values()):
+    def _step_drivers(
+        self, stepped: Iterable[extra_actions.AccDriver | drivers.NaturalDriver], dt: float, now: float
+    ) -> None:
+        """esmini steps these controllers after the default motion of every entity, each seeing the others
+        where they are after this step. An ACC sets its entity's speed and, in override mode, moves it with
+        it; a NaturalDriver sets the speed and moves it, and a lane change it decides starts from the next
+        step (esmini injects it as an action)."""
+        for driver in list(stepped):
             body = driver.actor
             if body.gone or body.external:
                 continue
             self.measure.clear()
             driver.step(dt)
-            if driver.override and not driver.virtual:
+            if isinstance(driver, drivers.NaturalDriver):
                 self._move_body(body, dt, now)
-        self._moved()
-
-    def _step_natural(self, dt: float, now: float) -> None:
-        """esmini's NaturalDriver steps after the default motion of every entity: it sets its entity's speed
-        and moves it; a lane change it decides starts from the next step (esmini injects it as an action)."""
-        for driver in list(self.natural_drivers.values()):
-            body = driver.actor
-            if body.gone or body.external:
-                continue
-            self.measure.clear()
-            driver.step(dt)
-            self._move_body(body, dt, now)
-            self._start_lane_change(driver)
+                self._start_lane_change(driver)
+            elif driver.override and not driver.virtual:
+                self._move_body(body, dt, now)
         self._moved()
 
     def _start_lane_change(self, driver: drivers.NaturalDriver) -> None:
