@@ -172,6 +172,7 @@ def test_recorder_on_sigterm_keeps_every_message_and_writes_no_summary(
     spec_file = tmp_path / "simulationrun.yaml"
     spec_file.write_text(next(iter(kubelet.configmaps.values()))["simulationrun.yaml"])
     bus_port, ready_port = free_port(), free_port()
+    count = 20_000
     env = {
         **s3_server.env(),
         "PATH": "/usr/bin:/bin",
@@ -193,14 +194,21 @@ def test_recorder_on_sigterm_keeps_every_message_and_writes_no_summary(
         Time = TYPESTORE.types["builtin_interfaces/msg/Time"]
         bus = LoopbackBus("127.0.0.1", bus_port)
         clock = bus.advertise("/clock", "rosgraph_msgs/msg/Clock")
-        for i in range(2000):
+        # stopped while they are published, the recorder has read none of them when SIGTERM arrives: every
+        # one is in flight (with the hub and in the recorder's socket), and reading and writing them all takes
+        # it longer than noticing SIGTERM (without its drain it records a few hundred at most)
+        recorder.send_signal(signal.SIGSTOP)
+        for i in range(count):
             clock.publish(Clock(clock=Time(sec=i, nanosec=0)), float(i))
         bus.close()
-        recorder.send_signal(signal.SIGTERM)  # at once: messages may still be in flight
+        assert bus.disconnected.is_set()  # the hub read them all and passed them on before closing on us
+        recorder.send_signal(signal.SIGTERM)
+        recorder.send_signal(signal.SIGCONT)
         assert recorder.wait(30) == 0
     finally:
         for proc in (recorder, bridge):
             if proc.poll() is None:
+                proc.send_signal(signal.SIGCONT)
                 proc.send_signal(signal.SIGTERM)
                 proc.wait(30)
     store = results_store(s3_server, monkeypatch)
@@ -209,5 +217,10 @@ def test_recorder_on_sigterm_keeps_every_message_and_writes_no_summary(
     recording = tmp_path / "term.mcap"
     recording.write_bytes(store.get_bytes("pod-term/0/recording.mcap"))
     with recording.open("rb") as f:
-        stats = make_reader(f).get_summary().statistics
-    assert stats.message_count == 2000
+        reader = make_reader(f)
+        assert reader.get_summary().statistics.message_count == count
+        seconds = [
+            TYPESTORE.deserialize_cdr(message.data, "rosgraph_msgs/msg/Clock").clock.sec
+            for _, _, message in reader.iter_messages()
+        ]
+    assert seconds == list(range(count))  # every message sent, each once, in order

@@ -332,10 +332,12 @@ class LoopbackBus:
 
     def drain(self, quiet: float = 0.3, limit: float = 5.0) -> None:
         """Wait until nothing arrived for `quiet` seconds (or `limit` passed, or the hub is gone): what
-        was already sent to this client is then dispatched."""
-        deadline = time.monotonic() + limit
+        was already sent to this client is then dispatched. The quiet time counts from this call at the
+        earliest: frames queued for a reader that has not run since its last frame are not given up."""
+        start = time.monotonic()
+        deadline = start + limit
         while time.monotonic() < deadline and not self.disconnected.is_set():
-            idle = time.monotonic() - self.last_receive
+            idle = time.monotonic() - max(self.last_receive, start)
             if idle >= quiet:
                 return
             time.sleep(quiet - idle)
