@@ -406,3 +406,21 @@ def test_github_workflow_builds_every_image_and_runs_the_tests() -> None:
         for step in job["steps"]:
             if "uses" in step:
                 assert re.search(r"@v\d+$", step["uses"]), f"unpinned action {step['uses']}"
+
+
+def test_simcore_image_ships_the_compiled_lidar_kernels() -> None:
+    """The simcore image compiles the numba kernels at build time for a generic CPU into a seed directory,
+    and runs with the same CPU name and the seed named: a pod loads the kernels (tests/test_sensors.py
+    checks the loading) instead of compiling them for ~10 s each time."""
+    image = parse_dockerfile(dockerfiles()["simcore"])
+    build = next(s for s in image.stages if s.name == "build")
+    warm = [v for i, v in build.instructions if i == "RUN" and "kernels.warm()" in v]
+    assert warm and "NUMBA_CPU_NAME=generic" in warm[0] and "NUMBA_CACHE_DIR=/opt/numba-cache" in warm[0]
+    assert ("COPY", "--from=build /opt/numba-cache /opt/numba-cache") in image.final.instructions
+    env = " ".join(v for i, v in image.final.instructions if i == "ENV")
+    for setting in (
+        "NUMBA_CPU_NAME=generic",
+        "CARLOS_NUMBA_CACHE_SEED=/opt/numba-cache",
+        "NUMBA_CACHE_DIR=/tmp",
+    ):
+        assert setting in env

@@ -1012,3 +1012,27 @@ def test_triangle_groups_and_grid_cover_every_triangle() -> None:
                 cell = int((x - x0) // size) * int(ny) + int((y - y0) // size)
                 assert j in cell_groups[cell_start[cell] : cell_start[cell + 1]]
     assert list(triangle_groups(np.zeros((0, 3)), np.zeros((0, 3)))) == [0]
+
+
+@pytest.mark.slow
+def test_kernels_load_from_a_seeded_cache(tmp_path: Path) -> None:
+    """An image compiles the kernels at build time (generic CPU) into a read-only seed; a pod with an empty
+    NUMBA_CACHE_DIR copies it and loads every kernel from it: no compilation."""
+    import os
+    import subprocess
+    import sys
+
+    count = (
+        "from simcore.sensors import kernels; kernels.warm(); "
+        "print(sum(sum(getattr(kernels, n).stats.cache_misses.values()) for n in dir(kernels) "
+        "if hasattr(getattr(kernels, n), 'stats')))"
+    )
+    env = {**os.environ, "NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(tmp_path / "seed")}
+    env.pop("CARLOS_NUMBA_CACHE_SEED", None)
+    built = subprocess.run([sys.executable, "-c", count], env=env, capture_output=True, text=True, check=True)
+    assert int(built.stdout.split()[-1]) > 0  # compiled into the seed
+    (tmp_path / "seed").chmod(0o555)
+    env.update(NUMBA_CACHE_DIR=str(tmp_path / "pod"), CARLOS_NUMBA_CACHE_SEED=str(tmp_path / "seed"))
+    pod = subprocess.run([sys.executable, "-c", count], env=env, capture_output=True, text=True, check=True)
+    assert int(pod.stdout.split()[-1]) == 0, pod.stderr
+    assert any((tmp_path / "pod").rglob("*.nbi"))

@@ -4,18 +4,47 @@ Each kernel is one loop over the rays doing what several numpy array passes did,
 float64 arithmetic in the same order, so the scan is bit for bit the one the numpy passes gave (the numpy
 reference lives in tests/test_sensors.py). The random numbers stay numpy's, drawn by the caller.
 
-Compiled on first use (`warm()`, called by the lidar's constructor) and cached on disk next to this module
-or in `NUMBA_CACHE_DIR` (the pods set it to /tmp: their root filesystem is read-only). `nogil`: they release
-the GIL, so the recorder's writer thread can run while they do.
+Compiled on first use (`warm()`, called by the lidar's constructor; ~10 s with an empty cache) and cached on
+disk next to this module or in `NUMBA_CACHE_DIR` (the pods set it to /tmp: their root filesystem is
+read-only). An image ships the cache compiled at build time (for `NUMBA_CPU_NAME=generic`, so any x86-64
+node loads it) in the read-only directory `CARLOS_NUMBA_CACHE_SEED`; importing this module copies it into an empty
+`NUMBA_CACHE_DIR` first, so a pod loads the kernels instead of compiling them. `nogil`: they release the
+GIL, so the recorder's writer thread can run while they do.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
+from pathlib import Path
+
 import numpy as np
 from numba import njit
 
+
+def seed_cache() -> bool:
+    """Copy the cache shipped in `CARLOS_NUMBA_CACHE_SEED` into `NUMBA_CACHE_DIR` when that has none yet;
+    True when it did. numba checks each entry against this module's source (path, size, modification time)
+    and the CPU, and compiles whatever does not match: a stale seed costs time, never correctness."""
+    seed, cache = os.environ.get("CARLOS_NUMBA_CACHE_SEED"), os.environ.get("NUMBA_CACHE_DIR")
+    if not seed or not cache or not Path(seed).is_dir():
+        return False
+    target = Path(cache)
+    if target.is_dir() and any(target.rglob("*.nbi")):
+        return False
+    shutil.copytree(seed, target, dirs_exist_ok=True)
+    for path in (target, *target.rglob("*")):  # the seed is read-only; the copy must take new entries
+        path.chmod(path.stat().st_mode | 0o200)
+    return True
+
+
+seed_cache()  # before the kernels are defined: numba sets up their cache directory then
+
 #: cached on disk, the GIL released, IEEE division (x / 0 is inf, not an exception), no bounds checks
 _kernel = njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+#: a small helper inlined into its callers (numba IR inlining: inlining the bigger helpers too made
+#: `level_bounds` take 18 s to compile)
+_inline = njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
 
 
 #: Slack of the reachability test (`level_bounds`) for the float32 rounding of the cast: metres, plus this
@@ -105,7 +134,7 @@ def level_bounds(
     return looked
 
 
-@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+@_kernel
 def _circle(
     circles: np.ndarray,
     j: int,
@@ -139,7 +168,7 @@ def _circle(
     return False
 
 
-@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+@_kernel
 def _triangle(
     corners: np.ndarray,
     circles: np.ndarray,
@@ -186,7 +215,7 @@ def _triangle(
            width, lo, hi, block_lo, block_hi, every)  # fmt: skip
 
 
-@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+@_kernel
 def _apply(
     rho_min: float,
     rho_max: float,
@@ -258,7 +287,7 @@ def _apply(
 _BLOCK = 32
 
 
-@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+@_inline
 def _widen(
     lo: np.ndarray,
     hi: np.ndarray,
@@ -289,7 +318,7 @@ def _widen(
         hi[c] = max(hi[c], s_hi)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+@_inline
 def _segment_distance(ax: float, ay: float, bx: float, by: float) -> float:  # pragma: no cover - compiled
     """Distance from the origin to the segment a-b."""
     dx, dy = bx - ax, by - ay
@@ -298,7 +327,7 @@ def _segment_distance(ax: float, ay: float, bx: float, by: float) -> float:  # p
     return float(np.hypot(ax + u * dx, ay + u * dy))
 
 
-@njit(cache=True, nogil=True, error_model="numpy", boundscheck=False, inline="always")
+@_inline
 def _wrap(a: float) -> float:  # pragma: no cover - compiled
     """An angle in (-pi, pi]."""
     while a > np.pi:
@@ -522,7 +551,13 @@ def boxes_returns(
                 corner[k, a] = wx * rot[0, a] + wy * rot[1, a] + wz * rot[2, a]
             angles[k] = np.arctan2(corner[k, 1], corner[k, 0]) % (2.0 * np.pi)
         # columns: the smallest arc holding every corner's azimuth (none: they surround the sensor)
-        angles.sort()
+        for k in range(1, 8):  # insertion sort: 8 values (numpy's sort costs seconds of compile time)
+            a = angles[k]
+            m = k - 1
+            while m >= 0 and angles[m] > a:
+                angles[m + 1] = angles[m]
+                m -= 1
+            angles[m + 1] = a
         gap, j = angles[0] + 2.0 * np.pi - angles[7], 7
         for k in range(7):
             if angles[k + 1] - angles[k] > gap:
