@@ -583,6 +583,19 @@ HILL = """<?xml version="1.0"?>
 """
 
 
+def count_casts(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The number of rays of every open3d cast from now on (the list fills as the scans cast)."""
+    sizes: list[int] = []
+    original_cast = RoadScene.cast_ids
+
+    def counting(self: RoadScene, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        sizes.append(len(rays))
+        return original_cast(self, rays)
+
+    monkeypatch.setattr(RoadScene, "cast_ids", counting)
+    return sizes
+
+
 @pytest.mark.parametrize("where", ["valley", "slope", "flat", "distorted", "pole", "tilted"])
 def test_ray_culling_changes_nothing(
     straight: RoadScene, where: str, monkeypatch: pytest.MonkeyPatch
@@ -606,14 +619,7 @@ def test_ray_culling_changes_nothing(
     config["motion_distortion"] = where == "distorted"
     if where == "tilted":  # pitched down 5°: directions are no longer level per channel
         config["mount"] = {"z": 1.8, "pitch": 5}
-    cast_sizes: list[int] = []
-    original_cast = RoadScene.cast_ids
-
-    def counting(self: RoadScene, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        cast_sizes.append(len(rays))
-        return original_cast(self, rays)
-
-    monkeypatch.setattr(RoadScene, "cast_ids", counting)
+    cast_sizes = count_casts(monkeypatch)
     culled = lidar(**config).scan(scene, boxes, ego, 0)
     with monkeypatch.context() as m:
         m.setattr(Lidar, "_reachable", lambda self, *args: None)
@@ -963,14 +969,7 @@ def test_column_culling_is_exact_on_the_curved_highway(monkeypatch: pytest.Monke
         "range_max": 80.0,
         "mount": {"x": 1.0, "z": 1.9, "yaw": 0.0 if fov == 360 else 35.0},
     }
-    cast_sizes: list[int] = []
-    original_cast = RoadScene.cast_ids
-
-    def counting(self: RoadScene, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        cast_sizes.append(len(rays))
-        return original_cast(self, rays)
-
-    monkeypatch.setattr(RoadScene, "cast_ids", counting)
+    cast_sizes = count_casts(monkeypatch)
     for s, lane, turn in ((300.0, -1, 0.0), (700.0, -2, 0.7), (1500.0, -3, -2.0), (1100.0, -4, math.pi)):
         p = road.lane_to_world("1", lane, s)
         ego = car("Ego", p.x, p.y, heading=p.heading + turn)

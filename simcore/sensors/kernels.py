@@ -108,6 +108,8 @@ def level_bounds(
     cy0 = max(int(np.floor((oy - reach - y0) / size)), 0)
     cy1 = min(int(np.floor((oy + reach - y0) / size)), ny - 1)
     looked = 0
+    view = (ox, oy, oz, yaw, reach, fov, width)  # the sweep, as the helpers take it
+    acc = (lo, hi, block_lo, block_hi, every)  # the bounds they widen
     for cx in range(cx0, cx1 + 1):
         for cy in range(cy0, cy1 + 1):
             cell = cx * ny + cy
@@ -117,16 +119,12 @@ def level_bounds(
                     continue
                 seen[g] = stamp
                 looked += 1
-                near = _circle(groups, g, ox, oy, oz, yaw, reach, fov, full_circle, width, lo, hi,
-                               block_lo, block_hi, every)  # fmt: skip
-                if not near:
+                if not _circle(groups, g, view, full_circle, acc):
                     continue
                 for j in range(group_start[g], group_start[g + 1]):
                     looked += 1
-                    if _circle(circles, j, ox, oy, oz, yaw, reach, fov, full_circle, width, lo, hi,
-                               block_lo, block_hi, every):  # fmt: skip
-                        _triangle(corners, circles, j, ox, oy, oz, yaw, reach, fov, full_circle, width, lo,
-                                  hi, block_lo, block_hi, every)  # fmt: skip
+                    if _circle(circles, j, view, full_circle, acc):
+                        _triangle(corners, circles, j, view, full_circle, acc)
     for c in range(columns):
         b = c // _BLOCK
         lo[c] = min(lo[c], block_lo[b], every[0])
@@ -138,23 +136,15 @@ def level_bounds(
 def _circle(
     circles: np.ndarray,
     j: int,
-    ox: float,
-    oy: float,
-    oz: float,
-    yaw: float,
-    reach: float,
-    fov: float,
+    view: tuple[float, float, float, float, float, float, float],
     full_circle: bool,
-    width: float,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    block_lo: np.ndarray,
-    block_hi: np.ndarray,
-    every: np.ndarray,
+    acc: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 ) -> bool:  # pragma: no cover - compiled
     """`level_bounds` for the bounding circle `circles[j]` (x, y, radius, z min, z max) when it is far
     (beyond 4 radii + 1 m): widens the bounds, returns False; out of reach: False; near: True (the caller
-    looks closer)."""
+    looks closer). `view`: the sensor's x, y, z, heading, the range, the field of view and the column width;
+    `acc`: the bounds (`_apply`)."""
+    ox, oy, oz, yaw, reach, _, _ = view
     dist = np.hypot(circles[j, 0] - ox, circles[j, 1] - oy)
     radius = circles[j, 2]
     if dist - radius > reach + _SLACK_M + _SLACK_REL * reach:
@@ -164,7 +154,7 @@ def _circle(
     a_mid = np.arctan2(circles[j, 1] - oy, circles[j, 0] - ox) - yaw
     a_half = np.arcsin(radius / dist)
     _apply(dist - radius, dist + radius, circles[j, 3] - oz, circles[j, 4] - oz, a_mid - a_half,
-           a_mid + a_half, reach, fov, full_circle, width, lo, hi, block_lo, block_hi, every)  # fmt: skip
+           a_mid + a_half, view, full_circle, acc)  # fmt: skip
     return False
 
 
@@ -173,21 +163,12 @@ def _triangle(
     corners: np.ndarray,
     circles: np.ndarray,
     j: int,
-    ox: float,
-    oy: float,
-    oz: float,
-    yaw: float,
-    reach: float,
-    fov: float,
+    view: tuple[float, float, float, float, float, float, float],
     full_circle: bool,
-    width: float,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    block_lo: np.ndarray,
-    block_hi: np.ndarray,
-    every: np.ndarray,
+    acc: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 ) -> None:  # pragma: no cover - compiled
     """`level_bounds` for triangle j near the sensor: its own distances and arc."""
+    ox, oy, oz, yaw, _, _, _ = view
     ax, ay = corners[j, 0, 0] - ox, corners[j, 0, 1] - oy
     bx, by = corners[j, 1, 0] - ox, corners[j, 1, 1] - oy
     qx, qy = corners[j, 2, 0] - ox, corners[j, 2, 1] - oy
@@ -211,8 +192,7 @@ def _triangle(
         e2 = _wrap(np.arctan2(qy, qx) - a0)
         a_lo = a0 + min(0.0, e1, e2) - yaw
         a_hi = a0 + max(0.0, e1, e2) - yaw
-    _apply(rho_min, rho_max, circles[j, 3] - oz, circles[j, 4] - oz, a_lo, a_hi, reach, fov, full_circle,
-           width, lo, hi, block_lo, block_hi, every)  # fmt: skip
+    _apply(rho_min, rho_max, circles[j, 3] - oz, circles[j, 4] - oz, a_lo, a_hi, view, full_circle, acc)
 
 
 @_kernel
@@ -223,19 +203,16 @@ def _apply(
     dz_hi: float,
     a_lo: float,
     a_hi: float,
-    reach: float,
-    fov: float,
+    view: tuple[float, float, float, float, float, float, float],
     full_circle: bool,
-    width: float,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    block_lo: np.ndarray,
-    block_hi: np.ndarray,
-    every: np.ndarray,
+    acc: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 ) -> None:  # pragma: no cover - compiled
-    """Widen the bounds of the columns of azimuths a_lo..a_hi (sensor frame; every column when rho_min is
-    within 5 cm) by the slopes from heights dz_lo..dz_hi (relative to the sensor) at horizontal distances
-    rho_min..rho_max, with the slack for float32 rounding."""
+    """Widen the bounds `acc` (per column lo, hi; per block of columns lo, hi; for every column lo, hi) of
+    the columns of azimuths a_lo..a_hi (sensor frame; every column when rho_min is within 5 cm) by the
+    slopes from heights dz_lo..dz_hi (relative to the sensor) at horizontal distances rho_min..rho_max,
+    with the slack for float32 rounding."""
+    _, _, _, _, reach, fov, width = view
+    lo, hi, block_lo, block_hi, every = acc
     rho_min -= _SLACK_M + _SLACK_REL * rho_min
     if rho_min > reach:
         return
@@ -493,6 +470,31 @@ def box_returns(
 
 
 @_kernel
+def box_slopes(corner: np.ndarray, widen: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    """The range (lo, hi) of slopes z / rho from the sensor to a box with these corners (8, 3; sensor frame,
+    the sensor at the origin or, with `widen` > 0, anywhere within `widen` m of it horizontally at the same
+    height): z within the corners' z range, rho from the nearest point of the box's bounding circle to its
+    farthest corner. A ray whose elevation's tangent is outside cannot hit the box."""
+    mx = my = 0.0
+    zmin, zmax = np.inf, -np.inf
+    for k in range(8):
+        mx += corner[k, 0] / 8.0
+        my += corner[k, 1] / 8.0
+        zmin = min(zmin, corner[k, 2])
+        zmax = max(zmax, corner[k, 2])
+    radius = 0.0
+    rho_max = 0.0
+    for k in range(8):
+        radius = max(radius, np.hypot(corner[k, 0] - mx, corner[k, 1] - my))
+        rho_max = max(rho_max, np.hypot(corner[k, 0], corner[k, 1]))
+    rho_min = max(np.hypot(mx, my) - radius - widen, 0.0)
+    rho_max += widen
+    if rho_min <= 0.0:
+        return (-np.inf if zmin < 0.0 else zmin / rho_max), (np.inf if zmax > 0.0 else zmax / rho_max)
+    return zmin / (rho_min if zmin < 0.0 else rho_max), zmax / (rho_min if zmax > 0.0 else rho_max)
+
+
+@_kernel
 def boxes_returns(
     t: np.ndarray,
     cos_inc: np.ndarray,
@@ -594,27 +596,7 @@ def boxes_returns(
                         n_cols += 1
         if n_cols == 0:
             continue
-        # channels: the slopes z / rho of the box's points (z within the corners', rho from its bounding
-        # circle's nearest point to its farthest corner)
-        mx = my = 0.0
-        zmin, zmax = np.inf, -np.inf
-        for k in range(8):
-            mx += corner[k, 0] / 8.0
-            my += corner[k, 1] / 8.0
-            zmin = min(zmin, corner[k, 2])
-            zmax = max(zmax, corner[k, 2])
-        radius = 0.0
-        rho_max = 0.0
-        for k in range(8):
-            radius = max(radius, np.hypot(corner[k, 0] - mx, corner[k, 1] - my))
-            rho_max = max(rho_max, np.hypot(corner[k, 0], corner[k, 1]))
-        rho_min = max(np.hypot(mx, my) - radius, 0.0)
-        if rho_min <= 0.0:
-            s_lo = -np.inf if zmin < 0.0 else zmin / rho_max
-            s_hi = np.inf if zmax > 0.0 else zmax / rho_max
-        else:
-            s_lo = zmin / (rho_min if zmin < 0.0 else rho_max)
-            s_hi = zmax / (rho_min if zmax > 0.0 else rho_max)
+        s_lo, s_hi = box_slopes(corner, 0.0)
         s_lo -= _SLACK_REL * (1.0 + abs(s_lo))
         s_hi += _SLACK_REL * (1.0 + abs(s_hi))
         n_chans = 0
@@ -748,6 +730,7 @@ def warm() -> None:
         t, cos, classes, oid, one, one, 1, np.zeros((3, 1), f32), np.eye(3, dtype=f32),
         np.zeros(3), np.eye(3), np.ones(3), 0.0, 1.0, u8(1), u32(1),
     )  # fmt: skip
+    box_slopes(np.ones((8, 3)), 0.0)
     boxes_returns(
         t, cos, classes, oid, np.zeros((1, 3)), np.eye(3)[None], np.ones((1, 3)), np.zeros(1, u8),
         np.ones(1, u32), 0, np.zeros(3), np.eye(3), np.eye(3, dtype=f32), np.zeros((3, 1), f32), np.zeros(1),

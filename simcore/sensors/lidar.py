@@ -210,18 +210,7 @@ class Lidar:
         distance rho in [rho_min, rho_max] (rho_min from the box's bounding circle), so its elevation's tangent
         z / rho lies between the extremes of those; a ray outside them cannot hit the box (exact: the slab
         test still decides every ray kept)."""
-        xy = corners_sensor[:, :2]
-        center = xy.mean(axis=0)
-        radius = float(np.max(np.hypot(*(xy - center).T)))
-        rho_min = max(float(np.hypot(*center)) - radius - widen, 0.0)
-        rho_max = float(np.max(np.hypot(*xy.T))) + widen
-        zmin, zmax = float(corners_sensor[:, 2].min()), float(corners_sensor[:, 2].max())
-        if rho_min <= 0.0:
-            lo = -math.inf if zmin < 0.0 else zmin / rho_max
-            hi = math.inf if zmax > 0.0 else zmax / rho_max
-        else:
-            lo = zmin / (rho_min if zmin < 0.0 else rho_max)
-            hi = zmax / (rho_min if zmax > 0.0 else rho_max)
+        lo, hi = kernels.box_slopes(np.ascontiguousarray(corners_sensor, np.float64), widen)
         if lo == -math.inf and hi == math.inf:
             return None
         margin = 1e-4  # float rounding of the directions, with room to spare
