@@ -1035,3 +1035,41 @@ def test_kernels_load_from_a_seeded_cache(tmp_path: Path) -> None:
     pod = subprocess.run([sys.executable, "-c", count], env=env, capture_output=True, text=True, check=True)
     assert int(pod.stdout.split()[-1]) == 0, pod.stderr
     assert any((tmp_path / "pod").rglob("*.nbi"))
+
+
+CORPUS_ROADS = ROOT.parent / "shared" / "corpus" / "esmini" / "resources" / "xodr"
+
+
+@pytest.mark.skipif(not CORPUS_ROADS.is_dir(), reason="esmini corpus not present")
+@pytest.mark.parametrize("name", ["multi_intersections", "crest-curve"])
+def test_column_culling_is_exact_on_corpus_roads(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Junctions full of short curved lanes, a crest on a curve: from random poses on the road (random
+    heading, mount yaw, 360° or 90° field of view) a level sweep gives the cloud casting every ray gives."""
+    scene = RoadScene(OpenDrive.from_file(CORPUS_ROADS / f"{name}.xodr"))
+    rng = np.random.default_rng(7)
+    cast_sizes = count_casts(monkeypatch)
+    seen = 0
+    for _ in range(5):
+        p = scene.corners[rng.integers(len(scene.corners))].mean(axis=0)
+        for fov in (360.0, 90.0):
+            config = {
+                "channels": 32,
+                "horizontal_resolution": round(720 * fov / 360),
+                "horizontal_fov": fov,
+                "vertical_fov": [-25, 10],
+                "range_max": 100.0,
+                "mount": {"x": 1.0, "z": 1.9, "yaw": float(rng.uniform(-90, 90))},
+            }
+            ego = dataclasses.replace(
+                car("Ego", p[0], p[1], heading=float(rng.uniform(-3, 3))), z=float(p[2])
+            )
+            boxes = Boxes.of(frame(ego, car("Other", p[0] + 8, p[1] + 3)))
+            culled = lidar(**config).scan(scene, boxes, ego, 0)
+            with monkeypatch.context() as m:
+                m.setattr(Lidar, "_level_rays", every_level_ray)
+                every = lidar(**config).scan(scene, boxes, ego, 0)
+            assert cast_sizes[-2] < cast_sizes[-1] == culled.rays
+            assert culled.points.tobytes() == every.points.tobytes()
+            assert np.array_equal(culled.visible_rays, every.visible_rays)
+            seen += len(culled.points)
+    assert seen > 20_000
