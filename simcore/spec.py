@@ -534,6 +534,48 @@ class CameraSensor(_SensorBase):
 Sensor = Annotated[LidarSensor | CameraSensor, Field(discriminator="type")]
 
 
+#: Environment variables CARLOS sets in a run pod's containers for their wiring (transport, discovery):
+#: a system under test may not set them (any `CARLOS_…` name is reserved too).
+RESERVED_ENV = frozenset(
+    {"ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "CYCLONEDDS_URI", "RMW_IMPLEMENTATION"}
+)
+
+
+class SecretKeyRef(Model):
+    """One key of a Secret in the run's namespace, by reference: the kubelet puts its value in the
+    container; CARLOS never reads it."""
+
+    name: DnsLabel = Field(description="Name of the Secret.")
+    key: str = Field(
+        description="Key in the Secret.", min_length=1, max_length=253, pattern=r"^[-._a-zA-Z0-9]+$"
+    )
+
+
+class EnvVar(Model):
+    """An environment variable of the system under test: a `value`, or a `secretKeyRef` (cluster: the
+    kubelet resolves it; local runs take the variable of the same name from the environment `carlos run`
+    was started in)."""
+
+    name: str = Field(
+        description="Variable name (letters, digits, '_'; not CARLOS_* or the ROS 2/DDS wiring variables).",
+        pattern=r"^[A-Za-z_][A-Za-z0-9_]*$",
+        max_length=256,
+    )
+    value: str | None = Field(None, description="The value.", max_length=32768)
+    secret_key_ref: SecretKeyRef | None = Field(None, description="The value from a Secret's key.")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> EnvVar:
+        if (self.value is None) == (self.secret_key_ref is None):
+            raise ValueError(f"{self.name}: set exactly one of 'value' and 'secretKeyRef'")
+        if self.name.startswith("CARLOS_") or self.name in RESERVED_ENV:
+            raise ValueError(
+                f"{self.name} is set by CARLOS to wire the run's pod (transport, ROS 2 discovery): "
+                "choose another name"
+            )
+        return self
+
+
 class SystemUnderTest(Model):
     """The software under test. It talks to the simulation through topics only.
 
@@ -565,11 +607,23 @@ class SystemUnderTest(Model):
         default_factory=list, description="Container command (cluster). Default: the image's."
     )
     args: list[str] = Field(default_factory=list, description="Container arguments (cluster). Default: none.")
+    env: list[EnvVar] = Field(
+        default_factory=list,
+        description=(
+            "Environment of the node: its container's on a cluster; locally set in the run's process before "
+            "the in-process node is constructed. Default: none."
+        ),
+        max_length=64,
+    )
 
     @model_validator(mode="after")
     def _something_to_run(self) -> SystemUnderTest:
         if self.module is None and self.image is None:
             raise ValueError("set 'module' (in-process, local runs) or 'image' (cluster), or both")
+        names = [e.name for e in self.env]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"env names must be unique: {', '.join(twice)} given more than once")
         return self
 
 

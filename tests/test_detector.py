@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -16,6 +18,7 @@ import yaml
 
 from examples.detector import Detector, DetectorParams, detect
 from examples.detector.detect import cluster, fit_ground
+from simcore.errors import BadInput
 from simcore.sensors import ros
 from simcore.sensors.lidar import Lidar
 from simcore.sensors.scene import Boxes, RoadScene
@@ -269,3 +272,50 @@ def test_a_crash_of_the_system_under_test_is_a_test_result(tmp_path: Path) -> No
     assert counts["/carlos/sut/detections"] == 2, "the node got nothing after its failure"
     assert counts["/carlos/Ego/lidar/points"] == 11
     assert len(status) == 1 and status[0].level == 2 and "segmentation fault" in status[0].message
+
+
+class EnvReader:
+    """A node under test that notes the environment it was constructed in."""
+
+    seen: ClassVar[dict[str, str | None]] = {}
+
+    def __init__(self, bus: object) -> None:
+        EnvReader.seen = {name: os.environ.get(name) for name in ("MODEL", "LICENSE_KEY")}
+
+
+def test_system_under_test_env_is_set_for_the_in_process_node(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Locally `env` values are set in the run's process while the node lives; a `secretKeyRef` comes from
+    the variable of the same name in the environment of `carlos run` (bad input naming the field and what to
+    export when it is not there); the process environment is restored after the run."""
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan
+    from simcore.runner import simulate
+
+    env = [
+        {"name": "MODEL", "value": "/models/tiny.onnx"},
+        {"name": "LICENSE_KEY", "secretKeyRef": {"name": "detector-license", "key": "key"}},
+    ]
+    manifest = _manifest(
+        tmp_path,
+        "envs",
+        **{
+            "systemUnderTest.module": "tests.test_detector:EnvReader",
+            "systemUnderTest.parameters": {},
+            "systemUnderTest.env": env,
+            "simulation.maxSeconds": 0.2,
+        },
+    )
+    run = load_manifest(manifest)
+    scenario = ROOT / "examples/scenarios/cut-in.xosc"
+    monkeypatch.delenv("MODEL", raising=False)
+    monkeypatch.delenv("LICENSE_KEY", raising=False)
+    with pytest.raises(BadInput) as info:
+        simulate(run, Plan(run.spec)[0], scenario, tmp_path / "a", base_dir=tmp_path)
+    assert info.value.field == "spec.systemUnderTest.env[1].secretKeyRef"
+    assert "export LICENSE_KEY=" in str(info.value) and "MODEL" not in os.environ
+    monkeypatch.setenv("LICENSE_KEY", "s3cret")
+    simulate(run, Plan(run.spec)[0], scenario, tmp_path / "b", base_dir=tmp_path)
+    assert EnvReader.seen == {"MODEL": "/models/tiny.onnx", "LICENSE_KEY": "s3cret"}
+    assert "MODEL" not in os.environ and os.environ["LICENSE_KEY"] == "s3cret"

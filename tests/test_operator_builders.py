@@ -293,6 +293,32 @@ def test_system_under_test_is_a_sidecar_on_the_cluster() -> None:
         check_cluster_spec(load(manifest(systemUnderTest={"name": "bridge", "image": "x"})))
 
 
+def test_system_under_test_env_values_and_secret_references() -> None:
+    """The node's `env`: values as they are, `secretKeyRef` as a reference the kubelet resolves (the
+    operator never reads the Secret); only the node's container gets them, after CARLOS' own variables."""
+    body = manifest(
+        systemUnderTest={
+            "name": "detector",
+            "image": "reg/detector:1",
+            "env": [
+                {"name": "MODEL", "value": "/models/pointpillars.onnx"},
+                {"name": "LICENSE_KEY", "secretKeyRef": {"name": "detector-license", "key": "key"}},
+            ],
+        }
+    )
+    run = load(body)
+    pod = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))["spec"]["template"]["spec"]
+    containers = {c["name"]: c for c in [*pod["initContainers"], *pod["containers"]]}
+    env = containers["detector"]["env"]
+    assert env[-2:] == [
+        {"name": "MODEL", "value": "/models/pointpillars.onnx"},
+        {"name": "LICENSE_KEY", "valueFrom": {"secretKeyRef": {"name": "detector-license", "key": "key"}}},
+    ]
+    assert [e["name"] for e in env].index("CARLOS_SPEC") < len(env) - 2
+    for name in ("simcore", "bridge", "recorder"):
+        assert not {"MODEL", "LICENSE_KEY"} & {e["name"] for e in containers[name]["env"]}, name
+
+
 def test_every_container_of_a_pod_shares_one_dds_domain_inside_the_pod() -> None:
     """DDS by default: every container (the roles and the system under test) gets CARLOS_TRANSPORT=dds, the
     same ROS_DOMAIN_ID and a CYCLONEDDS_URI for 127.0.0.1 without multicast, so the system under test's ROS 2

@@ -150,6 +150,19 @@ def test_unknown_field_is_named_with_its_path(tmp_path: Path) -> None:
             ),
             "used twice",
         ),
+        (
+            GOOD + "  systemUnderTest: {image: x, env: [{name: ROS_DOMAIN_ID, value: '7'}]}\n",
+            "ROS_DOMAIN_ID is set by CARLOS",
+        ),
+        (
+            GOOD
+            + "  systemUnderTest: {image: x, env: [{name: K, value: a, secretKeyRef: {name: s, key: k}}]}\n",
+            "spec.systemUnderTest.env[0]: K: set exactly one of 'value' and 'secretKeyRef'",
+        ),
+        (
+            GOOD + "  systemUnderTest: {image: x, env: [{name: K, value: a}, {name: K, value: b}]}\n",
+            "env names must be unique: K given more than once",
+        ),
     ],
 )
 def test_bad_manifests_give_one_clear_message(tmp_path: Path, text: str, expected: str) -> None:

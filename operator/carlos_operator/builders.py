@@ -389,6 +389,12 @@ def build_job(
             *node["env"],
             {"name": "CARLOS_ROLE", "value": "system-under-test"},
             {"name": "RMW_IMPLEMENTATION", "value": SUT_RMW},
+            *(
+                {"name": var.name, "value": var.value}
+                if var.value is not None
+                else {"name": var.name, "valueFrom": {"secretKeyRef": var.secret_key_ref.model_dump()}}
+                for var in sut.env
+            ),
         ]
         sidecars.append(node)
     pod_spec: dict[str, Any] = {

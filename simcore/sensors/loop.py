@@ -20,8 +20,10 @@ from __future__ import annotations
 import importlib
 import inspect
 import logging
+import os
 import sys
 import traceback
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +67,26 @@ class GuardedBus:
 
     def close(self) -> None:
         """The node does not close the run's bus."""
+
+
+def node_environment(sut: SystemUnderTest, environ: Mapping[str, str]) -> dict[str, str]:
+    """The variables `sut.env` sets for an in-process node: the values, and each `secretKeyRef` taken from
+    the variable of the same name in `environ` (a local run has no Secrets to read)."""
+    out: dict[str, str] = {}
+    for position, var in enumerate(sut.env):
+        if var.value is not None:
+            out[var.name] = var.value
+        elif var.name in environ:
+            out[var.name] = environ[var.name]
+        else:
+            ref = var.secret_key_ref
+            assert ref is not None
+            raise BadInput(
+                f"{var.name} comes from Secret {ref.name!r} (key {ref.key!r}) on a cluster; a local run takes "
+                f"it from its own environment: export {var.name}=… before `carlos run`",
+                field=f"spec.systemUnderTest.env[{position}].secretKeyRef",
+            )
+    return out
 
 
 def load_system_under_test(sut: SystemUnderTest, bus: Bus, base_dir: Path | None) -> Any:
@@ -135,10 +157,18 @@ class PerceptionLoop:
                 spec.evaluation.detection, ranges_of(c.metric for c in criteria)
             )
             self.evaluator.attach(bus)
+        self._saved_env: dict[str, str | None] = {}
         sut = spec.system_under_test
         if sut is not None and sut.module is not None:
             self.guard = GuardedBus(bus, sut.name)
-            self.node = load_system_under_test(sut, self.guard, base_dir)
+            env = node_environment(sut, os.environ)
+            self._saved_env = {name: os.environ.get(name) for name in env}
+            os.environ.update(env)  # the run's process is the node's: restored in close()
+            try:
+                self.node = load_system_under_test(sut, self.guard, base_dir)
+            except BaseException:
+                self._restore_env()
+                raise
 
     def step(self, frame: WorldFrame) -> None:
         self._time = frame.time
@@ -175,8 +205,19 @@ class PerceptionLoop:
             self.evaluator.flush(self._time)
         node, self.node = self.node, None
         close = getattr(node, "close", None)
-        if callable(close):
-            close()
+        try:
+            if callable(close):
+                close()
+        finally:
+            self._restore_env()
+
+    def _restore_env(self) -> None:
+        saved, self._saved_env = self._saved_env, {}
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
     def metrics(self) -> dict[str, float]:
         out = self.evaluator.result() if self.evaluator is not None else {}
