@@ -21,9 +21,9 @@ A box is intersected only with the columns its corners span and the channels who
 (exact as well: the slab test still decides every ray kept).
 
 Everything per ray around the open3d cast is one compiled pass each (`simcore.sensors.kernels`, numba,
-GIL released): the level ray buffer, the road returns (class, |cos|) into per-sweep buffers reused across
-sweeps, each box's slab test over its columns × channels, the range/dropout selection and the point
-records. The random numbers are numpy's (the same draws as before, into reused buffers), so the cloud is
+GIL released): the level sweep's per-column bounds and its ray buffer, the road returns (class, |cos|)
+into per-sweep buffers reused across sweeps, every box (its columns, channels and slab test over them) in
+one call, the range/dropout selection and the point records. The random numbers are numpy's (the same draws as before, into reused buffers), so the cloud is
 bit for bit the one of the numpy passes (tests/test_sensors.py keeps them as the reference). With motion
 distortion the boxes and the point coordinates stay numpy (per-column poses, (M, 3) arrays).
 """
