@@ -272,6 +272,7 @@ def intersect_box_rows(
 
 _Z_GRID = 16.0  # m: the grid of RoadScene.z_range's cache
 _XY_CELL = 32.0  # m: the cells of RoadScene's triangle grid
+_MAX_CELLS = 1 << 20  # at most about this many cells (a 32 km x 32 km map at 32 m)
 
 
 def bounding_circles(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -304,10 +305,13 @@ def xy_grid(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A uniform xy grid over boxes (T, >= 2) `lo`..`hi`: (x0, y0, cell, cells in x, cells in y) as
     float64, and per cell (index cx * cells in y + cy) the boxes meeting it as CSR arrays (start (cells + 1,),
-    box indices), each box listed in every cell its xy bounds meet."""
+    box indices), each box listed in every cell its xy bounds meet. The cells grow beyond `cell` on maps so
+    large that there would be more than `_MAX_CELLS` of them (bounded memory)."""
     if not len(lo):
         return np.array([0.0, 0.0, cell, 1.0, 1.0]), np.zeros(2, np.int64), np.zeros(0, np.int64)
     x0, y0 = float(lo[:, 0].min()), float(lo[:, 1].min())
+    width, depth = float(hi[:, 0].max()) - x0, float(hi[:, 1].max()) - y0
+    cell = max(cell, math.sqrt(max(width, 1.0) * max(depth, 1.0) / _MAX_CELLS))
     c_lo = np.floor((lo[:, :2] - (x0, y0)) / cell).astype(np.int64)
     c_hi = np.floor((hi[:, :2] - (x0, y0)) / cell).astype(np.int64)
     nx, ny = int(c_hi[:, 0].max()) + 1, int(c_hi[:, 1].max()) + 1
