@@ -21,10 +21,11 @@ header and appends both to the open chunk; full chunks go to a writer thread tha
 (zstd level 1 by default, lz4, or none) and writes them in 128 KiB slices while the simulation goes on:
 each slice is one call without the GIL, so the thread waits out open3d's GIL-holding cast instead of taking
 a core from it. zstd compresses on its own native worker thread, which needs no GIL at all: the writer
-thread only hands it the slices (a Python thread doing the compression itself got the GIL back too
-rarely between slices and fell behind the simulation; bench/sensors.py). The writer thread fdatasyncs every 16 MiB, so `close` only waits for the tail. At most
-`_QUEUE_CHUNKS` chunks wait for the writer thread (the caller blocks beyond that: bounded memory, nothing
-is dropped); `close`/`abort` write every chunk before the summary.
+thread only hands it the slices (a Python thread doing the compression itself got the GIL back too rarely
+between slices and fell behind the simulation; bench/sensors.py). The writer thread fdatasyncs every
+16 MiB, so `close` only waits for the tail. At most `_QUEUE_CHUNKS` chunks wait for the writer thread
+(the caller blocks beyond that: bounded memory, nothing is dropped); `close`/`abort` write every chunk
+before the summary.
 
 Crash safety: the recorder writes `<path>.part` and renames it to `path` only in :meth:`McapRecorder.close`,
 after an fsync; a run that dies never leaves a file under the final name. On an exception inside the
