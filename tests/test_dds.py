@@ -123,7 +123,10 @@ def test_every_type_of_the_type_store_registers_as_a_dds_topic(domain: int) -> N
     names = sorted(TYPESTORE.fielddefs)
     assert len(names) > 150
     for i, name in enumerate(names):
-        topic = Topic(participant, f"rt/type{i}", idl_type(name))
+        try:
+            topic = Topic(participant, f"rt/type{i}", idl_type(name))
+        except Exception as exc:  # name the type: one failure seen in a full parallel run, not reproduced
+            pytest.fail(f"type {i} of {len(names)}, {name}: {exc}")
         assert topic.typename == dds_typename(name)
 
 
