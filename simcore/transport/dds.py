@@ -460,9 +460,18 @@ class DdsBus:
                 raise DdsError(f"cannot create the DDS topic of {topic} ({typename}): {exc}") from None
         return existing
 
-    def _matched_participants(self, writer: DataWriter[Any]) -> set[uuid.UUID]:
-        out = set()
-        for handle in writer.get_matched_subscriptions():
+    @staticmethod
+    def _matched_participants(writer: DataWriter[Any]) -> set[uuid.UUID]:
+        """The participants of the readers matched with `writer` (empty when a reader matched in the middle of
+        the query: the callers ask again)."""
+        out: set[uuid.UUID] = set()
+        try:
+            handles = writer.get_matched_subscriptions()
+        except IndexError:
+            # cyclonedds-python counts the matches, allocates, then fills: a reader matching in between
+            # makes the fill return more than it allocated (IndexError "invalid index")
+            return out
+        for handle in handles:
             with contextlib.suppress(DDSException):
                 data = writer.get_matched_subscription_data(handle)
                 if data is not None:
