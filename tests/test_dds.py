@@ -60,14 +60,21 @@ def _domain_is_empty(domain: int) -> bool:
     return out.stdout.strip() == "0"
 
 
+#: Domains this process has used: never handed out twice. A domain lives on in the process while any of its
+#: entities does, with the types registered on it, and a later test's types of the same name but another
+#: definition (the hand-written IDL structs below) would clash with them.
+_USED_DOMAINS: set[int] = set()
+
+
 @pytest.fixture
 def domain() -> int:
     rng = random.Random(f"{os.getpid()}-{time.time_ns()}-{os.environ.get('PYTEST_XDIST_WORKER', '')}")
     for _ in range(5):
-        candidate = rng.randrange(100, 200)
+        candidate = rng.choice(sorted(set(range(100, 230)) - _USED_DOMAINS))
         if _domain_is_empty(candidate):
+            _USED_DOMAINS.add(candidate)
             return candidate
-    pytest.fail("no free DDS domain in 100..199 (5 tries)")
+    pytest.fail("no free DDS domain in 100..229 (5 tries)")
 
 
 def _env(domain: int, **extra: str) -> dict[str, str]:
