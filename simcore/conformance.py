@@ -124,18 +124,11 @@ def reference_end_times(reference_dir: Path) -> dict[str, float]:
     return out
 
 
-def controlled_entities(path: Path) -> set[str]:
-    """Entities a controller CARLOS does not run as the reference player does drives (ObjectController or
-    AssignControllerAction with a controller other than the default one and those of
-    `simcore.scenario.model.MODELLED_CONTROLLERS`, e.g. esmini's ACC/ALKS controllers): their motion is the
-    controller's, not the script's, so they are reported but do not decide agreement."""
-    from simcore.scenario.xosc import load_scenario
-
-    return uncompared_entities(load_scenario(path))
-
-
 def uncompared_entities(scenario: Any) -> set[str]:
-    """The entities of a loaded scenario that `controlled_entities` names."""
+    """Entities of a loaded scenario that a controller CARLOS does not run as the reference player does
+    drives (ObjectController or AssignControllerAction with a controller other than the default one and
+    those of `simcore.scenario.model.MODELLED_CONTROLLERS`, e.g. esmini's SloppyDriver): their motion is the
+    controller's, not the script's, so they are reported but do not decide agreement."""
     from simcore.scenario import model as m
 
     return {
@@ -153,7 +146,7 @@ class Trace:
     """Our positions at every REFERENCE_PERIOD of simulated time."""
 
     tracks: dict[str, list[tuple[float, float, float]]] = field(default_factory=dict)
-    controlled: set[str] | None = None  # entities not compared (`controlled_entities`), once loaded
+    controlled: set[str] | None = None  # entities not compared (`uncompared_entities`), once loaded
 
     def add(self, time_s: float, name: str, x: float, y: float) -> None:
         self.tracks.setdefault(name, []).append((time_s, x, y))

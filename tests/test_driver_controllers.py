@@ -199,11 +199,11 @@ def test_conformance_compares_entities_of_modelled_controllers_only(tmp_path: Pa
         private("Ego", 50, 20, extra=activate()),
         target=False,
     )
-    assert conformance.controlled_entities(acc) == set()
+    assert conformance.uncompared_entities(load_scenario(acc)) == set()
     sloppy = acc.with_name("sloppy.xosc")
     sloppy.write_text(
         acc.read_text().replace('Controller name="ACCController"', 'Controller name="SloppyDriver"')
     )
-    assert conformance.controlled_entities(sloppy) == {"Ego"}
+    assert conformance.uncompared_entities(load_scenario(sloppy)) == {"Ego"}
     kinds = m.controller_kinds(load_scenario(sloppy))
     assert kinds == {"Ego": {"SloppyDriver"}}

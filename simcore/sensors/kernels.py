@@ -426,8 +426,8 @@ def box_returns(
 ) -> int:  # pragma: no cover - compiled
     """Intersect the rays of columns `cols` × channels `chans` (one origin, sensor-frame directions `dirs_t`
     rotated by `r32` in float32) with one oriented box (`origin` = the ray origin in the box frame, `rot`'s
-    columns the box axes, `half` its half sizes): the slab test of `scene.intersect_box_rows`, in the same
-    float64 arithmetic. Where the box is closer than the return so far, it becomes the return (range, |cos|
+    columns the box axes, `half` its half sizes): the slab test of the numpy reference (tests/test_sensors.py
+    `intersect_box_rows`), in the same float64 arithmetic. Where the box is closer than the return so far, it becomes the return (range, |cos|
     of the entry face, class `cls`, object id `oid`). Returns the rays that hit it within range."""
     hits = 0
     for c in cols:

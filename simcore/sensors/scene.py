@@ -237,39 +237,6 @@ def intersect_box(
     return t, local_normal @ rot.T
 
 
-def intersect_box_rows(
-    origin: np.ndarray, dirs: Sequence[np.ndarray], center: np.ndarray, rot: np.ndarray, half: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """`intersect_box` for rays from one `origin` (3,) with directions given as three rows (x, y, z
-    components, (M,) each): the slab test one axis at a time on contiguous rows, several times faster than
-    on (M, 3) arrays in numpy.
-
-    Returns (t (M,) with inf where the ray misses or starts inside the box, |cos| of the angle between the
-    ray and the normal of the face hit (M,) float32: the ray's box-frame component along that face's axis)."""
-    o = (origin - center) @ rot  # into the box frame
-    m = len(dirs[0])
-    tmin = np.full(m, -np.inf)
-    tmax = np.full(m, np.inf)
-    axis_d = np.zeros(m)  # the box-frame direction component along the axis of the entry face
-    for k in range(3):
-        d = dirs[0] * rot[0, k] + dirs[1] * rot[1, k] + dirs[2] * rot[2, k]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / d
-            t1 = (-half[k] - o[k]) * inv
-            t2 = (half[k] - o[k]) * inv
-        near = np.minimum(t1, t2)
-        far = np.maximum(t1, t2, out=t2)
-        if not np.isfinite(inv).all():  # 0 * inf: parallel to a face and in its plane (NaN: no constraint)
-            np.copyto(near, -np.inf, where=np.isnan(near))
-            np.copyto(far, np.inf, where=np.isnan(far))
-        later = near > tmin  # the first axis of the largest entry wins, as argmax
-        np.copyto(tmin, near, where=later)
-        np.copyto(axis_d, d, where=later)
-        np.minimum(tmax, far, out=tmax)
-    hit = (tmax >= tmin) & (tmin > 0.0)
-    return np.where(hit, tmin, np.inf), np.abs(axis_d).astype(np.float32)
-
-
 _Z_GRID = 16.0  # m: the grid of RoadScene.z_range's cache
 _XY_CELL = 32.0  # m: the cells of RoadScene's triangle grid
 _MAX_CELLS = 1 << 20  # at most about this many cells (a 32 km x 32 km map at 32 m)
