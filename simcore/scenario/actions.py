@@ -858,14 +858,16 @@ class AccDriver:
     def __init__(self, engine: ScenarioEngine, actor: Body, properties: dict[str, str]) -> None:
         self.engine = engine
         self.actor = actor
-        self.time_gap = _float(properties.get("timeGap"), 1.5)
-        self.lateral_dist = _float(properties.get("lateralDist"), 5.0)
+        self.time_gap = m.property_number(properties.get("timeGap"), 1.5)
+        self.lateral_dist = m.property_number(properties.get("lateralDist"), 5.0)
         mode = properties.get("mode")
         self.override = mode is not None and mode != "additive"
         self.virtual = properties.get("virtual", "").strip().lower() == "true"
         self.current_speed = actor.speed
         given = properties.get("setSpeed")
-        self.set_speed = actor.speed if (not self.override or given is None) else _float(given, actor.speed)
+        self.set_speed = (
+            actor.speed if (not self.override or given is None) else m.property_number(given, actor.speed)
+        )
         self.lead: str | None = None  # the entity it follows (None: free road)
 
     def step(self, dt: float) -> None:
@@ -924,15 +926,6 @@ class AccDriver:
         self.current_speed = v
         if not self.virtual:
             a.speed = v
-
-
-def _float(text: str | None, default: float) -> float:
-    if text is None or text.strip() == "":
-        return default
-    try:
-        return float(text)
-    except ValueError:
-        return default
 
 
 def _same_lane(engine: ScenarioEngine, a: Body, b: Body) -> bool:

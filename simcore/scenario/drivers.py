@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from simcore.scenario import model as m
 from simcore.scenario.motion import lane_at_t, wrap_angle
 
 if TYPE_CHECKING:
@@ -30,13 +31,6 @@ MAX_WHEEL_ANGLE = math.radians(60.0)
 SMALL = 1e-10  # esmini's SMALL_NUMBER
 NO_ROAD_SPEED_LIMIT = 70 / 3.6  # esmini's speed limit off every road
 _BIG = 1e10  # esmini's LARGE_NUMBER
-
-
-def _float(text: str | None, default: float) -> float:
-    try:
-        return float(text) if text is not None and text.strip() else default
-    except ValueError:
-        return default
 
 
 class Vehicle:
@@ -129,12 +123,12 @@ class OffroadFollower:
         self.actor = actor
         lead = properties.get("followEntity")
         self.lead = engine.bodies.get(lead) if lead else None
-        self.target_distance = _float(properties.get("targetDistance"), 20.0)
+        self.target_distance = m.property_number(properties.get("targetDistance"), 20.0)
         self.vehicle = Vehicle(actor)
         perf = actor.entity.performance
         self.vehicle.max_acc = perf.max_acceleration
         self.vehicle.max_dec = perf.max_deceleration
-        self.vehicle.steering_rate = _float(properties.get("steeringRate"), 4.0)
+        self.vehicle.steering_rate = m.property_number(properties.get("steeringRate"), 4.0)
 
     def step(self, dt: float) -> None:
         lead, a, vehicle = self.lead, self.actor, self.vehicle
@@ -187,17 +181,17 @@ class NaturalDriver:
         self.engine = engine
         self.actor = actor
         p = properties.get
-        self.desired_distance = _float(p("desiredDistance"), 20.0)
-        self.desired_speed = _float(p("desiredSpeed"), 15.0)
-        self.lane_change_duration = _float(p("laneChangeDuration"), 3.0)
-        self.lookahead = _float(p("lookAheadDistance"), 115.0)
-        self.max_deceleration = _float(p("maxDec"), -3.0)
-        self.max_acceleration = _float(p("maxAcc"), 3.0)
-        self.lane_change_delay = _float(p("laneChangeDelay"), 1.0)
-        self.thw = _float(p("thw"), 2.0)
-        self.max_imposed_braking = _float(p("maxImposedBraking"), 3.0)
-        self.acc_gain = _float(p("laneChangeAccGain"), 0.2)
-        self.politeness = _float(p("politeness"), 0.5)
+        self.desired_distance = m.property_number(p("desiredDistance"), 20.0)
+        self.desired_speed = m.property_number(p("desiredSpeed"), 15.0)
+        self.lane_change_duration = m.property_number(p("laneChangeDuration"), 3.0)
+        self.lookahead = m.property_number(p("lookAheadDistance"), 115.0)
+        self.max_deceleration = m.property_number(p("maxDec"), -3.0)
+        self.max_acceleration = m.property_number(p("maxAcc"), 3.0)
+        self.lane_change_delay = m.property_number(p("laneChangeDelay"), 1.0)
+        self.thw = m.property_number(p("thw"), 2.0)
+        self.max_imposed_braking = m.property_number(p("maxImposedBraking"), 3.0)
+        self.acc_gain = m.property_number(p("laneChangeAccGain"), 0.2)
+        self.politeness = m.property_number(p("politeness"), 0.5)
         try:
             self.route = int(float(p("route") or -1))
         except ValueError:

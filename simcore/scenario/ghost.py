@@ -86,13 +86,6 @@ class GhostSetup:
     teleports: frozenset[int]  # ids of the TeleportActions that put the ghost on the entity (event starts)
 
 
-def _number(text: str | None, default: float) -> float:
-    try:
-        return float(text) if text is not None and text.strip() else default
-    except ValueError:
-        return default
-
-
 def follow_ghost_properties(scenario: m.Scenario) -> tuple[str, dict[str, str]] | None:
     """The first entity a FollowGhostController is given to (esmini sets up one ghost only), and the
     controller's properties."""
@@ -111,7 +104,7 @@ def follow_ghost_properties(scenario: m.Scenario) -> tuple[str, dict[str, str]] 
 
 
 def headstart_of(properties: dict[str, str]) -> float:
-    return _number(properties.get("headstartTime"), 3.0)
+    return m.property_number(properties.get("headstartTime"), 3.0)
 
 
 def setup(scenario: m.Scenario) -> tuple[m.Scenario, GhostSetup | None]:
@@ -362,15 +355,15 @@ class GhostFollower:
         self.actor = actor
         self.headstart = headstart
         self.position_mode = properties.get("followMode", "time").strip() == "position"
-        self.lookahead_speed = _number(properties.get("lookaheadSpeed"), 0.1)
-        self.min_lookahead_speed = _number(properties.get("minLookaheadSpeed"), 0.1)
-        self.lookahead_steering = _number(properties.get("lookaheadSteering"), 1.0)
-        self.min_lookahead_steering = _number(properties.get("minLookaheadSteering"), 1.0)
+        self.lookahead_speed = m.property_number(properties.get("lookaheadSpeed"), 0.1)
+        self.min_lookahead_speed = m.property_number(properties.get("minLookaheadSpeed"), 0.1)
+        self.lookahead_steering = m.property_number(properties.get("lookaheadSteering"), 1.0)
+        self.min_lookahead_steering = m.property_number(properties.get("minLookaheadSteering"), 1.0)
         # the vehicle model (esmini keeps its state apart from the entity's)
         self.vehicle = Vehicle(actor)
         self.vehicle.max_acc = MAX_ACCELERATION
         self.vehicle.max_speed = MAX_SPEED
-        self.vehicle.steering_scale = _number(properties.get("steeringSpeedInertia"), 0.01)
+        self.vehicle.steering_scale = m.property_number(properties.get("steeringSpeedInertia"), 0.01)
         self.follow_index = 0
         self.closest_s = 0.0
         self.target: tuple[float, float] = (actor.x, actor.y)  # the steering target last used

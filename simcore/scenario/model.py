@@ -95,6 +95,15 @@ def controller_type(properties: dict[str, str]) -> str:
     return properties.get("esminiController") or properties.get("name", "")
 
 
+def property_number(text: str | None, default: float) -> float:
+    """A controller property as a number: `default` when it is missing, empty or not a number (as esmini
+    reads its controller properties)."""
+    try:
+        return float(text) if text is not None and text.strip() else default
+    except ValueError:
+        return default
+
+
 # --- positions -----------------------------------------------------------------------------------------
 
 
