@@ -18,7 +18,8 @@ import pytest
 import yaml
 
 from simcore.spec import SimulationRun
-from tests.test_helm import KUBERNETES_VERSION, helm_binary, render
+from tests.test_helm import KUBERNETES_VERSION, render
+from tests.tooling import helm_binary
 
 ROOT = Path(__file__).resolve().parents[1]
 GITOPS = ROOT / "examples" / "gitops"

@@ -1,15 +1,12 @@
 """The Helm chart (helm/carlos): lint, render with several value sets, validate every object against the
 Kubernetes API schemas (kubernetes-validate, offline), and check least privilege and Pod Security "restricted".
 
-helm is not on the machine: the fixture fetches the real helm v4 binary with ../shared/tools/get-helm into
-.tools/bin (once; cached), or takes $HELM.
+helm is not on the machine: the `helm` fixture (tests/conftest.py) fetches the pinned helm v4 binary with
+tools/get_helm.py into .tools/bin (once; checksum verified), or takes $HELM.
 """
 
 from __future__ import annotations
 
-import fcntl
-import os
-import shutil
 import subprocess
 import tomllib
 from collections.abc import Iterator
@@ -22,7 +19,6 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 CHART = ROOT / "helm" / "carlos"
-TOOLS = ROOT / ".tools" / "bin"
 KUBERNETES_VERSION = "1.30.0"  # the oldest version the chart supports (Chart.yaml kubeVersion)
 RELEASE_NAMESPACE = "carlos-system"
 
@@ -53,35 +49,6 @@ except ModuleNotFoundError:  # until the operator declares them: the issue's lis
         ("", "events"): {"create"},
     }
     CLUSTER_RULES = {("", "namespaces"): {"get", "list", "watch"}}
-
-
-def helm_binary() -> Path:
-    """The helm binary: $HELM, else .tools/bin/helm, fetched by ../shared/tools/get-helm when missing (one
-    fetch even with several pytest workers: a file lock)."""
-    if os.environ.get("HELM"):
-        return Path(os.environ["HELM"])
-    target = TOOLS / "helm"
-    # executable = complete: get-helm writes the file, then makes it executable
-    if os.access(target, os.X_OK):
-        return target
-    TOOLS.mkdir(parents=True, exist_ok=True)
-    get_helm = ROOT.parent / "shared" / "tools" / "get-helm"
-    with open(TOOLS.parent / "get-helm.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if os.access(target, os.X_OK):
-            return target
-        if get_helm.exists():
-            subprocess.run([str(get_helm), str(TOOLS)], check=True, timeout=600, stdout=subprocess.DEVNULL)
-            return target
-    found = shutil.which("helm")
-    if found:
-        return Path(found)
-    pytest.fail(f"no helm: {get_helm} is missing and helm is not on PATH; set HELM=/path/to/helm")
-
-
-@pytest.fixture(scope="session")
-def helm() -> Path:
-    return helm_binary()
 
 
 def run_helm(helm: Path, *args: str) -> subprocess.CompletedProcess[str]:

@@ -14,8 +14,9 @@ import pytest
 from scipy.integrate import quad
 
 from simcore.world.opendrive import MAX_FILE_BYTES, OpenDrive, OpenDriveError
+from tests.tooling import NO_CORPUS, esmini_corpus
 
-CORPUS = Path("/work/shared/corpus/esmini")
+CORPUS = esmini_corpus() or Path("/nonexistent")  # the tests below skip when it is missing
 
 
 def _wrap(a: float) -> float:
@@ -496,7 +497,7 @@ def _network(path: str) -> OpenDrive:
 
 def _reference(scenario: str) -> tuple[OpenDrive, list[dict[str, str]]]:
     if not (CORPUS / "INDEX.tsv").is_file():
-        pytest.skip(f"reference corpus not available at {CORPUS}")
+        pytest.skip(NO_CORPUS)
     row = _index()[scenario]
     xodr = (CORPUS / "resources" / scenario).parent / row["road_file"]
     with gzip.open(CORPUS / row["reference_csv"], "rt") as fh:
@@ -559,7 +560,7 @@ def test_against_esmini_reference(scenario: str) -> None:
 def _corpus_network(name: str) -> OpenDrive:
     path = CORPUS / "resources" / "xodr" / name
     if not path.is_file():
-        pytest.skip(f"reference corpus not available at {CORPUS}")
+        pytest.skip(NO_CORPUS)
     return _network(str(path.resolve()))
 
 

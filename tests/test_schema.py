@@ -11,6 +11,7 @@ import pytest
 
 from simcore.errors import BadInput
 from simcore.scenario import schema
+from tests.tooling import esmini_corpus, needs_corpus
 from tests.xosc_fixtures import (
     act,
     event,
@@ -27,7 +28,7 @@ from tests.xosc_fixtures import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-CORPUS = ROOT.parent / "shared" / "corpus" / "esmini" / "resources"
+CORPUS = esmini_corpus()
 
 # a car, its speed set in Init and changed by one event: valid against the XSD of revisions 1.0 to 1.2
 CAR = vehicle(
@@ -117,12 +118,14 @@ def test_the_example_scenarios_are_valid(path: Path) -> None:
     assert report.valid, [str(i) for i in report.issues]
 
 
-@pytest.mark.skipif(not CORPUS.is_dir(), reason="esmini corpus not present")
+@needs_corpus
 def test_every_corpus_file_is_valid_against_its_declared_revision() -> None:
-    files = sorted(CORPUS.rglob("*.xosc"))
+    assert CORPUS is not None
+    resources = CORPUS / "resources"
+    files = sorted(resources.rglob("*.xosc"))
     assert len(files) >= 72
     invalid = {
-        str(f.relative_to(CORPUS)): r.issues[:3]
+        str(f.relative_to(resources)): r.issues[:3]
         for f in files
         if not (r := schema.check_openscenario(f)).valid
     }

@@ -31,6 +31,7 @@ from simcore.transport.bus import InProcessBus, Message
 from simcore.transport.messages import deserialize, serialize
 from simcore.world.opendrive import OpenDrive
 from simcore.world.state import BoundingBox, EntityState, WorldFrame
+from tests.tooling import esmini_corpus, needs_corpus
 
 ROOT = Path(__file__).resolve().parent.parent
 HIGHWAY = ROOT / "examples" / "maps" / "highway.xodr"
@@ -1073,10 +1074,10 @@ def test_kernels_load_from_a_seeded_cache(tmp_path: Path) -> None:
     assert any((tmp_path / "pod").rglob("*.nbi"))
 
 
-CORPUS_ROADS = ROOT.parent / "shared" / "corpus" / "esmini" / "resources" / "xodr"
+CORPUS_ROADS = (esmini_corpus() or Path("/nonexistent")) / "resources" / "xodr"
 
 
-@pytest.mark.skipif(not CORPUS_ROADS.is_dir(), reason="esmini corpus not present")
+@needs_corpus
 @pytest.mark.parametrize("name", ["multi_intersections", "crest-curve"])
 def test_column_culling_is_exact_on_corpus_roads(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """Junctions full of short curved lanes, a crest on a curve: from random poses on the road (random
