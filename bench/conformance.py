@@ -7,7 +7,7 @@ esmini's own figures from the corpus INDEX.tsv (`esmini_sim_s`, `esmini_cli_wall
 class with a fresh process per scenario), on the same scenarios.
 
 Prints a table and, as its last line, one JSON object with the figures. No assertions: machines are noisy.
-Usage: .venv/bin/python bench/conformance.py [CORPUS_DIR] (default ../shared/corpus/esmini)
+Usage: .venv/bin/python bench/conformance.py [CORPUS_DIR] (default $CARLOS_ESMINI_CORPUS)
 """
 
 from __future__ import annotations
@@ -29,7 +29,14 @@ CAP = float(os.environ.get("BENCH_CAP", "1250"))
 
 
 def main() -> None:
-    corpus = Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT.parent / "shared" / "corpus" / "esmini"
+    given = sys.argv[1] if len(sys.argv) > 1 else os.environ.get("CARLOS_ESMINI_CORPUS", "")
+    if not given or not Path(given).is_dir():
+        print(
+            "usage: bench/conformance.py CORPUS_DIR (or set CARLOS_ESMINI_CORPUS): the esmini corpus directory",
+            file=sys.stderr,
+        )
+        sys.exit(2)
+    corpus = Path(given)
     resources = corpus / "resources"
     files = [f for f in conformance.scenario_files(resources) if conformance.file_kind(f) == "scenario"]
     esmini: dict[str, tuple[float, float]] = {}
