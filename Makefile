@@ -78,12 +78,11 @@ IMAGE_PREFIX ?= ghcr.io/carlos-sim
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' pyproject.toml | head -1)
 IMAGES := operator simcore bridge recorder detector
 
-helm: $(HELM)
+# (re)fetches only when .tools/bin/helm is missing or not the pinned binary
+helm:
+	@if [ "$(HELM)" = .tools/bin/helm ]; then $(PYTHON) tools/get_helm.py .tools/bin >/dev/null; fi
 
-$(HELM):
-	$(PYTHON) tools/get_helm.py $(dir $(HELM))
-
-lint-chart: $(HELM)
+lint-chart: helm
 	$(HELM) lint --strict helm/carlos
 	$(HELM) lint --strict helm/carlos --set watchNamespaces='{carlos-runs}'
 	$(HELM) template carlos helm/carlos --namespace carlos-system --include-crds >/dev/null
