@@ -123,3 +123,30 @@ def test_numba_seed_compiled_from_the_installed_package_loads_without_compiling(
     assert misses(tmp_path / "src-seed", source=ROOT) > 0
     (tmp_path / "src-seed").chmod(0o555)
     assert misses(tmp_path / "pod2", seed=tmp_path / "src-seed") > 0
+
+
+@pytest.mark.slow
+def test_every_module_imports_from_the_installed_wheel(wheel: Path, tmp_path: Path) -> None:
+    """Installed (not this checkout), every module of both packages imports and the message definitions
+    load: nothing relies on a file the wheel lacks."""
+    site = tmp_path / "site"
+    _install(wheel, site)
+    code = """
+import importlib, pkgutil, simcore, carlos_operator
+from simcore.transport.messages import TYPESTORE
+for package in (simcore, carlos_operator):
+    for module in pkgutil.walk_packages(package.__path__, package.__name__ + "."):
+        importlib.import_module(module.name)
+assert "vision_msgs/msg/Detection3DArray" in TYPESTORE.types
+print(simcore.__file__, carlos_operator.__file__)
+"""
+    result = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, "PYTHONPATH": str(site)},
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert all(path.startswith(str(site)) for path in result.stdout.split()), result.stdout
