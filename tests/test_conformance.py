@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from simcore import conformance
-from tests.tooling import esmini_corpus, needs_corpus
+from tests.tooling import corpus_dir
 from tests.xosc_fixtures import (
     openscenario,
     private_actions,
@@ -25,7 +25,6 @@ from tests.xosc_fixtures import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-CORPUS = esmini_corpus()
 
 
 def straight(controller: str = "") -> str:
@@ -119,7 +118,6 @@ def test_markdown_table_has_the_totals_and_a_row_per_file(suite: tuple[Path, Pat
     assert "bad_input: " in rows["set/broken.xosc"] and "not well-formed" in rows["set/broken.xosc"]
 
 
-@needs_corpus
 def test_corpus_subset_agrees_with_esmini() -> None:
     """A few corpus scenarios covering lane changes, speed shapes, trajectories, catalogs and headway
     triggers: each loads, ends on its own and agrees with esmini."""
@@ -146,9 +144,9 @@ def test_corpus_subset_agrees_with_esmini() -> None:
         "xosc/highway_driver.xosc",  # esmini's NaturalDriver: IDM speed, lane changes past slower traffic
         "xosc/keep_lateral_distance.xosc",  # LateralDistance springs damped relative to a lane-changing entity
     ]
-    assert CORPUS is not None
+    corpus = corpus_dir()
     results = conformance.run_directory(
-        CORPUS / "resources", CORPUS / "reference", include=subset, cap_seconds=60
+        corpus / "resources", corpus / "reference", include=subset, cap_seconds=60
     )
     assert len(results) == len(subset)
     for r in results:

@@ -14,9 +14,7 @@ import pytest
 from scipy.integrate import quad
 
 from simcore.world.opendrive import MAX_FILE_BYTES, OpenDrive, OpenDriveError
-from tests.tooling import NO_CORPUS, esmini_corpus
-
-CORPUS = esmini_corpus() or Path("/nonexistent")  # the tests below skip when it is missing
+from tests.tooling import NO_CORPUS, corpus_dir
 
 
 def _wrap(a: float) -> float:
@@ -483,7 +481,7 @@ MAX_ROWS = 3000  # deterministic sample per scenario (most have fewer rows: all 
 
 @functools.cache
 def _index() -> dict[str, dict[str, str]]:
-    with (CORPUS / "INDEX.tsv").open() as fh:
+    with (corpus_dir() / "INDEX.tsv").open() as fh:
         return {
             row["path"].removeprefix("resources/").removesuffix(".xosc"): row
             for row in csv.DictReader(fh, delimiter="\t")
@@ -496,11 +494,12 @@ def _network(path: str) -> OpenDrive:
 
 
 def _reference(scenario: str) -> tuple[OpenDrive, list[dict[str, str]]]:
-    if not (CORPUS / "INDEX.tsv").is_file():
+    corpus = corpus_dir()
+    if not (corpus / "INDEX.tsv").is_file():
         pytest.skip(NO_CORPUS)
     row = _index()[scenario]
-    xodr = (CORPUS / "resources" / scenario).parent / row["road_file"]
-    with gzip.open(CORPUS / row["reference_csv"], "rt") as fh:
+    xodr = (corpus / "resources" / scenario).parent / row["road_file"]
+    with gzip.open(corpus / row["reference_csv"], "rt") as fh:
         rows = list(csv.DictReader(fh))
     # lane following: on the lane centre at this and the entity's neighbouring samples (not crossing the
     # centre during a lane change or lane-offset manoeuvre)
@@ -558,7 +557,7 @@ def test_against_esmini_reference(scenario: str) -> None:
 
 
 def _corpus_network(name: str) -> OpenDrive:
-    path = CORPUS / "resources" / "xodr" / name
+    path = corpus_dir() / "resources" / "xodr" / name
     if not path.is_file():
         pytest.skip(NO_CORPUS)
     return _network(str(path.resolve()))

@@ -11,7 +11,7 @@ import pytest
 
 from simcore.errors import BadInput
 from simcore.scenario import schema
-from tests.tooling import esmini_corpus, needs_corpus
+from tests.tooling import corpus_dir
 from tests.xosc_fixtures import (
     act,
     event,
@@ -28,7 +28,6 @@ from tests.xosc_fixtures import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-CORPUS = esmini_corpus()
 
 # a car, its speed set in Init and changed by one event: valid against the XSD of revisions 1.0 to 1.2
 CAR = vehicle(
@@ -118,10 +117,8 @@ def test_the_example_scenarios_are_valid(path: Path) -> None:
     assert report.valid, [str(i) for i in report.issues]
 
 
-@needs_corpus
 def test_every_corpus_file_is_valid_against_its_declared_revision() -> None:
-    assert CORPUS is not None
-    resources = CORPUS / "resources"
+    resources = corpus_dir() / "resources"
     files = sorted(resources.rglob("*.xosc"))
     assert len(files) >= 72
     invalid = {

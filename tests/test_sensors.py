@@ -31,7 +31,7 @@ from simcore.transport.bus import InProcessBus, Message
 from simcore.transport.messages import deserialize, serialize
 from simcore.world.opendrive import OpenDrive
 from simcore.world.state import BoundingBox, EntityState, WorldFrame
-from tests.tooling import esmini_corpus, needs_corpus
+from tests.tooling import corpus_dir
 
 ROOT = Path(__file__).resolve().parent.parent
 HIGHWAY = ROOT / "examples" / "maps" / "highway.xodr"
@@ -1074,15 +1074,11 @@ def test_kernels_load_from_a_seeded_cache(tmp_path: Path) -> None:
     assert any((tmp_path / "pod").rglob("*.nbi"))
 
 
-CORPUS_ROADS = (esmini_corpus() or Path("/nonexistent")) / "resources" / "xodr"
-
-
-@needs_corpus
 @pytest.mark.parametrize("name", ["multi_intersections", "crest-curve"])
 def test_column_culling_is_exact_on_corpus_roads(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """Junctions full of short curved lanes, a crest on a curve: from random poses on the road (random
     heading, mount yaw, 360° or 90° field of view) a level sweep gives the cloud casting every ray gives."""
-    scene = RoadScene(OpenDrive.from_file(CORPUS_ROADS / f"{name}.xodr"))
+    scene = RoadScene(OpenDrive.from_file(corpus_dir() / "resources" / "xodr" / f"{name}.xodr"))
     rng = np.random.default_rng(7)
     cast_sizes = count_casts(monkeypatch)
     seen = 0

@@ -34,8 +34,13 @@ def esmini_corpus() -> Path | None:
     return DEV_CORPUS if DEV_CORPUS.is_dir() else None
 
 
-#: skip a test that needs the esmini corpus when it is not there
-needs_corpus = pytest.mark.skipif(esmini_corpus() is None, reason=NO_CORPUS)
+def corpus_dir() -> Path:
+    """The esmini corpus directory for a test that needs it; the test skips with a reason when it is not
+    there."""
+    found = esmini_corpus()
+    if found is None:
+        pytest.skip(NO_CORPUS)
+    return found
 
 
 def helm_binary() -> Path:
