@@ -9,13 +9,12 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
-import click
 import typer
 import typer.main
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
-from typer.core import TyperGroup
+from typer.core import TyperGroup, _click
 
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
 
@@ -34,10 +33,10 @@ class _Commands(TyperGroup):
 
         return {ep.name: ep for ep in entry_points(group=COMMAND_ENTRY_POINTS)}
 
-    def list_commands(self, ctx: click.Context) -> list[str]:
+    def list_commands(self, ctx: _click.Context) -> list[str]:
         return sorted({*super().list_commands(ctx), *self._plugins()})
 
-    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+    def get_command(self, ctx: _click.Context, cmd_name: str) -> _click.Command | None:
         command = super().get_command(ctx, cmd_name)
         if command is not None:
             return command
@@ -47,7 +46,7 @@ class _Commands(TyperGroup):
         loaded = entry_point.load()
         command = typer.main.get_command(loaded) if isinstance(loaded, typer.Typer) else loaded
         command.name = cmd_name
-        return command  # type: ignore[no-any-return]
+        return command
 
 
 app = typer.Typer(
