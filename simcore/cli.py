@@ -14,11 +14,13 @@ import typer.main
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
-from typer.core import TyperGroup, _click
+from typer.core import TyperGroup
 
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
 
 if TYPE_CHECKING:
+    from typer.core import _click  # typer's click (vendored in typer >= 0.29); annotations only
+
     from simcore.transport.bus import Bus
 
 COMMAND_ENTRY_POINTS = "carlos.commands"
