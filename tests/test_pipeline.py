@@ -170,3 +170,18 @@ def test_operator_commands_come_from_the_operator_package_entry_points() -> None
     )
     assert bad.returncode == 2
     assert "--namespace" in bad.stderr + bad.stdout
+
+
+def test_point_grid_finds_what_a_kd_tree_finds() -> None:
+    """OpenDrive's world→road index (no scipy import) against scipy's cKDTree on the same points."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    from simcore.world.opendrive import PointGrid
+
+    rng = np.random.default_rng(7)
+    points = np.vstack([rng.uniform(-500.0, 500.0, (3000, 2)), rng.normal(0.0, 3.0, (500, 2))])
+    for radius in (0.5, 7.0, 40.0):
+        grid, tree = PointGrid(points, radius), cKDTree(points)
+        for query in [*rng.uniform(-520.0, 520.0, (200, 2)), (0.0, 0.0), points[5]]:
+            assert grid.query_ball_point(query, radius) == sorted(tree.query_ball_point(query, radius))
