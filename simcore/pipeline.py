@@ -2,7 +2,8 @@
 sensors and metrics from a SimulationRun and one of its run points, then stepped to the end.
 
 `carlos run` workers and the `simcore` pod role (`simcore.runner.simulate`) and `carlos conformance`
-(`simcore.conformance.run_scenario`: a run compared with a reference) all go through `assemble` and `drive`.
+(`simcore.conformance.run_scenario`: a run compared with a reference) all go through `assemble`, `drive`
+and `Assembly.close`.
 Each part starts only when something uses it: SUMO (libsumo, netconvert) when an entity is SUMO-driven; the
 recorder when recording is on; sensors and the system under test when the spec names them; the closed loop
 when an entity is externally driven; a world frame per step only when metrics, a publisher with a consumer,
@@ -350,25 +351,3 @@ def outcome(parts: Assembly) -> Outcome:
         if parts.perception.failure is not None:
             log_lines.append(f"system under test failed: {parts.perception.failure}")
     return Outcome(result, end_reason, engine.time, log_lines)
-
-
-def simulate(
-    run: SimulationRun,
-    point: RunPoint,
-    scenario_file: Path,
-    out_dir: Path,
-    *,
-    progress: Progress | None = None,
-    deadline: float | None = None,
-    bus: Bus | None = None,
-    base_dir: Path | None = None,
-) -> Outcome:
-    """Assemble, drive and close one run (see `simcore.runner.simulate`)."""
-    parts = assemble(run, point, scenario_file, out_dir, bus=bus, base_dir=base_dir)
-    ok = False
-    try:
-        drive(parts, progress=progress, deadline=deadline)
-        ok = True
-    finally:
-        parts.close(ok=ok)
-    return outcome(parts)

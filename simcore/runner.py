@@ -110,9 +110,14 @@ def simulate(
     Returns (metrics, end reason, simulated seconds, storyboard log)."""
     from simcore import pipeline
 
-    result = pipeline.simulate(
-        run, point, scenario_file, out_dir, progress=progress, deadline=deadline, bus=bus, base_dir=base_dir
-    )
+    parts = pipeline.assemble(run, point, scenario_file, out_dir, bus=bus, base_dir=base_dir)
+    ok = False
+    try:
+        pipeline.drive(parts, progress=progress, deadline=deadline)
+        ok = True
+    finally:
+        parts.close(ok=ok)
+    result = pipeline.outcome(parts)
     return result.metrics, result.end_reason, result.sim_seconds, result.log
 
 
