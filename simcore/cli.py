@@ -10,16 +10,49 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
+import typer.main
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
+from typer.core import TyperGroup
 
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
 
 if TYPE_CHECKING:
+    from typer.core import _click  # typer's click (vendored in typer >= 0.29); annotations only
+
     from simcore.transport.bus import Bus
 
+COMMAND_ENTRY_POINTS = "carlos.commands"
+
+
+class _Commands(TyperGroup):
+    """simcore's commands, plus those other installed packages provide as `carlos.commands` entry points
+    (`carlos operator`, `carlos crds` from carlos_operator): one is imported only when it is run or listed."""
+
+    def _plugins(self) -> dict[str, Any]:
+        from importlib.metadata import entry_points
+
+        return {ep.name: ep for ep in entry_points(group=COMMAND_ENTRY_POINTS)}
+
+    def list_commands(self, ctx: _click.Context) -> list[str]:
+        return sorted({*super().list_commands(ctx), *self._plugins()})
+
+    def get_command(self, ctx: _click.Context, cmd_name: str) -> _click.Command | None:
+        command = super().get_command(ctx, cmd_name)
+        if command is not None:
+            return command
+        entry_point = self._plugins().get(cmd_name)
+        if entry_point is None:
+            return None
+        loaded = entry_point.load()
+        command = typer.main.get_command(loaded) if isinstance(loaded, typer.Typer) else loaded
+        command.name = cmd_name
+        return command
+
+
 app = typer.Typer(
+    cls=_Commands,
     name="carlos",
     help="CARLOS: simulation runs for cooperative intelligent transport systems, locally or on Kubernetes.",
     no_args_is_help=True,
@@ -489,14 +522,6 @@ def docs() -> None:
 
 
 @app.command()
-def crds() -> None:
-    """Print the SimulationRun CustomResourceDefinition (YAML, generated from the spec models)."""
-    from carlos_operator.crd import crd_yaml
-
-    sys.stdout.write(crd_yaml())
-
-
-@app.command()
 def pod(
     role: Annotated[str, typer.Option("--role", help="simcore, bridge or recorder.")],
 ) -> None:
@@ -505,31 +530,6 @@ def pod(
     from simcore.pod import main as pod_main
 
     raise typer.Exit(pod_main(role))
-
-
-@app.command()
-def operator(
-    namespace: Annotated[
-        list[str] | None, typer.Option("--namespace", "-n", help="Watch this namespace (repeatable).")
-    ] = None,
-    all_namespaces: Annotated[
-        bool, typer.Option("--all-namespaces", "-A", help="Watch every namespace (cluster-wide).")
-    ] = False,
-    liveness_port: Annotated[int, typer.Option(help="Port of the liveness endpoint /healthz.")] = 8080,
-    metrics_port: Annotated[int, typer.Option(help="Port of the Prometheus metrics (0: off).")] = 9090,
-) -> None:
-    """Run the Kubernetes operator: SimulationRun → ConfigMap + Indexed Job → status."""
-    from carlos_operator.main import run_operator
-
-    if bool(namespace) == all_namespaces:
-        raise _fail(BadInput("give --namespace NS (repeatable) or --all-namespaces", field="--namespace"))
-    raise typer.Exit(
-        run_operator(
-            namespaces=list(namespace or []),
-            liveness_port=liveness_port,
-            metrics_port=metrics_port,
-        )
-    )
 
 
 @app.command()

@@ -20,9 +20,12 @@ import traceback
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from simcore.errors import BadInput, CarlosError
+
+if TYPE_CHECKING:
+    from simcore.spec import SimulationRun
 
 STEP_SECONDS = 0.05
 REFERENCE_PERIOD = 0.1
@@ -152,8 +155,28 @@ class Trace:
         self.tracks.setdefault(name, []).append((time_s, x, y))
 
 
+def conformance_run(path: Path, cap_seconds: float) -> SimulationRun:
+    """The SimulationRun a conformance check makes of one file: 0.05 s steps up to the cap, seed 1, no
+    recording (what the reference player did, headless)."""
+    from simcore.spec import SimulationRun
+
+    return SimulationRun.model_validate(
+        {
+            "apiVersion": "carlos.dev/v1alpha1",
+            "kind": "SimulationRun",
+            "metadata": {"name": "conformance"},
+            "spec": {
+                "scenarios": [{"name": "conformance", "openscenario": str(path)}],
+                "simulation": {"stepSeconds": STEP_SECONDS, "maxSeconds": cap_seconds, "seed": 1},
+                "recording": {"enabled": False},
+            },
+        }
+    )
+
+
 def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[ScenarioResult, Trace]:
-    """Load and run one scenario headless; never raises for problems of the scenario itself."""
+    """Run one scenario headless through the run pipeline (`simcore.pipeline`, as `carlos run` does) and
+    trace it; never raises for problems of the scenario itself."""
     result = ScenarioResult(file=str(path), kind=file_kind(path))
     trace = Trace()
     if result.kind != "scenario":
@@ -161,42 +184,35 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
         result.message = f"{result.kind} file, not a scenario"
         return result, trace
     started = time.perf_counter()
-    sumo = None
+    parts = None
     try:
-        from simcore.scenario.engine import ScenarioEngine
-        from simcore.scenario.xosc import load_scenario
-        from simcore.world.opendrive import OpenDrive, OpenDriveError
+        from simcore import pipeline
+        from simcore.plan import Plan
 
-        scenario = load_scenario(path)
-        result.warnings = list(scenario.warnings)
-        trace.controlled = uncompared_entities(scenario)
-        road = None
-        if scenario.road_file is not None and scenario.road_file.suffix == ".xodr":
-            try:
-                road = OpenDrive.from_file(scenario.road_file)
-            except OpenDriveError as exc:
-                raise BadInput(str(exc), file=str(scenario.road_file)) from None
-            except FileNotFoundError:
-                raise BadInput("road network file not found", file=str(scenario.road_file)) from None
-        if any(e.driver == "sumo" for e in scenario.entities) and scenario.road_file is not None:
-            from simcore.world.sumo import SumoWorld, prepare_network
+        run = conformance_run(path, cap_seconds)
 
-            sumo = SumoWorld(prepare_network(scenario.road_file), STEP_SECONDS, 1)
-        engine = ScenarioEngine(scenario, road=road, sumo=sumo, step_seconds=STEP_SECONDS)
+        def loaded(scenario: Any) -> None:
+            result.warnings = list(scenario.warnings)
+            trace.controlled = uncompared_entities(scenario)
+
+        parts = pipeline.assemble(
+            run, Plan(run.spec)[0], path, path.parent, with_metrics=False, headless=True, on_loaded=loaded
+        )
         result.loaded = True
         every = round(REFERENCE_PERIOD / STEP_SECONDS)
-        max_steps = round(cap_seconds / STEP_SECONDS)
-        _sample(trace, engine)
-        while not engine.ended and engine.step_index < max_steps:
-            engine.advance()
+
+        def sample(engine: Any) -> None:
             if engine.step_index % every == 0:
                 _sample(trace, engine)
+
+        pipeline.drive(parts, observe=sample)
+        engine = parts.engine
         result.sim_seconds = engine.time + getattr(engine, "output_time_offset", 0.0)
         result.ended = engine.ended
         result.status = "ended" if engine.ended else "capped"
         if not engine.ended:
             result.message = f"no end within {cap_seconds:g} s of simulated time"
-        result.warnings = list(scenario.warnings) + list(engine.warnings)
+        result.warnings = list(parts.scenario.warnings) + list(engine.warnings)
     except CarlosError as exc:
         result.status = "bad_input" if isinstance(exc, BadInput) and not result.loaded else "error"
         result.message = str(exc)
@@ -205,8 +221,8 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
         where = traceback.extract_tb(exc.__traceback__)[-1]
         result.message = f"{type(exc).__name__}: {exc} ({Path(where.filename).name}:{where.lineno})"
     finally:
-        if sumo is not None:
-            sumo.close()
+        if parts is not None:
+            parts.close()
     result.wall_seconds = time.perf_counter() - started
     return result, trace
 

@@ -1,6 +1,7 @@
 """The embedded default: run a SimulationRun's indexes on local worker processes.
 
-Workers are spawned once and run index after index (a warm worker keeps its imports and network cache).
+A single index runs in this process (no worker pool to start). Otherwise workers are spawned once and run
+index after index (a warm worker keeps its imports and network cache).
 A worker that crashes (e.g. a segfault in a native library) breaks the pool: the pool is rebuilt, the
 indexes that were in flight are retried (each counts an attempt, since which one crashed is unknown), and
 an index that used up its attempts is reported as an error. Nothing already written is lost: every index's
@@ -157,10 +158,11 @@ def execute(
     attempts = dict.fromkeys(todo, 0)
     max_attempts = spec.execution.retries + 1
     pending = list(todo)
-    if bus is not None:
+    if bus is not None or len(pending) == 1:
+        # a live view's bus, or a single run: here, without paying for a worker process and its imports
         _in_process(settings, store, pending, attempts, max_attempts, outcomes, events, bus)
     context = mp.get_context("spawn")
-    progress: Any = context.Queue()
+    progress: Any = context.Queue() if pending else None
     while pending:
         with ProcessPoolExecutor(
             max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(progress,)
@@ -191,7 +193,8 @@ def execute(
                         _crashed(index, attempts, max_attempts, pending, outcomes, settings, store, events)
                     break
                 _submit(pool, settings, pending, in_flight, attempts, max_attempts, workers * 2)
-    _drain(progress, events)
+    if progress is not None:
+        _drain(progress, events)
     summary = run_summary(name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted))
     summary["outputUrl"] = store.url_for(name)
     store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
@@ -215,9 +218,10 @@ def _in_process(
     max_attempts: int,
     outcomes: dict[int, dict[str, Any]],
     events: Events,
-    bus: Bus,
+    bus: Bus | None,
 ) -> None:
-    """Run the pending indexes here, one after another, publishing on `bus` (infrastructure errors retried)."""
+    """Run the pending indexes here, one after another, publishing on `bus` (default: a bus of each run's
+    own; infrastructure errors retried)."""
     while pending:
         index = pending.pop(0)
         attempts[index] += 1

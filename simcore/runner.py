@@ -9,33 +9,28 @@ from __future__ import annotations
 
 import json
 import logging
-import platform
 import posixpath
 import tempfile
 import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
-from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
+from simcore.errors import BadInput, CarlosError, ExitCode
 from simcore.evaluation.criteria import CriterionResult, evaluate
-from simcore.evaluation.metrics import MetricsAccumulator
 from simcore.evaluation.report import index_summary
+from simcore.pipeline import Progress, versions
 from simcore.plan import Plan, RunPoint
 from simcore.spec import SimulationRun
 from simcore.store import Store
-from simcore.transport.bus import Bus, InProcessBus, Message
-from simcore.transport.world import WorldPublisher
+from simcore.transport.bus import Bus
+
+__all__ = ["Progress", "RunOutcome", "error_outcome", "resolve_scenario_file", "run_index", "simulate",
+           "summary_bytes", "versions"]  # fmt: skip
 
 log = logging.getLogger("carlos.run")
-
-#: called with (index, simulated seconds so far) while a run progresses
-Progress = Callable[[int, float], None]
 
 
 @dataclass(frozen=True)
@@ -43,16 +38,6 @@ class RunOutcome:
     index: int
     summary: dict[str, Any]
     exit_code: ExitCode
-
-
-def versions() -> dict[str, str]:
-    out = {"python": platform.python_version()}
-    for package in ("carlos", "eclipse-sumo", "libsumo", "mcap", "rosbags"):
-        try:
-            out[package] = version(package)
-        except Exception:  # a package missing from the environment is reported, not fatal
-            out[package] = "unknown"
-    return out
 
 
 def resolve_scenario_file(
@@ -114,143 +99,26 @@ def simulate(
     bus: Bus | None = None,
     base_dir: Path | None = None,
 ) -> tuple[dict[str, float], str, float, list[str]]:
-    """Run the simulation of one index, recording into `out_dir/recording.mcap`. The world is published on
-    `bus` (default: a new in-process bus); whatever subscribed to it before (a live view, another process'
-    transport) receives every message.
+    """Run the simulation of one index (`simcore.pipeline`), recording into `out_dir/recording.mcap`. The
+    world is published on `bus` (default: a new in-process bus); whatever subscribed to it before (a live
+    view, another process' transport) receives every message it subscribed to.
 
     Sensors (`spec.sensors`) run every frame they are due; the system under test (`spec.systemUnderTest`,
     its `pythonPath` relative to `base_dir`) runs on the same bus; `spec.evaluation.detection` adds the
     `detection.*` metrics.
 
     Returns (metrics, end reason, simulated seconds, storyboard log)."""
-    from simcore.recorder import McapRecorder
-    from simcore.scenario.engine import ScenarioEngine
-    from simcore.scenario.xosc import load_scenario
-    from simcore.world.opendrive import OpenDrive, OpenDriveError
-    from simcore.world.sumo import SumoWorld, prepare_network
+    from simcore import pipeline
 
-    spec = run.spec
-    scenario = load_scenario(scenario_file, point.parameters)
-    road = None
-    sumo = None
-    if scenario.road_file is not None:
-        try:
-            road = OpenDrive.from_file(scenario.road_file) if scenario.road_file.suffix == ".xodr" else None
-        except OpenDriveError as exc:
-            raise BadInput(str(exc), file=str(scenario.road_file)) from None
-        except FileNotFoundError:
-            raise BadInput("road network file not found", file=str(scenario.road_file)) from None
-        network = prepare_network(scenario.road_file)
-        sumo = SumoWorld(network, spec.simulation.step_seconds, point.seed)
-    metadata = {
-        "carlos.spec": {
-            "manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))
-        },
-        "carlos.run": {
-            "run": run.name,
-            "index": str(point.index),
-            "scenario": point.scenario.name,
-            "scenarioFile": str(scenario_file),
-            "parameters": json.dumps(point.parameters, sort_keys=True),
-            "resolvedParameters": json.dumps(scenario.parameters, sort_keys=True, default=str),
-            "seed": str(point.seed),
-            "stepSeconds": repr(spec.simulation.step_seconds),
-        },
-        "carlos.versions": versions(),
-    }
-    metrics = MetricsAccumulator()
-    bus = bus if bus is not None else InProcessBus()
-    recorder = None
-    perception = None
+    parts = pipeline.assemble(run, point, scenario_file, out_dir, bus=bus, base_dir=base_dir)
+    ok = False
     try:
-        closed_loop = None
-        control = spec.control
-        if control is not None or any(e.driver == "external" for e in scenario.entities):
-            from simcore.closedloop import ClosedLoop
-
-            closed_loop = ClosedLoop(
-                bus,
-                mode=control.mode if control is not None else "freeRunning",
-                timeout_s=control.timeout_seconds if control is not None else 10.0,
-                startup_timeout_s=control.startup_timeout_seconds if control is not None else 60.0,
-            )
-        engine = ScenarioEngine(
-            scenario,
-            road=road,
-            sumo=sumo,
-            step_seconds=spec.simulation.step_seconds,
-            ego=spec.simulation.ego,
-            external=closed_loop,
-        )
-        for name in control.entities if control is not None else ():
-            engine.drive_externally(name)
-        if spec.recording.enabled:
-            recorder = McapRecorder(
-                out_dir / "recording.mcap",
-                topics=spec.recording.topics,
-                compression=spec.recording.compression,
-                metadata=metadata,
-            )
-            bus.subscribe("*", _record_into(recorder))
-        world = WorldPublisher(bus)
-        if spec.sensors or spec.system_under_test is not None or spec.evaluation.detection is not None:
-            from simcore.sensors.loop import PerceptionLoop
-
-            perception = PerceptionLoop(
-                spec, bus, road=road, road_file=scenario.road_file, seed=point.seed, base_dir=base_dir
-            )
-        if closed_loop is not None:
-            closed_loop.wait_for_nodes(b.name for b in engine.bodies.values() if b.external)
-        frame = engine.frame()
-        metrics.update(frame)
-        if closed_loop is not None:
-            closed_loop.published(frame.time)
-        world.publish(frame)
-        if perception is not None:
-            perception.step(frame)
-        max_steps = round(spec.simulation.max_seconds / spec.simulation.step_seconds)
-        reported = 0.0
-        while not engine.ended and engine.step_index < max_steps:
-            if closed_loop is not None:
-                closed_loop.wait((b.name for b in engine.bodies.values() if b.external), frame.time)
-            frame = engine.step()
-            metrics.update(frame)
-            if closed_loop is not None:
-                closed_loop.published(frame.time)
-            world.publish(frame)
-            if perception is not None:
-                perception.step(frame)
-            if progress is not None and frame.time - reported >= 1.0:
-                reported = frame.time
-                progress(point.index, frame.time)
-            if deadline is not None and engine.step_index % 100 == 0 and time.monotonic() > deadline:
-                raise SimulationError(
-                    f"run exceeded execution.timeoutSeconds={spec.execution.timeout_seconds} "
-                    f"at simulated t={frame.time:.1f} s"
-                )
-        if perception is not None:
-            perception.close()
-        world.publish_status(frame, "ended")
-        if recorder is not None:
-            recorder.close()
-            recorder = None
+        pipeline.drive(parts, progress=progress, deadline=deadline)
+        ok = True
     finally:
-        if perception is not None:
-            perception.close()
-        bus.close()
-        if recorder is not None:
-            recorder.abort()
-        if sumo is not None:
-            sumo.close()
-    result = metrics.result()
-    end_reason = engine.ended_by or "maxSeconds"
-    result["stopTriggered"] = 1.0 if end_reason == "stopTrigger" else 0.0
-    log_lines = engine.log
-    if perception is not None:
-        result.update(perception.metrics())
-        if perception.failure is not None:
-            log_lines = [*log_lines, f"system under test failed: {perception.failure}"]
-    return result, end_reason, engine.time, log_lines
+        parts.close(ok=ok)
+    result = pipeline.outcome(parts)
+    return result.metrics, result.end_reason, result.sim_seconds, result.log
 
 
 def error_outcome(run: SimulationRun, index: int, attempt: int, message: str) -> RunOutcome:
@@ -275,13 +143,6 @@ def error_outcome(run: SimulationRun, index: int, attempt: int, message: str) ->
 
 def summary_bytes(summary: dict[str, Any]) -> bytes:
     return (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
-
-
-def _record_into(recorder: Any) -> Callable[[Message], None]:
-    def record(message: Message) -> None:
-        recorder.write(message.topic, message.typename, message.obj(), message.time_s)
-
-    return record
 
 
 def run_index(

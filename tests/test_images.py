@@ -166,7 +166,7 @@ def test_entrypoint_resolves_to_a_real_command(name: str) -> None:
     argv = exec_form(path, dockerfile.last("ENTRYPOINT")) + exec_form(path, dockerfile.last("CMD"))
     if argv[0] == "carlos":
         group = _cli_command()
-        sub = group.commands.get(argv[1])  # type: ignore[attr-defined]
+        sub = group.get_command(None, argv[1])  # type: ignore[attr-defined]  # entry-point commands too
         assert sub is not None, f"{name}: `carlos {argv[1]}` does not exist"
         ctx = sub.make_context(argv[1], argv[2:])  # parses the options exactly as the container will
         if argv[1] == "pod":
@@ -349,8 +349,8 @@ def test_operator_image_needs_no_sumo_and_no_open3d() -> None:
         import typer.main
         from simcore.cli import app
         command = typer.main.get_command(app)
-        command.commands["operator"].make_context("operator", ["--all-namespaces"])
-        command.commands["crds"].callback()
+        command.get_command(None, "operator").make_context("operator", ["--all-namespaces"])
+        command.get_command(None, "crds").callback()
         print("ok")
         """,
     )

@@ -75,9 +75,11 @@ class _InProcessPublisher:
 
 @dataclass
 class InProcessBus:
-    """Synchronous in-process delivery, in subscription order."""
+    """Synchronous in-process delivery, in subscription order. A subscription may narrow its pattern with
+    `wants(topic)` (e.g. a recorder's topic filter); `wants`/`has_subscribers` tell a publisher whether a
+    message would reach anyone, so that nothing is built for no one."""
 
-    _subscriptions: list[tuple[str, Callback]] = field(default_factory=list)
+    _subscriptions: list[tuple[str, Callback, Callable[[str], bool] | None]] = field(default_factory=list)
     _routes: dict[str, list[Callback]] = field(default_factory=dict)
     topics: dict[str, str] = field(default_factory=dict)  # advertised topic → type
 
@@ -87,20 +89,36 @@ class InProcessBus:
             raise ValueError(f"topic {topic} is advertised as {known}, not {typename}")
         return _InProcessPublisher(self, topic, typename)
 
-    def subscribe(self, pattern: str, callback: Callback) -> None:
-        self._subscriptions.append((pattern, callback))
+    def subscribe(
+        self, pattern: str, callback: Callback, *, wants: Callable[[str], bool] | None = None
+    ) -> None:
+        self._subscriptions.append((pattern, callback, wants))
         self._routes.clear()
 
     def subscriber_count(self, topic: str) -> int:
         """Subscriptions to `topic` by its name (glob patterns such as a recorder's `*` do not count)."""
-        return sum(1 for pattern, _ in self._subscriptions if pattern == topic)
+        return sum(1 for pattern, _, _ in self._subscriptions if pattern == topic)
+
+    def has_subscribers(self) -> bool:
+        return bool(self._subscriptions)
+
+    def wants(self, topic: str) -> bool:
+        """Whether a message on `topic` reaches any subscriber."""
+        return bool(self._route(topic))
+
+    def _route(self, topic: str) -> list[Callback]:
+        route = self._routes.get(topic)
+        if route is None:
+            route = [
+                cb
+                for pattern, cb, wants in self._subscriptions
+                if fnmatch.fnmatchcase(topic, pattern) and (wants is None or wants(topic))
+            ]
+            self._routes[topic] = route
+        return route
 
     def dispatch(self, message: Message) -> None:
-        route = self._routes.get(message.topic)
-        if route is None:
-            route = [cb for pattern, cb in self._subscriptions if fnmatch.fnmatchcase(message.topic, pattern)]
-            self._routes[message.topic] = route
-        for callback in route:
+        for callback in self._route(message.topic):
             callback(message)
 
     def close(self) -> None:

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
-from functools import cache
+from collections.abc import Callable, Mapping
+from functools import cache, partial
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +85,7 @@ __all__ = [
     "base_link",
     "clock",
     "deserialize",
+    "frame_builders",
     "frame_messages",
     "msgdef",
     "objects",
@@ -307,20 +308,25 @@ def status(frame: WorldFrame, state: str, detail: Mapping[str, str] | None = Non
     )
 
 
-def frame_messages(frame: WorldFrame) -> list[tuple[str, str, Any]]:
-    """(topic, typename, message) for one step: `/clock`, `/tf`, `/carlos/<entity>/odometry` for every
-    entity, `/carlos/objects`."""
+def frame_builders(frame: WorldFrame) -> list[tuple[str, str, Callable[[], Any]]]:
+    """(topic, typename, build) for one step: `/clock`, `/tf`, `/carlos/<entity>/odometry` for every
+    entity, `/carlos/objects`; `build()` makes the message (called only for topics someone consumes)."""
     _check_unique(frame)
-    out: list[tuple[str, str, Any]] = [
-        (CLOCK_TOPIC, Clock.__msgtype__, clock(frame)),
-        (TF_TOPIC, TFMessage.__msgtype__, tf(frame)),
+    out: list[tuple[str, str, Callable[[], Any]]] = [
+        (CLOCK_TOPIC, Clock.__msgtype__, lambda: clock(frame)),
+        (TF_TOPIC, TFMessage.__msgtype__, lambda: tf(frame)),
     ]
     out.extend(
-        (odometry_topic(entity.name), Odometry.__msgtype__, odometry(frame, entity))
+        (odometry_topic(entity.name), Odometry.__msgtype__, partial(odometry, frame, entity))
         for entity in frame.entities
     )
-    out.append((OBJECTS_TOPIC, "vision_msgs/msg/Detection3DArray", objects(frame)))
+    out.append((OBJECTS_TOPIC, "vision_msgs/msg/Detection3DArray", lambda: objects(frame)))
     return out
+
+
+def frame_messages(frame: WorldFrame) -> list[tuple[str, str, Any]]:
+    """(topic, typename, message) for one step: every topic of `frame_builders`, built."""
+    return [(topic, typename, build()) for topic, typename, build in frame_builders(frame)]
 
 
 # --- serialisation -------------------------------------------------------------------------------------

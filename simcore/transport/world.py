@@ -1,9 +1,14 @@
-"""Publishing the world state on the bus: DESIGN.md's topics, one publisher per topic."""
+"""Publishing the world state on the bus: DESIGN.md's topics, one publisher per topic.
+
+A message is built only for a topic someone consumes: on an in-process bus, a subscription that wants the
+topic (`InProcessBus.wants`); on a transport to other processes (loopback, DDS) every topic, since its
+consumers are elsewhere. With no consumer at all, `simcore.transport.messages` (rosbags' type store, a
+noticeable import) is never imported.
+"""
 
 from __future__ import annotations
 
-from simcore.transport import messages
-from simcore.transport.bus import Bus, Publisher
+from simcore.transport.bus import Bus, InProcessBus, Publisher
 from simcore.world.state import WorldFrame
 
 STATUS_TOPIC = "/carlos/status"
@@ -12,7 +17,7 @@ STATUS_TYPE = "diagnostic_msgs/msg/DiagnosticStatus"
 
 class WorldPublisher:
     """Publishes `/clock`, `/tf`, `/carlos/<entity>/odometry` and `/carlos/objects` for every frame, and the
-    end-of-run status on `/carlos/status`."""
+    end-of-run status on `/carlos/status`, each topic only while it has a consumer."""
 
     def __init__(self, bus: Bus) -> None:
         self.bus = bus
@@ -24,9 +29,28 @@ class WorldPublisher:
             publisher = self._publishers[topic] = self.bus.advertise(topic, typename)
         return publisher
 
+    def wants(self, topic: str) -> bool:
+        bus = self.bus
+        return bus.wants(topic) if isinstance(bus, InProcessBus) else True
+
+    def has_consumers(self) -> bool:
+        """Whether any world topic may have a consumer (else publishing a frame does nothing)."""
+        bus = self.bus
+        return bus.has_subscribers() if isinstance(bus, InProcessBus) else True
+
     def publish(self, frame: WorldFrame) -> None:
-        for topic, typename, msg in messages.frame_messages(frame):
-            self._publisher(topic, typename).publish(msg, frame.time)
+        if not self.has_consumers():
+            return
+        from simcore.transport import messages
+
+        wants = self.wants
+        for topic, typename, build in messages.frame_builders(frame):
+            if wants(topic):
+                self._publisher(topic, typename).publish(build(), frame.time)
 
     def publish_status(self, frame: WorldFrame, state: str) -> None:
-        self._publisher(STATUS_TOPIC, STATUS_TYPE).publish(messages.status(frame, state), frame.time)
+        if self.wants(STATUS_TOPIC):
+            from simcore.transport.messages import status
+
+            message = status(frame, state)
+            self._publisher(STATUS_TOPIC, STATUS_TYPE).publish(message, frame.time)

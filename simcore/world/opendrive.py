@@ -37,7 +37,6 @@ from xml.etree.ElementTree import Element
 import defusedxml.ElementTree as DET
 import numpy as np
 from defusedxml import DefusedXmlException
-from scipy.special import fresnel
 
 __all__ = [
     "MAX_FILE_BYTES",
@@ -65,6 +64,38 @@ DRIVING_LANE_TYPES = frozenset(
 """Lane types (lower case) counted as drivable by ``lane_ids(..., driving_only=True)``."""
 
 _S_TOL = 1e-3  # m: s values this far outside [0, length] are clamped silently
+
+
+class PointGrid:
+    """Points in square cells of side `cell`, for `query_ball_point(p, r)` with r <= cell: the indices of
+    the points within r of p, ascending (the set scipy's cKDTree finds; this index costs no scipy import,
+    whose load outweighs a whole run on a small road)."""
+
+    def __init__(self, data: np.ndarray, cell: float) -> None:
+        self.data = data
+        self.cell = max(cell, 1e-9)
+        keys = np.floor(data / self.cell).astype(np.int64)
+        buckets: dict[tuple[int, int], list[int]] = {}
+        for i, (kx, ky) in enumerate(keys.tolist()):
+            buckets.setdefault((kx, ky), []).append(i)
+        self._buckets = {key: np.asarray(rows, dtype=np.int64) for key, rows in buckets.items()}
+
+    def query_ball_point(self, point: Sequence[float], r: float) -> list[int]:
+        x, y = float(point[0]), float(point[1])
+        span = max(1, math.ceil(r / self.cell))
+        kx, ky = math.floor(x / self.cell), math.floor(y / self.cell)
+        found = [
+            rows
+            for gx in range(kx - span, kx + span + 1)
+            for gy in range(ky - span, ky + span + 1)
+            if (rows := self._buckets.get((gx, gy))) is not None
+        ]
+        if not found:
+            return []
+        rows = np.concatenate(found)
+        d = self.data[rows]
+        near = rows[(d[:, 0] - x) ** 2 + (d[:, 1] - y) ** 2 <= r * r]
+        return sorted(near.tolist())
 
 
 class OpenDriveError(ValueError):
@@ -217,6 +248,8 @@ class Spiral(Geometry):
             self._sin0 = math.sin(self._th0)
 
     def _std(self, u: float) -> tuple[float, float]:
+        from scipy.special import fresnel  # only roads with spirals pay for scipy.special's import
+
         sf, cf = fresnel(u / self._scale)
         return self._scale * float(cf), self._sign * self._scale * float(sf)
 
@@ -1152,7 +1185,6 @@ class OpenDrive:
 
     # ---------------------------------------------------------------- world -> road
     def _build_index(self) -> dict[str, Any]:
-        from scipy.spatial import cKDTree
 
         xs: list[float] = []
         ys: list[float] = []
@@ -1178,7 +1210,7 @@ class OpenDrive:
                 reach.append(ext + sp + 0.5)
         pts = np.column_stack([xs, ys])
         return {
-            "tree": cKDTree(pts),
+            "tree": PointGrid(pts, float(max(reach))),
             "roads": road_list,
             "rix": np.asarray(rix),
             "s": np.asarray(ss),

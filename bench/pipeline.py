@@ -1,0 +1,221 @@
+"""The run pipeline as a user meets it, side by side with the esmini player on the same files.
+
+(a) single run: one scenario (the corpus' cut-in, 22 s simulated, recording off) through `carlos run` as a
+    fresh process (the installed console script next to this Python) vs the esmini player as a fresh process
+    on the same file; median of BENCH_REPEAT (default 3) runs each.
+(b) sweep: a BENCH_SWEEP-run (default 200) sweep of examples/scenarios/cut-in.xosc (EgoSpeed × CutInGap ×
+    AdversarySpeed, recording off) through `carlos run --parallel 2` vs as many esmini processes two at a
+    time, each on a copy of the file with that run's parameter values (esmini drives Ego by its script where
+    CARLOS hands it to SUMO, as the file asks).
+(c) simulated seconds per wall second per core, warm, in this process: the run pipeline
+    (`simcore.runner.simulate`, what `carlos run` workers and the simcore pod call) vs the bare engine
+    (`ScenarioEngine.advance` in a loop) on the corpus cut-in.
+
+esmini: ../shared/tools/esmini/esmini relative to the repository, else $ESMINI; its rows are skipped when
+neither exists. The corpus: ../shared/corpus/esmini (or $CORPUS). Prints a table; the last line is one JSON
+object with the figures and the ratios. No assertions: machines are noisy.
+Usage: .venv/bin/python bench/pipeline.py
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+REPEAT = int(os.environ.get("BENCH_REPEAT", "3"))
+SWEEP = int(os.environ.get("BENCH_SWEEP", "200"))
+PASSES = int(os.environ.get("BENCH_PASSES", "10"))
+CORPUS = Path(os.environ.get("CORPUS", ROOT.parent / "shared" / "corpus" / "esmini"))
+CARLOS = Path(sys.executable).parent / "carlos"
+EXAMPLE = ROOT / "examples" / "scenarios" / "cut-in.xosc"
+
+
+def esmini_binary() -> Path | None:
+    local = ROOT.parent / "shared" / "tools" / "esmini" / "esmini"
+    if local.is_file():
+        return local
+    env = os.environ.get("ESMINI")
+    return Path(env) if env and Path(env).is_file() else None
+
+
+def manifest(directory: Path, name: str, scenario: Path, sweep: dict[str, list[float]] | None = None) -> Path:
+    lines = [
+        "apiVersion: carlos.dev/v1alpha1",
+        "kind: SimulationRun",
+        f"metadata: {{name: {name}}}",
+        "spec:",
+        f"  scenarios: [{{name: {name}, openscenario: {json.dumps(str(scenario))}}}]",
+        "  simulation: {stepSeconds: 0.05, maxSeconds: 60, seed: 1}",
+        "  recording: {enabled: false}",
+        f"  output: {{url: {json.dumps((directory / 'results').as_uri())}}}",
+    ]
+    if sweep:
+        lines.append("  sweep:")
+        lines.append("    matrix:")
+        lines.extend(f"      {key}: {json.dumps(values)}" for key, values in sweep.items())
+    path = directory / f"{name}.yaml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def timed(command: list[str], cwd: Path) -> float:
+    started = time.perf_counter()
+    done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - started
+    if done.returncode not in (0, 1):
+        raise SystemExit(f"{' '.join(command)} exited {done.returncode}: {done.stderr.strip()[-400:]}")
+    return wall
+
+
+def esmini_command(binary: Path, scenario: Path) -> list[str]:
+    return [str(binary), "--headless", "--fixed_timestep", "0.05", "--disable_log", "--disable_stdout",
+            "--osc", str(scenario)]  # fmt: skip
+
+
+def sweep_matrix(size: int) -> dict[str, list[float]]:
+    ego = [round(18.0 + 0.5 * i, 2) for i in range(10)]
+    gap = [round(8.0 + 1.0 * i, 2) for i in range(10)]
+    adversary = [round(32.0 + 1.0 * i, 2) for i in range(max(1, size // 100))]
+    return {"EgoSpeed": ego, "CutInGap": gap, "AdversarySpeed": adversary}
+
+
+def esmini_variants(directory: Path, matrix: dict[str, list[float]]) -> list[Path]:
+    """One copy of the example per run of the matrix, next to a link to its maps (relative paths resolve)."""
+    scenarios = directory / "scenarios"
+    scenarios.mkdir()
+    (directory / "maps").symlink_to(EXAMPLE.parent.parent / "maps")
+    text = EXAMPLE.read_text()
+    out = []
+    keys = list(matrix)
+    for i, values in enumerate(itertools.product(*(matrix[k] for k in keys))):
+        variant = text
+        for key, value in zip(keys, values, strict=True):
+            variant = re.sub(
+                rf'(<ParameterDeclaration name="{key}" parameterType="double" value=")[^"]*"',
+                rf'\g<1>{value}"',
+                variant,
+            )
+        path = scenarios / f"run{i}.xosc"
+        path.write_text(variant)
+        out.append(path)
+    return out
+
+
+def pipeline_vs_engine(scenario: Path, work: Path) -> tuple[float, float, float]:
+    """(simulated s of one pass, pipeline sim-s/wall-s, bare engine sim-s/wall-s), warm, in this process."""
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan
+    from simcore.runner import simulate
+    from simcore.scenario.engine import ScenarioEngine
+    from simcore.scenario.xosc import load_scenario
+    from simcore.world.opendrive import OpenDrive
+
+    loaded = load_manifest(manifest(work, "inproc", scenario))
+    run = loaded[0] if isinstance(loaded, tuple) else loaded
+    point = Plan(run.spec)[0]
+
+    def pipeline() -> float:
+        with tempfile.TemporaryDirectory() as out:
+            return simulate(run, point, scenario, Path(out))[2]
+
+    def engine() -> float:
+        loaded_scenario = load_scenario(scenario)
+        road_file = loaded_scenario.road_file
+        road = OpenDrive.from_file(road_file) if road_file is not None else None
+        eng = ScenarioEngine(loaded_scenario, road=road, sumo=None, step_seconds=0.05)
+        while not eng.ended and eng.step_index < 1200:
+            eng.advance()
+        return eng.time
+
+    rates = []
+    sim = 0.0
+    for job in (pipeline, engine):
+        job()  # warm-up
+        started = time.perf_counter()
+        sim = sum(job() for _ in range(PASSES))
+        rates.append(sim / (time.perf_counter() - started))
+    return sim / PASSES, rates[0], rates[1]
+
+
+def main() -> None:
+    binary = esmini_binary()
+    cut_in = CORPUS / "resources" / "xosc" / "cut-in.xosc"
+    if not cut_in.is_file():
+        raise SystemExit(f"corpus cut-in not found at {cut_in} (set CORPUS)")
+    figures: dict[str, float | int | None] = {"sweep_runs": SWEEP}
+    with tempfile.TemporaryDirectory(prefix="carlos-bench-") as name:
+        work = Path(name)
+        single = manifest(work, "single", cut_in)
+        carlos_single = statistics.median(
+            timed([str(CARLOS), "run", str(single), "--fresh"], work) for _ in range(REPEAT)
+        )
+        figures["single_carlos_s"] = round(carlos_single, 3)
+        if binary is not None:
+            esmini_single = statistics.median(
+                timed(esmini_command(binary, cut_in), work) for _ in range(REPEAT)
+            )
+            figures["single_esmini_s"] = round(esmini_single, 3)
+            figures["single_ratio_carlos_over_esmini"] = round(carlos_single / esmini_single, 2)
+        matrix = sweep_matrix(SWEEP)
+        sweep = manifest(work, "sweep", EXAMPLE, matrix)
+        runs = len(list(itertools.product(*matrix.values())))
+        figures["sweep_runs"] = runs
+        carlos_sweep = timed([str(CARLOS), "run", str(sweep), "--fresh", "--parallel", "2"], work)
+        figures["sweep_carlos_s"] = round(carlos_sweep, 2)
+        figures["sweep_carlos_runs_per_s"] = round(runs / carlos_sweep, 2)
+        if binary is not None:
+            esmini_dir = work / "esmini"
+            esmini_dir.mkdir()
+            variants = esmini_variants(esmini_dir, matrix)
+            started = time.perf_counter()
+            with ThreadPoolExecutor(max_workers=2) as pool:
+                list(pool.map(lambda p: timed(esmini_command(binary, p), esmini_dir), variants))
+            esmini_sweep = time.perf_counter() - started
+            figures["sweep_esmini_s"] = round(esmini_sweep, 2)
+            figures["sweep_throughput_carlos_over_esmini"] = round(esmini_sweep / carlos_sweep, 2)
+        sim, pipeline_rate, engine_rate = pipeline_vs_engine(cut_in, work)
+        figures["pipeline_sim_s_per_wall_s"] = round(pipeline_rate, 1)
+        figures["engine_sim_s_per_wall_s"] = round(engine_rate, 1)
+        figures["pipeline_over_engine"] = round(pipeline_rate / engine_rate, 3)
+        shutil.rmtree(work / "results", ignore_errors=True)
+
+    def row(what: str, carlos: object, esmini: object, ratio: object) -> None:
+        print(f"{what:46} {carlos!s:>12} {esmini!s:>12} {ratio!s:>10}")
+
+    print(f"{'measure':46} {'carlos':>12} {'esmini':>12} {'ratio':>10}")
+    row(
+        "single run, fresh process (s)",
+        figures["single_carlos_s"],
+        figures.get("single_esmini_s", "—"),
+        figures.get("single_ratio_carlos_over_esmini", "—"),
+    )
+    row(
+        f"{runs}-run sweep, 2 at a time (s; ratio=throughput)",
+        figures["sweep_carlos_s"],
+        figures.get("sweep_esmini_s", "—"),
+        figures.get("sweep_throughput_carlos_over_esmini", "—"),
+    )
+    row(
+        f"sim-s per wall-s, cut-in {sim:.0f} s (pipeline/engine)",
+        figures["pipeline_sim_s_per_wall_s"],
+        figures["engine_sim_s_per_wall_s"],
+        figures["pipeline_over_engine"],
+    )
+    print(json.dumps(figures))
+
+
+if __name__ == "__main__":
+    main()

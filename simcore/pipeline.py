@@ -1,0 +1,353 @@
+"""One run, assembled in one place: scenario engine, road, SUMO, closed loop, bus, world publisher, recorder,
+sensors and metrics from a SimulationRun and one of its run points, then stepped to the end.
+
+`carlos run` workers and the `simcore` pod role (`simcore.runner.simulate`) and `carlos conformance`
+(`simcore.conformance.run_scenario`: a run compared with a reference) all go through `assemble`, `drive`
+and `Assembly.close`.
+Each part starts only when something uses it: SUMO (libsumo, netconvert) when an entity is SUMO-driven; the
+recorder when recording is on; sensors and the system under test when the spec names them; the closed loop
+when an entity is externally driven; a world frame per step only when metrics, a publisher with a consumer,
+sensors or the closed loop read it; ROS messages per topic only when someone consumes that topic.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib.metadata import version
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from simcore.errors import BadInput, SimulationError
+from simcore.plan import RunPoint
+from simcore.spec import SimulationRun
+from simcore.transport.bus import Bus, InProcessBus, Message
+from simcore.transport.world import WorldPublisher
+
+if TYPE_CHECKING:
+    from simcore.closedloop import ClosedLoop
+    from simcore.evaluation.metrics import MetricsAccumulator
+    from simcore.recorder import McapRecorder
+    from simcore.scenario.engine import ScenarioEngine
+    from simcore.scenario.model import Scenario
+    from simcore.sensors.loop import PerceptionLoop
+    from simcore.world.opendrive import OpenDrive
+    from simcore.world.sumo import SumoWorld
+
+#: called with (index, simulated seconds so far) while a run progresses
+Progress = Callable[[int, float], None]
+#: called with the engine after the initial state and after every step (e.g. a conformance trace)
+Observer = Callable[["ScenarioEngine"], None]
+
+
+@dataclass(frozen=True)
+class Outcome:
+    metrics: dict[str, float]
+    end_reason: str  # stopTrigger | maxSeconds
+    sim_seconds: float
+    log: list[str]
+
+
+@dataclass
+class Assembly:
+    """The parts of one run; `drive` steps it, `close` releases it (idempotent)."""
+
+    run: SimulationRun
+    point: RunPoint
+    scenario: Scenario
+    engine: ScenarioEngine
+    bus: Bus
+    world: WorldPublisher
+    metrics: MetricsAccumulator | None
+    road: OpenDrive | None = None
+    sumo: SumoWorld | None = None
+    closed_loop: ClosedLoop | None = None
+    recorder: McapRecorder | None = None
+    perception: PerceptionLoop | None = None
+    _closed: bool = field(default=False, repr=False)
+
+    @property
+    def needs_frames(self) -> bool:
+        """Whether anything reads a world frame per step (otherwise the engine only advances)."""
+        return (
+            self.metrics is not None
+            or self.perception is not None
+            or self.closed_loop is not None
+            or self.world.has_consumers()
+        )
+
+    def close(self, *, ok: bool = False) -> None:
+        """Release every part; the recording is finalised only when `ok` (else aborted)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self.perception is not None:
+                self.perception.close()
+            self.bus.close()
+            if self.recorder is not None:
+                if ok:
+                    self.recorder.close()
+                else:
+                    self.recorder.abort()
+        finally:
+            if self.sumo is not None:
+                self.sumo.close()
+
+
+def sumo_driven(scenario: Scenario) -> list[str]:
+    """The entities SUMO drives (`carlos.driver=sumo`): SUMO starts only for these."""
+    return [e.name for e in scenario.entities if e.driver == "sumo"]
+
+
+def load_road(scenario: Scenario) -> OpenDrive | None:
+    """The scenario's OpenDRIVE road (None without one, or for a SUMO .net.xml)."""
+    if scenario.road_file is None or scenario.road_file.suffix != ".xodr":
+        if scenario.road_file is not None and not scenario.road_file.is_file():
+            raise BadInput("road network file not found", file=str(scenario.road_file))
+        return None
+    from simcore.world.opendrive import OpenDrive, OpenDriveError
+
+    try:
+        return OpenDrive.from_file(scenario.road_file)
+    except OpenDriveError as exc:
+        raise BadInput(str(exc), file=str(scenario.road_file)) from None
+    except FileNotFoundError:
+        raise BadInput("road network file not found", file=str(scenario.road_file)) from None
+
+
+def start_sumo(scenario: Scenario, step_seconds: float, seed: int) -> SumoWorld | None:
+    """libsumo on the scenario's road, when an entity is SUMO-driven (a road netconvert cannot convert fails
+    such a run only, saying which entities need SUMO)."""
+    driven = sumo_driven(scenario)
+    if not driven or scenario.road_file is None:
+        return None  # without a road the engine reports the SUMO-driven entity
+    from simcore.world.sumo import SumoWorld, prepare_network
+
+    try:
+        network = prepare_network(scenario.road_file)
+    except BadInput as exc:
+        raise BadInput(
+            f"{exc.detail}; SUMO drives {', '.join(driven)} (controller property carlos.driver=sumo) and needs "
+            "the road converted: fix the road, or let the scenario drive them",
+            file=exc.file,
+        ) from None
+    return SumoWorld(network, step_seconds, seed)
+
+
+def versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for package in ("carlos", "eclipse-sumo", "libsumo", "mcap", "rosbags"):
+        try:
+            out[package] = version(package)
+        except Exception:  # a package missing from the environment is reported, not fatal
+            out[package] = "unknown"
+    return out
+
+
+def _metadata(run: SimulationRun, point: RunPoint, scenario: Scenario, scenario_file: Path) -> dict[str, Any]:
+    import yaml
+
+    return {
+        "carlos.spec": {
+            "manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))
+        },
+        "carlos.run": {
+            "run": run.name,
+            "index": str(point.index),
+            "scenario": point.scenario.name,
+            "scenarioFile": str(scenario_file),
+            "parameters": json.dumps(point.parameters, sort_keys=True),
+            "resolvedParameters": json.dumps(scenario.parameters, sort_keys=True, default=str),
+            "seed": str(point.seed),
+            "stepSeconds": repr(run.spec.simulation.step_seconds),
+        },
+        "carlos.versions": versions(),
+    }
+
+
+def assemble(
+    run: SimulationRun,
+    point: RunPoint,
+    scenario_file: Path,
+    out_dir: Path,
+    *,
+    bus: Bus | None = None,
+    base_dir: Path | None = None,
+    with_metrics: bool = True,
+    headless: bool = False,
+    on_loaded: Callable[[Scenario], None] | None = None,
+) -> Assembly:
+    """Build the run of `point` (recording into `out_dir/recording.mcap` when the spec records). `headless`:
+    no system under test is attached, so externally driven entities stand still (as in the reference
+    player) instead of waiting for commands. `on_loaded` sees the scenario once parsed. On an error every
+    part started so far is released."""
+    from simcore.scenario.engine import ScenarioEngine
+    from simcore.scenario.xosc import load_scenario
+
+    spec = run.spec
+    scenario = load_scenario(scenario_file, point.parameters)
+    if on_loaded is not None:
+        on_loaded(scenario)
+    road = load_road(scenario)
+    bus = bus if bus is not None else InProcessBus()
+    sumo = None
+    parts: Assembly | None = None
+    try:
+        sumo = start_sumo(scenario, spec.simulation.step_seconds, point.seed)
+        closed_loop = None
+        control = spec.control
+        if control is not None or (not headless and any(e.driver == "external" for e in scenario.entities)):
+            from simcore.closedloop import ClosedLoop
+
+            closed_loop = ClosedLoop(
+                bus,
+                mode=control.mode if control is not None else "freeRunning",
+                timeout_s=control.timeout_seconds if control is not None else 10.0,
+                startup_timeout_s=control.startup_timeout_seconds if control is not None else 60.0,
+            )
+        engine = ScenarioEngine(
+            scenario,
+            road=road,
+            sumo=sumo,
+            step_seconds=spec.simulation.step_seconds,
+            ego=spec.simulation.ego,
+            external=closed_loop,
+        )
+        for name in control.entities if control is not None else ():
+            engine.drive_externally(name)
+        metrics = None
+        if with_metrics:
+            from simcore.evaluation.metrics import MetricsAccumulator
+
+            metrics = MetricsAccumulator()
+        parts = Assembly(
+            run=run,
+            point=point,
+            scenario=scenario,
+            engine=engine,
+            bus=bus,
+            world=WorldPublisher(bus),
+            metrics=metrics,
+            road=road,
+            sumo=sumo,
+            closed_loop=closed_loop,
+        )
+        if spec.recording.enabled:
+            from simcore.recorder import McapRecorder
+
+            recorder = parts.recorder = McapRecorder(
+                out_dir / "recording.mcap",
+                topics=spec.recording.topics,
+                compression=spec.recording.compression,
+                metadata=_metadata(run, point, scenario, scenario_file),
+            )
+            _subscribe(bus, "*", _record_into(recorder), wants=recorder.wants)
+        if spec.sensors or spec.system_under_test is not None or spec.evaluation.detection is not None:
+            from simcore.sensors.loop import PerceptionLoop
+
+            parts.perception = PerceptionLoop(
+                spec, bus, road=road, road_file=scenario.road_file, seed=point.seed, base_dir=base_dir
+            )
+        return parts
+    except BaseException:
+        if parts is not None:
+            parts.close()
+        else:
+            bus.close()
+            if sumo is not None:
+                sumo.close()
+        raise
+
+
+def _subscribe(bus: Bus, pattern: str, callback: Callable[[Message], None], *, wants: Any) -> None:
+    if isinstance(bus, InProcessBus):
+        bus.subscribe(pattern, callback, wants=wants)
+    else:
+        bus.subscribe(pattern, callback)
+
+
+def _record_into(recorder: McapRecorder) -> Callable[[Message], None]:
+    def record(message: Message) -> None:
+        recorder.write(message.topic, message.typename, message.obj(), message.time_s)
+
+    return record
+
+
+def drive(
+    parts: Assembly,
+    *,
+    progress: Progress | None = None,
+    deadline: float | None = None,
+    observe: Observer | None = None,
+) -> None:
+    """Step the run until the scenario ends or `simulation.maxSeconds`; publishes and measures every frame
+    that anything reads."""
+    spec = parts.run.spec
+    engine, closed_loop, perception, metrics, world = (
+        parts.engine,
+        parts.closed_loop,
+        parts.perception,
+        parts.metrics,
+        parts.world,
+    )
+    index = parts.point.index
+    if closed_loop is not None:
+        closed_loop.wait_for_nodes(b.name for b in engine.bodies.values() if b.external)
+    frames = parts.needs_frames
+    frame = engine.frame() if frames else None
+
+    def consume() -> None:
+        assert frame is not None
+        if metrics is not None:
+            metrics.update(frame)
+        if closed_loop is not None:
+            closed_loop.published(frame.time)
+        world.publish(frame)
+        if perception is not None:
+            perception.step(frame)
+
+    if frame is not None:
+        consume()
+    if observe is not None:
+        observe(engine)
+    max_steps = round(spec.simulation.max_seconds / spec.simulation.step_seconds)
+    reported = 0.0
+    while not engine.ended and engine.step_index < max_steps:
+        if closed_loop is not None:
+            closed_loop.wait((b.name for b in engine.bodies.values() if b.external), engine.time)
+        if frames:
+            frame = engine.step()
+            consume()
+        else:
+            engine.advance()
+        if observe is not None:
+            observe(engine)
+        if progress is not None and engine.time - reported >= 1.0:
+            reported = engine.time
+            progress(index, engine.time)
+        if deadline is not None and engine.step_index % 100 == 0 and time.monotonic() > deadline:
+            raise SimulationError(
+                f"run exceeded execution.timeoutSeconds={spec.execution.timeout_seconds} "
+                f"at simulated t={engine.time:.1f} s"
+            )
+    if perception is not None:
+        perception.close()
+    world.publish_status(frame if frame is not None else engine.frame(), "ended")
+
+
+def outcome(parts: Assembly) -> Outcome:
+    """Metrics, end reason, simulated seconds and storyboard log of a driven run."""
+    engine = parts.engine
+    result = parts.metrics.result() if parts.metrics is not None else {}
+    end_reason = engine.ended_by or "maxSeconds"
+    result["stopTriggered"] = 1.0 if end_reason == "stopTrigger" else 0.0
+    log_lines = list(engine.log)
+    if parts.perception is not None:
+        result.update(parts.perception.metrics())
+        if parts.perception.failure is not None:
+            log_lines.append(f"system under test failed: {parts.perception.failure}")
+    return Outcome(result, end_reason, engine.time, log_lines)
