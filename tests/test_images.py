@@ -483,11 +483,21 @@ def test_detector_image_runs_its_node_by_default(tmp_path: Path) -> None:
     env["PYTHONPATH"] = str(ROOT)  # the image's PYTHONPATH=/opt/carlos
     with open(tmp_path / "detector.log", "wb") as log:
         proc = subprocess.Popen(argv, env=env, cwd=tmp_path, stdout=log, stderr=subprocess.STDOUT)
+
+    def handles_sigterm() -> bool:  # the node installs its handler once it runs (Linux: /proc SigCgt)
+        status = Path(f"/proc/{proc.pid}/status").read_text()
+        caught = int(next(x for x in status.splitlines() if x.startswith("SigCgt:")).split()[1], 16)
+        return bool(caught & (1 << (signal.SIGTERM - 1)))
+
     try:
-        time.sleep(5.0)
+        deadline = time.monotonic() + 120  # imports take long on a loaded machine
+        while time.monotonic() < deadline and proc.poll() is None and not handles_sigterm():
+            time.sleep(0.2)
+        time.sleep(2.0)  # still running: it did not print usage and exit
         assert proc.poll() is None, (
             f"exited with {proc.returncode}: {(tmp_path / 'detector.log').read_text()}"
         )
+        assert handles_sigterm(), "the node did not start within 120 s"
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(30) == 0, (tmp_path / "detector.log").read_text()
     finally:
