@@ -367,7 +367,7 @@ def test_deployment_args_parse_with_the_real_cli(helm: Path, tmp_path: Path) -> 
     from simcore.cli import app
 
     command = typer.main.get_command(app)
-    operator = command.commands.get("operator")  # type: ignore[attr-defined]
+    operator = command.get_command(None, "operator")  # type: ignore[attr-defined,arg-type]  # entry point
     if operator is None:
         pytest.skip("`carlos operator` is not there yet (issue 5)")
     for values, expected in (
