@@ -11,8 +11,8 @@
     (`simcore.runner.simulate`, what `carlos run` workers and the simcore pod call) vs the bare engine
     (`ScenarioEngine.advance` in a loop) on the corpus cut-in.
 
-esmini: ../shared/tools/esmini/esmini relative to the repository, else $ESMINI; its rows are skipped when
-neither exists. The corpus: ../shared/corpus/esmini (or $CORPUS). Prints a table; the last line is one JSON
+esmini: the player binary at $ESMINI; its rows are skipped when it is not set. The corpus:
+$CARLOS_ESMINI_CORPUS (esmini's corpus directory with resources/xosc). Prints a table; the last line is one JSON
 object with the figures and the ratios. No assertions: machines are noisy.
 Usage: .venv/bin/python bench/pipeline.py
 """
@@ -38,15 +38,12 @@ sys.path.insert(0, str(ROOT))
 REPEAT = int(os.environ.get("BENCH_REPEAT", "3"))
 SWEEP = int(os.environ.get("BENCH_SWEEP", "200"))
 PASSES = int(os.environ.get("BENCH_PASSES", "10"))
-CORPUS = Path(os.environ.get("CORPUS", ROOT.parent / "shared" / "corpus" / "esmini"))
+CORPUS = Path(os.environ.get("CARLOS_ESMINI_CORPUS", ""))
 CARLOS = Path(sys.executable).parent / "carlos"
 EXAMPLE = ROOT / "examples" / "scenarios" / "cut-in.xosc"
 
 
 def esmini_binary() -> Path | None:
-    local = ROOT.parent / "shared" / "tools" / "esmini" / "esmini"
-    if local.is_file():
-        return local
     env = os.environ.get("ESMINI")
     return Path(env) if env and Path(env).is_file() else None
 
@@ -154,7 +151,7 @@ def main() -> None:
     binary = esmini_binary()
     cut_in = CORPUS / "resources" / "xosc" / "cut-in.xosc"
     if not cut_in.is_file():
-        raise SystemExit(f"corpus cut-in not found at {cut_in} (set CORPUS)")
+        raise SystemExit(f"corpus cut-in not found at {cut_in} (set CARLOS_ESMINI_CORPUS)")
     figures: dict[str, float | int | None] = {"sweep_runs": SWEEP}
     with tempfile.TemporaryDirectory(prefix="carlos-bench-") as name:
         work = Path(name)

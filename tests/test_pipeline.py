@@ -18,10 +18,12 @@ from simcore.executor import execute
 from simcore.manifest import load_manifest
 from simcore.transport.bus import InProcessBus, Message
 from simcore.transport.messages import ros_name
+from tests.tooling import NO_CORPUS, esmini_corpus
 
 ROOT = Path(__file__).resolve().parents[1]
-CORPUS = ROOT.parent / "shared" / "corpus" / "esmini" / "resources" / "xosc"
-needs_corpus = pytest.mark.skipif(not CORPUS.is_dir(), reason=f"esmini corpus not found at {CORPUS}")
+_CORPUS_ROOT = esmini_corpus()
+CORPUS = (_CORPUS_ROOT or ROOT) / "resources" / "xosc"
+needs_corpus = pytest.mark.skipif(_CORPUS_ROOT is None, reason=NO_CORPUS)
 
 
 def _manifest(directory: Path, scenario: Path, *, name: str = "pipeline") -> Path:
