@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from simcore.errors import BadInput
 from simcore.scenario import model as m
 from simcore.scenario import paths
-from simcore.scenario.conditions import _axis_gaps
+from simcore.scenario.measure import axis_gaps
 from simcore.scenario.motion import Body, lane_at_t, shape_value, wrap_angle
 
 if TYPE_CHECKING:
@@ -319,7 +319,7 @@ class LongitudinalDistanceRuntime(Runtime):
 
     def _gap(self, ref: Body) -> float:
         a = self.action
-        return self.engine.relative_distance(
+        return self.engine.measure.relative_distance(
             self.actor, ref, "longitudinal", a.freespace, signed=True, system=a.coordinate_system
         )
 
@@ -804,10 +804,10 @@ class SafetyDriver:
         for other in self.engine.bodies.values():
             if other is a or other.gone or not other.placed:
                 continue
-            gap = self.engine.relative_distance(a, other, "longitudinal", True, signed=True)
+            gap = self.engine.measure.relative_distance(a, other, "longitudinal", True, signed=True)
             if gap <= 0.0:
                 continue
-            lateral = self.engine.relative_distance(a, other, "lateral", True)
+            lateral = self.engine.measure.relative_distance(a, other, "lateral", True)
             if lateral > 0.0:  # beside its path: not in the way
                 continue
             ahead_speed = other.speed * math.cos(other.heading - a.heading)
@@ -887,7 +887,7 @@ class AccDriver:
             if other is a or other.gone or not other.placed:
                 continue
             box_b = other.entity.box
-            delta = measure._road_delta_entity(a, other) if a.road_id is not None else None
+            delta = measure.road_delta_entity(a, other) if a.road_id is not None else None
             if delta is not None and abs(delta[0]) <= lookahead:
                 ds, dt_lat = delta
                 turn = abs(wrap_angle(other.heading - a.heading))
@@ -903,7 +903,7 @@ class AccDriver:
                 # a very close entity just in front (whatever the lanes say)
                 reach = box_a.length + box_b.length + 1.0 + 0.5 * max(0.0, v - other.speed)
                 if abs(other.x - a.x) < reach and abs(other.y - a.y) < reach:
-                    lon, lat = _axis_gaps(measure.box(a), measure.box(other))
+                    lon, lat = axis_gaps(measure.box(a), measure.box(other))
                     if 0.0 < lon < 1.0 + box_b.length + 0.5 * max(0.0, v - other.speed) and -0.5 < lat < 0.2:
                         best_gap, lead = lon, other
         if lead is not None:
@@ -936,6 +936,6 @@ def _same_lane(engine: ScenarioEngine, a: Body, b: Body) -> bool:
     if road is None or a.road_id is None or b.road_id is None:
         return a.lane_id == b.lane_id
     measure = engine.measure
-    lane_a = lane_at_t(road, a.road_id, a.s, measure._t_of(a))[0] if a.offset else a.lane_id
-    lane_b = lane_at_t(road, b.road_id, b.s, measure._t_of(b))[0] if b.offset else b.lane_id
+    lane_a = lane_at_t(road, a.road_id, a.s, measure.t_of(a))[0] if a.offset else a.lane_id
+    lane_b = lane_at_t(road, b.road_id, b.s, measure.t_of(b))[0] if b.offset else b.lane_id
     return lane_a == lane_b

@@ -95,7 +95,7 @@ def put(engine: ScenarioEngine, body: Body, vehicle: Vehicle) -> None:
     body.odometer += math.hypot(vehicle.x - body.x, vehicle.y - body.y)
     body.x, body.y, body.heading, body.speed = vehicle.x, vehicle.y, vehicle.heading, vehicle.speed
     body.mover = None
-    engine._locate(body)
+    engine.locate(body)
 
 
 def speed_limit(engine: ScenarioEngine, body: Body) -> float:
@@ -227,7 +227,7 @@ class NaturalDriver:
         acc = self.max_acceleration * (1 - (v / self.desired_speed) ** 4)
         if lead is not None:
             delta = (
-                self.engine.measure._road_delta_entity(follow, lead) if follow.road_id is not None else None
+                self.engine.measure.road_delta_entity(follow, lead) if follow.road_id is not None else None
             )
             ds = delta[0] if delta is not None else _BIG
             gap = self._gap(follow, lead, ds)
@@ -241,7 +241,7 @@ class NaturalDriver:
         road = self.engine.road
         if road is None or body.road_id is None or not body.offset:
             return body.lane_id
-        return lane_at_t(road, body.road_id, body.s, self.engine.measure._t_of(body))[0]
+        return lane_at_t(road, body.road_id, body.s, self.engine.measure.t_of(body))[0]
 
     def _update_surroundings(self) -> list[Body]:
         a, engine = self.actor, self.engine
@@ -258,7 +258,7 @@ class NaturalDriver:
             if math.hypot(other.x - a.x, other.y - a.y) > self.lookahead:
                 continue
             seen.append(other)
-            delta = engine.measure._road_delta_entity(a, other)
+            delta = engine.measure.road_delta_entity(a, other)
             if delta is None:
                 continue
             ds = delta[0]
@@ -327,7 +327,7 @@ class NaturalDriver:
                 continue
             if self._lane(other) == self._lane(self.actor):
                 continue
-            delta = self.engine.measure._road_delta_entity(self.actor, other)
+            delta = self.engine.measure.road_delta_entity(self.actor, other)
             if delta is None:
                 continue
             gap = self._gap(self.actor, other, delta[0])

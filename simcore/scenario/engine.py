@@ -14,12 +14,12 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
 from simcore.errors import BadInput, SimulationError
-from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
+from simcore.evaluation.metrics import Box, boxes_overlap
 from simcore.scenario import actions as extra_actions
-from simcore.scenario import drivers, ghost, paths
+from simcore.scenario import drivers, ghost, positions
 from simcore.scenario import model as m
 from simcore.scenario.actions import Runtime
-from simcore.scenario.conditions import LARGE, Measure
+from simcore.scenario.measure import LARGE, Measure, directional
 from simcore.scenario.motion import (
     Body,
     advance_on_road,
@@ -33,6 +33,7 @@ from simcore.scenario.motion import (
     wrap_angle,
 )
 from simcore.scenario.storyboard import Node, Registry, State, Transition, transition_of
+from simcore.scenario.world import Pose
 from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
 
 if TYPE_CHECKING:
@@ -398,7 +399,7 @@ class ScenarioEngine:
                 )
         self.conditions: dict[int, ConditionState] = {}
         self._target_roads: dict[tuple[float, float, str], Any] = {}
-        self._fixed_points: dict[int, tuple[m.Position, tuple[float, float, float, float]]] = {}
+        self.memo: dict[tuple[str, int], Any] = {}  # conditions' and positions' memory (ScenarioWorld)
         self.measure = Measure(self)
         self._state_nodes: dict[int, list[Node]] = {}  # StoryboardElementStateCondition → its elements
         # StoryboardElementStateCondition on a transition → element → how many of it the condition has seen
@@ -580,142 +581,6 @@ class ScenarioEngine:
         except KeyError:
             raise BadInput(f"entity {name!r} is not declared in <Entities>", file=self.source) from None
 
-    def resolve_position(
-        self, position: m.Position, for_body: Body | None = None
-    ) -> tuple[float, float, float, float]:
-        """World (x, y, z, heading) of a position."""
-        road = self.road
-
-        def need_road() -> OpenDrive:
-            if road is None:
-                raise BadInput(
-                    f"{type(position).__name__} needs a road network (RoadNetwork/LogicFile)",
-                    file=self.source,
-                )
-            return road
-
-        def orient(base: float, orientation: m.Orientation | None) -> float:
-            if orientation is None:
-                return base
-            return orientation.h if orientation.type == "absolute" else wrap_angle(base + orientation.h)
-
-        try:
-            if isinstance(position, m.WorldPosition):
-                z = position.z if position.z is not None else 0.0
-                return position.x, position.y, z, position.h if position.h is not None else 0.0
-            if isinstance(position, m.LanePosition):
-                r = need_road()
-                road_id, lane_id, s_on = _walk_lane(r, position.road_id, position.lane_id, position.s)
-                if (road_id, lane_id, s_on) != (position.road_id, position.lane_id, position.s):
-                    # beyond the road's ends: on along the lane's links (the position keeps its lane)
-                    length = r.road_length(road_id)
-                    if not 0.0 <= s_on <= length:
-                        message = (
-                            f"{position.source or self.source}: LanePosition: road {position.road_id} "
-                            f"s={position.s:g} lies beyond "
-                            f"the lanes' links: placed at the end of road {road_id}"
-                        )
-                        if message not in self.warnings:
-                            self.warnings.append(message)
-                        s_on = min(max(s_on, 0.0), length)
-                    pose = r.lane_to_world(road_id, lane_id, s_on, position.offset)
-                    return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
-                pose = r.lane_to_world(position.road_id, position.lane_id, position.s, position.offset)
-                # relative orientation is relative to the lane's driving direction (as esmini does)
-                backward = r.drives_backward(position.road_id, position.lane_id)
-                base = pose.heading + (math.pi if backward else 0.0)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
-            if isinstance(position, m.RoadPosition):
-                r = need_road()
-                pose = r.road_to_world(position.road_id, position.s, position.t)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
-            if isinstance(position, m.TrajectoryPosition):
-                base_pose = (0.0, 0.0, 0.0, 0.0)
-                if for_body is not None:
-                    base_pose = (for_body.x, for_body.y, for_body.z, for_body.heading)
-                path = paths.sample(position.trajectory, self.resolve_position, base_pose)
-                x, y, z, h = path.at(position.s)
-                x -= position.t * math.sin(h)
-                y += position.t * math.cos(h)
-                return x, y, z, wrap_angle(orient(h, position.orientation))
-            if isinstance(position, m.RoutePosition):
-                if position.entity is not None:
-                    ref = self.body(position.entity)
-                    return ref.x, ref.y, ref.z, orient(ref.heading, position.orientation)
-                r = need_road()
-                assert position.route is not None
-                road_id, s_on, direction = self._route_point(position.route, position.path_s or 0.0)
-                if position.lane_id is not None:
-                    pose = r.lane_to_world(road_id, position.lane_id, s_on, position.lane_offset)
-                else:
-                    pose = r.road_to_world(road_id, s_on, position.t)
-                base = pose.heading + (math.pi if direction < 0 else 0.0)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
-            ref = self.body(position.entity)
-            if isinstance(position, m.RelativeWorldPosition):
-                return (
-                    ref.x + position.dx,
-                    ref.y + position.dy,
-                    ref.z + position.dz,
-                    orient(ref.heading, position.orientation),
-                )
-            if isinstance(position, m.RelativeObjectPosition):
-                c, s = math.cos(ref.heading), math.sin(ref.heading)
-                return (
-                    ref.x + c * position.dx - s * position.dy,
-                    ref.y + s * position.dx + c * position.dy,
-                    ref.z + position.dz,
-                    orient(ref.heading, position.orientation),
-                )
-            r = need_road()
-            if ref.road_id is None:
-                raise BadInput(
-                    f"{type(position).__name__}: entity {ref.name!r} is not on a road", file=self.source
-                )
-            if isinstance(position, m.RelativeLanePosition):
-                s_new = ref.s + position.ds * ref.direction
-                lane = lane_shift(r, ref.road_id, s_new, ref.lane_id, position.d_lane, ref.direction)
-                pose = r.lane_to_world(ref.road_id, lane, s_new, position.offset * ref.direction)
-                base = pose.heading + (math.pi if ref.direction < 0 else 0.0)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
-            if isinstance(position, m.RelativeRoadPosition):
-                t_ref = r.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
-                pose = r.road_to_world(ref.road_id, ref.s + position.ds, t_ref + position.dt)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
-        except (KeyError, ValueError) as exc:
-            raise BadInput(f"{type(position).__name__}: {exc}", file=self.source) from None
-        raise BadInput(f"position {type(position).__name__} is not supported", file=self.source)
-
-    def _route_point(self, route: m.Route, path_s: float) -> tuple[str, float, int]:
-        """(road, s, direction) `path_s` metres along a route from its first waypoint."""
-        road = self.road
-        assert road is not None
-        points = []
-        for waypoint in route.waypoints:
-            x, y, _, h = self.resolve_position(waypoint.position)
-            rc = road.world_to_road(x, y, None, road_hint=getattr(waypoint.position, "road_id", None))
-            if rc is None:
-                raise BadInput(f"route {route.name!r}: a waypoint is on no road", file=self.source)
-            points.append((rc, 1 if math.cos(h - rc.heading) >= 0 else -1))
-        first, direction = points[0]
-        legs: list[tuple[str, int]] = [(first.road_id, direction)]
-        for rc, _ in points[1:]:
-            leg = paths.plan(road, legs[-1], rc.road_id)
-            if leg is None:
-                raise BadInput(f"route {route.name!r}: no way to road {rc.road_id}", file=self.source)
-            legs.extend(leg[1:])
-        s_on = first.s
-        remaining = path_s
-        for i, (road_id, d) in enumerate(legs):
-            length = road.road_length(road_id)
-            if i > 0:
-                s_on = 0.0 if d > 0 else length
-            room = (length - s_on) if d > 0 else s_on
-            if remaining <= room or i == len(legs) - 1:
-                return road_id, min(max(s_on + d * remaining, 0.0), length), d
-            remaining -= room
-        return legs[-1][0], s_on, legs[-1][1]
-
     def place(self, body: Body, position: m.Position) -> None:
         """Teleport: pose from the position; road coordinates from the road network when on a road."""
         x, y, z, heading = self.resolve_position(position, body)
@@ -773,22 +638,19 @@ class ScenarioEngine:
         """Road coordinates of a body moved freely (a trajectory): its lane, s and offset from x/y. With
         `lock_lane` the body follows that lane afterwards, in the direction it is heading."""
         self._moved()
-        if self.road is None:
-            return
-        rc = None
-        if body.road_id is not None:
-            rc = self.road.world_to_road_near(body.x, body.y, body.road_id, body.s)
-        if rc is None:
-            rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
-        if rc is None:
-            body.road_id = None
-            return
-        body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
-        body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
-        body.heading_offset = 0.0
-        body.posed = None
-        if lock_lane:
-            body.lateral_velocity = 0.0
+        positions.track(self.road, body, lock_lane)
+
+    def locate(self, body: Body) -> None:
+        """Road coordinates (road, lane, s, offset, direction, z) of a body moved in world coordinates."""
+        positions.locate(self.road, body)
+
+    def resolve_position(self, position: m.Position, for_body: Body | None = None) -> Pose:
+        """World (x, y, z, heading) of a position."""
+        return positions.resolve(self, position, for_body)
+
+    def plan_route(self, body: Body, targets: list[m.Position]) -> list[tuple[str, int]]:
+        """The roads (id, direction) a body drives through to pass every target position in order."""
+        return positions.plan_route(self, body, targets)
 
     def shift_along(self, body: Body, distance: float) -> None:
         """Move a body `distance` metres along its lane (or its heading off road) at once."""
@@ -818,31 +680,6 @@ class ScenarioEngine:
             if rc is not None and rc.road_id == body.road_id:
                 return max((rc.s - body.s) * body.direction, 0.0)
         return math.hypot(x - body.x, y - body.y)
-
-    def plan_route(self, body: Body, targets: list[m.Position]) -> list[tuple[str, int]]:
-        """The roads (id, direction) a body drives through to pass every target position in order."""
-        road = self.road
-        if road is None or body.road_id is None:
-            return []
-        state = (body.road_id, body.direction)
-        out: list[tuple[str, int]] = []
-        for position in targets:
-            x, y, _, _ = self.resolve_position(position)
-            hint = getattr(position, "road_id", None)
-            rc = road.world_to_road(x, y, None, road_hint=hint)
-            if rc is None:
-                continue
-            if state[0] == rc.road_id and not out:
-                continue
-            leg = paths.plan(road, state, rc.road_id)
-            if leg is None:
-                self.warnings.append(
-                    f"{self.source}: route of {body.name!r}: no way found to road {rc.road_id}"
-                )
-                continue
-            out.extend(leg[1:])
-            state = leg[-1]
-        return out
 
     def _global_action(self, action: m.GlobalAction) -> None:
         if isinstance(action, m.ParameterSetAction | m.ParameterModifyAction):
@@ -1044,7 +881,7 @@ class ScenarioEngine:
         if isinstance(c, m.SpeedCondition):
             if c.direction is None:
                 return compare(c.rule, body.speed, c.value)
-            return compare(c.rule, _directional(body, body.heading, c.direction), c.value)
+            return compare(c.rule, directional(body, body.heading, c.direction), c.value)
         if isinstance(c, m.AccelerationCondition):
             return compare(c.rule, body.acceleration, c.value)
         if isinstance(c, m.TraveledDistanceCondition):
@@ -1062,7 +899,7 @@ class ScenarioEngine:
             if c.direction is None:
                 return compare(c.rule, body.speed - other.speed, c.value)
             # both velocities in the reference entity's frame (as esmini)
-            relative = _directional(body, other.heading, c.direction) - _directional(
+            relative = directional(body, other.heading, c.direction) - directional(
                 other, other.heading, c.direction
             )
             return compare(c.rule, relative, c.value)
@@ -1071,10 +908,10 @@ class ScenarioEngine:
             mine = Box.of(self.state_of(body))
             return any(boxes_overlap(mine, Box.of(self.state_of(o))) for o in others)
         if isinstance(c, m.ReachPositionCondition):
-            x, y, _, _ = self._fixed_point(c.position)
+            x, y, _, _ = positions.fixed_point(self, c.position)
             return math.hypot(body.x - x, body.y - y) < c.tolerance
         if isinstance(c, m.DistanceCondition):
-            x, y, _, _ = self._fixed_point(c.position)
+            x, y, _, _ = positions.fixed_point(self, c.position)
             measured = self.measure.to_point(body, x, y, c.coordinate_system, c.distance_type, c.freespace)
             return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
         if isinstance(c, m.RelativeDistanceCondition):
@@ -1098,7 +935,7 @@ class ScenarioEngine:
             point: tuple[float, float] | None = None
             target: Body | None = None
             if c.position is not None:
-                x, y, _, _ = self._fixed_point(c.position)
+                x, y, _, _ = positions.fixed_point(self, c.position)
                 point = (x, y)
             else:
                 target = self.body(c.entity)
@@ -1175,7 +1012,7 @@ class ScenarioEngine:
         for other in others:
             if other is body or other.gone:
                 continue
-            lon = self.relative_distance(body, other, "longitudinal", c.free_space, signed=True)
+            lon = self.measure.relative_distance(body, other, "longitudinal", c.free_space, signed=True)
             if not (-c.distance_backward <= lon <= c.distance_forward):
                 continue
             if c.lanes is not None and self.road is not None and body.road_id is not None:
@@ -1192,66 +1029,6 @@ class ScenarioEngine:
             occupied = True
             break
         return not occupied
-
-    def _fixed_point(self, position: m.Position) -> tuple[float, float, float, float]:
-        """World pose of a condition's position: computed once when it depends on no entity."""
-        if isinstance(position, m.WorldPosition | m.LanePosition | m.RoadPosition):
-            key = id(position)
-            cached = self._fixed_points.get(key)
-            if cached is None:
-                cached = self._fixed_points[key] = (position, self.resolve_position(position))
-            return cached[1]
-        return self.resolve_position(position)
-
-    def relative_distance(
-        self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False, system: str = "entity"
-    ) -> float:
-        """Distance from a to b in a's frame (longitudinal: along a's heading; lateral: across it). In road
-        or lane coordinates on one road, longitudinal is the difference of s (as esmini measures it)."""
-        if (
-            system in ("road", "lane")
-            and kind == "longitudinal"
-            and a.road_id is not None
-            and a.road_id == b.road_id
-        ):
-            # along the road between reference points, positive in a's travel direction
-            ds = (b.s - a.s) * a.direction
-            if freespace:
-                ba, bb = a.entity.box, b.entity.box
-                if ds >= 0:  # b ahead: a's front to b's rear
-                    extent = (ba.center_x + ba.length / 2) - (bb.center_x - bb.length / 2)
-                else:
-                    extent = (bb.center_x + bb.length / 2) - (ba.center_x - ba.length / 2)
-                ds = math.copysign(max(abs(ds) - extent, 0.0), ds)
-            return ds if signed else abs(ds)
-        if kind in ("euclidianDistance", "cartesianDistance"):
-            if freespace:
-                return box_distance(self.measure.box(a), self.measure.box(b))
-            return math.hypot(b.x - a.x, b.y - a.y)
-        if freespace:
-            ax, ay = _box_center(a)
-            bx, by = _box_center(b)
-        else:  # between reference points (as esmini measures without freespace)
-            ax, ay, bx, by = a.x, a.y, b.x, b.y
-        c, s = math.cos(a.heading), math.sin(a.heading)
-        dx, dy = bx - ax, by - ay
-        lon, lat = c * dx + s * dy, -s * dx + c * dy
-        value = lon if kind == "longitudinal" else lat
-        if freespace:
-            rel = b.heading - a.heading
-            if kind == "longitudinal":
-                extent_b = (
-                    abs(math.cos(rel)) * b.entity.box.length / 2 + abs(math.sin(rel)) * b.entity.box.width / 2
-                )
-                extent = a.entity.box.length / 2 + extent_b
-            else:
-                extent_b = (
-                    abs(math.sin(rel)) * b.entity.box.length / 2 + abs(math.cos(rel)) * b.entity.box.width / 2
-                )
-                extent = a.entity.box.width / 2 + extent_b
-            magnitude = max(abs(value) - extent, 0.0)
-            value = math.copysign(magnitude, value)
-        return value if signed else abs(value)
 
     def _condition(self, cond: m.Condition, triggering: list[str]) -> bool:
         if cond.edge == "none" and cond.delay <= 0:
@@ -1581,7 +1358,7 @@ class ScenarioEngine:
                     continue
                 body.odometer += math.hypot(state.x - body.x, state.y - body.y)
                 body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
-                self._locate(body)
+                self.locate(body)
         if self.acc_drivers:
             self._step_drivers(self.acc_drivers.values(), dt, now)
         if self.natural_drivers:
@@ -1705,20 +1482,6 @@ class ScenarioEngine:
         body.external = True
         body.mover = None
 
-    def _locate(self, body: Body) -> None:
-        """Road coordinates (road, lane, s, offset, direction, z) of a body moved in world coordinates."""
-        if self.road is None:
-            return
-        rc = None
-        if body.road_id is not None:
-            rc = self.road.world_to_road_near(body.x, body.y, body.road_id, body.s)
-        if rc is None:
-            rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
-        if rc is not None:
-            body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
-            body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
-            body.z = self.road.road_to_world(rc.road_id, rc.s, rc.t).z
-
     def _move_external(self, body: Body, dt: float) -> None:
         """An entity its external controller drives: moved by the control input; without one (no system
         under test attached, as in a headless conformance run) it stands still, as in esmini."""
@@ -1728,7 +1491,7 @@ class ScenarioEngine:
         x, y, heading, speed = self.external.move(body.entity, body.x, body.y, body.heading, body.speed, dt)
         body.odometer += math.hypot(x - body.x, y - body.y)
         body.x, body.y, body.heading, body.speed = x, y, heading, speed
-        self._locate(body)
+        self.locate(body)
 
     def _moved(self) -> None:
         """Bodies moved: the per-step caches of their states and of condition measurements are stale."""
@@ -1778,41 +1541,6 @@ class ScenarioEngine:
     @property
     def ended(self) -> bool:
         return self.ended_by is not None
-
-
-def _walk_lane(road: OpenDrive, road_id: str, lane_id: int, s: float) -> tuple[str, int, float]:
-    """A lane position past a road's end continued along the lane's successors (before its start, along
-    its predecessors)."""
-    for _ in range(32):
-        if road_id not in road.roads:
-            return road_id, lane_id, s
-        length = road.road_length(road_id)
-        if 0.0 <= s <= length:
-            return road_id, lane_id, s
-        direction = 1 if s > length else -1
-        nxt = road.successor(road_id, lane_id, direction)
-        if nxt is None:
-            return road_id, lane_id, s
-        over = s - length if direction > 0 else -s
-        road_id, lane_id, new_dir = nxt
-        s = over if new_dir > 0 else road.road_length(road_id) - over
-    return road_id, lane_id, s
-
-
-def _directional(body: Body, heading: float, direction: str) -> float:
-    """A body's velocity along (longitudinal) or across (lateral, + left) `heading`; vertical: none here."""
-    if direction == "vertical":
-        return 0.0
-    c, s = math.cos(heading), math.sin(heading)
-    vx, vy = body.vx, body.vy
-    return c * vx + s * vy if direction == "longitudinal" else -s * vx + c * vy
-
-
-def _box_center(body: Body) -> tuple[float, float]:
-    """Centre of a body's bounding box in the map frame."""
-    box = body.entity.box
-    c, s = math.cos(body.heading), math.sin(body.heading)
-    return body.x + c * box.center_x - s * box.center_y, body.y + s * box.center_x + c * box.center_y
 
 
 def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tuple[float, int]]:

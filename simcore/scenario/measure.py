@@ -20,14 +20,14 @@ corpus; its roadmanager `Position::Distance` and `Object::Distance`):
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
 from simcore.scenario import paths
 
 if TYPE_CHECKING:
-    from simcore.scenario.engine import ScenarioEngine
     from simcore.scenario.motion import Body
+    from simcore.world.opendrive import OpenDrive
 
 #: a distance that could not be measured (no road connection): compared as a very large value (as esmini)
 LARGE = 1e10
@@ -36,11 +36,21 @@ SMALL = 1e-10
 Point = tuple[float, float]
 
 
+class RoadClock(Protocol):
+    """What measurements read besides the bodies: the road network and the step (their caches' age)."""
+
+    @property
+    def road(self) -> OpenDrive | None: ...
+
+    @property
+    def step_index(self) -> int: ...
+
+
 class Measure:
     """Distance measurements for one engine, with per-step caches of what every condition asks again."""
 
-    def __init__(self, engine: ScenarioEngine) -> None:
-        self.engine = engine
+    def __init__(self, world: RoadClock) -> None:
+        self.world = world
         self._step = -1
         self._stale = False
         self._frame: dict[str, float] = {}  # body name → heading of its measuring frame (this step)
@@ -50,8 +60,8 @@ class Measure:
         self._points: dict[tuple[float, float, str | None], tuple[str, float, float] | None] = {}
 
     def _fresh(self) -> None:
-        if self._stale or self._step != self.engine.step_index:
-            self._step = self.engine.step_index
+        if self._stale or self._step != self.world.step_index:
+            self._step = self.world.step_index
             self._stale = False
             self._frame.clear()
             self._road_t.clear()
@@ -70,7 +80,7 @@ class Measure:
         if cached is not None:
             return cached
         heading = body.heading
-        road = self.engine.road
+        road = self.world.road
         if road is not None and body.road_id is not None and body.road_id in road.roads:
             r = road.road(body.road_id)
             _, _, h_road = r.reference_xyh(min(max(body.s, 0.0), r.length))
@@ -91,11 +101,11 @@ class Measure:
 
     # --- road coordinates -----------------------------------------------------------------------------
 
-    def _t_of(self, body: Body) -> float:
+    def t_of(self, body: Body) -> float:
         self._fresh()
         cached = self._road_t.get(body.name)
         if cached is None:
-            road = self.engine.road
+            road = self.world.road
             assert road is not None and body.road_id is not None
             cached = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
             self._road_t[body.name] = cached
@@ -104,7 +114,7 @@ class Measure:
     def _point_on_road(self, x: float, y: float, hint: str | None) -> tuple[str, float, float] | None:
         key = (x, y, hint)
         if key not in self._points:
-            road = self.engine.road
+            road = self.world.road
             rc = road.world_to_road(x, y, None, road_hint=hint) if road is not None else None
             self._points[key] = None if rc is None else (rc.road_id, rc.s, rc.t)
         return self._points[key]
@@ -112,7 +122,7 @@ class Measure:
     def _plan(self, start: str, direction: int, goal: str) -> list[tuple[str, int]] | None:
         key = (start, direction, goal)
         if key not in self._plans:
-            road = self.engine.road
+            road = self.world.road
             assert road is not None
             self._plans[key] = paths.plan(road, (start, direction), goal, max_roads=200)
         return self._plans[key]
@@ -120,11 +130,11 @@ class Measure:
     def road_delta(self, a: Body, road_id: str, s: float, t: float) -> Point | None:
         """(ds, dt) from the entity to a road position along the road network, in the entity's driving
         direction (dt + to the left of it); None when the roads do not connect."""
-        road = self.engine.road
+        road = self.world.road
         if road is None or a.road_id is None:
             return None
         d = 1 if a.direction >= 0 else -1
-        t_a = self._t_of(a)
+        t_a = self.t_of(a)
         if road_id == a.road_id:
             return (s - a.s) * d, (t - t_a) * d
         best: Point | None = None
@@ -151,13 +161,13 @@ class Measure:
         if freespace:
             if system == "entity" or euclid:
                 box_a, box_b = self.box(a), self.box(b)
-                lon, lat = _axis_gaps(box_a, box_b)
+                lon, lat = axis_gaps(box_a, box_b)
                 if system == "entity" and kind == "longitudinal":
                     return lon
                 if system == "entity" and kind == "lateral":
                     return lat
                 return box_distance(box_a, box_b) * (1.0 if lon >= 0 else -1.0)
-            delta = self._road_delta_entity(a, b)
+            delta = self.road_delta_entity(a, b)
             if delta is None:
                 return None
             ds, dt = delta
@@ -167,17 +177,17 @@ class Measure:
         if euclid:
             return self.signed_euclid(a, b.x, b.y)
         if system in ("road", "lane", "trajectory"):
-            delta = self._road_delta_entity(a, b)
+            delta = self.road_delta_entity(a, b)
             if delta is None:
                 return None
             return delta[0] if kind == "longitudinal" else delta[1]
         dx, dy = self.local(a, b.x, b.y)
         return dx if kind == "longitudinal" else dy
 
-    def _road_delta_entity(self, a: Body, b: Body) -> Point | None:
-        if b.road_id is None or self.engine.road is None:
+    def road_delta_entity(self, a: Body, b: Body) -> Point | None:
+        if b.road_id is None or self.world.road is None:
             return None
-        return self.road_delta(a, b.road_id, b.s, self._t_of(b))
+        return self.road_delta(a, b.road_id, b.s, self.t_of(b))
 
     def to_point(self, a: Body, x: float, y: float, system: str, kind: str, freespace: bool) -> float | None:
         """Signed distance from entity a to the point (x, y) (None: not measurable)."""
@@ -277,6 +287,56 @@ class Measure:
         ttc = dist / rel_speed
         return ttc if ttc >= 0 else None
 
+    def relative_distance(
+        self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False, system: str = "entity"
+    ) -> float:
+        """Distance from a to b in a's frame (longitudinal: along a's heading; lateral: across it). In road
+        or lane coordinates on one road, longitudinal is the difference of s (as esmini measures it)."""
+        if (
+            system in ("road", "lane")
+            and kind == "longitudinal"
+            and a.road_id is not None
+            and a.road_id == b.road_id
+        ):
+            # along the road between reference points, positive in a's travel direction
+            ds = (b.s - a.s) * a.direction
+            if freespace:
+                ba, bb = a.entity.box, b.entity.box
+                if ds >= 0:  # b ahead: a's front to b's rear
+                    extent = (ba.center_x + ba.length / 2) - (bb.center_x - bb.length / 2)
+                else:
+                    extent = (bb.center_x + bb.length / 2) - (ba.center_x - ba.length / 2)
+                ds = math.copysign(max(abs(ds) - extent, 0.0), ds)
+            return ds if signed else abs(ds)
+        if kind in ("euclidianDistance", "cartesianDistance"):
+            if freespace:
+                return box_distance(self.box(a), self.box(b))
+            return math.hypot(b.x - a.x, b.y - a.y)
+        if freespace:
+            ax, ay = box_center(a)
+            bx, by = box_center(b)
+        else:  # between reference points (as esmini measures without freespace)
+            ax, ay, bx, by = a.x, a.y, b.x, b.y
+        c, s = math.cos(a.heading), math.sin(a.heading)
+        dx, dy = bx - ax, by - ay
+        lon, lat = c * dx + s * dy, -s * dx + c * dy
+        value = lon if kind == "longitudinal" else lat
+        if freespace:
+            rel = b.heading - a.heading
+            if kind == "longitudinal":
+                extent_b = (
+                    abs(math.cos(rel)) * b.entity.box.length / 2 + abs(math.sin(rel)) * b.entity.box.width / 2
+                )
+                extent = a.entity.box.length / 2 + extent_b
+            else:
+                extent_b = (
+                    abs(math.sin(rel)) * b.entity.box.length / 2 + abs(math.cos(rel)) * b.entity.box.width / 2
+                )
+                extent = a.entity.box.width / 2 + extent_b
+            magnitude = max(abs(value) - extent, 0.0)
+            value = math.copysign(magnitude, value)
+        return value if signed else abs(value)
+
 
 def _sign(value: float) -> float:
     return -1.0 if value < 0 else 1.0
@@ -292,7 +352,7 @@ def _extent_along(body: Body, front: bool) -> float:
     return box.center_x + box.length / 2 if front else box.length / 2 - box.center_x
 
 
-def _axis_gaps(a: Box, b: Box) -> Point:
+def axis_gaps(a: Box, b: Box) -> Point:
     """Gaps between the boxes' projections on a's forward and left axes: positive when b is ahead (left),
     negative behind (right), 0 where the projections overlap."""
     out = []
@@ -329,3 +389,19 @@ def _point_gaps(box: Box, heading: float, x: float, y: float) -> tuple[float, fl
     d, vx, vy = best
     c, s = math.cos(heading), math.sin(heading)
     return d, c * vx + s * vy, -s * vx + c * vy
+
+
+def directional(body: Body, heading: float, direction: str) -> float:
+    """A body's velocity along (longitudinal) or across (lateral, + left) `heading`; vertical: none here."""
+    if direction == "vertical":
+        return 0.0
+    c, s = math.cos(heading), math.sin(heading)
+    vx, vy = body.vx, body.vy
+    return c * vx + s * vy if direction == "longitudinal" else -s * vx + c * vy
+
+
+def box_center(body: Body) -> tuple[float, float]:
+    """Centre of a body's bounding box in the map frame."""
+    box = body.entity.box
+    c, s = math.cos(body.heading), math.sin(body.heading)
+    return body.x + c * box.center_x - s * box.center_y, body.y + s * box.center_x + c * box.center_y
