@@ -8,18 +8,15 @@ lanes and are placed into SUMO; SUMO steps, moving the entities it drives; (4) t
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Iterable
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
 from simcore.errors import BadInput, SimulationError
-from simcore.evaluation.metrics import Box, boxes_overlap
 from simcore.scenario import actions as extra_actions
 from simcore.scenario import drivers, ghost, positions
 from simcore.scenario import model as m
 from simcore.scenario.actions import Runtime
-from simcore.scenario.measure import LARGE, Measure, directional
+from simcore.scenario.measure import Measure
 from simcore.scenario.motion import (
     Body,
     advance_on_road,
@@ -32,27 +29,14 @@ from simcore.scenario.motion import (
     update_pose_from_road,
     wrap_angle,
 )
-from simcore.scenario.storyboard import Node, Registry, State, Transition, transition_of
+from simcore.scenario.storyboard import Node, Registry, State, Transition
+from simcore.scenario.triggers import Triggers
 from simcore.scenario.world import Pose
 from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
     from simcore.world.sumo import SumoWorld
-
-_COMPARE = {
-    "greaterThan": lambda a, b: a > b,
-    "lessThan": lambda a, b: a < b,
-    "equalTo": lambda a, b: abs(a - b) < 1e-9 if isinstance(a, float) else a == b,
-    "greaterOrEqual": lambda a, b: a >= b,
-    "lessOrEqual": lambda a, b: a <= b,
-    "notEqualTo": lambda a, b: a != b,
-}
-
-
-def compare(rule: str, a: Any, b: Any) -> bool:
-    return bool(_COMPARE[rule](a, b))
-
 
 # --- action runtimes --------------------------------------------------------------------------------------
 
@@ -343,18 +327,6 @@ class ExternalDriver(Protocol):
     ) -> tuple[float, float, float, float]: ...
 
 
-# --- conditions -------------------------------------------------------------------------------------------
-
-
-@dataclass
-class ConditionState:
-    """Edge and delay bookkeeping of one condition instance."""
-
-    condition: m.Condition
-    previous: bool | None = None
-    history: deque[tuple[float, bool]] = field(default_factory=deque)
-
-
 class ScenarioEngine:
     """Runs one scenario. `step()` advances one fixed step and returns the new frame."""
 
@@ -397,13 +369,10 @@ class ScenarioEngine:
                     file=self.source,
                     field="RoadNetwork/LogicFile",
                 )
-        self.conditions: dict[int, ConditionState] = {}
         self._target_roads: dict[tuple[float, float, str], Any] = {}
         self.memo: dict[tuple[str, int], Any] = {}  # conditions' and positions' memory (ScenarioWorld)
         self.measure = Measure(self)
-        self._state_nodes: dict[int, list[Node]] = {}  # StoryboardElementStateCondition → its elements
-        # StoryboardElementStateCondition on a transition → element → how many of it the condition has seen
-        self._seen_transitions: dict[int, dict[int, int]] = {}
+        self.triggers = Triggers(self)
         self.owner: Body | None = None  # the actor whose action runs now ("$owner")
         self.parameter_values: dict[str, Any] = dict(scenario.parameters)
         self.variables: dict[str, Any] = dict(scenario.variables)
@@ -806,280 +775,9 @@ class ScenarioEngine:
         if lane_id in lanes:
             self.sumo.change_lane(body.name, lanes.index(lane_id), duration)
 
-    # --- conditions -----------------------------------------------------------------------------------
-
-    def _value(self, cond: m.Condition, triggering: list[str]) -> bool:
-        if cond.value_condition is not None:
-            return self._value_condition(cond.value_condition)
-        condition = cond.entity_condition
-        assert condition is not None
-        # entities not in the world are skipped; "any" stops at the first entity that fulfils it (the one
-        # that triggers), "all" at the first that does not (as esmini)
-        every = cond.triggering_rule == "all"
-        result = False
-        hits: list[str] = []
-        for name in cond.triggering_entities:
-            body = self.body(name)
-            if body.gone:
-                continue
-            result = self._entity_condition(condition, body)
-            if result:
-                hits.append(name)
-                if not every:
-                    break
-            elif every:
-                return False
-        if result:
-            triggering.extend(hits)
-        return result
-
-    def _value_condition(self, c: m.ValueCondition) -> bool:
-        if isinstance(c, m.SimulationTimeCondition):
-            return compare(c.rule, self.time, c.value)
-        if isinstance(c, m.StoryboardElementStateCondition):
-            nodes = self._state_nodes.get(id(c))
-            if nodes is None:
-                nodes = self._state_nodes[id(c)] = self.registry.find(c.element_type, c.element_ref)
-            if not nodes:
-                raise BadInput(
-                    f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
-                    file=self.source,
-                )
-            transition = transition_of(c.state)
-            if transition is None:
-                return any(node.is_(c.state, self.step_index) for node in nodes)
-            # a transition holds when the element went through it since this condition was last evaluated
-            # (every transition counts once for each condition, however late it looks; as esmini)
-            seen = self._seen_transitions.get(id(c))
-            if seen is None:
-                seen = self._seen_transitions[id(c)] = {}
-            happened = False
-            for node in nodes:
-                count = node.counts.get(transition, 0)
-                if count > seen.get(id(node), 0):
-                    happened = True
-                    seen[id(node)] = count
-            return happened
-        if isinstance(c, m.TrafficSignalCondition):
-            return self.signals.get(c.name) == c.state
-        if isinstance(c, m.TrafficSignalControllerCondition):
-            return self.signal_phases.get(c.controller) == c.phase
-        if isinstance(c, m.UnsupportedCondition):
-            return False
-        store = self.variables if isinstance(c, m.VariableCondition) else self.parameter_values
-        value = store.get(c.name)
-        if value is None:
-            kind = "VariableCondition" if isinstance(c, m.VariableCondition) else "ParameterCondition"
-            raise BadInput(f"{kind} on undeclared name {c.name!r}", file=self.source)
-        if isinstance(value, bool):
-            return compare(c.rule, value, c.value.lower() == "true")
-        if isinstance(value, int | float):
-            return compare(c.rule, float(value), float(c.value))
-        return compare(c.rule, value, c.value)
-
-    def _entity_condition(self, c: m.EntityCondition, body: Body) -> bool:
-        if isinstance(c, m.SpeedCondition):
-            if c.direction is None:
-                return compare(c.rule, body.speed, c.value)
-            return compare(c.rule, directional(body, body.heading, c.direction), c.value)
-        if isinstance(c, m.AccelerationCondition):
-            return compare(c.rule, body.acceleration, c.value)
-        if isinstance(c, m.TraveledDistanceCondition):
-            return body.odometer >= c.value
-        if isinstance(c, m.StandStillCondition):
-            return (
-                body.standstill_since is not None and self.time - body.standstill_since >= c.duration - 1e-9
-            )
-        if isinstance(c, m.EndOfRoadCondition):
-            return (
-                body.end_of_road_since is not None and self.time - body.end_of_road_since >= c.duration - 1e-9
-            )
-        if isinstance(c, m.RelativeSpeedCondition):
-            other = self.body(c.entity)
-            if c.direction is None:
-                return compare(c.rule, body.speed - other.speed, c.value)
-            # both velocities in the reference entity's frame (as esmini)
-            relative = directional(body, other.heading, c.direction) - directional(
-                other, other.heading, c.direction
-            )
-            return compare(c.rule, relative, c.value)
-        if isinstance(c, m.CollisionCondition):
-            others = [self.body(c.entity)] if c.entity else [b for b in self.bodies.values() if b is not body]
-            mine = Box.of(self.state_of(body))
-            return any(boxes_overlap(mine, Box.of(self.state_of(o))) for o in others)
-        if isinstance(c, m.ReachPositionCondition):
-            x, y, _, _ = positions.fixed_point(self, c.position)
-            return math.hypot(body.x - x, body.y - y) < c.tolerance
-        if isinstance(c, m.DistanceCondition):
-            x, y, _, _ = positions.fixed_point(self, c.position)
-            measured = self.measure.to_point(body, x, y, c.coordinate_system, c.distance_type, c.freespace)
-            return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
-        if isinstance(c, m.RelativeDistanceCondition):
-            other = self.body(c.entity)
-            if other.gone:
-                return False
-            if c.freespace and c.distance_type in ("euclidianDistance", "cartesianDistance"):
-                # far apart, a lower bound of the distance between the boxes decides the comparison
-                lower = self.measure.box_distance_lower_bound(body, other)
-                if lower > c.value + 1e-6:
-                    return compare(c.rule, lower, c.value)
-            measured = self.measure.to_entity(body, other, c.coordinate_system, c.distance_type, c.freespace)
-            return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
-        if isinstance(c, m.TimeHeadwayCondition):
-            other = self.body(c.entity)
-            if other.gone:
-                return False
-            headway = self.measure.headway(body, other, c.coordinate_system, c.distance_type, c.freespace)
-            return headway is not None and compare(c.rule, headway, c.value)
-        if isinstance(c, m.TimeToCollisionCondition):
-            point: tuple[float, float] | None = None
-            target: Body | None = None
-            if c.position is not None:
-                x, y, _, _ = positions.fixed_point(self, c.position)
-                point = (x, y)
-            else:
-                target = self.body(c.entity)
-                if target.gone:
-                    return False
-            ttc = self.measure.time_to_collision(
-                body, target, point, c.coordinate_system, c.distance_type, c.freespace
-            )
-            return ttc is not None and compare(c.rule, ttc, c.value)
-        if isinstance(c, m.OffroadCondition):
-            if body.road_id is None or self._outside_driving_lanes(body):
-                since = body.extra.setdefault("offroad_since", self.time)
-                return self.time - since >= c.duration - 1e-9
-            body.extra.pop("offroad_since", None)
-            return False
-        if isinstance(c, m.AngleCondition | m.RelativeAngleCondition):
-            return self._angle_condition(c, body)
-        if isinstance(c, m.RelativeClearanceCondition):
-            return self._clearance(c, body)
-        if isinstance(c, m.UnsupportedCondition):
-            return False
-        raise BadInput(f"condition {type(c).__name__} is not supported", file=self.source)
-
-    def _angle_condition(self, c: m.AngleCondition | m.RelativeAngleCondition, body: Body) -> bool:
-        def angle_of(b: Body, kind: str) -> float:
-            return b.heading if kind == "heading" else b.pitch if kind == "pitch" else b.roll
-
-        value = angle_of(body, c.angle_type)
-        if isinstance(c, m.RelativeAngleCondition):
-            other = self.body(c.entity)
-            if other.gone:
-                return False
-            value -= angle_of(other, c.angle_type)
-        elif c.coordinate_system in ("road", "lane", "trajectory") and c.angle_type == "heading":
-            # relative to the road's reference line (the lane's direction in the lane system)
-            if self.road is None or body.road_id is None:
-                return False
-            reference = self.road.road_to_world(body.road_id, body.s, 0.0).heading
-            if c.coordinate_system != "road" and self.road.drives_backward(body.road_id, body.lane_id):
-                reference += math.pi
-            value -= reference
-        return abs(wrap_angle(value - c.angle)) <= c.tolerance + 1e-9
-
-    def _outside_driving_lanes(self, body: Body) -> bool:
-        """The reference point is beyond every driving lane of its road (off the road)."""
-        road = self.road
-        if road is None or body.road_id is None:
-            return True
-        r = road.road(body.road_id)
-        s = min(max(body.s, 0.0), r.length)
-        t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
-        for lane, inner, outer in r.all_borders(s):
-            if lane.id != 0 and lane.type != "none" and min(inner, outer) <= t <= max(inner, outer):
-                return False
-        return True
-
-    def _clearance(self, c: m.RelativeClearanceCondition, body: Body) -> bool:
-        """True when the lanes and distances given are clear of the listed (else of all) entities; freeSpace
-        chooses bounding-box distances over reference points."""
-        others = [self.body(n) for n in c.entities] if c.entities else list(self.bodies.values())
-        if c.lanes is not None and self.road is not None and body.road_id is not None:
-            # the lanes checked must exist (in the travel direction unless oppositeLanes): no lane, no clearance
-            for d_lane in range(max(c.lanes[0], -20), min(c.lanes[1], 20) + 1):
-                if d_lane == 0:
-                    continue
-                try:
-                    lane = lane_shift(self.road, body.road_id, body.s, body.lane_id, d_lane, body.direction)
-                except ValueError:
-                    return False
-                same_way = self.road.drives_backward(body.road_id, lane) == (body.direction < 0)
-                if not c.opposite_lanes and not same_way:
-                    return False
-        occupied = False
-        for other in others:
-            if other is body or other.gone:
-                continue
-            lon = self.measure.relative_distance(body, other, "longitudinal", c.free_space, signed=True)
-            if not (-c.distance_backward <= lon <= c.distance_forward):
-                continue
-            if c.lanes is not None and self.road is not None and body.road_id is not None:
-                if other.road_id != body.road_id:
-                    continue
-                lanes = sorted(self.road.lane_ids(body.road_id, body.s))
-                if other.lane_id not in lanes or body.lane_id not in lanes:
-                    continue
-                d_lane = (lanes.index(other.lane_id) - lanes.index(body.lane_id)) * body.direction
-                if not c.opposite_lanes and other.direction != body.direction:
-                    continue
-                if not (c.lanes[0] <= d_lane <= c.lanes[1]):
-                    continue
-            occupied = True
-            break
-        return not occupied
-
-    def _condition(self, cond: m.Condition, triggering: list[str]) -> bool:
-        if cond.edge == "none" and cond.delay <= 0:
-            return self._value(cond, triggering)  # no edge, no delay: nothing to remember
-        state = self.conditions.get(id(cond))
-        if state is None:
-            state = self.conditions[id(cond)] = ConditionState(cond)
-        value = self._value(cond, triggering)
-        # an edge needs a change: the first evaluation only records the value (as esmini does)
-        previous = state.previous if state.previous is not None else value
-        state.previous = value
-        if cond.edge == "rising":
-            fired = value and not previous
-        elif cond.edge == "falling":
-            fired = previous and not value
-        elif cond.edge == "risingOrFalling":
-            fired = value != previous
-        else:
-            fired = value
-        if cond.delay <= 0:
-            return fired
-        state.history.append((self.time, fired))
-        result = False
-        while state.history and state.history[0][0] <= self.time - cond.delay + 1e-9:
-            result = state.history.popleft()[1] or result
-        return result
-
     def trigger(self, trigger: m.Trigger | None, triggering: list[str] | None = None) -> bool:
-        """OR over groups, AND within a group (as esmini: every group is evaluated; within a group, once a
-        condition does not hold only the conditions with a delay are evaluated, their timers run on). When
-        the trigger fires, its edge conditions start over (the next evaluation only records the value)."""
-        if trigger is None:
-            return False
-        fired = False
-        for group in trigger.groups:
-            group_entities: list[str] = []
-            holds = True
-            for c in group:
-                if holds or c.delay > 0:
-                    holds = self._condition(c, group_entities) and holds
-            if holds:
-                fired = True
-                if triggering is not None:
-                    triggering.extend(group_entities)
-        if fired:
-            for group in trigger.groups:
-                for c in group:
-                    state = self.conditions.get(id(c))
-                    if state is not None:
-                        state.previous = None
-        return fired
+        """Whether a trigger fires now (`simcore.scenario.triggers`)."""
+        return self.triggers.fire(trigger, triggering)
 
     # --- storyboard -----------------------------------------------------------------------------------
 
@@ -1579,4 +1277,4 @@ def _default_ego(scenario: m.Scenario) -> str:
     return names[0]
 
 
-__all__ = ["ScenarioEngine", "SimulationError", "compare", "update_pose_from_road"]
+__all__ = ["ScenarioEngine", "SimulationError", "update_pose_from_road"]

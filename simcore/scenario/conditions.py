@@ -1,0 +1,338 @@
+"""OpenSCENARIO conditions: one evaluate function per condition type, and the registry that maps each type
+of `simcore.scenario.model` to it (esmini's OSCCondition: each condition type owns its evaluation).
+
+Value conditions read the clock, the stores and the storyboard; entity conditions are evaluated for one
+triggering entity. Both read the run only through `ScenarioWorld`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from simcore.errors import BadInput
+from simcore.evaluation.metrics import Box, boxes_overlap
+from simcore.scenario import model as m
+from simcore.scenario.measure import LARGE, directional
+from simcore.scenario.motion import lane_shift, wrap_angle
+from simcore.scenario.positions import fixed_point
+from simcore.scenario.storyboard import Node, transition_of
+
+if TYPE_CHECKING:
+    from simcore.scenario.motion import Body
+    from simcore.scenario.world import ScenarioWorld
+
+_COMPARE = {
+    "greaterThan": lambda a, b: a > b,
+    "lessThan": lambda a, b: a < b,
+    "equalTo": lambda a, b: abs(a - b) < 1e-9 if isinstance(a, float) else a == b,
+    "greaterOrEqual": lambda a, b: a >= b,
+    "lessOrEqual": lambda a, b: a <= b,
+    "notEqualTo": lambda a, b: a != b,
+}
+
+
+def compare(rule: str, a: Any, b: Any) -> bool:
+    return bool(_COMPARE[rule](a, b))
+
+
+def holds(cond: m.Condition, world: ScenarioWorld, triggering: list[str]) -> bool:
+    """Whether a condition's value holds now (before its edge and delay); the entities that fulfil an
+    entity condition are added to `triggering`."""
+    if cond.value_condition is not None:
+        c = cond.value_condition
+        return VALUE_CONDITIONS[type(c)](c, world)
+    condition = cond.entity_condition
+    assert condition is not None
+    evaluate = ENTITY_CONDITIONS.get(type(condition))
+    if evaluate is None:
+        raise BadInput(f"condition {type(condition).__name__} is not supported", file=world.source)
+    # entities not in the world are skipped; "any" stops at the first entity that fulfils it (the one
+    # that triggers), "all" at the first that does not (as esmini)
+    every = cond.triggering_rule == "all"
+    result = False
+    hits: list[str] = []
+    for name in cond.triggering_entities:
+        body = world.body(name)
+        if body.gone:
+            continue
+        result = evaluate(condition, world, body)
+        if result:
+            hits.append(name)
+            if not every:
+                break
+        elif every:
+            return False
+    if result:
+        triggering.extend(hits)
+    return result
+
+
+# --- value conditions -------------------------------------------------------------------------------------
+
+
+def simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> bool:
+    return compare(c.rule, world.time, c.value)
+
+
+def storyboard_element_state(c: m.StoryboardElementStateCondition, world: ScenarioWorld) -> bool:
+    nodes: list[Node] | None = world.memo.get(("element_nodes", id(c)))
+    if nodes is None:
+        nodes = world.memo[("element_nodes", id(c))] = world.registry.find(c.element_type, c.element_ref)
+    if not nodes:
+        raise BadInput(
+            f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
+            file=world.source,
+        )
+    transition = transition_of(c.state)
+    if transition is None:
+        return any(node.is_(c.state, world.step_index) for node in nodes)
+    # a transition holds when the element went through it since this condition was last evaluated
+    # (every transition counts once for each condition, however late it looks; as esmini)
+    seen: dict[int, int] | None = world.memo.get(("seen_transitions", id(c)))
+    if seen is None:
+        seen = world.memo[("seen_transitions", id(c))] = {}
+    happened = False
+    for node in nodes:
+        count = node.counts.get(transition, 0)
+        if count > seen.get(id(node), 0):
+            happened = True
+            seen[id(node)] = count
+    return happened
+
+
+def traffic_signal(c: m.TrafficSignalCondition, world: ScenarioWorld) -> bool:
+    return world.signals.get(c.name) == c.state
+
+
+def traffic_signal_controller(c: m.TrafficSignalControllerCondition, world: ScenarioWorld) -> bool:
+    return world.signal_phases.get(c.controller) == c.phase
+
+
+def stored_value(c: m.ParameterCondition | m.VariableCondition, world: ScenarioWorld) -> bool:
+    """ParameterCondition and VariableCondition: the value in its store, compared as the type it has."""
+    store = world.variables if isinstance(c, m.VariableCondition) else world.parameter_values
+    value = store.get(c.name)
+    if value is None:
+        kind = "VariableCondition" if isinstance(c, m.VariableCondition) else "ParameterCondition"
+        raise BadInput(f"{kind} on undeclared name {c.name!r}", file=world.source)
+    if isinstance(value, bool):
+        return compare(c.rule, value, c.value.lower() == "true")
+    if isinstance(value, int | float):
+        return compare(c.rule, float(value), float(c.value))
+    return compare(c.rule, value, c.value)
+
+
+def unsupported(c: m.UnsupportedCondition, world: ScenarioWorld, body: Body | None = None) -> bool:
+    """A condition CARLOS does not model (warned about at load): never holds."""
+    return False
+
+
+# --- entity conditions ------------------------------------------------------------------------------------
+
+
+def speed(c: m.SpeedCondition, world: ScenarioWorld, body: Body) -> bool:
+    if c.direction is None:
+        return compare(c.rule, body.speed, c.value)
+    return compare(c.rule, directional(body, body.heading, c.direction), c.value)
+
+
+def acceleration(c: m.AccelerationCondition, world: ScenarioWorld, body: Body) -> bool:
+    return compare(c.rule, body.acceleration, c.value)
+
+
+def traveled_distance(c: m.TraveledDistanceCondition, world: ScenarioWorld, body: Body) -> bool:
+    return body.odometer >= c.value
+
+
+def stand_still(c: m.StandStillCondition, world: ScenarioWorld, body: Body) -> bool:
+    since = body.standstill_since
+    return since is not None and world.time - since >= c.duration - 1e-9
+
+
+def end_of_road(c: m.EndOfRoadCondition, world: ScenarioWorld, body: Body) -> bool:
+    since = body.end_of_road_since
+    return since is not None and world.time - since >= c.duration - 1e-9
+
+
+def relative_speed(c: m.RelativeSpeedCondition, world: ScenarioWorld, body: Body) -> bool:
+    other = world.body(c.entity)
+    if c.direction is None:
+        return compare(c.rule, body.speed - other.speed, c.value)
+    # both velocities in the reference entity's frame (as esmini)
+    relative = directional(body, other.heading, c.direction) - directional(other, other.heading, c.direction)
+    return compare(c.rule, relative, c.value)
+
+
+def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool:
+    others = [world.body(c.entity)] if c.entity else [b for b in world.bodies.values() if b is not body]
+    mine = Box.of(world.state_of(body))
+    return any(boxes_overlap(mine, Box.of(world.state_of(o))) for o in others)
+
+
+def reach_position(c: m.ReachPositionCondition, world: ScenarioWorld, body: Body) -> bool:
+    x, y, _, _ = fixed_point(world, c.position)
+    return math.hypot(body.x - x, body.y - y) < c.tolerance
+
+
+def distance(c: m.DistanceCondition, world: ScenarioWorld, body: Body) -> bool:
+    x, y, _, _ = fixed_point(world, c.position)
+    measured = world.measure.to_point(body, x, y, c.coordinate_system, c.distance_type, c.freespace)
+    return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
+
+
+def relative_distance(c: m.RelativeDistanceCondition, world: ScenarioWorld, body: Body) -> bool:
+    other = world.body(c.entity)
+    if other.gone:
+        return False
+    measure = world.measure
+    if c.freespace and c.distance_type in ("euclidianDistance", "cartesianDistance"):
+        # far apart, a lower bound of the distance between the boxes decides the comparison
+        lower = measure.box_distance_lower_bound(body, other)
+        if lower > c.value + 1e-6:
+            return compare(c.rule, lower, c.value)
+    measured = measure.to_entity(body, other, c.coordinate_system, c.distance_type, c.freespace)
+    return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
+
+
+def time_headway(c: m.TimeHeadwayCondition, world: ScenarioWorld, body: Body) -> bool:
+    other = world.body(c.entity)
+    if other.gone:
+        return False
+    headway = world.measure.headway(body, other, c.coordinate_system, c.distance_type, c.freespace)
+    return headway is not None and compare(c.rule, headway, c.value)
+
+
+def time_to_collision(c: m.TimeToCollisionCondition, world: ScenarioWorld, body: Body) -> bool:
+    point: tuple[float, float] | None = None
+    target: Body | None = None
+    if c.position is not None:
+        x, y, _, _ = fixed_point(world, c.position)
+        point = (x, y)
+    else:
+        target = world.body(c.entity)
+        if target.gone:
+            return False
+    ttc = world.measure.time_to_collision(
+        body, target, point, c.coordinate_system, c.distance_type, c.freespace
+    )
+    return ttc is not None and compare(c.rule, ttc, c.value)
+
+
+def offroad(c: m.OffroadCondition, world: ScenarioWorld, body: Body) -> bool:
+    if body.road_id is None or _outside_driving_lanes(world, body):
+        since = body.extra.setdefault("offroad_since", world.time)
+        return world.time - since >= c.duration - 1e-9
+    body.extra.pop("offroad_since", None)
+    return False
+
+
+def angle(c: m.AngleCondition | m.RelativeAngleCondition, world: ScenarioWorld, body: Body) -> bool:
+    def angle_of(b: Body, kind: str) -> float:
+        return b.heading if kind == "heading" else b.pitch if kind == "pitch" else b.roll
+
+    value = angle_of(body, c.angle_type)
+    if isinstance(c, m.RelativeAngleCondition):
+        other = world.body(c.entity)
+        if other.gone:
+            return False
+        value -= angle_of(other, c.angle_type)
+    elif c.coordinate_system in ("road", "lane", "trajectory") and c.angle_type == "heading":
+        # relative to the road's reference line (the lane's direction in the lane system)
+        if world.road is None or body.road_id is None:
+            return False
+        reference = world.road.road_to_world(body.road_id, body.s, 0.0).heading
+        if c.coordinate_system != "road" and world.road.drives_backward(body.road_id, body.lane_id):
+            reference += math.pi
+        value -= reference
+    return abs(wrap_angle(value - c.angle)) <= c.tolerance + 1e-9
+
+
+def _outside_driving_lanes(world: ScenarioWorld, body: Body) -> bool:
+    """The reference point is beyond every driving lane of its road (off the road)."""
+    road = world.road
+    if road is None or body.road_id is None:
+        return True
+    r = road.road(body.road_id)
+    s = min(max(body.s, 0.0), r.length)
+    t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
+    for lane, inner, outer in r.all_borders(s):
+        if lane.id != 0 and lane.type != "none" and min(inner, outer) <= t <= max(inner, outer):
+            return False
+    return True
+
+
+def relative_clearance(c: m.RelativeClearanceCondition, world: ScenarioWorld, body: Body) -> bool:
+    """True when the lanes and distances given are clear of the listed (else of all) entities; freeSpace
+    chooses bounding-box distances over reference points."""
+    others = [world.body(n) for n in c.entities] if c.entities else list(world.bodies.values())
+    if c.lanes is not None and world.road is not None and body.road_id is not None:
+        # the lanes checked must exist (in the travel direction unless oppositeLanes): no lane, no clearance
+        for d_lane in range(max(c.lanes[0], -20), min(c.lanes[1], 20) + 1):
+            if d_lane == 0:
+                continue
+            try:
+                lane = lane_shift(world.road, body.road_id, body.s, body.lane_id, d_lane, body.direction)
+            except ValueError:
+                return False
+            same_way = world.road.drives_backward(body.road_id, lane) == (body.direction < 0)
+            if not c.opposite_lanes and not same_way:
+                return False
+    occupied = False
+    for other in others:
+        if other is body or other.gone:
+            continue
+        lon = world.measure.relative_distance(body, other, "longitudinal", c.free_space, signed=True)
+        if not (-c.distance_backward <= lon <= c.distance_forward):
+            continue
+        if c.lanes is not None and world.road is not None and body.road_id is not None:
+            if other.road_id != body.road_id:
+                continue
+            lanes = sorted(world.road.lane_ids(body.road_id, body.s))
+            if other.lane_id not in lanes or body.lane_id not in lanes:
+                continue
+            d_lane = (lanes.index(other.lane_id) - lanes.index(body.lane_id)) * body.direction
+            if not c.opposite_lanes and other.direction != body.direction:
+                continue
+            if not (c.lanes[0] <= d_lane <= c.lanes[1]):
+                continue
+        occupied = True
+        break
+    return not occupied
+
+
+ValueEvaluator = Callable[[Any, "ScenarioWorld"], bool]
+EntityEvaluator = Callable[[Any, "ScenarioWorld", "Body"], bool]
+
+#: value condition type → its evaluation
+VALUE_CONDITIONS: dict[type, ValueEvaluator] = {
+    m.SimulationTimeCondition: simulation_time,
+    m.StoryboardElementStateCondition: storyboard_element_state,
+    m.ParameterCondition: stored_value,
+    m.VariableCondition: stored_value,
+    m.TrafficSignalCondition: traffic_signal,
+    m.TrafficSignalControllerCondition: traffic_signal_controller,
+    m.UnsupportedCondition: unsupported,
+}
+
+#: entity condition type → its evaluation for one triggering entity
+ENTITY_CONDITIONS: dict[type, EntityEvaluator] = {
+    m.SpeedCondition: speed,
+    m.AccelerationCondition: acceleration,
+    m.TraveledDistanceCondition: traveled_distance,
+    m.StandStillCondition: stand_still,
+    m.EndOfRoadCondition: end_of_road,
+    m.RelativeSpeedCondition: relative_speed,
+    m.CollisionCondition: collision,
+    m.ReachPositionCondition: reach_position,
+    m.DistanceCondition: distance,
+    m.RelativeDistanceCondition: relative_distance,
+    m.TimeHeadwayCondition: time_headway,
+    m.TimeToCollisionCondition: time_to_collision,
+    m.OffroadCondition: offroad,
+    m.AngleCondition: angle,
+    m.RelativeAngleCondition: angle,
+    m.RelativeClearanceCondition: relative_clearance,
+    m.UnsupportedCondition: unsupported,
+}
