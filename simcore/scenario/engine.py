@@ -12,23 +12,22 @@ from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any, Protocol
 
 from simcore.errors import BadInput, SimulationError
-from simcore.scenario import actions as extra_actions
-from simcore.scenario import drivers, ghost, positions
+from simcore.scenario import drivers, ghost, global_actions, positions
 from simcore.scenario import model as m
-from simcore.scenario.actions import Runtime
+from simcore.scenario.action_registry import make_runtime
+from simcore.scenario.core_actions import LaneChangeRuntime
 from simcore.scenario.measure import Measure
 from simcore.scenario.motion import (
     Body,
     advance_on_road,
     align_trailer,
     lane_at_t,
-    lane_shift,
     pull_trailer,
-    shape_peak_rate_factor,
-    shape_value,
     update_pose_from_road,
     wrap_angle,
 )
+from simcore.scenario.runtime import Runtime
+from simcore.scenario.signals import SignalControllers
 from simcore.scenario.storyboard import Node, Registry, State, Transition
 from simcore.scenario.triggers import Triggers
 from simcore.scenario.world import Pose
@@ -37,285 +36,6 @@ from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, World
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
     from simcore.world.sumo import SumoWorld
-
-# --- action runtimes --------------------------------------------------------------------------------------
-
-
-class ActionRuntime(Runtime):
-    domain = "other"
-
-
-class SpeedRuntime(ActionRuntime):
-    domain = "longitudinal"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.SpeedAction) -> None:
-        super().__init__(engine, actor)
-        self.action = action
-        self.v0 = 0.0
-        self.elapsed = 0.0
-        self.duration = 0.0
-
-    def target(self) -> float:
-        target = self.action.target
-        if isinstance(target, m.AbsoluteTargetSpeed):
-            return target.value
-        reference = self.engine.body(target.entity).speed
-        return reference + target.value if target.value_type == "delta" else reference * target.value
-
-    def start(self) -> None:
-        self.v0 = self.actor.speed
-        dyn = self.action.dynamics
-        target = self.target()
-        dv = abs(target - self.v0)
-        if dyn.dimension == "rate":
-            # the rate is bounded by the vehicle's performance (as esmini does)
-            perf = self.actor.entity.performance
-            limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
-            rate = min(dyn.value, limit) if limit > 0 else dyn.value
-            self.duration = dv / rate * shape_peak_rate_factor(dyn.shape) if rate > 0 else 0.0
-        elif dyn.dimension == "distance":
-            # every shape is symmetric, so the mean speed over the transition is (v0 + v1) / 2: the
-            # transition covers `value` metres in this time (as esmini does)
-            mean = (abs(self.v0) + abs(target)) / 2
-            self.duration = dyn.value / mean if mean > 1e-9 else 0.0
-        else:
-            self.duration = dyn.value
-        if dyn.dimension != "rate" and dyn.shape != "step" and self.duration > 0 and dv > 0:
-            # the shape's peak acceleration stays within the vehicle's performance: the transition is
-            # stretched when it would exceed it (as esmini does)
-            perf = self.actor.entity.performance
-            limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
-            peak = dv / self.duration * shape_peak_rate_factor(dyn.shape)
-            if limit > 0 and peak > limit:
-                self.duration = dv * shape_peak_rate_factor(dyn.shape) / limit
-        if self.actor.entity.driver == "sumo":
-            # the SUMO driver reaches the desired speed with its own dynamics
-            self.engine.sumo_set_speed(self.actor, self.target())
-            self.done = not self._continuous
-            return
-        if dyn.shape == "step" or self.duration <= 0:
-            self._set(self.target())
-            self.done = not self._continuous
-
-    @property
-    def _continuous(self) -> bool:
-        return isinstance(self.action.target, m.RelativeTargetSpeed) and self.action.target.continuous
-
-    def _set(self, speed: float, dt: float | None = None) -> None:
-        if dt:
-            # the vehicle's performance bounds the acceleration (as esmini does)
-            perf = self.actor.entity.performance
-            v = self.actor.speed
-            speed = min(max(speed, v - perf.max_deceleration * dt), v + perf.max_acceleration * dt)
-        self.actor.speed = speed
-
-    def step(self, dt: float) -> None:
-        if self.actor.entity.driver == "sumo":
-            self.engine.sumo_set_speed(self.actor, self.target())
-            return
-        if self.done or (self.action.dynamics.shape == "step" and self._continuous):
-            # following a moving target: within the vehicle's performance (as esmini does)
-            self._set(self.target(), dt)
-            return
-        self.elapsed += dt
-        dyn = self.action.dynamics
-        progress = self.elapsed / max(self.duration, 1e-9)
-        target = self.target()
-        self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress), dt)
-        if progress >= 1.0 - 1e-9:
-            self._set(target, dt)
-            # bounded by the vehicle's performance, the target may be reached later than the shape says
-            self.done = not self._continuous and abs(self.actor.speed - target) < 1e-9
-
-
-class LaneChangeRuntime(ActionRuntime):
-    domain = "lateral"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.LaneChangeAction) -> None:
-        super().__init__(engine, actor)
-        self.action = action
-        self.elapsed = 0.0
-        self.start_odometer = 0.0
-        self.offset0 = 0.0
-        self.offset1 = 0.0
-
-    def start(self) -> None:
-        actor = self.actor
-        road = self.engine.road
-        if road is None or actor.road_id is None:
-            raise BadInput(
-                f"LaneChangeAction on {actor.name!r}, which is not on a road", file=self.engine.source
-            )
-        target = self.action.target
-        try:
-            if isinstance(target, m.AbsoluteTargetLane):
-                lane = target.lane_id
-                if lane not in road.lane_ids(actor.road_id, actor.s):
-                    raise ValueError(f"lane {lane} does not exist on road {actor.road_id} at s={actor.s:.1f}")
-            else:
-                reference = self.engine.body(target.entity)
-                base = reference.lane_id if reference.road_id == actor.road_id else actor.lane_id
-                lane = lane_shift(road, actor.road_id, actor.s, base, target.value, reference.direction)
-        except ValueError as exc:
-            raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.engine.source) from None
-        t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
-        centre = road.lane_center_t(actor.road_id, lane, actor.s)
-        actor.lane_id = lane
-        actor.offset = t_now - centre
-        self.offset0 = actor.offset
-        self.offset1 = self.action.target_lane_offset * actor.direction
-        self.start_odometer = actor.odometer
-        self.target_lane = lane
-        if actor.entity.driver == "sumo":
-            self.engine.sumo_change_lane(actor, lane, self.action.dynamics.value)
-            self.done = True
-            return
-        if self.action.dynamics.shape == "step" or self.action.dynamics.value <= 0:
-            actor.offset = self.offset1
-            self.done = True
-
-    def step(self, dt: float) -> None:
-        if self.done:
-            return
-        # the lane change moves the entity at the speed it has now: a speed action stepped after it in the
-        # storyboard's order changes the speed from the next step on (as esmini)
-        self.actor.extra["move_speed"] = self.actor.speed
-        dyn = self.action.dynamics
-        self.elapsed += dt
-        if dyn.dimension == "distance":
-            progress = (self.actor.odometer - self.start_odometer + abs(self.actor.speed) * dt) / dyn.value
-        elif dyn.dimension == "rate":  # lateral rate in m/s: duration from the lateral distance
-            duration = abs(self.offset1 - self.offset0) / dyn.value * shape_peak_rate_factor(dyn.shape)
-            progress = self.elapsed / max(duration, 1e-9)
-        else:
-            progress = self.elapsed / dyn.value
-        new_offset = self.offset0 + (self.offset1 - self.offset0) * shape_value(dyn.shape, progress)
-        self.actor.lateral_velocity = (new_offset - self.actor.offset) / dt
-        self.actor.offset = new_offset
-        if progress >= 1.0 - 1e-9:
-            self.actor.offset = self.offset1
-            self.actor.lateral_velocity = 0.0
-            self.done = True
-
-
-class TeleportRuntime(ActionRuntime):
-    domain = "teleport"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.TeleportAction) -> None:
-        super().__init__(engine, actor)
-        self.action = action
-
-    def start(self) -> None:
-        self.done = True
-        ghosts = self.engine.ghosts
-        if ghosts is not None and id(self.action) in ghosts.setup.teleports:
-            ghosts.teleport(self.actor)  # the ghost put on its entity (esmini's AddedGhostTeleport)
-            return
-        if self.actor.name in self.engine.tow_of:
-            return  # a towed trailer goes where its tow vehicle takes it (as esmini)
-        self.engine.place(self.actor, self.action.position)
-        if self.actor.name in self.engine.trailer_of:
-            self.engine.align_trailers(self.actor)
-        if self.engine.root.state == State.RUNNING:
-            # teleported during the run: it stays where it was put for the rest of this step (as esmini)
-            self.actor.extra["teleported"] = 1.0
-        self.done = True
-
-
-class ControllerRuntime(ActionRuntime):
-    """Assign/activate a controller: an external one, active on any domain, moves the entity by its
-    control input from now on (the scenario's motion actions on it are then ignored)."""
-
-    domain = "none"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.ControllerAction) -> None:
-        super().__init__(engine, actor)
-        self.action = action
-
-    def start(self) -> None:
-        control = self.engine.controllers[self.actor.name]
-        if self.action.assign is not None:
-            control[0] = self.action.assign
-        if self.action.longitudinal is not None:
-            control[1] = self.action.longitudinal
-        if self.action.lateral is not None:
-            control[2] = self.action.lateral
-        external = control[0] == "external" and (control[1] or control[2])
-        self._driver_model(control, bool(external))
-        ghosts = self.engine.ghosts
-        if ghosts is not None and ghosts.entity is self.actor:
-            ghosts.activate(not external and (control[1] or control[2]))
-        if external != self.actor.external:
-            self.actor.external = bool(external)
-            self.actor.mover = None
-            self.engine.log.append(
-                f"t={self.engine.time:.2f} {self.actor.name}: external controller "
-                f"{'activated: moved by its control input' if external else 'deactivated'}"
-            )
-        self.done = True
-
-    def _driver_model(self, control: list[Any], external: bool) -> None:
-        """(Re)start or stop the driver model of an esmini controller CARLOS runs (ACC/ALKS): activated on
-        the longitudinal domain, it starts from the entity's speed now (as esmini's Activate)."""
-        e, name = self.engine, self.actor.name
-        if self.action.assign is not None:
-            e.assigned_controller[name] = dict(self.action.controller)
-        properties = e.assigned_controller.get(name, self.actor.entity.controller)
-        kind = m.controller_type(properties)
-        if kind in m.VEHICLE_CONTROLLERS and not external and (control[1] or control[2]):
-            if self.action.assign is not None or name not in e.vehicle_drivers:
-                e.vehicle_drivers[name] = drivers.OffroadFollower(e, self.actor, properties)
-                e.log.append(f"t={e.time:.2f} {name}: {kind} controller activated")
-        elif e.vehicle_drivers.pop(name, None) is not None:
-            e.log.append(f"t={e.time:.2f} {name}: {kind or 'its'} controller deactivated")
-        if kind in m.NATURAL_DRIVER_CONTROLLERS and not external and control[1]:
-            if self.action.longitudinal or self.action.assign is not None or name not in e.natural_drivers:
-                e.natural_drivers[name] = drivers.NaturalDriver(e, self.actor, properties)
-                e.log.append(f"t={e.time:.2f} {name}: NaturalDriver activated at {self.actor.speed:.2f} m/s")
-        elif e.natural_drivers.pop(name, None) is not None:
-            e.log.append(f"t={e.time:.2f} {name}: NaturalDriver deactivated")
-        if external or not control[1] or kind not in m.ACC_CONTROLLERS:
-            if e.acc_drivers.pop(name, None) is not None:
-                e.log.append(f"t={e.time:.2f} {name}: ACC controller deactivated")
-            return
-        if self.action.longitudinal or self.action.assign is not None or name not in e.acc_drivers:
-            e.acc_drivers[name] = extra_actions.AccDriver(e, self.actor, properties)
-            e.log.append(f"t={e.time:.2f} {name}: ACC controller activated at {self.actor.speed:.2f} m/s")
-
-
-class IgnoredRuntime(ActionRuntime):
-    """A motion action on an entity an external controller drives: the controller overrides it."""
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> None:
-        super().__init__(engine, actor)
-        self.domain = getattr(action, "domain", "other")
-
-    def start(self) -> None:
-        self.done = True
-
-
-def make_runtime(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> Runtime:
-    if isinstance(action, m.ControllerAction):
-        return ControllerRuntime(engine, actor, action)
-    if actor.external and not isinstance(action, m.TeleportAction | m.NoMotionAction | m.AssignRouteAction):
-        return IgnoredRuntime(engine, actor, action)
-    if engine.acc_drivers and getattr(action, "domain", "") == "longitudinal":
-        acc = engine.acc_drivers.get(actor.name)
-        if acc is not None and acc.override and not acc.virtual:
-            return IgnoredRuntime(engine, actor, action)  # an override controller moves it (esmini ends it)
-    natural = engine.natural_drivers
-    if natural and actor.name in natural and getattr(action, "domain", "") == "longitudinal":
-        return IgnoredRuntime(engine, actor, action)  # the NaturalDriver moves it (esmini ends it)
-    other = extra_actions.make(engine, actor, action)
-    if other is not None:
-        return other
-    if isinstance(action, m.SpeedAction):
-        return SpeedRuntime(engine, actor, action)
-    if isinstance(action, m.LaneChangeAction):
-        return LaneChangeRuntime(engine, actor, action)
-    if isinstance(action, m.TeleportAction):
-        return TeleportRuntime(engine, actor, action)
-    raise BadInput(f"{type(action).__name__} is not supported", file=engine.source)
 
 
 class ExternalDriver(Protocol):
@@ -379,10 +99,9 @@ class ScenarioEngine:
         self.added_later = _added_later(scenario)
         # traffic signals: state shown by each signal (by the id or name the scenario uses), and the phase
         # cycle of each signal controller: name → (time its current cycle was anchored, phase index then)
-        self.signals: dict[str, str] = {}
-        self._signal_cycles: dict[str, tuple[float, int]] = _signal_starts(scenario.signal_controllers)
-        self._signal_controllers = {c.name: c for c in scenario.signal_controllers}
-        self.signal_phases: dict[str, str] = {}
+        self.signal_control = SignalControllers(scenario.signal_controllers)
+        self.signals = self.signal_control.signals
+        self.signal_phases = self.signal_control.phases
         self.action_order: dict[int, int] = {}  # id of an action node → its place in the storyboard
         self.ended_in_move = False  # an action runtime finished while moving its entity this step
         # a FollowGhost controller (esmini) gives its ghost a head start: esmini reports every time shifted
@@ -394,11 +113,11 @@ class ScenarioEngine:
         self._alks = [
             e.name for e in scenario.entities if m.controller_type(e.controller) in m.ALKS_CONTROLLERS
         ]
-        self.safety_drivers: dict[str, extra_actions.SafetyDriver] = {}
+        self.safety_drivers: dict[str, drivers.SafetyDriver] = {}
         # the properties of each entity's controller assigned during the run (AssignControllerAction), and
         # the ACC/ALKS driver models (esmini's ACCController) active on the longitudinal domain now
         self.assigned_controller: dict[str, dict[str, str]] = {}
-        self.acc_drivers: dict[str, extra_actions.AccDriver] = {}
+        self.acc_drivers: dict[str, drivers.AccDriver] = {}
         # esmini's controllers that drive a vehicle model of their own (OffroadFollower), active now
         self.vehicle_drivers: dict[str, drivers.OffroadFollower] = {}
         # esmini's NaturalDriver controllers active on the longitudinal domain now (they move their entity)
@@ -458,28 +177,10 @@ class ScenarioEngine:
         self.init_runtimes: list[Runtime] = []
         for item in ordered:
             if not item.entity:
-                self._global_action(item.action)  # type: ignore[arg-type]
+                global_actions.run(self, item.action)  # type: ignore[arg-type]
                 continue
-            body = self.bodies[item.entity]
-            runtime = make_runtime(self, body, item.action)  # type: ignore[arg-type]
-            continuous = isinstance(item.action, m.SpeedAction) and (
-                isinstance(item.action.target, m.RelativeTargetSpeed) and item.action.target.continuous
-            )
-            if (
-                isinstance(item.action, m.SpeedAction)
-                and (item.action.dynamics.shape == "step" or item.action.dynamics.value == 0)
-                and not continuous
-            ):
-                # initial speed with a step: reached at once
-                body.speed = runtime.target() if isinstance(runtime, SpeedRuntime) else body.speed
-            elif isinstance(item.action, m.SpeedAction):
-                # with a transition shape the speed changes over time from the start, as in a story
-                self.init_runtimes.append(runtime)
-            elif isinstance(
-                item.action, m.TeleportAction | m.AssignRouteAction | m.NoMotionAction | m.ControllerAction
-            ):
-                runtime.start()
-            else:
+            runtime = make_runtime(self, self.bodies[item.entity], item.action)  # type: ignore[arg-type]
+            if not runtime.start_in_init():
                 # an Init action with duration (a trajectory, a distance to keep) runs from the first step
                 self.init_runtimes.append(runtime)
         for runtime in self.init_runtimes:
@@ -553,7 +254,7 @@ class ScenarioEngine:
     def place(self, body: Body, position: m.Position) -> None:
         """Teleport: pose from the position; road coordinates from the road network when on a road."""
         x, y, z, heading = self.resolve_position(position, body)
-        self._moved()
+        self.moved()
         body.x, body.y, body.z, body.heading = x, y, z, heading
         body.posed = None
         body.placed = True
@@ -606,7 +307,7 @@ class ScenarioEngine:
     def track_road(self, body: Body, lock_lane: bool = False) -> None:
         """Road coordinates of a body moved freely (a trajectory): its lane, s and offset from x/y. With
         `lock_lane` the body follows that lane afterwards, in the direction it is heading."""
-        self._moved()
+        self.moved()
         positions.track(self.road, body, lock_lane)
 
     def locate(self, body: Body) -> None:
@@ -636,7 +337,7 @@ class ScenarioEngine:
         else:
             body.x += distance * math.cos(body.heading)
             body.y += distance * math.sin(body.heading)
-        self._moved()
+        self.moved()
 
     def distance_to(self, body: Body, target: tuple[float, float, float, float]) -> float:
         """Distance still to travel to a position: along the road when both are on the same road."""
@@ -649,57 +350,6 @@ class ScenarioEngine:
             if rc is not None and rc.road_id == body.road_id:
                 return max((rc.s - body.s) * body.direction, 0.0)
         return math.hypot(x - body.x, y - body.y)
-
-    def _global_action(self, action: m.GlobalAction) -> None:
-        if isinstance(action, m.ParameterSetAction | m.ParameterModifyAction):
-            store = self.variables if action.variable else self.parameter_values
-            if action.name not in store:
-                kind = "variable" if action.variable else "parameter"
-                raise BadInput(f"{kind} {action.name!r} is not declared", file=self.source)
-            old = store[action.name]
-            if isinstance(action, m.ParameterSetAction):
-                new: Any = action.value
-                if isinstance(old, bool):
-                    new = action.value.lower() in ("true", "1")
-                elif isinstance(old, int):
-                    new = int(float(action.value))
-                elif isinstance(old, float):
-                    new = float(action.value)
-            else:
-                base = float(old)
-                new = base + action.value if action.rule == "add" else base * action.value
-                if isinstance(old, int) and not isinstance(old, bool) and new == int(new):
-                    new = int(new)
-            store[action.name] = new
-            self.log.append(f"t={self.time:.2f} {action.name} := {new}")
-        elif isinstance(action, m.AddEntityAction):
-            body = self.body(action.entity)
-            body.gone = False
-            self.place(body, action.position)
-        elif isinstance(action, m.DeleteEntityAction):
-            body = self.body(action.entity)
-            body.gone = True
-            self._moved()
-        elif isinstance(action, m.TrafficSignalStateAction):
-            self.signals[action.name] = action.state
-            self.log.append(f"t={self.time:.2f} signal {action.name} := {action.state}")
-        elif isinstance(action, m.TrafficSignalControllerAction):
-            ctrl = self._signal_controllers.get(action.controller)
-            if ctrl is None:
-                raise BadInput(
-                    f"TrafficSignalControllerAction: no TrafficSignalController {action.controller!r} in "
-                    "RoadNetwork/TrafficSignals",
-                    file=self.source,
-                )
-            names = [p.name for p in ctrl.phases]
-            if action.phase not in names:
-                raise BadInput(
-                    f"TrafficSignalControllerAction: controller {ctrl.name!r} has no phase {action.phase!r} "
-                    f"(phases: {', '.join(names)})",
-                    file=self.source,
-                )
-            self._signal_cycles[ctrl.name] = (self.time, names.index(action.phase))
-            self._update_signals()
 
     def _check_signal_names(self, road: OpenDrive) -> None:
         """Warn about traffic signals the scenario names (by id or name) that the road network lacks."""
@@ -735,28 +385,6 @@ class ScenarioEngine:
                     f"{self.source}: {where}: traffic signal {name!r} is not a <signal> of the road network "
                     f"{road.name} (ids: {', '.join(sorted(road.signals)) or 'none'})"
                 )
-
-    def _update_signals(self) -> None:
-        """Signal controllers: the phase each is in now, and the signal states that phase sets."""
-        for name, (anchor, index) in self._signal_cycles.items():
-            ctrl = self._signal_controllers[name]
-            if not ctrl.phases or self.time < anchor - 1e-9:
-                continue
-            total = sum(p.duration for p in ctrl.phases)
-            elapsed = (self.time - anchor) % total if total > 0 else 0.0
-            n = len(ctrl.phases)
-            i = index
-            for _ in range(n):
-                duration = ctrl.phases[i].duration
-                if elapsed < duration - 1e-9:
-                    break
-                elapsed -= duration
-                i = (i + 1) % n
-            phase = ctrl.phases[i]
-            if self.signal_phases.get(name) != phase.name:
-                self.signal_phases[name] = phase.name
-                for signal, state in phase.states:
-                    self.signals[signal] = state
 
     # --- SUMO hooks -----------------------------------------------------------------------------------
 
@@ -833,7 +461,7 @@ class ScenarioEngine:
         action: m.Action = node.definition
         if action.private is None:
             if action.global_action is not None:
-                self._global_action(action.global_action)
+                global_actions.run(self, action.global_action)
             self._set(node, Transition.END, State.COMPLETE)
             return
         runtimes = []
@@ -957,8 +585,8 @@ class ScenarioEngine:
         ghosts = self.ghosts
         if ghosts is not None:
             ghosts.begin_step()
-        if self._signal_cycles:
-            self._update_signals()
+        if self.signal_control.cycles:
+            self.signal_control.update(self.time)
         self._evaluate_storyboard()
         previous = []
         for body in self.bodies.values():
@@ -986,9 +614,9 @@ class ScenarioEngine:
             if self.controllers[name][1]:  # active on the longitudinal domain: it sets the speed
                 driver = self.safety_drivers.get(name)
                 if driver is None:
-                    driver = self.safety_drivers[name] = extra_actions.SafetyDriver(self, self.bodies[name])
+                    driver = self.safety_drivers[name] = drivers.SafetyDriver(self, self.bodies[name])
                 driver.step(dt)
-        self._moved()
+        self.moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         sumo, road, tow_of = self.sumo, self.road, self.tow_of
         # entities an override-mode ACC moves itself, after the others (below)
@@ -1066,10 +694,10 @@ class ScenarioEngine:
                 if not follower.actor.gone and not follower.actor.external:
                     self.measure.clear()
                     follower.step(dt)
-            self._moved()
+            self.moved()
         if ghosts is not None:
             ghosts.end_step(dt)
-            self._moved()
+            self.moved()
         for body, speed0, heading0, px, py in previous:
             speed = body.speed
             body.acceleration = (speed - speed0) / dt
@@ -1097,11 +725,11 @@ class ScenarioEngine:
             self._complete_elements()
         self.time = now
         self.step_index += 1
-        self._moved()
+        self.moved()
         self._check_stop()
 
     def _step_drivers(
-        self, stepped: Iterable[extra_actions.AccDriver | drivers.NaturalDriver], dt: float, now: float
+        self, stepped: Iterable[drivers.AccDriver | drivers.NaturalDriver], dt: float, now: float
     ) -> None:
         """esmini steps these controllers after the default motion of every entity, each seeing the others
         where they are after this step. An ACC sets its entity's speed and, in override mode, moves it with
@@ -1118,7 +746,7 @@ class ScenarioEngine:
                 self._start_lane_change(driver)
             elif driver.override and not driver.virtual:
                 self._move_body(body, dt, now)
-        self._moved()
+        self.moved()
 
     def _start_lane_change(self, driver: drivers.NaturalDriver) -> None:
         """The lane change a NaturalDriver decided: sinusoidal, over its laneChangeDuration, to its target
@@ -1191,7 +819,7 @@ class ScenarioEngine:
         body.x, body.y, body.heading, body.speed = x, y, heading, speed
         self.locate(body)
 
-    def _moved(self) -> None:
+    def moved(self) -> None:
         """Bodies moved: the per-step caches of their states and of condition measurements are stale."""
         self._states.clear()
         self.measure.clear()
@@ -1237,25 +865,13 @@ class ScenarioEngine:
         return WorldFrame(step=self.step_index, time=self.time, entities=entities, ego=self.ego)
 
     @property
+    def started(self) -> bool:
+        """The storyboard runs (Init is over)."""
+        return self.root.state == State.RUNNING
+
+    @property
     def ended(self) -> bool:
         return self.ended_by is not None
-
-
-def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tuple[float, int]]:
-    """When each signal controller starts its first phase: its delay, counted from the start of the
-    controller it references (if any)."""
-    by_name = {c.name: c for c in controllers}
-    out: dict[str, tuple[float, int]] = {}
-    for ctrl in controllers:
-        start = 0.0
-        seen: set[str] = set()
-        current: m.SignalController | None = ctrl
-        while current is not None and current.name not in seen:
-            seen.add(current.name)
-            start += current.delay
-            current = by_name.get(current.reference) if current.reference else None
-        out[ctrl.name] = (start, 0)
-    return out
 
 
 def _added_later(scenario: m.Scenario) -> set[str]:

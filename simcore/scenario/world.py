@@ -13,6 +13,7 @@ if TYPE_CHECKING:
     from simcore.scenario import model as m
     from simcore.scenario.measure import Measure
     from simcore.scenario.motion import Body
+    from simcore.scenario.signals import SignalControllers
     from simcore.scenario.storyboard import Registry
     from simcore.world.opendrive import OpenDrive
     from simcore.world.state import EntityState
@@ -37,6 +38,7 @@ class ScenarioWorld(Protocol):
     variables: dict[str, Any]
     signals: dict[str, str]  # traffic signal (id or name) → the state it shows
     signal_phases: dict[str, str]  # signal controller → its current phase
+    signal_control: SignalControllers
     memo: dict[tuple[str, int], Any]  # per-run memory of conditions and positions, by (kind, id of element)
 
     def body(self, name: str) -> Body:
@@ -44,6 +46,10 @@ class ScenarioWorld(Protocol):
         ...
 
     def state_of(self, body: Body) -> EntityState: ...
+
+    def moved(self) -> None:
+        """Bodies moved (or left the world): per-step caches of their states and measurements are stale."""
+        ...
 
     def resolve_position(self, position: m.Position, for_body: Body | None = None) -> Pose: ...
 
@@ -60,6 +66,10 @@ class ScenarioWorld(Protocol):
         ...
 
     def shift_along(self, body: Body, distance: float) -> None: ...
+
+    def distance_to(self, body: Body, target: Pose) -> float:
+        """Distance still to travel to a pose: along the road when both are on the same road."""
+        ...
 
     def plan_route(self, body: Body, targets: list[m.Position]) -> list[tuple[str, int]]: ...
 
