@@ -29,6 +29,7 @@ from simcore.scenario.motion import (
 from simcore.scenario.runtime import Runtime
 from simcore.scenario.signals import SignalControllers
 from simcore.scenario.storyboard import Node, Registry, State, Transition
+from simcore.scenario.sumo_bridge import SumoBridge
 from simcore.scenario.triggers import Triggers
 from simcore.scenario.world import Pose
 from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
@@ -66,7 +67,7 @@ class ScenarioEngine:
         self.external = external  # moves the entities whose external controller is active
         self.source = str(scenario.path)
         self.road = road
-        self.sumo = sumo
+        self.sumo = SumoBridge(sumo, road) if sumo is not None else None
         self.dt = step_seconds
         self.time = 0.0
         self.step_index = 0
@@ -218,25 +219,7 @@ class ScenarioEngine:
             # scripted entity every step would cost two libsumo calls per entity for nothing)
             self.sumo = None
         if self.sumo is not None:
-            for body in self.bodies.values():
-                if body.gone:
-                    continue
-                e = body.entity
-                self.sumo.add_vehicle(
-                    body.name,
-                    length=e.box.length,
-                    width=e.box.width,
-                    height=e.box.height,
-                    front_offset=e.box.center_x + e.box.length / 2,
-                    max_speed=e.performance.max_speed,
-                    max_accel=e.performance.max_acceleration,
-                    max_decel=e.performance.max_deceleration,
-                    x=body.x,
-                    y=body.y,
-                    heading=body.heading,
-                    speed=body.speed,
-                    scripted=e.driver != "sumo",
-                )
+            self.sumo.add(self.bodies.values())
         self.root.transition(Transition.START, State.RUNNING, 0, self.log, 0.0)
         for story in self.root.children:
             story.transition(Transition.START, State.RUNNING, 0, self.log, 0.0)
@@ -280,8 +263,8 @@ class ScenarioEngine:
                 lane_heading = self.road.road_to_world(body.road_id, body.s, 0.0).heading
             travel = lane_heading if body.direction > 0 else lane_heading + math.pi
             body.heading_offset = wrap_angle(heading - travel)
-        if self.sumo is not None and self.step_index > 0 and self.sumo.has(body.name):
-            self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+        if self.sumo is not None and self.step_index > 0:
+            self.sumo.place(body)
 
     def align_trailers(self, tow: Body | None = None, *, pull: bool = False) -> None:
         """Place every trailer (of `tow`, else of every front tow vehicle) behind its tow vehicle, down the
@@ -390,18 +373,11 @@ class ScenarioEngine:
 
     def sumo_set_speed(self, body: Body, speed: float) -> None:
         if self.sumo is not None:
-            self.sumo.set_desired_speed(body.name, speed)
+            self.sumo.set_speed(body, speed)
 
     def sumo_change_lane(self, body: Body, lane_id: int, duration: float) -> None:
-        if self.sumo is None or self.road is None or body.road_id is None:
-            return
-        # SUMO lane index 0 is the rightmost driving lane in the travel direction
-        side = [
-            lane for lane in self.road.lane_ids(body.road_id, body.s, driving_only=True) if lane * lane_id > 0
-        ]
-        lanes = sorted(side, reverse=body.direction < 0)
-        if lane_id in lanes:
-            self.sumo.change_lane(body.name, lanes.index(lane_id), duration)
+        if self.sumo is not None:
+            self.sumo.change_lane(body, lane_id, duration)
 
     def trigger(self, trigger: m.Trigger | None, triggering: list[str] | None = None) -> bool:
         """Whether a trigger fires now (`simcore.scenario.triggers`)."""
@@ -636,8 +612,8 @@ class ScenarioEngine:
                 continue
             if body.external:
                 self._move_external(body, dt)
-                if sumo is not None and sumo.has(body.name):
-                    sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+                if sumo is not None:
+                    sumo.place(body)
                 continue
             if body.entity.driver == "sumo" or (tow_of and body.name in tow_of):
                 continue  # SUMO moves it, or its tow vehicle drags it (below)
@@ -666,25 +642,12 @@ class ScenarioEngine:
                     body.x += distance * math.cos(body.heading)
                     body.y += distance * math.sin(body.heading)
                 body.odometer += abs(distance)
-            if sumo is not None and sumo.has(body.name):
-                sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+            if sumo is not None:
+                sumo.place(body)
         if self.trailer_of:
             self.align_trailers(pull=True)
         if self.sumo is not None:
-            self.sumo.step()
-            for body in self.bodies.values():
-                if body.entity.driver != "sumo" or body.gone or body.external:
-                    continue
-                state = self.sumo.read(body.name)
-                if state is None:
-                    body.gone = True
-                    body.speed = 0.0
-                    if body.end_of_road_since is None:
-                        body.end_of_road_since = now
-                    continue
-                body.odometer += math.hypot(state.x - body.x, state.y - body.y)
-                body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
-                self.locate(body)
+            self.sumo.step(self.bodies.values(), now, self.locate)
         if self.acc_drivers:
             self._step_drivers(self.acc_drivers.values(), dt, now)
         if self.natural_drivers:
@@ -792,8 +755,8 @@ class ScenarioEngine:
                 body.x += distance * math.cos(body.heading)
                 body.y += distance * math.sin(body.heading)
             body.odometer += abs(distance)
-        if self.sumo is not None and self.sumo.has(body.name):
-            self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+        if self.sumo is not None:
+            self.sumo.place(body)
 
     def drive_externally(self, name: str) -> None:
         """Make `name` externally driven from now on (`spec.control.entities`), as if its external
