@@ -28,7 +28,8 @@ from simcore.scenario.motion import (
 )
 from simcore.scenario.runtime import Runtime
 from simcore.scenario.signals import SignalControllers
-from simcore.scenario.storyboard import Node, Registry, State, Transition
+from simcore.scenario.story import StoryRun
+from simcore.scenario.storyboard import State
 from simcore.scenario.sumo_bridge import SumoBridge
 from simcore.scenario.triggers import Triggers
 from simcore.scenario.world import Pose
@@ -103,7 +104,6 @@ class ScenarioEngine:
         self.signal_control = SignalControllers(scenario.signal_controllers)
         self.signals = self.signal_control.signals
         self.signal_phases = self.signal_control.phases
-        self.action_order: dict[int, int] = {}  # id of an action node → its place in the storyboard
         self.ended_in_move = False  # an action runtime finished while moving its entity this step
         # a FollowGhost controller (esmini) gives its ghost a head start: esmini reports every time shifted
         # back by it (the storyboard's time 0 is at -headstart on its time axis); `output_time_offset` is
@@ -123,8 +123,6 @@ class ScenarioEngine:
         self.vehicle_drivers: dict[str, drivers.OffroadFollower] = {}
         # esmini's NaturalDriver controllers active on the longitudinal domain now (they move their entity)
         self.natural_drivers: dict[str, drivers.NaturalDriver] = {}
-        self._transitions = 0  # state transitions so far, and how many there were at the last completion pass
-        self._completed_at = -1
         # trailers: tow vehicle → the entity it tows (Trailer/TrailerRef, ConnectTrailerAction), and back
         self.trailer_of: dict[str, str] = {}
         for entity in scenario.entities:
@@ -137,40 +135,17 @@ class ScenarioEngine:
                     )
                 self.trailer_of[entity.name] = entity.trailer
         self.tow_of: dict[str, str] = {t: tow for tow, t in self.trailer_of.items()}
-        self.root = self._build()
+        self.story = StoryRun(scenario, self, self.triggers)
+        self.root = self.story.root
         if road is not None:
             self._check_signal_names(road)
-        self.registry = Registry(self.root)
-        self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
+        self.registry = self.story.registry
         self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
         self._init()
         if self.ghosts is not None:
             self.ghosts.start()
 
     # --- set-up ---------------------------------------------------------------------------------------
-
-    def _build(self) -> Node:
-        root = Node("storyboard", "storyboard", None)
-        for story in self.scenario.stories:
-            s = Node("story", story.name, story, root)
-            root.children.append(s)
-            for act in story.acts:
-                a = Node("act", act.name, act, s)
-                s.children.append(a)
-                for group in act.groups:
-                    g = Node("maneuverGroup", group.name, group, a, actors=group.actors)
-                    a.children.append(g)
-                    for maneuver in group.maneuvers:
-                        mv = Node("maneuver", maneuver.name, maneuver, g)
-                        g.children.append(mv)
-                        for event in maneuver.events:
-                            e = Node("event", event.name, event, mv)
-                            mv.children.append(e)
-                            for action in event.actions:
-                                node = Node("action", action.name, action, e)
-                                e.children.append(node)
-                                self.action_order[id(node)] = len(self.action_order)
-        return root
 
     def _init(self) -> None:
         # teleports first (other init actions may refer to positions of entities placed here)
@@ -220,9 +195,7 @@ class ScenarioEngine:
             self.sumo = None
         if self.sumo is not None:
             self.sumo.add(self.bodies.values())
-        self.root.transition(Transition.START, State.RUNNING, 0, self.log, 0.0)
-        for story in self.root.children:
-            story.transition(Transition.START, State.RUNNING, 0, self.log, 0.0)
+        self.story.begin()
 
     # --- positions ------------------------------------------------------------------------------------
 
@@ -379,177 +352,6 @@ class ScenarioEngine:
         if self.sumo is not None:
             self.sumo.change_lane(body, lane_id, duration)
 
-    def trigger(self, trigger: m.Trigger | None, triggering: list[str] | None = None) -> bool:
-        """Whether a trigger fires now (`simcore.scenario.triggers`)."""
-        return self.triggers.fire(trigger, triggering)
-
-    # --- storyboard -----------------------------------------------------------------------------------
-
-    def _set(self, node: Node, transition: Transition, state: State) -> None:
-        node.transition(transition, state, self.step_index, self.log, self.time)
-        self._transitions += 1
-
-    def _stop(self, node: Node) -> None:
-        for child in node.children:
-            if child.state != State.COMPLETE:
-                self._stop(child)
-        if node.kind == "action":
-            self._release(node)
-        if node.state != State.COMPLETE:
-            self._set(node, Transition.STOP, State.COMPLETE)
-
-    def _release(self, node: Node) -> None:
-        for key, running in list(self.running.items()):
-            if running is node:
-                del self.running[key]
-        node.runtime = None
-
-    def _start_group(self, group: Node) -> None:
-        self._set(group, Transition.START, State.RUNNING)
-        for maneuver in group.children:
-            maneuver.state = State.STANDBY
-            maneuver.executions = 0
-            self._set(maneuver, Transition.START, State.RUNNING)
-            for event in maneuver.children:
-                event.state = State.STANDBY
-                event.executions = 0
-                for action in event.children:
-                    action.state = State.STANDBY
-
-    def _start_event(self, event: Node, actors: tuple[str, ...]) -> None:
-        definition: m.Event = event.definition
-        maneuver = event.parent
-        assert maneuver is not None
-        others = [e for e in maneuver.children if e is not event and e.state == State.RUNNING]
-        if definition.priority == "skip" and others:
-            self._set(event, Transition.SKIP, State.STANDBY)
-            return
-        if definition.priority in ("override", "overwrite"):
-            for other in others:
-                self._stop(other)
-                other.executions += 1
-        self._set(event, Transition.START, State.RUNNING)
-        for action in event.children:
-            self._set(action, Transition.START, State.RUNNING)
-            self._start_action(action, actors)
-
-    def _start_action(self, node: Node, actors: tuple[str, ...]) -> None:
-        action: m.Action = node.definition
-        if action.private is None:
-            if action.global_action is not None:
-                global_actions.run(self, action.global_action)
-            self._set(node, Transition.END, State.COMPLETE)
-            return
-        runtimes = []
-        for actor_name in actors:
-            body = self.body(actor_name)
-            runtime = make_runtime(self, body, action.private)
-            self.owner = body
-            key = (actor_name, runtime.domain)
-            previous = self.running.get(key)
-            if previous is not None and previous is not node:
-                # a new action of the same domain on the same actor overrides the running one
-                self._release(previous)
-                self._set(previous, Transition.STOP, State.COMPLETE)
-            self.running[key] = node
-            # an Init action still running in this domain (a distance kept from the start) is overridden too
-            self.init_runtimes = [
-                r for r in self.init_runtimes if not (r.actor is body and r.domain == runtime.domain)
-            ]
-            runtime.start()
-            runtimes.append(runtime)
-        node.runtime = runtimes
-        if all(r.done for r in runtimes):
-            self._release(node)
-            self._set(node, Transition.END, State.COMPLETE)
-
-    def _check_stop(self) -> bool:
-        if self.trigger(self.scenario.stop_trigger):
-            self._stop(self.root)
-            self.ended_by = "stopTrigger"
-            return True
-        return False
-
-    def _evaluate_storyboard(self) -> None:
-        # the StopTrigger is evaluated at the end of every step, on the state just reached (so a run ends at
-        # the first step where it holds, as esmini does); only the initial state is checked here
-        if self.step_index == 0 and self._check_stop():
-            return
-        for story in self.root.children:
-            for act in story.children:
-                definition: m.Act = act.definition
-                if act.state == State.STANDBY:
-                    if definition.start_trigger is None or self.trigger(definition.start_trigger):
-                        self._set(act, Transition.START, State.RUNNING)
-                        for group in act.children:
-                            self._start_group(group)
-                elif act.state == State.RUNNING and self.trigger(definition.stop_trigger):
-                    self._stop(act)
-                    continue
-                if act.state != State.RUNNING:
-                    continue
-                for group in act.children:
-                    if group.state != State.RUNNING:
-                        continue
-                    for maneuver in group.children:
-                        if maneuver.state != State.RUNNING:
-                            continue
-                        for event in maneuver.children:
-                            if event.state != State.STANDBY:
-                                continue
-                            ev: m.Event = event.definition
-                            triggering: list[str] = []
-                            if ev.start_trigger is None or self.trigger(ev.start_trigger, triggering):
-                                gdef: m.ManeuverGroup = group.definition
-                                actors = gdef.actors
-                                if gdef.select_triggering_entities and triggering:
-                                    actors = tuple(dict.fromkeys(triggering))
-                                self._start_event(event, actors)
-
-    def _complete_elements(self) -> None:
-        # completion follows from the states of the children: nothing to do while no element changed state
-        if self._transitions == self._completed_at:
-            return
-        self._completed_at = self._transitions
-        for story in self.root.children:
-            for act in story.children:
-                if act.state != State.RUNNING:
-                    continue
-                for group in act.children:
-                    if group.state != State.RUNNING:
-                        continue
-                    for maneuver in group.children:
-                        if maneuver.state != State.RUNNING:
-                            continue
-                        for event in maneuver.children:
-                            if event.state == State.RUNNING and all(
-                                a.state == State.COMPLETE for a in event.children
-                            ):
-                                event.executions += 1
-                                if event.executions < event.definition.maximum_execution_count:
-                                    self._set(event, Transition.END, State.STANDBY)
-                                    for action in event.children:
-                                        action.state = State.STANDBY
-                                else:
-                                    self._set(event, Transition.END, State.COMPLETE)
-                        if all(
-                            e.state == State.COMPLETE or e.executions >= e.definition.maximum_execution_count
-                            for e in maneuver.children
-                        ):
-                            self._set(maneuver, Transition.END, State.COMPLETE)
-                    if all(mv.state == State.COMPLETE for mv in group.children):
-                        group.executions += 1
-                        if group.executions < group.definition.maximum_execution_count:
-                            self._start_group(group)
-                        else:
-                            self._set(group, Transition.END, State.COMPLETE)
-                if all(g.state == State.COMPLETE for g in act.children):
-                    self._set(act, Transition.END, State.COMPLETE)
-            if story.state == State.RUNNING and all(a.state == State.COMPLETE for a in story.children):
-                self._set(story, Transition.END, State.COMPLETE)
-
-    # --- stepping -------------------------------------------------------------------------------------
-
     def step(self) -> WorldFrame:
         """Advance one step; returns the frame at the new time."""
         self.advance()
@@ -563,7 +365,10 @@ class ScenarioEngine:
             ghosts.begin_step()
         if self.signal_control.cycles:
             self.signal_control.update(self.time)
-        self._evaluate_storyboard()
+        # the StopTrigger is evaluated at the end of every step, on the state just reached (so a run ends at
+        # the first step where it holds, as esmini does); only the initial state is checked here
+        if not (self.step_index == 0 and self._check_stop()):
+            self.story.evaluate()
         previous = []
         for body in self.bodies.values():
             previous.append((body, body.speed, body.heading, body.x, body.y))
@@ -573,19 +378,7 @@ class ScenarioEngine:
                 if not runtime.done:
                     runtime.step(dt)
             self.init_runtimes = [r for r in self.init_runtimes if not r.done]
-        nodes: list[Node] = list({id(n): n for n in self.running.values()}.values())
-        if len(nodes) > 1:
-            # actions step in the storyboard's order (as esmini), not in the order they started
-            nodes = sorted(nodes, key=lambda n: self.action_order.get(id(n), 0))
-        for node in nodes:
-            runtimes: list[Runtime] = node.runtime or []
-            for runtime in runtimes:
-                self.owner = runtime.actor
-                runtime.step(dt)
-            if runtimes and all(r.done for r in runtimes):
-                self._release(node)
-                self._set(node, Transition.END, State.COMPLETE)
-        self._complete_elements()
+        self.story.step_actions(dt)
         for name in self._alks:
             if self.controllers[name][1]:  # active on the longitudinal domain: it sets the speed
                 driver = self.safety_drivers.get(name)
@@ -680,16 +473,17 @@ class ScenarioEngine:
             # an action that moves its entity itself (a trajectory) ended while moving it: it ends in this
             # step, so conditions on its end see it at the next (as esmini)
             self.ended_in_move = False
-            for node in list({id(n): n for n in self.running.values()}.values()):
-                runtimes = node.runtime or []
-                if runtimes and all(r.done for r in runtimes):
-                    self._release(node)
-                    self._set(node, Transition.END, State.COMPLETE)
-            self._complete_elements()
+            self.story.end_finished_actions()
         self.time = now
         self.step_index += 1
         self.moved()
         self._check_stop()
+
+    def _check_stop(self) -> bool:
+        if self.story.check_stop():
+            self.ended_by = "stopTrigger"
+            return True
+        return False
 
     def _step_drivers(
         self, stepped: Iterable[drivers.AccDriver | drivers.NaturalDriver], dt: float, now: float
@@ -723,10 +517,7 @@ class ScenarioEngine:
             target=m.AbsoluteTargetLane(lane),
         )
         runtime = LaneChangeRuntime(self, body, change)
-        running = self.running.get((body.name, "lateral"))
-        if running is not None:
-            self._release(running)
-            self._set(running, Transition.STOP, State.COMPLETE)
+        self.story.stop_action_of(body.name, "lateral")
         self.init_runtimes = [
             r for r in self.init_runtimes if not (r.actor is body and r.domain == "lateral")
         ]
