@@ -3,6 +3,9 @@
 Per step (time t → t + dt): (1) triggers are evaluated on the state at t and storyboard elements change
 state; (2) running actions set the motion of their actors; (3) scenario-driven entities move along their
 lanes and are placed into SUMO; SUMO steps, moving the entities it drives; (4) the new frame is published.
+
+The storyboard (`story`), triggers and conditions, the runtime of each action type (`action_registry`) and
+position resolution (`positions`) live in their own modules; the engine is the `ScenarioWorld` they use.
 """
 
 from __future__ import annotations
