@@ -4,6 +4,7 @@ runtimes from `simcore.scenario.action_registry`; the world only through `StoryW
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Protocol
 
 from simcore.scenario import global_actions
@@ -198,12 +199,8 @@ class StoryRun:
                     continue
                 if act.state != State.RUNNING:
                     continue
-                for group in act.children:
-                    if group.state != State.RUNNING:
-                        continue
-                    for maneuver in group.children:
-                        if maneuver.state != State.RUNNING:
-                            continue
+                for group in _running(act.children):
+                    for maneuver in _running(group.children):
                         for event in maneuver.children:
                             if event.state != State.STANDBY:
                                 continue
@@ -222,15 +219,9 @@ class StoryRun:
             return
         self._completed_at = self._transitions
         for story in self.root.children:
-            for act in story.children:
-                if act.state != State.RUNNING:
-                    continue
-                for group in act.children:
-                    if group.state != State.RUNNING:
-                        continue
-                    for maneuver in group.children:
-                        if maneuver.state != State.RUNNING:
-                            continue
+            for act in _running(story.children):
+                for group in _running(act.children):
+                    for maneuver in _running(group.children):
                         for event in maneuver.children:
                             if event.state == State.RUNNING and all(
                                 a.state == State.COMPLETE for a in event.children
@@ -257,3 +248,8 @@ class StoryRun:
                     self.set(act, Transition.END, State.COMPLETE)
             if story.state == State.RUNNING and all(a.state == State.COMPLETE for a in story.children):
                 self.set(story, Transition.END, State.COMPLETE)
+
+
+def _running(nodes: list[Node]) -> Iterator[Node]:
+    """The nodes that are running when reached (their states may change while the caller goes through them)."""
+    return (node for node in nodes if node.state == State.RUNNING)
