@@ -13,8 +13,8 @@ from simcore.scenario.controller_actions import ControllerRuntime
 from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
+    from simcore.scenario.action_world import ActionWorld
     from simcore.scenario.motion import Body
-    from simcore.scenario.view import ActionWorld
 
 #: private action type → its runtime (constructed with the world, the actor and the action)
 PRIVATE_ACTIONS: dict[type, Callable[[ActionWorld, Body, Any], Runtime]] = {

@@ -13,7 +13,7 @@ from simcore.scenario.motion import Body, shape_value, wrap_angle
 from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
-    from simcore.scenario.view import ActionWorld
+    from simcore.scenario.action_world import ActionWorld
     from simcore.world.opendrive import OpenDrive
 
 _BIG = 1e10  # no limit (esmini's LARGE_NUMBER)

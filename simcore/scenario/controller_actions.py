@@ -10,8 +10,8 @@ from simcore.scenario import model as m
 from simcore.scenario.runtime import Instant
 
 if TYPE_CHECKING:
+    from simcore.scenario.action_world import ActionWorld
     from simcore.scenario.motion import Body
-    from simcore.scenario.view import ActionWorld
 
 
 class ControllerRuntime(Instant):

@@ -10,7 +10,7 @@ from simcore.scenario.motion import Body, lane_shift, shape_peak_rate_factor, sh
 from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
-    from simcore.scenario.view import ActionWorld
+    from simcore.scenario.action_world import ActionWorld
 
 
 class SpeedRuntime(Runtime):

@@ -7,8 +7,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from simcore.scenario.action_world import ActionWorld
     from simcore.scenario.motion import Body
-    from simcore.scenario.view import ActionWorld
 
 
 class Runtime:

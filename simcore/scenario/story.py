@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING, Protocol
 from simcore.scenario import global_actions
 from simcore.scenario import model as m
 from simcore.scenario.action_registry import make_runtime
+from simcore.scenario.action_world import ActionWorld
 from simcore.scenario.storyboard import Node, Registry, State, Transition
-from simcore.scenario.view import ActionWorld
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
