@@ -30,7 +30,7 @@ from simcore.scenario.motion import (
     wrap_angle,
 )
 from simcore.scenario.runtime import Runtime
-from simcore.scenario.signals import SignalControllers
+from simcore.scenario.signals import SignalControllers, unknown_signals
 from simcore.scenario.story import StoryRun
 from simcore.scenario.storyboard import State
 from simcore.scenario.sumo_bridge import SumoBridge
@@ -141,7 +141,7 @@ class ScenarioEngine:
         self.story = StoryRun(scenario, self, self.triggers)
         self.root = self.story.root
         if road is not None:
-            self._check_signal_names(road)
+            self.warnings.extend(unknown_signals(self.scenario, self.root, road, self.source))
         self.registry = self.story.registry
         self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
         self._init()
@@ -309,41 +309,6 @@ class ScenarioEngine:
             if rc is not None and rc.road_id == body.road_id:
                 return max((rc.s - body.s) * body.direction, 0.0)
         return math.hypot(x - body.x, y - body.y)
-
-    def _check_signal_names(self, road: OpenDrive) -> None:
-        """Warn about traffic signals the scenario names (by id or name) that the road network lacks."""
-        known = set(road.signals) | {n for n in road.signals.values() if n}
-        named: dict[str, str] = {}
-        for item in self.scenario.init:
-            if isinstance(item.action, m.TrafficSignalStateAction):
-                named.setdefault(item.action.name, "TrafficSignalStateAction")
-        for ctrl in self.scenario.signal_controllers:
-            for phase in ctrl.phases:
-                for signal, _ in phase.states:
-                    named.setdefault(signal, f"TrafficSignalController[{ctrl.name}]")
-        for node in self.root.walk():
-            definition = node.definition
-            if isinstance(definition, m.Action) and isinstance(
-                definition.global_action, m.TrafficSignalStateAction
-            ):
-                named.setdefault(definition.global_action.name, "TrafficSignalStateAction")
-            triggers = (getattr(definition, "start_trigger", None), getattr(definition, "stop_trigger", None))
-            for trigger in triggers:
-                for group in trigger.groups if trigger is not None else ():
-                    for cond in group:
-                        if isinstance(cond.value_condition, m.TrafficSignalCondition):
-                            named.setdefault(cond.value_condition.name, "TrafficSignalCondition")
-        for trigger_ in (self.scenario.stop_trigger,):
-            for group in trigger_.groups if trigger_ is not None else ():
-                for cond in group:
-                    if isinstance(cond.value_condition, m.TrafficSignalCondition):
-                        named.setdefault(cond.value_condition.name, "TrafficSignalCondition")
-        for name, where in named.items():
-            if name not in known:
-                self.warnings.append(
-                    f"{self.source}: {where}: traffic signal {name!r} is not a <signal> of the road network "
-                    f"{road.name} (ids: {', '.join(sorted(road.signals)) or 'none'})"
-                )
 
     # --- SUMO hooks -----------------------------------------------------------------------------------
 

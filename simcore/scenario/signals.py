@@ -3,8 +3,14 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from simcore.errors import BadInput
 from simcore.scenario import model as m
+
+if TYPE_CHECKING:
+    from simcore.scenario.storyboard import Node
+    from simcore.world.opendrive import OpenDrive
 
 
 class SignalControllers:
@@ -57,6 +63,42 @@ class SignalControllers:
                 self.phases[name] = phase.name
                 for signal, state in phase.states:
                     self.signals[signal] = state
+
+
+def unknown_signals(scenario: m.Scenario, root: Node, road: OpenDrive, source: str) -> list[str]:
+    """Warnings about the traffic signals the scenario names (by id or name) that the road network lacks."""
+    known = set(road.signals) | {n for n in road.signals.values() if n}
+    named: dict[str, str] = {}
+    for item in scenario.init:
+        if isinstance(item.action, m.TrafficSignalStateAction):
+            named.setdefault(item.action.name, "TrafficSignalStateAction")
+    for ctrl in scenario.signal_controllers:
+        for phase in ctrl.phases:
+            for signal, _ in phase.states:
+                named.setdefault(signal, f"TrafficSignalController[{ctrl.name}]")
+    for node in root.walk():
+        definition = node.definition
+        if isinstance(definition, m.Action) and isinstance(
+            definition.global_action, m.TrafficSignalStateAction
+        ):
+            named.setdefault(definition.global_action.name, "TrafficSignalStateAction")
+        triggers = (getattr(definition, "start_trigger", None), getattr(definition, "stop_trigger", None))
+        for trigger in triggers:
+            for group in trigger.groups if trigger is not None else ():
+                for cond in group:
+                    if isinstance(cond.value_condition, m.TrafficSignalCondition):
+                        named.setdefault(cond.value_condition.name, "TrafficSignalCondition")
+    for trigger_ in (scenario.stop_trigger,):
+        for group in trigger_.groups if trigger_ is not None else ():
+            for cond in group:
+                if isinstance(cond.value_condition, m.TrafficSignalCondition):
+                    named.setdefault(cond.value_condition.name, "TrafficSignalCondition")
+    ids = ", ".join(sorted(road.signals)) or "none"
+    return [
+        f"{source}: {where}: traffic signal {name!r} is not a <signal> of the road network {road.name} (ids: {ids})"
+        for name, where in named.items()
+        if name not in known
+    ]
 
 
 def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tuple[float, int]]:
