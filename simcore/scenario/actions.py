@@ -9,32 +9,22 @@ from typing import TYPE_CHECKING
 from simcore.errors import BadInput
 from simcore.scenario import model as m
 from simcore.scenario import paths
-from simcore.scenario.conditions import _axis_gaps
-from simcore.scenario.motion import Body, lane_at_t, shape_value, wrap_angle
+from simcore.scenario.motion import Body, shape_value, wrap_angle
+from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
-    from simcore.scenario.engine import ScenarioEngine
+    from simcore.scenario.action_world import ActionWorld
     from simcore.world.opendrive import OpenDrive
 
 _BIG = 1e10  # no limit (esmini's LARGE_NUMBER)
 _EPS = 1e-10
 
 
-class Runtime:
-    domain = "other"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body) -> None:
-        self.engine = engine
-        self.actor = actor
-        self.done = False
-
-    def start(self) -> None: ...
-
-    def step(self, dt: float) -> None: ...
-
-
-class NoMotionRuntime(Runtime):
+class NoMotionRuntime(Instant):
     domain = "none"
+
+    def __init__(self, world: ActionWorld, actor: Body, action: m.NoMotionAction) -> None:
+        super().__init__(world, actor)
 
     def start(self) -> None:
         self.done = True
@@ -49,8 +39,8 @@ class FollowTrajectoryRuntime(Runtime):
 
     domain = "lateral"
 
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.FollowTrajectoryAction) -> None:
-        super().__init__(engine, actor)
+    def __init__(self, world: ActionWorld, actor: Body, action: m.FollowTrajectoryAction) -> None:
+        super().__init__(world, actor)
         self.action = action
         self.path: paths.SampledPath | None = None
         self.s = 0.0
@@ -60,23 +50,23 @@ class FollowTrajectoryRuntime(Runtime):
     def start(self) -> None:
         a = self.actor
         end = a.extra.get("trajectory_end_time")
-        if end is not None and self.engine.time - end <= 2 * self.engine.dt + 1e-9:
+        if end is not None and self.world.time - end <= 2 * self.world.dt + 1e-9:
             # chained trajectories: the next starts with the heading the previous one ended with (lane
             # following in between would have turned the entity back to the road's heading)
             a.heading = a.extra["trajectory_end_heading"]
         self.path = paths.sample(
-            self.action.trajectory, self.engine.resolve_position, (a.x, a.y, a.z, a.heading)
+            self.action.trajectory, self.world.resolve_position, (a.x, a.y, a.z, a.heading)
         )
         if self.action.following_mode == "position":
             # timed vertices in position mode: each segment at its own constant speed; in follow mode the
             # speed changes linearly from vertex to vertex (as esmini)
             self.path.v = None
-        self.t0 = self.engine.time
+        self.t0 = self.world.time
         self.s = min(max(self.action.initial_distance_offset, 0.0), self.path.length)
         timed = self.action.timing != "none" and self.path.t is not None
         self.timed = timed
         if timed:
-            self.s = self.path.s_at_time(self._trajectory_time(self.engine.time))
+            self.s = self.path.s_at_time(self._trajectory_time(self.world.time))
         a.mover = self
         a.placed = True
         self._pose(self.s)
@@ -96,9 +86,9 @@ class FollowTrajectoryRuntime(Runtime):
         x, y, z, h = self.path.at(s)
         a = self.actor
         a.x, a.y, a.heading = x, y, wrap_angle(h + (math.pi if a.speed < 0 and not self.timed else 0.0))
-        if self.engine.road is not None:
+        if self.world.road is not None:
             a.z = z if z != 0.0 else a.z
-        self.engine.track_road(a)
+        self.world.track_road(a)
 
     def move(self, dt: float, now: float) -> None:
         assert self.path is not None
@@ -127,42 +117,55 @@ class FollowTrajectoryRuntime(Runtime):
 
     def finish(self) -> None:
         a = self.actor
-        a.extra["trajectory_end_time"] = self.engine.time + self.engine.dt
+        a.extra["trajectory_end_time"] = self.world.time + self.world.dt
         a.extra["trajectory_end_heading"] = a.heading
         if a.mover is self:
             a.mover = None
-        self.engine.track_road(a, lock_lane=True)
-        if a.road_id is not None and self.engine.road is not None:
+        self.world.track_road(a, lock_lane=True)
+        if a.road_id is not None and self.world.road is not None:
             # it goes on along the lane keeping the heading it has relative to it (as esmini)
-            lane_heading = self.engine.road.road_to_world(a.road_id, a.s, 0.0).heading
+            lane_heading = self.world.road.road_to_world(a.road_id, a.s, 0.0).heading
             travel = lane_heading if a.direction > 0 else lane_heading + math.pi
             a.heading_offset = wrap_angle(a.heading - travel)
-        if a.road_id is None and self.engine.road is None:
+        if a.road_id is None and self.world.road is None:
             # with no road to go on with, the entity stops where the trajectory ends (as esmini does)
             a.speed = 0.0
         self.done = True
-        self.engine.ended_in_move = True
+        self.world.ended_in_move = True
 
 
 # --- routes ------------------------------------------------------------------------------------------------
 
 
-class AssignRouteRuntime(Runtime):
+class AssignRouteRuntime(Instant):
+    """The roads the actor takes through the waypoints of a route, planned at once."""
+
     domain = "route"
 
-    def __init__(
-        self, engine: ScenarioEngine, actor: Body, action: m.AssignRouteAction | m.AcquirePositionAction
-    ) -> None:
-        super().__init__(engine, actor)
+    def __init__(self, world: ActionWorld, actor: Body, action: m.AssignRouteAction) -> None:
+        super().__init__(world, actor)
         self.action = action
 
+    def targets(self) -> list[m.Position]:
+        return [w.position for w in self.action.route.waypoints]
+
     def start(self) -> None:
-        if isinstance(self.action, m.AssignRouteAction):
-            targets = [w.position for w in self.action.route.waypoints]
-        else:
-            targets = [self.action.position]
-        self.actor.route = self.engine.plan_route(self.actor, targets)
+        self.actor.route = self.world.plan_route(self.actor, self.targets())
         self.done = True
+
+
+class AcquirePositionRuntime(AssignRouteRuntime):
+    """A route to one position; in Init it is planned with the actions that run from the first step."""
+
+    def __init__(self, world: ActionWorld, actor: Body, action: m.AcquirePositionAction) -> None:
+        Runtime.__init__(self, world, actor)
+        self.position = action.position
+
+    def targets(self) -> list[m.Position]:
+        return [self.position]
+
+    def start_in_init(self) -> bool:
+        return False
 
 
 # --- lateral -----------------------------------------------------------------------------------------------
@@ -171,15 +174,15 @@ class AssignRouteRuntime(Runtime):
 class LaneOffsetRuntime(Runtime):
     domain = "lateral"
 
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.LaneOffsetAction) -> None:
-        super().__init__(engine, actor)
+    def __init__(self, world: ActionWorld, actor: Body, action: m.LaneOffsetAction) -> None:
+        super().__init__(world, actor)
         self.action = action
         self.elapsed = 0.0
 
     def _target(self) -> float:
         value = self.action.offset * self.actor.direction
         if self.action.entity is not None:
-            ref = self.engine.body(self.action.entity)
+            ref = self.world.body(self.action.entity)
             value += ref.offset
         return value
 
@@ -233,18 +236,18 @@ class LateralDistanceRuntime(Runtime):
     SPRING = 0.4
     THRESHOLD = 0.01  # m: this close ends a non-continuous action
 
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.LateralDistanceAction) -> None:
-        super().__init__(engine, actor)
+    def __init__(self, world: ActionWorld, actor: Body, action: m.LateralDistanceAction) -> None:
+        super().__init__(world, actor)
         self.action = action
         self.velocity = 0.0  # lateral, in t per second
         self.first_step = -1
 
     def start(self) -> None:
-        self.first_step = self.engine.step_index
+        self.first_step = self.world.step_index
 
     def step(self, dt: float) -> None:
-        road = self.engine.road
-        a, ref = self.actor, self.engine.body(self.action.entity)
+        road = self.world.road
+        a, ref = self.actor, self.world.body(self.action.entity)
         if road is None or a.road_id is None or ref.road_id != a.road_id:
             return
         t_ref = road.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
@@ -261,7 +264,7 @@ class LateralDistanceRuntime(Runtime):
         error = target - t_me
         if not self.action.continuous and abs(error) < self.THRESHOLD:
             self.done = True
-        if self.engine.step_index == self.first_step:
+        if self.world.step_index == self.first_step:
             return
         c = self.action.constraints or m.DynamicConstraints()
         max_speed = c.max_speed if c.max_speed is not None else _BIG
@@ -311,25 +314,25 @@ class LongitudinalDistanceRuntime(Runtime):
     SPRING = 0.4
     THRESHOLD = 0.1  # m: a distance this close ends a non-continuous action
 
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.LongitudinalDistanceAction) -> None:
-        super().__init__(engine, actor)
+    def __init__(self, world: ActionWorld, actor: Body, action: m.LongitudinalDistanceAction) -> None:
+        super().__init__(world, actor)
         self.action = action
         self.acceleration = 0.0
         self.trailing = action.displacement != "leadingReferencedEntity"
 
     def _gap(self, ref: Body) -> float:
         a = self.action
-        return self.engine.relative_distance(
+        return self.world.measure.relative_distance(
             self.actor, ref, "longitudinal", a.freespace, signed=True, system=a.coordinate_system
         )
 
     def start(self) -> None:
         if self.action.displacement == "any":
-            self.trailing = self._gap(self.engine.body(self.action.entity)) >= 0.0
+            self.trailing = self._gap(self.world.body(self.action.entity)) >= 0.0
 
     def step(self, dt: float) -> None:
         a = self.actor
-        ref = self.engine.body(self.action.entity)
+        ref = self.world.body(self.action.entity)
         gap = self._gap(ref)
         if self.action.distance is not None:
             wanted = abs(self.action.distance)
@@ -350,7 +353,7 @@ class LongitudinalDistanceRuntime(Runtime):
             max_dec = min(max_dec, perf.max_deceleration)
         if max_acc >= _BIG and max_dec >= _BIG:
             # no dynamics given: the distance is kept exactly
-            self.engine.shift_along(a, error)
+            self.world.shift_along(a, error)
             a.speed = ref.speed
             return
         stiffness = (max_acc if error < 0.0 else max_dec) * self.SPRING
@@ -379,8 +382,8 @@ class SpeedProfileRuntime(Runtime):
 
     domain = "longitudinal"
 
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.SpeedProfileAction) -> None:
-        super().__init__(engine, actor)
+    def __init__(self, world: ActionWorld, actor: Body, action: m.SpeedProfileAction) -> None:
+        super().__init__(world, actor)
         self.action = action
         self.elapsed = 0.0
         # (start time, speed, acceleration, jerk) of each phase, times from the action's start
@@ -409,7 +412,7 @@ class SpeedProfileRuntime(Runtime):
     def _vertices(self) -> list[list[float]]:
         """[time, speed, slope to the next vertex, intercept of that line] with redundant vertices merged."""
         entries = self.action.entries
-        offset = self.engine.body(self.action.entity).speed if self.action.entity else 0.0
+        offset = self.world.body(self.action.entity).speed if self.action.entity else 0.0
         v_now = self.actor.speed
         first = entries[0]
         start = 0
@@ -586,8 +589,8 @@ class SynchronizeRuntime(Runtime):
     domain = "longitudinal"
     MAX_DECELERATION = 8.0  # m/s², stopping at once when the target is far too close
 
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.SynchronizeAction) -> None:
-        super().__init__(engine, actor)
+    def __init__(self, world: ActionWorld, actor: Body, action: m.SynchronizeAction) -> None:
+        super().__init__(world, actor)
         self.action = action
         self.mode = "none"  # none | nonlinear | linear | stopped | stop | waiting | steady
         self.convex = False
@@ -595,7 +598,7 @@ class SynchronizeRuntime(Runtime):
         self.last_master_dist = math.inf
 
     def start(self) -> None:
-        e = self.engine
+        e = self.world
         self.target = e.resolve_position(self.action.position)
         self.master_target = e.resolve_position(self.action.master_position)
         self.master = e.body(self.action.master)
@@ -613,7 +616,7 @@ class SynchronizeRuntime(Runtime):
         return None
 
     def step(self, dt: float) -> None:
-        e, a, action = self.engine, self.actor, self.action
+        e, a, action = self.world, self.actor, self.action
         master_dist = e.distance_to(self.master, self.master_target)
         dist = e.distance_to(a, self.target)
         done = (
@@ -729,12 +732,12 @@ class TrailerRuntime(Runtime):
 
     domain = "trailer"
 
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.TrailerAction) -> None:
-        super().__init__(engine, actor)
+    def __init__(self, world: ActionWorld, actor: Body, action: m.TrailerAction) -> None:
+        super().__init__(world, actor)
         self.action = action
 
     def start(self) -> None:
-        e, name = self.engine, self.actor.name
+        e, name = self.world, self.actor.name
         old = e.trailer_of.pop(name, None)
         if old is not None:
             e.tow_of.pop(old, None)
@@ -751,191 +754,3 @@ class TrailerRuntime(Runtime):
             e.tow_of[trailer] = name
             body.mover = None
         self.done = True
-
-
-def make(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> Runtime | None:
-    if isinstance(action, m.FollowTrajectoryAction):
-        return FollowTrajectoryRuntime(engine, actor, action)
-    if isinstance(action, m.AssignRouteAction | m.AcquirePositionAction):
-        return AssignRouteRuntime(engine, actor, action)
-    if isinstance(action, m.LaneOffsetAction):
-        return LaneOffsetRuntime(engine, actor, action)
-    if isinstance(action, m.LateralDistanceAction):
-        return LateralDistanceRuntime(engine, actor, action)
-    if isinstance(action, m.LongitudinalDistanceAction):
-        return LongitudinalDistanceRuntime(engine, actor, action)
-    if isinstance(action, m.SpeedProfileAction):
-        return SpeedProfileRuntime(engine, actor, action)
-    if isinstance(action, m.SynchronizeAction):
-        return SynchronizeRuntime(engine, actor, action)
-    if isinstance(action, m.TrailerAction):
-        return TrailerRuntime(engine, actor, action)
-    if isinstance(action, m.NoMotionAction):
-        return NoMotionRuntime(engine, actor)
-    return None
-
-
-__all__ = ["BadInput", "Runtime", "make"]
-
-
-class SafetyDriver:
-    """A longitudinal driver model for an entity under an ALKS controller (esmini's ALKS_R157SM_Controller,
-    UN R157): it holds the speed it had when the controller was activated and brakes, within the
-    regulation's 0.774 g, for a vehicle ahead whose path overlaps its own (a cut-in, a slower or a braking
-    vehicle), hard enough to end up 2 m behind it; with room ahead (1.5 s), it gets back to its set speed at
-    2 m/s². An
-    approximation of the regulation's driver models, not esmini's implementation."""
-
-    MAX_DECELERATION = 0.774 * 9.81
-    RESUME_ACCELERATION = 2.0
-    STANDSTILL_GAP = 2.0  # m kept to the vehicle ahead when stopped behind it
-    MIN_DECELERATION = 0.5  # m/s²: gentler needs are ignored (no braking for a far, slowly closing vehicle)
-    TIME_GAP = 1.5  # s: closer than this behind a vehicle that is not pulling away, it does not speed up
-
-    def __init__(self, engine: ScenarioEngine, actor: Body) -> None:
-        self.engine = engine
-        self.actor = actor
-        self.set_speed = actor.speed
-
-    def step(self, dt: float) -> None:
-        a = self.actor
-        need = 0.0
-        blocked = False  # something close ahead in its path, not pulling away: no speeding up
-        for other in self.engine.bodies.values():
-            if other is a or other.gone or not other.placed:
-                continue
-            gap = self.engine.relative_distance(a, other, "longitudinal", True, signed=True)
-            if gap <= 0.0:
-                continue
-            lateral = self.engine.relative_distance(a, other, "lateral", True)
-            if lateral > 0.0:  # beside its path: not in the way
-                continue
-            ahead_speed = other.speed * math.cos(other.heading - a.heading)
-            room = gap - self.STANDSTILL_GAP
-            if room < self.TIME_GAP * a.speed + 1.0 and ahead_speed <= a.speed + 0.1:
-                blocked = True
-            if room <= 0.1 and a.speed > ahead_speed:
-                need = math.inf  # at the standstill gap: stop
-                continue
-            if other.acceleration < -0.1 and ahead_speed > 0.0:
-                # it is braking: stop behind the point where it will stand
-                room += ahead_speed * ahead_speed / (2.0 * -other.acceleration)
-                need = max(need, a.speed * a.speed / (2.0 * max(room, 0.1)))
-            elif a.speed > ahead_speed:
-                need = max(need, (a.speed - ahead_speed) ** 2 / (2.0 * max(room, 0.1)))
-        if need >= self.MIN_DECELERATION:
-            a.speed = max(a.speed - min(need, self.MAX_DECELERATION) * dt, 0.0)
-        elif a.speed < self.set_speed and not blocked:
-            a.speed = min(a.speed + self.RESUME_ACCELERATION * dt, self.set_speed)
-
-
-class AccDriver:
-    """esmini's ACCController (and ALKSController, which is the same controller): a longitudinal driver
-    that holds a set speed and keeps a time gap to the vehicle ahead in its lane. Its semantics as esmini
-    implements them:
-
-    - properties `timeGap` (s, default 1.5), `setSpeed` (m/s; default: the speed at activation), `lateralDist`
-      (m, default 5: vehicles farther across are not followed), `mode` (`override`, `additive`; without the
-      property, additive), `virtual` (true: it only computes, the entity is not moved by it);
-    - activation takes the entity's speed as its current speed, and as set speed in additive mode or when no
-      `setSpeed` is given; while it runs, a speed other than the one it set last (a speed action in additive
-      mode) becomes the new set speed;
-    - the vehicle to follow: the nearest entity ahead along the road in the same lane, within `lateralDist`,
-      bumper to bumper, looked for up to max(50 m, 6 m + v²/max deceleration); also a very close entity just
-      in front (bounding boxes less than its length + 1 m apart, lateral gap within -0.5…0.2 m);
-    - following: closer than 1 m it stops at once; else it accelerates by
-      2.5·f − f·(v − v_set) − (1 − f)·(v − min(v_set, v_lead)), f = min(1, (gap − d)/d), d = 3 m + timeGap·
-      max(v, v_lead), within the entity's acceleration/deceleration limits, and never above its set speed;
-    - free road: toward the set speed at 0.7·max acceleration per m/s of difference, at most 0.7·max
-      acceleration, without overshooting;
-    - it steps after every entity has moved (as esmini steps controllers after the default motion): in
-      override mode it then moves its entity with the new speed (speed actions on it end without effect);
-      in additive mode the entity moves on with its speed and the new speed applies from the next step."""
-
-    MIN_DISTANCE = 3.0  # m kept at standstill
-    ACCELERATION_FACTOR = 0.7
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, properties: dict[str, str]) -> None:
-        self.engine = engine
-        self.actor = actor
-        self.time_gap = m.property_number(properties.get("timeGap"), 1.5)
-        self.lateral_dist = m.property_number(properties.get("lateralDist"), 5.0)
-        mode = properties.get("mode")
-        self.override = mode is not None and mode != "additive"
-        self.virtual = properties.get("virtual", "").strip().lower() == "true"
-        self.current_speed = actor.speed
-        given = properties.get("setSpeed")
-        self.set_speed = (
-            actor.speed if (not self.override or given is None) else m.property_number(given, actor.speed)
-        )
-        self.lead: str | None = None  # the entity it follows (None: free road)
-
-    def step(self, dt: float) -> None:
-        a, engine = self.actor, self.engine
-        if self.virtual:
-            self.current_speed = a.speed
-        elif abs(a.speed - self.current_speed) > 1e-3:
-            self.set_speed = a.speed  # set by someone else (a speed action): respected as the new set speed
-        perf = a.entity.performance
-        v = self.current_speed
-        lookahead = max(50.0, 2 * self.MIN_DISTANCE + v * v / max(perf.max_deceleration, 1e-9))
-        box_a = a.entity.box
-        front_a = box_a.length / 2 + box_a.center_x
-        best_gap, lead = _BIG, None
-        measure = engine.measure
-        for other in engine.bodies.values():
-            if other is a or other.gone or not other.placed:
-                continue
-            box_b = other.entity.box
-            delta = measure._road_delta_entity(a, other) if a.road_id is not None else None
-            if delta is not None and abs(delta[0]) <= lookahead:
-                ds, dt_lat = delta
-                turn = abs(wrap_angle(other.heading - a.heading))
-                rear_b = (
-                    box_b.length / 2 - box_b.center_x
-                    if turn < math.pi / 2
-                    else box_b.length / 2 + box_b.center_x
-                )
-                gap = ds - front_a - rear_b
-                if 0.0 < gap < best_gap and abs(dt_lat) < self.lateral_dist and _same_lane(engine, a, other):
-                    best_gap, lead = gap, other
-            if lead is not other:
-                # a very close entity just in front (whatever the lanes say)
-                reach = box_a.length + box_b.length + 1.0 + 0.5 * max(0.0, v - other.speed)
-                if abs(other.x - a.x) < reach and abs(other.y - a.y) < reach:
-                    lon, lat = _axis_gaps(measure.box(a), measure.box(other))
-                    if 0.0 < lon < 1.0 + box_b.length + 0.5 * max(0.0, v - other.speed) and -0.5 < lat < 0.2:
-                        best_gap, lead = lon, other
-        if lead is not None:
-            if best_gap < 1.0:
-                v = 0.0
-            else:
-                follow = self.MIN_DISTANCE + self.time_gap * abs(max(v, lead.speed))
-                factor = min(1.0, (best_gap - follow) / follow)
-                dv_min = v - min(self.set_speed, lead.speed)
-                dv_set = v - self.set_speed
-                acc = 2.5 * factor - factor * dv_set - (1.0 - factor) * dv_min
-                acc = min(max(acc, -perf.max_deceleration), perf.max_acceleration)
-                v = min(max(0.0, v + acc * dt), self.set_speed)
-        else:
-            gain = self.ACCELERATION_FACTOR * perf.max_acceleration
-            acc = min(max((self.set_speed - v) * gain, -perf.max_deceleration), gain)
-            ahead = v + acc * dt
-            v = self.set_speed if abs(ahead - self.set_speed) > abs(v - self.set_speed) else ahead
-        self.lead = lead.name if lead is not None else None
-        self.current_speed = v
-        if not self.virtual:
-            a.speed = v
-
-
-def _same_lane(engine: ScenarioEngine, a: Body, b: Body) -> bool:
-    """b is in a's lane (esmini: no lane change between them along the road): the lanes their reference
-    points are in now (during a lane change, the one it has reached), by id (across a road link too: the
-    corpus's roads keep lane ids across links)."""
-    road = engine.road
-    if road is None or a.road_id is None or b.road_id is None:
-        return a.lane_id == b.lane_id
-    measure = engine.measure
-    lane_a = lane_at_t(road, a.road_id, a.s, measure._t_of(a))[0] if a.offset else a.lane_id
-    lane_b = lane_at_t(road, b.road_id, b.s, measure._t_of(b))[0] if b.offset else b.lane_id
-    return lane_a == lane_b

@@ -1,331 +1,338 @@
-"""What entity conditions measure: distances between entities (or to a position) in the coordinate systems
-and distance types of OpenSCENARIO 1.1+, time headway and time to collision.
+"""OpenSCENARIO conditions: one evaluate function per condition type, and the registry that maps each type
+of `simcore.scenario.model` to it (esmini's OSCCondition: each condition type owns its evaluation).
 
-Where the standard leaves a choice open, this follows esmini (the reference player of the conformance
-corpus; its roadmanager `Position::Distance` and `Object::Distance`):
-
-- distances are signed: positive when the target is ahead of the measuring entity;
-- in the entity coordinate system, without freespace, the measuring frame is the road's heading at the
-  entity, turned to the entity's driving direction (not the entity's own heading); with freespace, the
-  longitudinal and lateral distances are the gaps between the bounding boxes along the entity's own axes
-  (0 where the projections overlap), and the Euclidean one the shortest distance between the boxes;
-- in the road and lane coordinate systems, the difference of s (longitudinal) or t (lateral) along the
-  road network, in the entity's driving direction;
-- the defaults of TimeHeadwayCondition, TimeToCollisionCondition and DistanceCondition (coordinate system
-  `entity`, distance type `euclidianDistance`; `alongRoute="true"` of 1.0 selects `road`);
-- headway and time to collision are not defined (the condition does not hold) when the target is behind,
-  when the measuring entity stands still, or (time to collision) when the entities do not close in.
+Value conditions read the clock, the stores and the storyboard; entity conditions are evaluated for one
+triggering entity. Both read the run only through `ScenarioWorld`.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
-from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
-from simcore.scenario import paths
+from simcore.errors import BadInput
+from simcore.evaluation.metrics import Box, boxes_overlap
+from simcore.scenario import model as m
+from simcore.scenario.measure import LARGE, directional
+from simcore.scenario.motion import lane_shift, wrap_angle
+from simcore.scenario.positions import fixed_point
+from simcore.scenario.storyboard import Node, transition_of
 
 if TYPE_CHECKING:
-    from simcore.scenario.engine import ScenarioEngine
     from simcore.scenario.motion import Body
+    from simcore.scenario.world import ScenarioWorld
 
-#: a distance that could not be measured (no road connection): compared as a very large value (as esmini)
-LARGE = 1e10
-SMALL = 1e-10
+_COMPARE = {
+    "greaterThan": lambda a, b: a > b,
+    "lessThan": lambda a, b: a < b,
+    "equalTo": lambda a, b: abs(a - b) < 1e-9 if isinstance(a, float) else a == b,
+    "greaterOrEqual": lambda a, b: a >= b,
+    "lessOrEqual": lambda a, b: a <= b,
+    "notEqualTo": lambda a, b: a != b,
+}
 
-Point = tuple[float, float]
+
+def compare(rule: str, a: Any, b: Any) -> bool:
+    return bool(_COMPARE[rule](a, b))
 
 
-class Measure:
-    """Distance measurements for one engine, with per-step caches of what every condition asks again."""
+def holds(cond: m.Condition, world: ScenarioWorld, triggering: list[str]) -> bool:
+    """Whether a condition's value holds now (before its edge and delay); the entities that fulfil an
+    entity condition are added to `triggering`."""
+    if cond.value_condition is not None:
+        c = cond.value_condition
+        return VALUE_CONDITIONS[type(c)](c, world)
+    condition = cond.entity_condition
+    assert condition is not None
+    evaluate = ENTITY_CONDITIONS.get(type(condition))
+    if evaluate is None:
+        raise BadInput(f"condition {type(condition).__name__} is not supported", file=world.source)
+    # entities not in the world are skipped; "any" stops at the first entity that fulfils it (the one
+    # that triggers), "all" at the first that does not (as esmini)
+    every = cond.triggering_rule == "all"
+    result = False
+    hits: list[str] = []
+    for name in cond.triggering_entities:
+        body = world.body(name)
+        if body.gone:
+            continue
+        result = evaluate(condition, world, body)
+        if result:
+            hits.append(name)
+            if not every:
+                break
+        elif every:
+            return False
+    if result:
+        triggering.extend(hits)
+    return result
 
-    def __init__(self, engine: ScenarioEngine) -> None:
-        self.engine = engine
-        self._step = -1
-        self._stale = False
-        self._frame: dict[str, float] = {}  # body name → heading of its measuring frame (this step)
-        self._road_t: dict[str, float] = {}  # body name → t of its reference point (this step)
-        self._boxes: dict[str, Box] = {}  # body name → bounding box footprint (this step)
-        self._plans: dict[tuple[str, int, str], list[tuple[str, int]] | None] = {}
-        self._points: dict[tuple[float, float, str | None], tuple[str, float, float] | None] = {}
 
-    def _fresh(self) -> None:
-        if self._stale or self._step != self.engine.step_index:
-            self._step = self.engine.step_index
-            self._stale = False
-            self._frame.clear()
-            self._road_t.clear()
-            self._boxes.clear()
+# --- value conditions -------------------------------------------------------------------------------------
 
-    def clear(self) -> None:
-        """Forget what was measured on the bodies (they moved); done when next asked."""
-        self._stale = True
 
-    # --- frames ---------------------------------------------------------------------------------------
+def simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> bool:
+    return compare(c.rule, world.time, c.value)
 
-    def frame_heading(self, body: Body) -> float:
-        """The road's heading at the entity, in its driving direction (its own heading when off road)."""
-        self._fresh()
-        cached = self._frame.get(body.name)
-        if cached is not None:
-            return cached
-        heading = body.heading
-        road = self.engine.road
-        if road is not None and body.road_id is not None and body.road_id in road.roads:
-            r = road.road(body.road_id)
-            _, _, h_road = r.reference_xyh(min(max(body.s, 0.0), r.length))
-            heading = h_road if math.cos(body.heading - h_road) >= 0 else h_road + math.pi
-        self._frame[body.name] = heading
-        return heading
 
-    def local(self, body: Body, x: float, y: float) -> Point:
-        """(x, y) in the entity's measuring frame, from its reference point."""
-        h = self.frame_heading(body)
-        c, s = math.cos(h), math.sin(h)
-        dx, dy = x - body.x, y - body.y
-        return c * dx + s * dy, -s * dx + c * dy
+def storyboard_element_state(c: m.StoryboardElementStateCondition, world: ScenarioWorld) -> bool:
+    nodes: list[Node] | None = world.memo.get(("element_nodes", id(c)))
+    if nodes is None:
+        nodes = world.memo[("element_nodes", id(c))] = world.registry.find(c.element_type, c.element_ref)
+    if not nodes:
+        raise BadInput(
+            f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
+            file=world.source,
+        )
+    transition = transition_of(c.state)
+    if transition is None:
+        return any(node.is_(c.state, world.step_index) for node in nodes)
+    # a transition holds when the element went through it since this condition was last evaluated
+    # (every transition counts once for each condition, however late it looks; as esmini)
+    seen: dict[int, int] | None = world.memo.get(("seen_transitions", id(c)))
+    if seen is None:
+        seen = world.memo[("seen_transitions", id(c))] = {}
+    happened = False
+    for node in nodes:
+        count = node.counts.get(transition, 0)
+        if count > seen.get(id(node), 0):
+            happened = True
+            seen[id(node)] = count
+    return happened
 
-    def signed_euclid(self, body: Body, x: float, y: float) -> float:
-        dx, dy = self.local(body, x, y)
-        return math.copysign(math.hypot(dx, dy), 1.0 if dx > 0 else -1.0)
 
-    # --- road coordinates -----------------------------------------------------------------------------
+def traffic_signal(c: m.TrafficSignalCondition, world: ScenarioWorld) -> bool:
+    return world.signals.get(c.name) == c.state
 
-    def _t_of(self, body: Body) -> float:
-        self._fresh()
-        cached = self._road_t.get(body.name)
-        if cached is None:
-            road = self.engine.road
-            assert road is not None and body.road_id is not None
-            cached = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
-            self._road_t[body.name] = cached
-        return cached
 
-    def _point_on_road(self, x: float, y: float, hint: str | None) -> tuple[str, float, float] | None:
-        key = (x, y, hint)
-        if key not in self._points:
-            road = self.engine.road
-            rc = road.world_to_road(x, y, None, road_hint=hint) if road is not None else None
-            self._points[key] = None if rc is None else (rc.road_id, rc.s, rc.t)
-        return self._points[key]
+def traffic_signal_controller(c: m.TrafficSignalControllerCondition, world: ScenarioWorld) -> bool:
+    return world.signal_phases.get(c.controller) == c.phase
 
-    def _plan(self, start: str, direction: int, goal: str) -> list[tuple[str, int]] | None:
-        key = (start, direction, goal)
-        if key not in self._plans:
-            road = self.engine.road
-            assert road is not None
-            self._plans[key] = paths.plan(road, (start, direction), goal, max_roads=200)
-        return self._plans[key]
 
-    def road_delta(self, a: Body, road_id: str, s: float, t: float) -> Point | None:
-        """(ds, dt) from the entity to a road position along the road network, in the entity's driving
-        direction (dt + to the left of it); None when the roads do not connect."""
-        road = self.engine.road
-        if road is None or a.road_id is None:
-            return None
-        d = 1 if a.direction >= 0 else -1
-        t_a = self._t_of(a)
-        if road_id == a.road_id:
-            return (s - a.s) * d, (t - t_a) * d
-        best: Point | None = None
-        for sign in (1, -1):
-            legs = self._plan(a.road_id, d * sign, road_id)
-            if legs is None:
+def stored_value(c: m.ParameterCondition | m.VariableCondition, world: ScenarioWorld) -> bool:
+    """ParameterCondition and VariableCondition: the value in its store, compared as the type it has."""
+    store = world.variables if isinstance(c, m.VariableCondition) else world.parameter_values
+    value = store.get(c.name)
+    if value is None:
+        kind = "VariableCondition" if isinstance(c, m.VariableCondition) else "ParameterCondition"
+        raise BadInput(f"{kind} on undeclared name {c.name!r}", file=world.source)
+    if isinstance(value, bool):
+        return compare(c.rule, value, c.value.lower() == "true")
+    if isinstance(value, int | float):
+        return compare(c.rule, float(value), float(c.value))
+    return compare(c.rule, value, c.value)
+
+
+def unsupported(c: m.UnsupportedCondition, world: ScenarioWorld, body: Body | None = None) -> bool:
+    """A condition CARLOS does not model (warned about at load): never holds."""
+    return False
+
+
+# --- entity conditions ------------------------------------------------------------------------------------
+
+
+def speed(c: m.SpeedCondition, world: ScenarioWorld, body: Body) -> bool:
+    if c.direction is None:
+        return compare(c.rule, body.speed, c.value)
+    return compare(c.rule, directional(body, body.heading, c.direction), c.value)
+
+
+def acceleration(c: m.AccelerationCondition, world: ScenarioWorld, body: Body) -> bool:
+    return compare(c.rule, body.acceleration, c.value)
+
+
+def traveled_distance(c: m.TraveledDistanceCondition, world: ScenarioWorld, body: Body) -> bool:
+    return body.odometer >= c.value
+
+
+def stand_still(c: m.StandStillCondition, world: ScenarioWorld, body: Body) -> bool:
+    since = body.standstill_since
+    return since is not None and world.time - since >= c.duration - 1e-9
+
+
+def end_of_road(c: m.EndOfRoadCondition, world: ScenarioWorld, body: Body) -> bool:
+    since = body.end_of_road_since
+    return since is not None and world.time - since >= c.duration - 1e-9
+
+
+def relative_speed(c: m.RelativeSpeedCondition, world: ScenarioWorld, body: Body) -> bool:
+    other = world.body(c.entity)
+    if c.direction is None:
+        return compare(c.rule, body.speed - other.speed, c.value)
+    # both velocities in the reference entity's frame (as esmini)
+    relative = directional(body, other.heading, c.direction) - directional(other, other.heading, c.direction)
+    return compare(c.rule, relative, c.value)
+
+
+def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool:
+    others = [world.body(c.entity)] if c.entity else [b for b in world.bodies.values() if b is not body]
+    mine = Box.of(world.state_of(body))
+    return any(boxes_overlap(mine, Box.of(world.state_of(o))) for o in others)
+
+
+def reach_position(c: m.ReachPositionCondition, world: ScenarioWorld, body: Body) -> bool:
+    x, y, _, _ = fixed_point(world, c.position)
+    return math.hypot(body.x - x, body.y - y) < c.tolerance
+
+
+def distance(c: m.DistanceCondition, world: ScenarioWorld, body: Body) -> bool:
+    x, y, _, _ = fixed_point(world, c.position)
+    measured = world.measure.to_point(body, x, y, c.coordinate_system, c.distance_type, c.freespace)
+    return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
+
+
+def relative_distance(c: m.RelativeDistanceCondition, world: ScenarioWorld, body: Body) -> bool:
+    other = world.body(c.entity)
+    if other.gone:
+        return False
+    measure = world.measure
+    if c.freespace and c.distance_type in ("euclidianDistance", "cartesianDistance"):
+        # far apart, a lower bound of the distance between the boxes decides the comparison
+        lower = measure.box_distance_lower_bound(body, other)
+        if lower > c.value + 1e-6:
+            return compare(c.rule, lower, c.value)
+    measured = measure.to_entity(body, other, c.coordinate_system, c.distance_type, c.freespace)
+    return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
+
+
+def time_headway(c: m.TimeHeadwayCondition, world: ScenarioWorld, body: Body) -> bool:
+    other = world.body(c.entity)
+    if other.gone:
+        return False
+    headway = world.measure.headway(body, other, c.coordinate_system, c.distance_type, c.freespace)
+    return headway is not None and compare(c.rule, headway, c.value)
+
+
+def time_to_collision(c: m.TimeToCollisionCondition, world: ScenarioWorld, body: Body) -> bool:
+    point: tuple[float, float] | None = None
+    target: Body | None = None
+    if c.position is not None:
+        x, y, _, _ = fixed_point(world, c.position)
+        point = (x, y)
+    else:
+        target = world.body(c.entity)
+        if target.gone:
+            return False
+    ttc = world.measure.time_to_collision(
+        body, target, point, c.coordinate_system, c.distance_type, c.freespace
+    )
+    return ttc is not None and compare(c.rule, ttc, c.value)
+
+
+def offroad(c: m.OffroadCondition, world: ScenarioWorld, body: Body) -> bool:
+    if body.road_id is None or _outside_driving_lanes(world, body):
+        since = body.extra.setdefault("offroad_since", world.time)
+        return world.time - since >= c.duration - 1e-9
+    body.extra.pop("offroad_since", None)
+    return False
+
+
+def angle(c: m.AngleCondition | m.RelativeAngleCondition, world: ScenarioWorld, body: Body) -> bool:
+    def angle_of(b: Body, kind: str) -> float:
+        return b.heading if kind == "heading" else b.pitch if kind == "pitch" else b.roll
+
+    value = angle_of(body, c.angle_type)
+    if isinstance(c, m.RelativeAngleCondition):
+        other = world.body(c.entity)
+        if other.gone:
+            return False
+        value -= angle_of(other, c.angle_type)
+    elif c.coordinate_system in ("road", "lane", "trajectory") and c.angle_type == "heading":
+        # relative to the road's reference line (the lane's direction in the lane system)
+        if world.road is None or body.road_id is None:
+            return False
+        reference = world.road.road_to_world(body.road_id, body.s, 0.0).heading
+        if c.coordinate_system != "road" and world.road.drives_backward(body.road_id, body.lane_id):
+            reference += math.pi
+        value -= reference
+    return abs(wrap_angle(value - c.angle)) <= c.tolerance + 1e-9
+
+
+def _outside_driving_lanes(world: ScenarioWorld, body: Body) -> bool:
+    """The reference point is beyond every driving lane of its road (off the road)."""
+    road = world.road
+    if road is None or body.road_id is None:
+        return True
+    r = road.road(body.road_id)
+    s = min(max(body.s, 0.0), r.length)
+    t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
+    for lane, inner, outer in r.all_borders(s):
+        if lane.id != 0 and lane.type != "none" and min(inner, outer) <= t <= max(inner, outer):
+            return False
+    return True
+
+
+def relative_clearance(c: m.RelativeClearanceCondition, world: ScenarioWorld, body: Body) -> bool:
+    """True when the lanes and distances given are clear of the listed (else of all) entities; freeSpace
+    chooses bounding-box distances over reference points."""
+    others = [world.body(n) for n in c.entities] if c.entities else list(world.bodies.values())
+    if c.lanes is not None and world.road is not None and body.road_id is not None:
+        # the lanes checked must exist (in the travel direction unless oppositeLanes): no lane, no clearance
+        for d_lane in range(max(c.lanes[0], -20), min(c.lanes[1], 20) + 1):
+            if d_lane == 0:
                 continue
-            first_len = road.road_length(a.road_id)
-            along = (first_len - a.s) if d * sign > 0 else a.s
-            for leg_road, _ in legs[1:-1]:
-                along += road.road_length(leg_road)
-            last_dir = legs[-1][1]
-            along += s if last_dir > 0 else road.road_length(road_id) - s
-            candidate = (along * sign, t * last_dir * sign - t_a * d)
-            if best is None or abs(candidate[0]) < abs(best[0]):
-                best = candidate
-        return best
-
-    # --- distances ------------------------------------------------------------------------------------
-
-    def to_entity(self, a: Body, b: Body, system: str, kind: str, freespace: bool) -> float | None:
-        """Signed distance from entity a to entity b (None: not measurable)."""
-        euclid = kind in ("euclidianDistance", "cartesianDistance")
-        if freespace:
-            if system == "entity" or euclid:
-                box_a, box_b = self.box(a), self.box(b)
-                lon, lat = _axis_gaps(box_a, box_b)
-                if system == "entity" and kind == "longitudinal":
-                    return lon
-                if system == "entity" and kind == "lateral":
-                    return lat
-                return box_distance(box_a, box_b) * (1.0 if lon >= 0 else -1.0)
-            delta = self._road_delta_entity(a, b)
-            if delta is None:
-                return None
-            ds, dt = delta
-            if kind == "longitudinal":
-                return _shrink(ds, _extent_along(a, ds >= 0) + _extent_along(b, ds < 0))
-            return _shrink(dt, (a.entity.box.width + b.entity.box.width) / 2)
-        if euclid:
-            return self.signed_euclid(a, b.x, b.y)
-        if system in ("road", "lane", "trajectory"):
-            delta = self._road_delta_entity(a, b)
-            if delta is None:
-                return None
-            return delta[0] if kind == "longitudinal" else delta[1]
-        dx, dy = self.local(a, b.x, b.y)
-        return dx if kind == "longitudinal" else dy
-
-    def _road_delta_entity(self, a: Body, b: Body) -> Point | None:
-        if b.road_id is None or self.engine.road is None:
-            return None
-        return self.road_delta(a, b.road_id, b.s, self._t_of(b))
-
-    def to_point(self, a: Body, x: float, y: float, system: str, kind: str, freespace: bool) -> float | None:
-        """Signed distance from entity a to the point (x, y) (None: not measurable)."""
-        euclid = kind in ("euclidianDistance", "cartesianDistance")
-        if freespace and (system == "entity" or euclid):
-            dist, lon, lat = _point_gaps(self.box(a), a.heading, x, y)
-            if system == "entity" and kind == "longitudinal":
-                return lon
-            if system == "entity" and kind == "lateral":
-                return lat
-            return dist * (1.0 if lon >= 0 else -1.0)
-        if euclid:
-            return self.signed_euclid(a, x, y)
-        if system in ("road", "lane", "trajectory"):
-            on_road = self._point_on_road(x, y, a.road_id)
-            if on_road is None:
-                return None
-            delta = self.road_delta(a, *on_road)
-            if delta is None:
-                return None
-            ds, dt = delta
-            if freespace:
-                if kind == "longitudinal":
-                    return _shrink(ds, _extent_along(a, ds >= 0))
-                return _shrink(dt, a.entity.box.width / 2)
-            return ds if kind == "longitudinal" else dt
-        dx, dy = self.local(a, x, y)
-        return dx if kind == "longitudinal" else dy
-
-    def box_distance_lower_bound(self, a: Body, b: Body) -> float:
-        """A cheap lower bound of the distance between two bounding boxes: their centres' distance less
-        both half diagonals."""
-        ba, bb = a.entity.box, b.entity.box
-        ca, sa = math.cos(a.heading), math.sin(a.heading)
-        cb, sb = math.cos(b.heading), math.sin(b.heading)
-        dx = (b.x + cb * bb.center_x - sb * bb.center_y) - (a.x + ca * ba.center_x - sa * ba.center_y)
-        dy = (b.y + sb * bb.center_x + cb * bb.center_y) - (a.y + sa * ba.center_x + ca * ba.center_y)
-        return math.hypot(dx, dy) - 0.5 * (math.hypot(ba.length, ba.width) + math.hypot(bb.length, bb.width))
-
-    def box(self, body: Body) -> Box:
-        """The entity's bounding box footprint (this step)."""
-        self._fresh()
-        cached = self._boxes.get(body.name)
-        if cached is None:
-            box = body.entity.box
-            c, s = math.cos(body.heading), math.sin(body.heading)
-            cx = body.x + c * box.center_x - s * box.center_y
-            cy = body.y + s * box.center_x + c * box.center_y
-            hl, hw = box.length / 2, box.width / 2
-            lc, ls, wc, ws = hl * c, hl * s, hw * c, hw * s
-            cached = self._boxes[body.name] = Box(
-                (
-                    (cx + lc - ws, cy + ls + wc),
-                    (cx - lc - ws, cy - ls + wc),
-                    (cx - lc + ws, cy - ls - wc),
-                    (cx + lc + ws, cy + ls - wc),
-                ),
-                ((c, s), (-s, c)),
-            )
-        return cached
-
-    # --- headway and time to collision ------------------------------------------------------------------
-
-    def headway(self, a: Body, b: Body, system: str, kind: str, freespace: bool) -> float | None:
-        """Time headway from a to b; None where it is not defined (b behind, a standing still)."""
-        if a.speed < SMALL:
-            return None
-        dist = self.to_entity(a, b, system, kind, freespace)
-        if dist is None:
-            dist = LARGE
-        if dist < 0 or a.speed < SMALL:
-            return None
-        return abs(dist / a.speed)
-
-    def time_to_collision(
-        self, a: Body, b: Body | None, point: Point | None, system: str, kind: str, freespace: bool
-    ) -> float | None:
-        """Time until a reaches b (or the point) at the current speeds; None where not defined."""
-        if b is not None:
-            dist = self.to_entity(a, b, system, kind, freespace)
-            # velocities as moved over the last step (a trajectory's heading may differ from its motion)
-            bvx, bvy = b.vx, b.vy
-            if abs(bvx) < SMALL and abs(bvy) < SMALL:
-                rel_speed = a.speed
-            else:
-                avx, avy = a.vx, a.vy
-                projected = (avx * bvx + avy * bvy) / math.hypot(bvx, bvy)
-                rel_speed = _sign(a.speed) * _sign(projected) * (projected - abs(b.speed))
-        else:
-            assert point is not None
-            dist = self.to_point(a, point[0], point[1], system, kind, freespace)
-            rel_speed = a.speed
-        if dist is None:
-            dist = LARGE
-        if abs(dist) < SMALL or abs(rel_speed) < SMALL:
-            return None
-        ttc = dist / rel_speed
-        return ttc if ttc >= 0 else None
+            try:
+                lane = lane_shift(world.road, body.road_id, body.s, body.lane_id, d_lane, body.direction)
+            except ValueError:
+                return False
+            same_way = world.road.drives_backward(body.road_id, lane) == (body.direction < 0)
+            if not c.opposite_lanes and not same_way:
+                return False
+    occupied = False
+    for other in others:
+        if other is body or other.gone:
+            continue
+        lon = world.measure.relative_distance(body, other, "longitudinal", c.free_space, signed=True)
+        if not (-c.distance_backward <= lon <= c.distance_forward):
+            continue
+        if c.lanes is not None and world.road is not None and body.road_id is not None:
+            if other.road_id != body.road_id:
+                continue
+            lanes = sorted(world.road.lane_ids(body.road_id, body.s))
+            if other.lane_id not in lanes or body.lane_id not in lanes:
+                continue
+            d_lane = (lanes.index(other.lane_id) - lanes.index(body.lane_id)) * body.direction
+            if not c.opposite_lanes and other.direction != body.direction:
+                continue
+            if not (c.lanes[0] <= d_lane <= c.lanes[1]):
+                continue
+        occupied = True
+        break
+    return not occupied
 
 
-def _sign(value: float) -> float:
-    return -1.0 if value < 0 else 1.0
+ValueEvaluator = Callable[[Any, "ScenarioWorld"], bool]
+EntityEvaluator = Callable[[Any, "ScenarioWorld", "Body"], bool]
 
+#: value condition type → its evaluation
+VALUE_CONDITIONS: dict[type, ValueEvaluator] = {
+    m.SimulationTimeCondition: simulation_time,
+    m.StoryboardElementStateCondition: storyboard_element_state,
+    m.ParameterCondition: stored_value,
+    m.VariableCondition: stored_value,
+    m.TrafficSignalCondition: traffic_signal,
+    m.TrafficSignalControllerCondition: traffic_signal_controller,
+    m.UnsupportedCondition: unsupported,
+}
 
-def _shrink(value: float, extent: float) -> float:
-    """A reference-point distance reduced by the extents of the boxes (0 when they overlap)."""
-    return math.copysign(max(abs(value) - extent, 0.0), value)
-
-
-def _extent_along(body: Body, front: bool) -> float:
-    box = body.entity.box
-    return box.center_x + box.length / 2 if front else box.length / 2 - box.center_x
-
-
-def _axis_gaps(a: Box, b: Box) -> Point:
-    """Gaps between the boxes' projections on a's forward and left axes: positive when b is ahead (left),
-    negative behind (right), 0 where the projections overlap."""
-    out = []
-    for ax, ay in a.axes:
-        pa = [x * ax + y * ay for x, y in a.corners]
-        pb = [x * ax + y * ay for x, y in b.corners]
-        if max(pa) < min(pb) - SMALL:
-            out.append(min(pb) - max(pa))
-        elif min(pa) > max(pb) + SMALL:
-            out.append(max(pb) - min(pa))
-        else:
-            out.append(0.0)
-    return out[0], out[1]
-
-
-def _point_gaps(box: Box, heading: float, x: float, y: float) -> tuple[float, float, float]:
-    """(distance, longitudinal, lateral) from a box to a point: the vector from the nearest point of the
-    box to the point, in the box's frame; zeros when the point is inside."""
-    point_box = Box(((x, y),) * 4, ((1.0, 0.0), (0.0, 1.0)))
-    if boxes_overlap(box, point_box):
-        return 0.0, 0.0, 0.0
-    best = (math.inf, 0.0, 0.0)
-    corners = box.corners
-    for i in range(4):
-        x0, y0 = corners[i - 1]
-        x1, y1 = corners[i]
-        dx, dy = x1 - x0, y1 - y0
-        length2 = dx * dx + dy * dy
-        u = 0.0 if length2 <= 0 else min(max(((x - x0) * dx + (y - y0) * dy) / length2, 0.0), 1.0)
-        vx, vy = x - (x0 + u * dx), y - (y0 + u * dy)
-        d = math.hypot(vx, vy)
-        if d < best[0]:
-            best = (d, vx, vy)
-    d, vx, vy = best
-    c, s = math.cos(heading), math.sin(heading)
-    return d, c * vx + s * vy, -s * vx + c * vy
+#: entity condition type → its evaluation for one triggering entity
+ENTITY_CONDITIONS: dict[type, EntityEvaluator] = {
+    m.SpeedCondition: speed,
+    m.AccelerationCondition: acceleration,
+    m.TraveledDistanceCondition: traveled_distance,
+    m.StandStillCondition: stand_still,
+    m.EndOfRoadCondition: end_of_road,
+    m.RelativeSpeedCondition: relative_speed,
+    m.CollisionCondition: collision,
+    m.ReachPositionCondition: reach_position,
+    m.DistanceCondition: distance,
+    m.RelativeDistanceCondition: relative_distance,
+    m.TimeHeadwayCondition: time_headway,
+    m.TimeToCollisionCondition: time_to_collision,
+    m.OffroadCondition: offroad,
+    m.AngleCondition: angle,
+    m.RelativeAngleCondition: angle,
+    m.RelativeClearanceCondition: relative_clearance,
+    m.UnsupportedCondition: unsupported,
+}

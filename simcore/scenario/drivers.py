@@ -21,11 +21,12 @@ import math
 from typing import TYPE_CHECKING
 
 from simcore.scenario import model as m
+from simcore.scenario.measure import axis_gaps
 from simcore.scenario.motion import lane_at_t, wrap_angle
 
 if TYPE_CHECKING:
-    from simcore.scenario.engine import ScenarioEngine
     from simcore.scenario.motion import Body
+    from simcore.scenario.world import ScenarioWorld
 
 MAX_WHEEL_ANGLE = math.radians(60.0)
 SMALL = 1e-10  # esmini's SMALL_NUMBER
@@ -90,18 +91,18 @@ class Vehicle:
         self.y += dt * v * math.sin(direction)
 
 
-def put(engine: ScenarioEngine, body: Body, vehicle: Vehicle) -> None:
+def put(world: ScenarioWorld, body: Body, vehicle: Vehicle) -> None:
     """The entity where its vehicle model is (its road position found from there)."""
     body.odometer += math.hypot(vehicle.x - body.x, vehicle.y - body.y)
     body.x, body.y, body.heading, body.speed = vehicle.x, vehicle.y, vehicle.heading, vehicle.speed
     body.mover = None
-    engine._locate(body)
+    world.locate(body)
 
 
-def speed_limit(engine: ScenarioEngine, body: Body) -> float:
+def speed_limit(world: ScenarioWorld, body: Body) -> float:
     """esmini's Position::GetSpeedLimit without the road's speed records (CARLOS does not read them): off
     every road 70 km/h; on a road 120 km/h with more than one driving lane on the entity's side, else 60."""
-    road = engine.road
+    road = world.road
     if road is None or body.road_id is None:
         return NO_ROAD_SPEED_LIMIT
     side = 1 if body.lane_id > 0 else -1
@@ -118,11 +119,11 @@ class OffroadFollower:
     speed of min(1.2 × the speed limit where it is, the entity's maximum speed). Without `followEntity` (or
     with one that does not exist) it does nothing."""
 
-    def __init__(self, engine: ScenarioEngine, actor: Body, properties: dict[str, str]) -> None:
-        self.engine = engine
+    def __init__(self, world: ScenarioWorld, actor: Body, properties: dict[str, str]) -> None:
+        self.world = world
         self.actor = actor
         lead = properties.get("followEntity")
-        self.lead = engine.bodies.get(lead) if lead else None
+        self.lead = world.bodies.get(lead) if lead else None
         self.target_distance = m.property_number(properties.get("targetDistance"), 20.0)
         self.vehicle = Vehicle(actor)
         perf = actor.entity.performance
@@ -134,7 +135,7 @@ class OffroadFollower:
         lead, a, vehicle = self.lead, self.actor, self.vehicle
         if lead is None or lead.gone:
             return
-        vehicle.max_speed = min(1.2 * speed_limit(self.engine, a), a.entity.performance.max_speed)
+        vehicle.max_speed = min(1.2 * speed_limit(self.world, a), a.entity.performance.max_speed)
         dx, dy = lead.x - a.x, lead.y - a.y
         bearing = math.atan2(dy, dx) - a.heading
         bearing = math.atan2(math.sin(bearing), math.cos(bearing))
@@ -142,7 +143,7 @@ class OffroadFollower:
         steering = min(max(bearing, -1.0), 1.0)
         throttle = min(max(0.5 * (distance - self.target_distance) - 0.5 * (a.speed - lead.speed), -1.0), 1.0)
         vehicle.control_analog(dt, throttle, steering)
-        put(self.engine, a, vehicle)
+        put(self.world, a, vehicle)
 
 
 # --- esmini's NaturalDriver ----------------------------------------------------------------------------------
@@ -177,9 +178,18 @@ class NaturalDriver:
 
     The `mode` property is ignored (esmini moves the entity from the controller in either mode)."""
 
-    def __init__(self, engine: ScenarioEngine, actor: Body, properties: dict[str, str]) -> None:
-        self.engine = engine
+    def __init__(
+        self,
+        world: ScenarioWorld,
+        actor: Body,
+        properties: dict[str, str],
+        peers: dict[str, NaturalDriver] | None = None,
+    ) -> None:
+        self.world = world
         self.actor = actor
+        # the NaturalDrivers active in the run (this one among them once active): a lane change is given up
+        # for another one changing into the same lane close ahead
+        self.peers: dict[str, NaturalDriver] = peers if peers is not None else {}
         p = properties.get
         self.desired_distance = m.property_number(p("desiredDistance"), 20.0)
         self.desired_speed = m.property_number(p("desiredSpeed"), 15.0)
@@ -226,9 +236,7 @@ class NaturalDriver:
         v = follow.speed
         acc = self.max_acceleration * (1 - (v / self.desired_speed) ** 4)
         if lead is not None:
-            delta = (
-                self.engine.measure._road_delta_entity(follow, lead) if follow.road_id is not None else None
-            )
+            delta = self.world.measure.road_delta_entity(follow, lead) if follow.road_id is not None else None
             ds = delta[0] if delta is not None else _BIG
             gap = self._gap(follow, lead, ds)
             if gap == 0:
@@ -238,13 +246,13 @@ class NaturalDriver:
 
     # the surroundings
     def _lane(self, body: Body) -> int:
-        road = self.engine.road
+        road = self.world.road
         if road is None or body.road_id is None or not body.offset:
             return body.lane_id
-        return lane_at_t(road, body.road_id, body.s, self.engine.measure._t_of(body))[0]
+        return lane_at_t(road, body.road_id, body.s, self.world.measure.t_of(body))[0]
 
     def _update_surroundings(self) -> list[Body]:
-        a, engine = self.actor, self.engine
+        a, world = self.actor, self.world
         around: list[tuple[Body, float] | None] = [None] * 6
         seen: list[Body] = []
         if a.road_id is None:
@@ -252,13 +260,13 @@ class NaturalDriver:
             return seen
         my_lane = self._lane(a)
         side = -1 if my_lane < 0 else 1
-        for other in engine.bodies.values():
+        for other in world.bodies.values():
             if other is a or other.gone or not other.placed:
                 continue
             if math.hypot(other.x - a.x, other.y - a.y) > self.lookahead:
                 continue
             seen.append(other)
-            delta = engine.measure._road_delta_entity(a, other)
+            delta = world.measure.road_delta_entity(a, other)
             if delta is None:
                 continue
             ds = delta[0]
@@ -288,7 +296,7 @@ class NaturalDriver:
 
     def _adjacent_lanes(self) -> tuple[int, int]:
         """(left, right) driving lanes beside it on its side of the road (0: none)."""
-        a, road = self.actor, self.engine.road
+        a, road = self.actor, self.world.road
         if road is None or a.road_id is None:
             return 0, 0
         lane = self._lane(a)
@@ -320,14 +328,14 @@ class NaturalDriver:
 
     def _abort(self, seen: list[Body]) -> bool:
         """Another NaturalDriver close ahead (within its desired gap) is changing into the same lane."""
-        drivers = self.engine.natural_drivers
+        drivers = self.peers
         for other in seen:
             driver = drivers.get(other.name)
             if driver is None or not driver.injected or driver.target_lane != self.target_lane:
                 continue
             if self._lane(other) == self._lane(self.actor):
                 continue
-            delta = self.engine.measure._road_delta_entity(self.actor, other)
+            delta = self.world.measure.road_delta_entity(self.actor, other)
             if delta is None:
                 continue
             gap = self._gap(self.actor, other, delta[0])
@@ -377,3 +385,166 @@ class NaturalDriver:
             v = 0.0
         self.current_speed = v
         a.speed = v
+
+
+class SafetyDriver:
+    """A longitudinal driver model for an entity under an ALKS controller (esmini's ALKS_R157SM_Controller,
+    UN R157): it holds the speed it had when the controller was activated and brakes, within the
+    regulation's 0.774 g, for a vehicle ahead whose path overlaps its own (a cut-in, a slower or a braking
+    vehicle), hard enough to end up 2 m behind it; with room ahead (1.5 s), it gets back to its set speed at
+    2 m/s². An
+    approximation of the regulation's driver models, not esmini's implementation."""
+
+    MAX_DECELERATION = 0.774 * 9.81
+    RESUME_ACCELERATION = 2.0
+    STANDSTILL_GAP = 2.0  # m kept to the vehicle ahead when stopped behind it
+    MIN_DECELERATION = 0.5  # m/s²: gentler needs are ignored (no braking for a far, slowly closing vehicle)
+    TIME_GAP = 1.5  # s: closer than this behind a vehicle that is not pulling away, it does not speed up
+
+    def __init__(self, world: ScenarioWorld, actor: Body) -> None:
+        self.world = world
+        self.actor = actor
+        self.set_speed = actor.speed
+
+    def step(self, dt: float) -> None:
+        a = self.actor
+        need = 0.0
+        blocked = False  # something close ahead in its path, not pulling away: no speeding up
+        for other in self.world.bodies.values():
+            if other is a or other.gone or not other.placed:
+                continue
+            gap = self.world.measure.relative_distance(a, other, "longitudinal", True, signed=True)
+            if gap <= 0.0:
+                continue
+            lateral = self.world.measure.relative_distance(a, other, "lateral", True)
+            if lateral > 0.0:  # beside its path: not in the way
+                continue
+            ahead_speed = other.speed * math.cos(other.heading - a.heading)
+            room = gap - self.STANDSTILL_GAP
+            if room < self.TIME_GAP * a.speed + 1.0 and ahead_speed <= a.speed + 0.1:
+                blocked = True
+            if room <= 0.1 and a.speed > ahead_speed:
+                need = math.inf  # at the standstill gap: stop
+                continue
+            if other.acceleration < -0.1 and ahead_speed > 0.0:
+                # it is braking: stop behind the point where it will stand
+                room += ahead_speed * ahead_speed / (2.0 * -other.acceleration)
+                need = max(need, a.speed * a.speed / (2.0 * max(room, 0.1)))
+            elif a.speed > ahead_speed:
+                need = max(need, (a.speed - ahead_speed) ** 2 / (2.0 * max(room, 0.1)))
+        if need >= self.MIN_DECELERATION:
+            a.speed = max(a.speed - min(need, self.MAX_DECELERATION) * dt, 0.0)
+        elif a.speed < self.set_speed and not blocked:
+            a.speed = min(a.speed + self.RESUME_ACCELERATION * dt, self.set_speed)
+
+
+class AccDriver:
+    """esmini's ACCController (and ALKSController, which is the same controller): a longitudinal driver
+    that holds a set speed and keeps a time gap to the vehicle ahead in its lane. Its semantics as esmini
+    implements them:
+
+    - properties `timeGap` (s, default 1.5), `setSpeed` (m/s; default: the speed at activation), `lateralDist`
+      (m, default 5: vehicles farther across are not followed), `mode` (`override`, `additive`; without the
+      property, additive), `virtual` (true: it only computes, the entity is not moved by it);
+    - activation takes the entity's speed as its current speed, and as set speed in additive mode or when no
+      `setSpeed` is given; while it runs, a speed other than the one it set last (a speed action in additive
+      mode) becomes the new set speed;
+    - the vehicle to follow: the nearest entity ahead along the road in the same lane, within `lateralDist`,
+      bumper to bumper, looked for up to max(50 m, 6 m + v²/max deceleration); also a very close entity just
+      in front (bounding boxes less than its length + 1 m apart, lateral gap within -0.5…0.2 m);
+    - following: closer than 1 m it stops at once; else it accelerates by
+      2.5·f − f·(v − v_set) − (1 − f)·(v − min(v_set, v_lead)), f = min(1, (gap − d)/d), d = 3 m + timeGap·
+      max(v, v_lead), within the entity's acceleration/deceleration limits, and never above its set speed;
+    - free road: toward the set speed at 0.7·max acceleration per m/s of difference, at most 0.7·max
+      acceleration, without overshooting;
+    - it steps after every entity has moved (as esmini steps controllers after the default motion): in
+      override mode it then moves its entity with the new speed (speed actions on it end without effect);
+      in additive mode the entity moves on with its speed and the new speed applies from the next step."""
+
+    MIN_DISTANCE = 3.0  # m kept at standstill
+    ACCELERATION_FACTOR = 0.7
+
+    def __init__(self, world: ScenarioWorld, actor: Body, properties: dict[str, str]) -> None:
+        self.world = world
+        self.actor = actor
+        self.time_gap = m.property_number(properties.get("timeGap"), 1.5)
+        self.lateral_dist = m.property_number(properties.get("lateralDist"), 5.0)
+        mode = properties.get("mode")
+        self.override = mode is not None and mode != "additive"
+        self.virtual = properties.get("virtual", "").strip().lower() == "true"
+        self.current_speed = actor.speed
+        given = properties.get("setSpeed")
+        self.set_speed = (
+            actor.speed if (not self.override or given is None) else m.property_number(given, actor.speed)
+        )
+        self.lead: str | None = None  # the entity it follows (None: free road)
+
+    def step(self, dt: float) -> None:
+        a, world = self.actor, self.world
+        if self.virtual:
+            self.current_speed = a.speed
+        elif abs(a.speed - self.current_speed) > 1e-3:
+            self.set_speed = a.speed  # set by someone else (a speed action): respected as the new set speed
+        perf = a.entity.performance
+        v = self.current_speed
+        lookahead = max(50.0, 2 * self.MIN_DISTANCE + v * v / max(perf.max_deceleration, 1e-9))
+        box_a = a.entity.box
+        front_a = box_a.length / 2 + box_a.center_x
+        best_gap, lead = _BIG, None
+        measure = world.measure
+        for other in world.bodies.values():
+            if other is a or other.gone or not other.placed:
+                continue
+            box_b = other.entity.box
+            delta = measure.road_delta_entity(a, other) if a.road_id is not None else None
+            if delta is not None and abs(delta[0]) <= lookahead:
+                ds, dt_lat = delta
+                turn = abs(wrap_angle(other.heading - a.heading))
+                rear_b = (
+                    box_b.length / 2 - box_b.center_x
+                    if turn < math.pi / 2
+                    else box_b.length / 2 + box_b.center_x
+                )
+                gap = ds - front_a - rear_b
+                if 0.0 < gap < best_gap and abs(dt_lat) < self.lateral_dist and _same_lane(world, a, other):
+                    best_gap, lead = gap, other
+            if lead is not other:
+                # a very close entity just in front (whatever the lanes say)
+                reach = box_a.length + box_b.length + 1.0 + 0.5 * max(0.0, v - other.speed)
+                if abs(other.x - a.x) < reach and abs(other.y - a.y) < reach:
+                    lon, lat = axis_gaps(measure.box(a), measure.box(other))
+                    if 0.0 < lon < 1.0 + box_b.length + 0.5 * max(0.0, v - other.speed) and -0.5 < lat < 0.2:
+                        best_gap, lead = lon, other
+        if lead is not None:
+            if best_gap < 1.0:
+                v = 0.0
+            else:
+                follow = self.MIN_DISTANCE + self.time_gap * abs(max(v, lead.speed))
+                factor = min(1.0, (best_gap - follow) / follow)
+                dv_min = v - min(self.set_speed, lead.speed)
+                dv_set = v - self.set_speed
+                acc = 2.5 * factor - factor * dv_set - (1.0 - factor) * dv_min
+                acc = min(max(acc, -perf.max_deceleration), perf.max_acceleration)
+                v = min(max(0.0, v + acc * dt), self.set_speed)
+        else:
+            gain = self.ACCELERATION_FACTOR * perf.max_acceleration
+            acc = min(max((self.set_speed - v) * gain, -perf.max_deceleration), gain)
+            ahead = v + acc * dt
+            v = self.set_speed if abs(ahead - self.set_speed) > abs(v - self.set_speed) else ahead
+        self.lead = lead.name if lead is not None else None
+        self.current_speed = v
+        if not self.virtual:
+            a.speed = v
+
+
+def _same_lane(world: ScenarioWorld, a: Body, b: Body) -> bool:
+    """b is in a's lane (esmini: no lane change between them along the road): the lanes their reference
+    points are in now (during a lane change, the one it has reached), by id (across a road link too: the
+    corpus's roads keep lane ids across links)."""
+    road = world.road
+    if road is None or a.road_id is None or b.road_id is None:
+        return a.lane_id == b.lane_id
+    measure = world.measure
+    lane_a = lane_at_t(road, a.road_id, a.s, measure.t_of(a))[0] if a.offset else a.lane_id
+    lane_b = lane_at_t(road, b.road_id, b.s, measure.t_of(b))[0] if b.offset else b.lane_id
+    return lane_a == lane_b

@@ -3,334 +3,44 @@
 Per step (time t → t + dt): (1) triggers are evaluated on the state at t and storyboard elements change
 state; (2) running actions set the motion of their actors; (3) scenario-driven entities move along their
 lanes and are placed into SUMO; SUMO steps, moving the entities it drives; (4) the new frame is published.
+
+The storyboard (`story`), triggers and conditions, the runtime of each action type (`action_registry`) and
+position resolution (`positions`) live in their own modules; the engine is the `ScenarioWorld` they use.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Iterable
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
 from simcore.errors import BadInput, SimulationError
-from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
-from simcore.scenario import actions as extra_actions
-from simcore.scenario import drivers, ghost, paths
+from simcore.scenario import drivers, ghost, global_actions, positions
 from simcore.scenario import model as m
-from simcore.scenario.actions import Runtime
-from simcore.scenario.conditions import LARGE, Measure
+from simcore.scenario.action_registry import make_runtime
+from simcore.scenario.core_actions import LaneChangeRuntime
+from simcore.scenario.measure import Measure
 from simcore.scenario.motion import (
     Body,
     advance_on_road,
     align_trailer,
     lane_at_t,
-    lane_shift,
     pull_trailer,
-    shape_peak_rate_factor,
-    shape_value,
     update_pose_from_road,
     wrap_angle,
 )
-from simcore.scenario.storyboard import Node, Registry, State, Transition, transition_of
+from simcore.scenario.runtime import Runtime
+from simcore.scenario.signals import SignalControllers, unknown_signals
+from simcore.scenario.story import StoryRun
+from simcore.scenario.storyboard import State
+from simcore.scenario.sumo_bridge import SumoBridge
+from simcore.scenario.triggers import Triggers
+from simcore.scenario.world import Pose
 from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
     from simcore.world.sumo import SumoWorld
-
-_COMPARE = {
-    "greaterThan": lambda a, b: a > b,
-    "lessThan": lambda a, b: a < b,
-    "equalTo": lambda a, b: abs(a - b) < 1e-9 if isinstance(a, float) else a == b,
-    "greaterOrEqual": lambda a, b: a >= b,
-    "lessOrEqual": lambda a, b: a <= b,
-    "notEqualTo": lambda a, b: a != b,
-}
-
-
-def compare(rule: str, a: Any, b: Any) -> bool:
-    return bool(_COMPARE[rule](a, b))
-
-
-# --- action runtimes --------------------------------------------------------------------------------------
-
-
-class ActionRuntime(Runtime):
-    domain = "other"
-
-
-class SpeedRuntime(ActionRuntime):
-    domain = "longitudinal"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.SpeedAction) -> None:
-        super().__init__(engine, actor)
-        self.action = action
-        self.v0 = 0.0
-        self.elapsed = 0.0
-        self.duration = 0.0
-
-    def target(self) -> float:
-        target = self.action.target
-        if isinstance(target, m.AbsoluteTargetSpeed):
-            return target.value
-        reference = self.engine.body(target.entity).speed
-        return reference + target.value if target.value_type == "delta" else reference * target.value
-
-    def start(self) -> None:
-        self.v0 = self.actor.speed
-        dyn = self.action.dynamics
-        target = self.target()
-        dv = abs(target - self.v0)
-        if dyn.dimension == "rate":
-            # the rate is bounded by the vehicle's performance (as esmini does)
-            perf = self.actor.entity.performance
-            limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
-            rate = min(dyn.value, limit) if limit > 0 else dyn.value
-            self.duration = dv / rate * shape_peak_rate_factor(dyn.shape) if rate > 0 else 0.0
-        elif dyn.dimension == "distance":
-            # every shape is symmetric, so the mean speed over the transition is (v0 + v1) / 2: the
-            # transition covers `value` metres in this time (as esmini does)
-            mean = (abs(self.v0) + abs(target)) / 2
-            self.duration = dyn.value / mean if mean > 1e-9 else 0.0
-        else:
-            self.duration = dyn.value
-        if dyn.dimension != "rate" and dyn.shape != "step" and self.duration > 0 and dv > 0:
-            # the shape's peak acceleration stays within the vehicle's performance: the transition is
-            # stretched when it would exceed it (as esmini does)
-            perf = self.actor.entity.performance
-            limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
-            peak = dv / self.duration * shape_peak_rate_factor(dyn.shape)
-            if limit > 0 and peak > limit:
-                self.duration = dv * shape_peak_rate_factor(dyn.shape) / limit
-        if self.actor.entity.driver == "sumo":
-            # the SUMO driver reaches the desired speed with its own dynamics
-            self.engine.sumo_set_speed(self.actor, self.target())
-            self.done = not self._continuous
-            return
-        if dyn.shape == "step" or self.duration <= 0:
-            self._set(self.target())
-            self.done = not self._continuous
-
-    @property
-    def _continuous(self) -> bool:
-        return isinstance(self.action.target, m.RelativeTargetSpeed) and self.action.target.continuous
-
-    def _set(self, speed: float, dt: float | None = None) -> None:
-        if dt:
-            # the vehicle's performance bounds the acceleration (as esmini does)
-            perf = self.actor.entity.performance
-            v = self.actor.speed
-            speed = min(max(speed, v - perf.max_deceleration * dt), v + perf.max_acceleration * dt)
-        self.actor.speed = speed
-
-    def step(self, dt: float) -> None:
-        if self.actor.entity.driver == "sumo":
-            self.engine.sumo_set_speed(self.actor, self.target())
-            return
-        if self.done or (self.action.dynamics.shape == "step" and self._continuous):
-            # following a moving target: within the vehicle's performance (as esmini does)
-            self._set(self.target(), dt)
-            return
-        self.elapsed += dt
-        dyn = self.action.dynamics
-        progress = self.elapsed / max(self.duration, 1e-9)
-        target = self.target()
-        self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress), dt)
-        if progress >= 1.0 - 1e-9:
-            self._set(target, dt)
-            # bounded by the vehicle's performance, the target may be reached later than the shape says
-            self.done = not self._continuous and abs(self.actor.speed - target) < 1e-9
-
-
-class LaneChangeRuntime(ActionRuntime):
-    domain = "lateral"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.LaneChangeAction) -> None:
-        super().__init__(engine, actor)
-        self.action = action
-        self.elapsed = 0.0
-        self.start_odometer = 0.0
-        self.offset0 = 0.0
-        self.offset1 = 0.0
-
-    def start(self) -> None:
-        actor = self.actor
-        road = self.engine.road
-        if road is None or actor.road_id is None:
-            raise BadInput(
-                f"LaneChangeAction on {actor.name!r}, which is not on a road", file=self.engine.source
-            )
-        target = self.action.target
-        try:
-            if isinstance(target, m.AbsoluteTargetLane):
-                lane = target.lane_id
-                if lane not in road.lane_ids(actor.road_id, actor.s):
-                    raise ValueError(f"lane {lane} does not exist on road {actor.road_id} at s={actor.s:.1f}")
-            else:
-                reference = self.engine.body(target.entity)
-                base = reference.lane_id if reference.road_id == actor.road_id else actor.lane_id
-                lane = lane_shift(road, actor.road_id, actor.s, base, target.value, reference.direction)
-        except ValueError as exc:
-            raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.engine.source) from None
-        t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
-        centre = road.lane_center_t(actor.road_id, lane, actor.s)
-        actor.lane_id = lane
-        actor.offset = t_now - centre
-        self.offset0 = actor.offset
-        self.offset1 = self.action.target_lane_offset * actor.direction
-        self.start_odometer = actor.odometer
-        self.target_lane = lane
-        if actor.entity.driver == "sumo":
-            self.engine.sumo_change_lane(actor, lane, self.action.dynamics.value)
-            self.done = True
-            return
-        if self.action.dynamics.shape == "step" or self.action.dynamics.value <= 0:
-            actor.offset = self.offset1
-            self.done = True
-
-    def step(self, dt: float) -> None:
-        if self.done:
-            return
-        # the lane change moves the entity at the speed it has now: a speed action stepped after it in the
-        # storyboard's order changes the speed from the next step on (as esmini)
-        self.actor.extra["move_speed"] = self.actor.speed
-        dyn = self.action.dynamics
-        self.elapsed += dt
-        if dyn.dimension == "distance":
-            progress = (self.actor.odometer - self.start_odometer + abs(self.actor.speed) * dt) / dyn.value
-        elif dyn.dimension == "rate":  # lateral rate in m/s: duration from the lateral distance
-            duration = abs(self.offset1 - self.offset0) / dyn.value * shape_peak_rate_factor(dyn.shape)
-            progress = self.elapsed / max(duration, 1e-9)
-        else:
-            progress = self.elapsed / dyn.value
-        new_offset = self.offset0 + (self.offset1 - self.offset0) * shape_value(dyn.shape, progress)
-        self.actor.lateral_velocity = (new_offset - self.actor.offset) / dt
-        self.actor.offset = new_offset
-        if progress >= 1.0 - 1e-9:
-            self.actor.offset = self.offset1
-            self.actor.lateral_velocity = 0.0
-            self.done = True
-
-
-class TeleportRuntime(ActionRuntime):
-    domain = "teleport"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.TeleportAction) -> None:
-        super().__init__(engine, actor)
-        self.action = action
-
-    def start(self) -> None:
-        self.done = True
-        ghosts = self.engine.ghosts
-        if ghosts is not None and id(self.action) in ghosts.setup.teleports:
-            ghosts.teleport(self.actor)  # the ghost put on its entity (esmini's AddedGhostTeleport)
-            return
-        if self.actor.name in self.engine.tow_of:
-            return  # a towed trailer goes where its tow vehicle takes it (as esmini)
-        self.engine.place(self.actor, self.action.position)
-        if self.actor.name in self.engine.trailer_of:
-            self.engine.align_trailers(self.actor)
-        if self.engine.root.state == State.RUNNING:
-            # teleported during the run: it stays where it was put for the rest of this step (as esmini)
-            self.actor.extra["teleported"] = 1.0
-        self.done = True
-
-
-class ControllerRuntime(ActionRuntime):
-    """Assign/activate a controller: an external one, active on any domain, moves the entity by its
-    control input from now on (the scenario's motion actions on it are then ignored)."""
-
-    domain = "none"
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.ControllerAction) -> None:
-        super().__init__(engine, actor)
-        self.action = action
-
-    def start(self) -> None:
-        control = self.engine.controllers[self.actor.name]
-        if self.action.assign is not None:
-            control[0] = self.action.assign
-        if self.action.longitudinal is not None:
-            control[1] = self.action.longitudinal
-        if self.action.lateral is not None:
-            control[2] = self.action.lateral
-        external = control[0] == "external" and (control[1] or control[2])
-        self._driver_model(control, bool(external))
-        ghosts = self.engine.ghosts
-        if ghosts is not None and ghosts.entity is self.actor:
-            ghosts.activate(not external and (control[1] or control[2]))
-        if external != self.actor.external:
-            self.actor.external = bool(external)
-            self.actor.mover = None
-            self.engine.log.append(
-                f"t={self.engine.time:.2f} {self.actor.name}: external controller "
-                f"{'activated: moved by its control input' if external else 'deactivated'}"
-            )
-        self.done = True
-
-    def _driver_model(self, control: list[Any], external: bool) -> None:
-        """(Re)start or stop the driver model of an esmini controller CARLOS runs (ACC/ALKS): activated on
-        the longitudinal domain, it starts from the entity's speed now (as esmini's Activate)."""
-        e, name = self.engine, self.actor.name
-        if self.action.assign is not None:
-            e.assigned_controller[name] = dict(self.action.controller)
-        properties = e.assigned_controller.get(name, self.actor.entity.controller)
-        kind = m.controller_type(properties)
-        if kind in m.VEHICLE_CONTROLLERS and not external and (control[1] or control[2]):
-            if self.action.assign is not None or name not in e.vehicle_drivers:
-                e.vehicle_drivers[name] = drivers.OffroadFollower(e, self.actor, properties)
-                e.log.append(f"t={e.time:.2f} {name}: {kind} controller activated")
-        elif e.vehicle_drivers.pop(name, None) is not None:
-            e.log.append(f"t={e.time:.2f} {name}: {kind or 'its'} controller deactivated")
-        if kind in m.NATURAL_DRIVER_CONTROLLERS and not external and control[1]:
-            if self.action.longitudinal or self.action.assign is not None or name not in e.natural_drivers:
-                e.natural_drivers[name] = drivers.NaturalDriver(e, self.actor, properties)
-                e.log.append(f"t={e.time:.2f} {name}: NaturalDriver activated at {self.actor.speed:.2f} m/s")
-        elif e.natural_drivers.pop(name, None) is not None:
-            e.log.append(f"t={e.time:.2f} {name}: NaturalDriver deactivated")
-        if external or not control[1] or kind not in m.ACC_CONTROLLERS:
-            if e.acc_drivers.pop(name, None) is not None:
-                e.log.append(f"t={e.time:.2f} {name}: ACC controller deactivated")
-            return
-        if self.action.longitudinal or self.action.assign is not None or name not in e.acc_drivers:
-            e.acc_drivers[name] = extra_actions.AccDriver(e, self.actor, properties)
-            e.log.append(f"t={e.time:.2f} {name}: ACC controller activated at {self.actor.speed:.2f} m/s")
-
-
-class IgnoredRuntime(ActionRuntime):
-    """A motion action on an entity an external controller drives: the controller overrides it."""
-
-    def __init__(self, engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> None:
-        super().__init__(engine, actor)
-        self.domain = getattr(action, "domain", "other")
-
-    def start(self) -> None:
-        self.done = True
-
-
-def make_runtime(engine: ScenarioEngine, actor: Body, action: m.PrivateAction) -> Runtime:
-    if isinstance(action, m.ControllerAction):
-        return ControllerRuntime(engine, actor, action)
-    if actor.external and not isinstance(action, m.TeleportAction | m.NoMotionAction | m.AssignRouteAction):
-        return IgnoredRuntime(engine, actor, action)
-    if engine.acc_drivers and getattr(action, "domain", "") == "longitudinal":
-        acc = engine.acc_drivers.get(actor.name)
-        if acc is not None and acc.override and not acc.virtual:
-            return IgnoredRuntime(engine, actor, action)  # an override controller moves it (esmini ends it)
-    natural = engine.natural_drivers
-    if natural and actor.name in natural and getattr(action, "domain", "") == "longitudinal":
-        return IgnoredRuntime(engine, actor, action)  # the NaturalDriver moves it (esmini ends it)
-    other = extra_actions.make(engine, actor, action)
-    if other is not None:
-        return other
-    if isinstance(action, m.SpeedAction):
-        return SpeedRuntime(engine, actor, action)
-    if isinstance(action, m.LaneChangeAction):
-        return LaneChangeRuntime(engine, actor, action)
-    if isinstance(action, m.TeleportAction):
-        return TeleportRuntime(engine, actor, action)
-    raise BadInput(f"{type(action).__name__} is not supported", file=engine.source)
 
 
 class ExternalDriver(Protocol):
@@ -340,18 +50,6 @@ class ExternalDriver(Protocol):
     def move(
         self, entity: m.Entity, x: float, y: float, heading: float, speed: float, dt: float
     ) -> tuple[float, float, float, float]: ...
-
-
-# --- conditions -------------------------------------------------------------------------------------------
-
-
-@dataclass
-class ConditionState:
-    """Edge and delay bookkeeping of one condition instance."""
-
-    condition: m.Condition
-    previous: bool | None = None
-    history: deque[tuple[float, bool]] = field(default_factory=deque)
 
 
 class ScenarioEngine:
@@ -373,7 +71,7 @@ class ScenarioEngine:
         self.external = external  # moves the entities whose external controller is active
         self.source = str(scenario.path)
         self.road = road
-        self.sumo = sumo
+        self.sumo = SumoBridge(sumo, road) if sumo is not None else None
         self.dt = step_seconds
         self.time = 0.0
         self.step_index = 0
@@ -396,24 +94,19 @@ class ScenarioEngine:
                     file=self.source,
                     field="RoadNetwork/LogicFile",
                 )
-        self.conditions: dict[int, ConditionState] = {}
         self._target_roads: dict[tuple[float, float, str], Any] = {}
-        self._fixed_points: dict[int, tuple[m.Position, tuple[float, float, float, float]]] = {}
+        self.memo: dict[tuple[str, int], Any] = {}  # conditions' and positions' memory (ScenarioWorld)
         self.measure = Measure(self)
-        self._state_nodes: dict[int, list[Node]] = {}  # StoryboardElementStateCondition → its elements
-        # StoryboardElementStateCondition on a transition → element → how many of it the condition has seen
-        self._seen_transitions: dict[int, dict[int, int]] = {}
+        self.triggers = Triggers(self)
         self.owner: Body | None = None  # the actor whose action runs now ("$owner")
         self.parameter_values: dict[str, Any] = dict(scenario.parameters)
         self.variables: dict[str, Any] = dict(scenario.variables)
         self.added_later = _added_later(scenario)
         # traffic signals: state shown by each signal (by the id or name the scenario uses), and the phase
         # cycle of each signal controller: name → (time its current cycle was anchored, phase index then)
-        self.signals: dict[str, str] = {}
-        self._signal_cycles: dict[str, tuple[float, int]] = _signal_starts(scenario.signal_controllers)
-        self._signal_controllers = {c.name: c for c in scenario.signal_controllers}
-        self.signal_phases: dict[str, str] = {}
-        self.action_order: dict[int, int] = {}  # id of an action node → its place in the storyboard
+        self.signal_control = SignalControllers(scenario.signal_controllers)
+        self.signals = self.signal_control.signals
+        self.signal_phases = self.signal_control.phases
         self.ended_in_move = False  # an action runtime finished while moving its entity this step
         # a FollowGhost controller (esmini) gives its ghost a head start: esmini reports every time shifted
         # back by it (the storyboard's time 0 is at -headstart on its time axis); `output_time_offset` is
@@ -424,17 +117,15 @@ class ScenarioEngine:
         self._alks = [
             e.name for e in scenario.entities if m.controller_type(e.controller) in m.ALKS_CONTROLLERS
         ]
-        self.safety_drivers: dict[str, extra_actions.SafetyDriver] = {}
+        self.safety_drivers: dict[str, drivers.SafetyDriver] = {}
         # the properties of each entity's controller assigned during the run (AssignControllerAction), and
         # the ACC/ALKS driver models (esmini's ACCController) active on the longitudinal domain now
         self.assigned_controller: dict[str, dict[str, str]] = {}
-        self.acc_drivers: dict[str, extra_actions.AccDriver] = {}
+        self.acc_drivers: dict[str, drivers.AccDriver] = {}
         # esmini's controllers that drive a vehicle model of their own (OffroadFollower), active now
         self.vehicle_drivers: dict[str, drivers.OffroadFollower] = {}
         # esmini's NaturalDriver controllers active on the longitudinal domain now (they move their entity)
         self.natural_drivers: dict[str, drivers.NaturalDriver] = {}
-        self._transitions = 0  # state transitions so far, and how many there were at the last completion pass
-        self._completed_at = -1
         # trailers: tow vehicle → the entity it tows (Trailer/TrailerRef, ConnectTrailerAction), and back
         self.trailer_of: dict[str, str] = {}
         for entity in scenario.entities:
@@ -447,11 +138,11 @@ class ScenarioEngine:
                     )
                 self.trailer_of[entity.name] = entity.trailer
         self.tow_of: dict[str, str] = {t: tow for tow, t in self.trailer_of.items()}
-        self.root = self._build()
+        self.story = StoryRun(scenario, self, self.triggers)
+        self.root = self.story.root
         if road is not None:
-            self._check_signal_names(road)
-        self.registry = Registry(self.root)
-        self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
+            self.warnings.extend(unknown_signals(self.scenario, self.root, road, self.source))
+        self.registry = self.story.registry
         self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
         self._init()
         if self.ghosts is not None:
@@ -459,57 +150,16 @@ class ScenarioEngine:
 
     # --- set-up ---------------------------------------------------------------------------------------
 
-    def _build(self) -> Node:
-        root = Node("storyboard", "storyboard", None)
-        for story in self.scenario.stories:
-            s = Node("story", story.name, story, root)
-            root.children.append(s)
-            for act in story.acts:
-                a = Node("act", act.name, act, s)
-                s.children.append(a)
-                for group in act.groups:
-                    g = Node("maneuverGroup", group.name, group, a, actors=group.actors)
-                    a.children.append(g)
-                    for maneuver in group.maneuvers:
-                        mv = Node("maneuver", maneuver.name, maneuver, g)
-                        g.children.append(mv)
-                        for event in maneuver.events:
-                            e = Node("event", event.name, event, mv)
-                            mv.children.append(e)
-                            for action in event.actions:
-                                node = Node("action", action.name, action, e)
-                                e.children.append(node)
-                                self.action_order[id(node)] = len(self.action_order)
-        return root
-
     def _init(self) -> None:
         # teleports first (other init actions may refer to positions of entities placed here)
         ordered = sorted(self.scenario.init, key=lambda i: not isinstance(i.action, m.TeleportAction))
         self.init_runtimes: list[Runtime] = []
         for item in ordered:
             if not item.entity:
-                self._global_action(item.action)  # type: ignore[arg-type]
+                global_actions.run(self, item.action)  # type: ignore[arg-type]
                 continue
-            body = self.bodies[item.entity]
-            runtime = make_runtime(self, body, item.action)  # type: ignore[arg-type]
-            continuous = isinstance(item.action, m.SpeedAction) and (
-                isinstance(item.action.target, m.RelativeTargetSpeed) and item.action.target.continuous
-            )
-            if (
-                isinstance(item.action, m.SpeedAction)
-                and (item.action.dynamics.shape == "step" or item.action.dynamics.value == 0)
-                and not continuous
-            ):
-                # initial speed with a step: reached at once
-                body.speed = runtime.target() if isinstance(runtime, SpeedRuntime) else body.speed
-            elif isinstance(item.action, m.SpeedAction):
-                # with a transition shape the speed changes over time from the start, as in a story
-                self.init_runtimes.append(runtime)
-            elif isinstance(
-                item.action, m.TeleportAction | m.AssignRouteAction | m.NoMotionAction | m.ControllerAction
-            ):
-                runtime.start()
-            else:
+            runtime = make_runtime(self, self.bodies[item.entity], item.action)  # type: ignore[arg-type]
+            if not runtime.start_in_init():
                 # an Init action with duration (a trajectory, a distance to keep) runs from the first step
                 self.init_runtimes.append(runtime)
         for runtime in self.init_runtimes:
@@ -547,28 +197,8 @@ class ScenarioEngine:
             # scripted entity every step would cost two libsumo calls per entity for nothing)
             self.sumo = None
         if self.sumo is not None:
-            for body in self.bodies.values():
-                if body.gone:
-                    continue
-                e = body.entity
-                self.sumo.add_vehicle(
-                    body.name,
-                    length=e.box.length,
-                    width=e.box.width,
-                    height=e.box.height,
-                    front_offset=e.box.center_x + e.box.length / 2,
-                    max_speed=e.performance.max_speed,
-                    max_accel=e.performance.max_acceleration,
-                    max_decel=e.performance.max_deceleration,
-                    x=body.x,
-                    y=body.y,
-                    heading=body.heading,
-                    speed=body.speed,
-                    scripted=e.driver != "sumo",
-                )
-        self.root.transition(Transition.START, State.RUNNING, 0, self.log, 0.0)
-        for story in self.root.children:
-            story.transition(Transition.START, State.RUNNING, 0, self.log, 0.0)
+            self.sumo.add(self.bodies.values())
+        self.story.begin()
 
     # --- positions ------------------------------------------------------------------------------------
 
@@ -580,146 +210,10 @@ class ScenarioEngine:
         except KeyError:
             raise BadInput(f"entity {name!r} is not declared in <Entities>", file=self.source) from None
 
-    def resolve_position(
-        self, position: m.Position, for_body: Body | None = None
-    ) -> tuple[float, float, float, float]:
-        """World (x, y, z, heading) of a position."""
-        road = self.road
-
-        def need_road() -> OpenDrive:
-            if road is None:
-                raise BadInput(
-                    f"{type(position).__name__} needs a road network (RoadNetwork/LogicFile)",
-                    file=self.source,
-                )
-            return road
-
-        def orient(base: float, orientation: m.Orientation | None) -> float:
-            if orientation is None:
-                return base
-            return orientation.h if orientation.type == "absolute" else wrap_angle(base + orientation.h)
-
-        try:
-            if isinstance(position, m.WorldPosition):
-                z = position.z if position.z is not None else 0.0
-                return position.x, position.y, z, position.h if position.h is not None else 0.0
-            if isinstance(position, m.LanePosition):
-                r = need_road()
-                road_id, lane_id, s_on = _walk_lane(r, position.road_id, position.lane_id, position.s)
-                if (road_id, lane_id, s_on) != (position.road_id, position.lane_id, position.s):
-                    # beyond the road's ends: on along the lane's links (the position keeps its lane)
-                    length = r.road_length(road_id)
-                    if not 0.0 <= s_on <= length:
-                        message = (
-                            f"{position.source or self.source}: LanePosition: road {position.road_id} "
-                            f"s={position.s:g} lies beyond "
-                            f"the lanes' links: placed at the end of road {road_id}"
-                        )
-                        if message not in self.warnings:
-                            self.warnings.append(message)
-                        s_on = min(max(s_on, 0.0), length)
-                    pose = r.lane_to_world(road_id, lane_id, s_on, position.offset)
-                    return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
-                pose = r.lane_to_world(position.road_id, position.lane_id, position.s, position.offset)
-                # relative orientation is relative to the lane's driving direction (as esmini does)
-                backward = r.drives_backward(position.road_id, position.lane_id)
-                base = pose.heading + (math.pi if backward else 0.0)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
-            if isinstance(position, m.RoadPosition):
-                r = need_road()
-                pose = r.road_to_world(position.road_id, position.s, position.t)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
-            if isinstance(position, m.TrajectoryPosition):
-                base_pose = (0.0, 0.0, 0.0, 0.0)
-                if for_body is not None:
-                    base_pose = (for_body.x, for_body.y, for_body.z, for_body.heading)
-                path = paths.sample(position.trajectory, self.resolve_position, base_pose)
-                x, y, z, h = path.at(position.s)
-                x -= position.t * math.sin(h)
-                y += position.t * math.cos(h)
-                return x, y, z, wrap_angle(orient(h, position.orientation))
-            if isinstance(position, m.RoutePosition):
-                if position.entity is not None:
-                    ref = self.body(position.entity)
-                    return ref.x, ref.y, ref.z, orient(ref.heading, position.orientation)
-                r = need_road()
-                assert position.route is not None
-                road_id, s_on, direction = self._route_point(position.route, position.path_s or 0.0)
-                if position.lane_id is not None:
-                    pose = r.lane_to_world(road_id, position.lane_id, s_on, position.lane_offset)
-                else:
-                    pose = r.road_to_world(road_id, s_on, position.t)
-                base = pose.heading + (math.pi if direction < 0 else 0.0)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
-            ref = self.body(position.entity)
-            if isinstance(position, m.RelativeWorldPosition):
-                return (
-                    ref.x + position.dx,
-                    ref.y + position.dy,
-                    ref.z + position.dz,
-                    orient(ref.heading, position.orientation),
-                )
-            if isinstance(position, m.RelativeObjectPosition):
-                c, s = math.cos(ref.heading), math.sin(ref.heading)
-                return (
-                    ref.x + c * position.dx - s * position.dy,
-                    ref.y + s * position.dx + c * position.dy,
-                    ref.z + position.dz,
-                    orient(ref.heading, position.orientation),
-                )
-            r = need_road()
-            if ref.road_id is None:
-                raise BadInput(
-                    f"{type(position).__name__}: entity {ref.name!r} is not on a road", file=self.source
-                )
-            if isinstance(position, m.RelativeLanePosition):
-                s_new = ref.s + position.ds * ref.direction
-                lane = lane_shift(r, ref.road_id, s_new, ref.lane_id, position.d_lane, ref.direction)
-                pose = r.lane_to_world(ref.road_id, lane, s_new, position.offset * ref.direction)
-                base = pose.heading + (math.pi if ref.direction < 0 else 0.0)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
-            if isinstance(position, m.RelativeRoadPosition):
-                t_ref = r.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
-                pose = r.road_to_world(ref.road_id, ref.s + position.ds, t_ref + position.dt)
-                return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
-        except (KeyError, ValueError) as exc:
-            raise BadInput(f"{type(position).__name__}: {exc}", file=self.source) from None
-        raise BadInput(f"position {type(position).__name__} is not supported", file=self.source)
-
-    def _route_point(self, route: m.Route, path_s: float) -> tuple[str, float, int]:
-        """(road, s, direction) `path_s` metres along a route from its first waypoint."""
-        road = self.road
-        assert road is not None
-        points = []
-        for waypoint in route.waypoints:
-            x, y, _, h = self.resolve_position(waypoint.position)
-            rc = road.world_to_road(x, y, None, road_hint=getattr(waypoint.position, "road_id", None))
-            if rc is None:
-                raise BadInput(f"route {route.name!r}: a waypoint is on no road", file=self.source)
-            points.append((rc, 1 if math.cos(h - rc.heading) >= 0 else -1))
-        first, direction = points[0]
-        legs: list[tuple[str, int]] = [(first.road_id, direction)]
-        for rc, _ in points[1:]:
-            leg = paths.plan(road, legs[-1], rc.road_id)
-            if leg is None:
-                raise BadInput(f"route {route.name!r}: no way to road {rc.road_id}", file=self.source)
-            legs.extend(leg[1:])
-        s_on = first.s
-        remaining = path_s
-        for i, (road_id, d) in enumerate(legs):
-            length = road.road_length(road_id)
-            if i > 0:
-                s_on = 0.0 if d > 0 else length
-            room = (length - s_on) if d > 0 else s_on
-            if remaining <= room or i == len(legs) - 1:
-                return road_id, min(max(s_on + d * remaining, 0.0), length), d
-            remaining -= room
-        return legs[-1][0], s_on, legs[-1][1]
-
     def place(self, body: Body, position: m.Position) -> None:
         """Teleport: pose from the position; road coordinates from the road network when on a road."""
         x, y, z, heading = self.resolve_position(position, body)
-        self._moved()
+        self.moved()
         body.x, body.y, body.z, body.heading = x, y, z, heading
         body.posed = None
         body.placed = True
@@ -745,8 +239,8 @@ class ScenarioEngine:
                 lane_heading = self.road.road_to_world(body.road_id, body.s, 0.0).heading
             travel = lane_heading if body.direction > 0 else lane_heading + math.pi
             body.heading_offset = wrap_angle(heading - travel)
-        if self.sumo is not None and self.step_index > 0 and self.sumo.has(body.name):
-            self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+        if self.sumo is not None and self.step_index > 0:
+            self.sumo.place(body)
 
     def align_trailers(self, tow: Body | None = None, *, pull: bool = False) -> None:
         """Place every trailer (of `tow`, else of every front tow vehicle) behind its tow vehicle, down the
@@ -772,23 +266,20 @@ class ScenarioEngine:
     def track_road(self, body: Body, lock_lane: bool = False) -> None:
         """Road coordinates of a body moved freely (a trajectory): its lane, s and offset from x/y. With
         `lock_lane` the body follows that lane afterwards, in the direction it is heading."""
-        self._moved()
-        if self.road is None:
-            return
-        rc = None
-        if body.road_id is not None:
-            rc = self.road.world_to_road_near(body.x, body.y, body.road_id, body.s)
-        if rc is None:
-            rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
-        if rc is None:
-            body.road_id = None
-            return
-        body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
-        body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
-        body.heading_offset = 0.0
-        body.posed = None
-        if lock_lane:
-            body.lateral_velocity = 0.0
+        self.moved()
+        positions.track(self.road, body, lock_lane)
+
+    def locate(self, body: Body) -> None:
+        """Road coordinates (road, lane, s, offset, direction, z) of a body moved in world coordinates."""
+        positions.locate(self.road, body)
+
+    def resolve_position(self, position: m.Position, for_body: Body | None = None) -> Pose:
+        """World (x, y, z, heading) of a position."""
+        return positions.resolve(self, position, for_body)
+
+    def plan_route(self, body: Body, targets: list[m.Position]) -> list[tuple[str, int]]:
+        """The roads (id, direction) a body drives through to pass every target position in order."""
+        return positions.plan_route(self, body, targets)
 
     def shift_along(self, body: Body, distance: float) -> None:
         """Move a body `distance` metres along its lane (or its heading off road) at once."""
@@ -805,7 +296,7 @@ class ScenarioEngine:
         else:
             body.x += distance * math.cos(body.heading)
             body.y += distance * math.sin(body.heading)
-        self._moved()
+        self.moved()
 
     def distance_to(self, body: Body, target: tuple[float, float, float, float]) -> float:
         """Distance still to travel to a position: along the road when both are on the same road."""
@@ -819,657 +310,15 @@ class ScenarioEngine:
                 return max((rc.s - body.s) * body.direction, 0.0)
         return math.hypot(x - body.x, y - body.y)
 
-    def plan_route(self, body: Body, targets: list[m.Position]) -> list[tuple[str, int]]:
-        """The roads (id, direction) a body drives through to pass every target position in order."""
-        road = self.road
-        if road is None or body.road_id is None:
-            return []
-        state = (body.road_id, body.direction)
-        out: list[tuple[str, int]] = []
-        for position in targets:
-            x, y, _, _ = self.resolve_position(position)
-            hint = getattr(position, "road_id", None)
-            rc = road.world_to_road(x, y, None, road_hint=hint)
-            if rc is None:
-                continue
-            if state[0] == rc.road_id and not out:
-                continue
-            leg = paths.plan(road, state, rc.road_id)
-            if leg is None:
-                self.warnings.append(
-                    f"{self.source}: route of {body.name!r}: no way found to road {rc.road_id}"
-                )
-                continue
-            out.extend(leg[1:])
-            state = leg[-1]
-        return out
-
-    def _global_action(self, action: m.GlobalAction) -> None:
-        if isinstance(action, m.ParameterSetAction | m.ParameterModifyAction):
-            store = self.variables if action.variable else self.parameter_values
-            if action.name not in store:
-                kind = "variable" if action.variable else "parameter"
-                raise BadInput(f"{kind} {action.name!r} is not declared", file=self.source)
-            old = store[action.name]
-            if isinstance(action, m.ParameterSetAction):
-                new: Any = action.value
-                if isinstance(old, bool):
-                    new = action.value.lower() in ("true", "1")
-                elif isinstance(old, int):
-                    new = int(float(action.value))
-                elif isinstance(old, float):
-                    new = float(action.value)
-            else:
-                base = float(old)
-                new = base + action.value if action.rule == "add" else base * action.value
-                if isinstance(old, int) and not isinstance(old, bool) and new == int(new):
-                    new = int(new)
-            store[action.name] = new
-            self.log.append(f"t={self.time:.2f} {action.name} := {new}")
-        elif isinstance(action, m.AddEntityAction):
-            body = self.body(action.entity)
-            body.gone = False
-            self.place(body, action.position)
-        elif isinstance(action, m.DeleteEntityAction):
-            body = self.body(action.entity)
-            body.gone = True
-            self._moved()
-        elif isinstance(action, m.TrafficSignalStateAction):
-            self.signals[action.name] = action.state
-            self.log.append(f"t={self.time:.2f} signal {action.name} := {action.state}")
-        elif isinstance(action, m.TrafficSignalControllerAction):
-            ctrl = self._signal_controllers.get(action.controller)
-            if ctrl is None:
-                raise BadInput(
-                    f"TrafficSignalControllerAction: no TrafficSignalController {action.controller!r} in "
-                    "RoadNetwork/TrafficSignals",
-                    file=self.source,
-                )
-            names = [p.name for p in ctrl.phases]
-            if action.phase not in names:
-                raise BadInput(
-                    f"TrafficSignalControllerAction: controller {ctrl.name!r} has no phase {action.phase!r} "
-                    f"(phases: {', '.join(names)})",
-                    file=self.source,
-                )
-            self._signal_cycles[ctrl.name] = (self.time, names.index(action.phase))
-            self._update_signals()
-
-    def _check_signal_names(self, road: OpenDrive) -> None:
-        """Warn about traffic signals the scenario names (by id or name) that the road network lacks."""
-        known = set(road.signals) | {n for n in road.signals.values() if n}
-        named: dict[str, str] = {}
-        for item in self.scenario.init:
-            if isinstance(item.action, m.TrafficSignalStateAction):
-                named.setdefault(item.action.name, "TrafficSignalStateAction")
-        for ctrl in self.scenario.signal_controllers:
-            for phase in ctrl.phases:
-                for signal, _ in phase.states:
-                    named.setdefault(signal, f"TrafficSignalController[{ctrl.name}]")
-        for node in self.root.walk():
-            definition = node.definition
-            if isinstance(definition, m.Action) and isinstance(
-                definition.global_action, m.TrafficSignalStateAction
-            ):
-                named.setdefault(definition.global_action.name, "TrafficSignalStateAction")
-            triggers = (getattr(definition, "start_trigger", None), getattr(definition, "stop_trigger", None))
-            for trigger in triggers:
-                for group in trigger.groups if trigger is not None else ():
-                    for cond in group:
-                        if isinstance(cond.value_condition, m.TrafficSignalCondition):
-                            named.setdefault(cond.value_condition.name, "TrafficSignalCondition")
-        for trigger_ in (self.scenario.stop_trigger,):
-            for group in trigger_.groups if trigger_ is not None else ():
-                for cond in group:
-                    if isinstance(cond.value_condition, m.TrafficSignalCondition):
-                        named.setdefault(cond.value_condition.name, "TrafficSignalCondition")
-        for name, where in named.items():
-            if name not in known:
-                self.warnings.append(
-                    f"{self.source}: {where}: traffic signal {name!r} is not a <signal> of the road network "
-                    f"{road.name} (ids: {', '.join(sorted(road.signals)) or 'none'})"
-                )
-
-    def _update_signals(self) -> None:
-        """Signal controllers: the phase each is in now, and the signal states that phase sets."""
-        for name, (anchor, index) in self._signal_cycles.items():
-            ctrl = self._signal_controllers[name]
-            if not ctrl.phases or self.time < anchor - 1e-9:
-                continue
-            total = sum(p.duration for p in ctrl.phases)
-            elapsed = (self.time - anchor) % total if total > 0 else 0.0
-            n = len(ctrl.phases)
-            i = index
-            for _ in range(n):
-                duration = ctrl.phases[i].duration
-                if elapsed < duration - 1e-9:
-                    break
-                elapsed -= duration
-                i = (i + 1) % n
-            phase = ctrl.phases[i]
-            if self.signal_phases.get(name) != phase.name:
-                self.signal_phases[name] = phase.name
-                for signal, state in phase.states:
-                    self.signals[signal] = state
-
     # --- SUMO hooks -----------------------------------------------------------------------------------
 
     def sumo_set_speed(self, body: Body, speed: float) -> None:
         if self.sumo is not None:
-            self.sumo.set_desired_speed(body.name, speed)
+            self.sumo.set_speed(body, speed)
 
     def sumo_change_lane(self, body: Body, lane_id: int, duration: float) -> None:
-        if self.sumo is None or self.road is None or body.road_id is None:
-            return
-        # SUMO lane index 0 is the rightmost driving lane in the travel direction
-        side = [
-            lane for lane in self.road.lane_ids(body.road_id, body.s, driving_only=True) if lane * lane_id > 0
-        ]
-        lanes = sorted(side, reverse=body.direction < 0)
-        if lane_id in lanes:
-            self.sumo.change_lane(body.name, lanes.index(lane_id), duration)
-
-    # --- conditions -----------------------------------------------------------------------------------
-
-    def _value(self, cond: m.Condition, triggering: list[str]) -> bool:
-        if cond.value_condition is not None:
-            return self._value_condition(cond.value_condition)
-        condition = cond.entity_condition
-        assert condition is not None
-        # entities not in the world are skipped; "any" stops at the first entity that fulfils it (the one
-        # that triggers), "all" at the first that does not (as esmini)
-        every = cond.triggering_rule == "all"
-        result = False
-        hits: list[str] = []
-        for name in cond.triggering_entities:
-            body = self.body(name)
-            if body.gone:
-                continue
-            result = self._entity_condition(condition, body)
-            if result:
-                hits.append(name)
-                if not every:
-                    break
-            elif every:
-                return False
-        if result:
-            triggering.extend(hits)
-        return result
-
-    def _value_condition(self, c: m.ValueCondition) -> bool:
-        if isinstance(c, m.SimulationTimeCondition):
-            return compare(c.rule, self.time, c.value)
-        if isinstance(c, m.StoryboardElementStateCondition):
-            nodes = self._state_nodes.get(id(c))
-            if nodes is None:
-                nodes = self._state_nodes[id(c)] = self.registry.find(c.element_type, c.element_ref)
-            if not nodes:
-                raise BadInput(
-                    f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
-                    file=self.source,
-                )
-            transition = transition_of(c.state)
-            if transition is None:
-                return any(node.is_(c.state, self.step_index) for node in nodes)
-            # a transition holds when the element went through it since this condition was last evaluated
-            # (every transition counts once for each condition, however late it looks; as esmini)
-            seen = self._seen_transitions.get(id(c))
-            if seen is None:
-                seen = self._seen_transitions[id(c)] = {}
-            happened = False
-            for node in nodes:
-                count = node.counts.get(transition, 0)
-                if count > seen.get(id(node), 0):
-                    happened = True
-                    seen[id(node)] = count
-            return happened
-        if isinstance(c, m.TrafficSignalCondition):
-            return self.signals.get(c.name) == c.state
-        if isinstance(c, m.TrafficSignalControllerCondition):
-            return self.signal_phases.get(c.controller) == c.phase
-        if isinstance(c, m.UnsupportedCondition):
-            return False
-        store = self.variables if isinstance(c, m.VariableCondition) else self.parameter_values
-        value = store.get(c.name)
-        if value is None:
-            kind = "VariableCondition" if isinstance(c, m.VariableCondition) else "ParameterCondition"
-            raise BadInput(f"{kind} on undeclared name {c.name!r}", file=self.source)
-        if isinstance(value, bool):
-            return compare(c.rule, value, c.value.lower() == "true")
-        if isinstance(value, int | float):
-            return compare(c.rule, float(value), float(c.value))
-        return compare(c.rule, value, c.value)
-
-    def _entity_condition(self, c: m.EntityCondition, body: Body) -> bool:
-        if isinstance(c, m.SpeedCondition):
-            if c.direction is None:
-                return compare(c.rule, body.speed, c.value)
-            return compare(c.rule, _directional(body, body.heading, c.direction), c.value)
-        if isinstance(c, m.AccelerationCondition):
-            return compare(c.rule, body.acceleration, c.value)
-        if isinstance(c, m.TraveledDistanceCondition):
-            return body.odometer >= c.value
-        if isinstance(c, m.StandStillCondition):
-            return (
-                body.standstill_since is not None and self.time - body.standstill_since >= c.duration - 1e-9
-            )
-        if isinstance(c, m.EndOfRoadCondition):
-            return (
-                body.end_of_road_since is not None and self.time - body.end_of_road_since >= c.duration - 1e-9
-            )
-        if isinstance(c, m.RelativeSpeedCondition):
-            other = self.body(c.entity)
-            if c.direction is None:
-                return compare(c.rule, body.speed - other.speed, c.value)
-            # both velocities in the reference entity's frame (as esmini)
-            relative = _directional(body, other.heading, c.direction) - _directional(
-                other, other.heading, c.direction
-            )
-            return compare(c.rule, relative, c.value)
-        if isinstance(c, m.CollisionCondition):
-            others = [self.body(c.entity)] if c.entity else [b for b in self.bodies.values() if b is not body]
-            mine = Box.of(self.state_of(body))
-            return any(boxes_overlap(mine, Box.of(self.state_of(o))) for o in others)
-        if isinstance(c, m.ReachPositionCondition):
-            x, y, _, _ = self._fixed_point(c.position)
-            return math.hypot(body.x - x, body.y - y) < c.tolerance
-        if isinstance(c, m.DistanceCondition):
-            x, y, _, _ = self._fixed_point(c.position)
-            measured = self.measure.to_point(body, x, y, c.coordinate_system, c.distance_type, c.freespace)
-            return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
-        if isinstance(c, m.RelativeDistanceCondition):
-            other = self.body(c.entity)
-            if other.gone:
-                return False
-            if c.freespace and c.distance_type in ("euclidianDistance", "cartesianDistance"):
-                # far apart, a lower bound of the distance between the boxes decides the comparison
-                lower = self.measure.box_distance_lower_bound(body, other)
-                if lower > c.value + 1e-6:
-                    return compare(c.rule, lower, c.value)
-            measured = self.measure.to_entity(body, other, c.coordinate_system, c.distance_type, c.freespace)
-            return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
-        if isinstance(c, m.TimeHeadwayCondition):
-            other = self.body(c.entity)
-            if other.gone:
-                return False
-            headway = self.measure.headway(body, other, c.coordinate_system, c.distance_type, c.freespace)
-            return headway is not None and compare(c.rule, headway, c.value)
-        if isinstance(c, m.TimeToCollisionCondition):
-            point: tuple[float, float] | None = None
-            target: Body | None = None
-            if c.position is not None:
-                x, y, _, _ = self._fixed_point(c.position)
-                point = (x, y)
-            else:
-                target = self.body(c.entity)
-                if target.gone:
-                    return False
-            ttc = self.measure.time_to_collision(
-                body, target, point, c.coordinate_system, c.distance_type, c.freespace
-            )
-            return ttc is not None and compare(c.rule, ttc, c.value)
-        if isinstance(c, m.OffroadCondition):
-            if body.road_id is None or self._outside_driving_lanes(body):
-                since = body.extra.setdefault("offroad_since", self.time)
-                return self.time - since >= c.duration - 1e-9
-            body.extra.pop("offroad_since", None)
-            return False
-        if isinstance(c, m.AngleCondition | m.RelativeAngleCondition):
-            return self._angle_condition(c, body)
-        if isinstance(c, m.RelativeClearanceCondition):
-            return self._clearance(c, body)
-        if isinstance(c, m.UnsupportedCondition):
-            return False
-        raise BadInput(f"condition {type(c).__name__} is not supported", file=self.source)
-
-    def _angle_condition(self, c: m.AngleCondition | m.RelativeAngleCondition, body: Body) -> bool:
-        def angle_of(b: Body, kind: str) -> float:
-            return b.heading if kind == "heading" else b.pitch if kind == "pitch" else b.roll
-
-        value = angle_of(body, c.angle_type)
-        if isinstance(c, m.RelativeAngleCondition):
-            other = self.body(c.entity)
-            if other.gone:
-                return False
-            value -= angle_of(other, c.angle_type)
-        elif c.coordinate_system in ("road", "lane", "trajectory") and c.angle_type == "heading":
-            # relative to the road's reference line (the lane's direction in the lane system)
-            if self.road is None or body.road_id is None:
-                return False
-            reference = self.road.road_to_world(body.road_id, body.s, 0.0).heading
-            if c.coordinate_system != "road" and self.road.drives_backward(body.road_id, body.lane_id):
-                reference += math.pi
-            value -= reference
-        return abs(wrap_angle(value - c.angle)) <= c.tolerance + 1e-9
-
-    def _outside_driving_lanes(self, body: Body) -> bool:
-        """The reference point is beyond every driving lane of its road (off the road)."""
-        road = self.road
-        if road is None or body.road_id is None:
-            return True
-        r = road.road(body.road_id)
-        s = min(max(body.s, 0.0), r.length)
-        t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
-        for lane, inner, outer in r.all_borders(s):
-            if lane.id != 0 and lane.type != "none" and min(inner, outer) <= t <= max(inner, outer):
-                return False
-        return True
-
-    def _clearance(self, c: m.RelativeClearanceCondition, body: Body) -> bool:
-        """True when the lanes and distances given are clear of the listed (else of all) entities; freeSpace
-        chooses bounding-box distances over reference points."""
-        others = [self.body(n) for n in c.entities] if c.entities else list(self.bodies.values())
-        if c.lanes is not None and self.road is not None and body.road_id is not None:
-            # the lanes checked must exist (in the travel direction unless oppositeLanes): no lane, no clearance
-            for d_lane in range(max(c.lanes[0], -20), min(c.lanes[1], 20) + 1):
-                if d_lane == 0:
-                    continue
-                try:
-                    lane = lane_shift(self.road, body.road_id, body.s, body.lane_id, d_lane, body.direction)
-                except ValueError:
-                    return False
-                same_way = self.road.drives_backward(body.road_id, lane) == (body.direction < 0)
-                if not c.opposite_lanes and not same_way:
-                    return False
-        occupied = False
-        for other in others:
-            if other is body or other.gone:
-                continue
-            lon = self.relative_distance(body, other, "longitudinal", c.free_space, signed=True)
-            if not (-c.distance_backward <= lon <= c.distance_forward):
-                continue
-            if c.lanes is not None and self.road is not None and body.road_id is not None:
-                if other.road_id != body.road_id:
-                    continue
-                lanes = sorted(self.road.lane_ids(body.road_id, body.s))
-                if other.lane_id not in lanes or body.lane_id not in lanes:
-                    continue
-                d_lane = (lanes.index(other.lane_id) - lanes.index(body.lane_id)) * body.direction
-                if not c.opposite_lanes and other.direction != body.direction:
-                    continue
-                if not (c.lanes[0] <= d_lane <= c.lanes[1]):
-                    continue
-            occupied = True
-            break
-        return not occupied
-
-    def _fixed_point(self, position: m.Position) -> tuple[float, float, float, float]:
-        """World pose of a condition's position: computed once when it depends on no entity."""
-        if isinstance(position, m.WorldPosition | m.LanePosition | m.RoadPosition):
-            key = id(position)
-            cached = self._fixed_points.get(key)
-            if cached is None:
-                cached = self._fixed_points[key] = (position, self.resolve_position(position))
-            return cached[1]
-        return self.resolve_position(position)
-
-    def relative_distance(
-        self, a: Body, b: Body, kind: str, freespace: bool, signed: bool = False, system: str = "entity"
-    ) -> float:
-        """Distance from a to b in a's frame (longitudinal: along a's heading; lateral: across it). In road
-        or lane coordinates on one road, longitudinal is the difference of s (as esmini measures it)."""
-        if (
-            system in ("road", "lane")
-            and kind == "longitudinal"
-            and a.road_id is not None
-            and a.road_id == b.road_id
-        ):
-            # along the road between reference points, positive in a's travel direction
-            ds = (b.s - a.s) * a.direction
-            if freespace:
-                ba, bb = a.entity.box, b.entity.box
-                if ds >= 0:  # b ahead: a's front to b's rear
-                    extent = (ba.center_x + ba.length / 2) - (bb.center_x - bb.length / 2)
-                else:
-                    extent = (bb.center_x + bb.length / 2) - (ba.center_x - ba.length / 2)
-                ds = math.copysign(max(abs(ds) - extent, 0.0), ds)
-            return ds if signed else abs(ds)
-        if kind in ("euclidianDistance", "cartesianDistance"):
-            if freespace:
-                return box_distance(self.measure.box(a), self.measure.box(b))
-            return math.hypot(b.x - a.x, b.y - a.y)
-        if freespace:
-            ax, ay = _box_center(a)
-            bx, by = _box_center(b)
-        else:  # between reference points (as esmini measures without freespace)
-            ax, ay, bx, by = a.x, a.y, b.x, b.y
-        c, s = math.cos(a.heading), math.sin(a.heading)
-        dx, dy = bx - ax, by - ay
-        lon, lat = c * dx + s * dy, -s * dx + c * dy
-        value = lon if kind == "longitudinal" else lat
-        if freespace:
-            rel = b.heading - a.heading
-            if kind == "longitudinal":
-                extent_b = (
-                    abs(math.cos(rel)) * b.entity.box.length / 2 + abs(math.sin(rel)) * b.entity.box.width / 2
-                )
-                extent = a.entity.box.length / 2 + extent_b
-            else:
-                extent_b = (
-                    abs(math.sin(rel)) * b.entity.box.length / 2 + abs(math.cos(rel)) * b.entity.box.width / 2
-                )
-                extent = a.entity.box.width / 2 + extent_b
-            magnitude = max(abs(value) - extent, 0.0)
-            value = math.copysign(magnitude, value)
-        return value if signed else abs(value)
-
-    def _condition(self, cond: m.Condition, triggering: list[str]) -> bool:
-        if cond.edge == "none" and cond.delay <= 0:
-            return self._value(cond, triggering)  # no edge, no delay: nothing to remember
-        state = self.conditions.get(id(cond))
-        if state is None:
-            state = self.conditions[id(cond)] = ConditionState(cond)
-        value = self._value(cond, triggering)
-        # an edge needs a change: the first evaluation only records the value (as esmini does)
-        previous = state.previous if state.previous is not None else value
-        state.previous = value
-        if cond.edge == "rising":
-            fired = value and not previous
-        elif cond.edge == "falling":
-            fired = previous and not value
-        elif cond.edge == "risingOrFalling":
-            fired = value != previous
-        else:
-            fired = value
-        if cond.delay <= 0:
-            return fired
-        state.history.append((self.time, fired))
-        result = False
-        while state.history and state.history[0][0] <= self.time - cond.delay + 1e-9:
-            result = state.history.popleft()[1] or result
-        return result
-
-    def trigger(self, trigger: m.Trigger | None, triggering: list[str] | None = None) -> bool:
-        """OR over groups, AND within a group (as esmini: every group is evaluated; within a group, once a
-        condition does not hold only the conditions with a delay are evaluated, their timers run on). When
-        the trigger fires, its edge conditions start over (the next evaluation only records the value)."""
-        if trigger is None:
-            return False
-        fired = False
-        for group in trigger.groups:
-            group_entities: list[str] = []
-            holds = True
-            for c in group:
-                if holds or c.delay > 0:
-                    holds = self._condition(c, group_entities) and holds
-            if holds:
-                fired = True
-                if triggering is not None:
-                    triggering.extend(group_entities)
-        if fired:
-            for group in trigger.groups:
-                for c in group:
-                    state = self.conditions.get(id(c))
-                    if state is not None:
-                        state.previous = None
-        return fired
-
-    # --- storyboard -----------------------------------------------------------------------------------
-
-    def _set(self, node: Node, transition: Transition, state: State) -> None:
-        node.transition(transition, state, self.step_index, self.log, self.time)
-        self._transitions += 1
-
-    def _stop(self, node: Node) -> None:
-        for child in node.children:
-            if child.state != State.COMPLETE:
-                self._stop(child)
-        if node.kind == "action":
-            self._release(node)
-        if node.state != State.COMPLETE:
-            self._set(node, Transition.STOP, State.COMPLETE)
-
-    def _release(self, node: Node) -> None:
-        for key, running in list(self.running.items()):
-            if running is node:
-                del self.running[key]
-        node.runtime = None
-
-    def _start_group(self, group: Node) -> None:
-        self._set(group, Transition.START, State.RUNNING)
-        for maneuver in group.children:
-            maneuver.state = State.STANDBY
-            maneuver.executions = 0
-            self._set(maneuver, Transition.START, State.RUNNING)
-            for event in maneuver.children:
-                event.state = State.STANDBY
-                event.executions = 0
-                for action in event.children:
-                    action.state = State.STANDBY
-
-    def _start_event(self, event: Node, actors: tuple[str, ...]) -> None:
-        definition: m.Event = event.definition
-        maneuver = event.parent
-        assert maneuver is not None
-        others = [e for e in maneuver.children if e is not event and e.state == State.RUNNING]
-        if definition.priority == "skip" and others:
-            self._set(event, Transition.SKIP, State.STANDBY)
-            return
-        if definition.priority in ("override", "overwrite"):
-            for other in others:
-                self._stop(other)
-                other.executions += 1
-        self._set(event, Transition.START, State.RUNNING)
-        for action in event.children:
-            self._set(action, Transition.START, State.RUNNING)
-            self._start_action(action, actors)
-
-    def _start_action(self, node: Node, actors: tuple[str, ...]) -> None:
-        action: m.Action = node.definition
-        if action.private is None:
-            if action.global_action is not None:
-                self._global_action(action.global_action)
-            self._set(node, Transition.END, State.COMPLETE)
-            return
-        runtimes = []
-        for actor_name in actors:
-            body = self.body(actor_name)
-            runtime = make_runtime(self, body, action.private)
-            self.owner = body
-            key = (actor_name, runtime.domain)
-            previous = self.running.get(key)
-            if previous is not None and previous is not node:
-                # a new action of the same domain on the same actor overrides the running one
-                self._release(previous)
-                self._set(previous, Transition.STOP, State.COMPLETE)
-            self.running[key] = node
-            # an Init action still running in this domain (a distance kept from the start) is overridden too
-            self.init_runtimes = [
-                r for r in self.init_runtimes if not (r.actor is body and r.domain == runtime.domain)
-            ]
-            runtime.start()
-            runtimes.append(runtime)
-        node.runtime = runtimes
-        if all(r.done for r in runtimes):
-            self._release(node)
-            self._set(node, Transition.END, State.COMPLETE)
-
-    def _check_stop(self) -> bool:
-        if self.trigger(self.scenario.stop_trigger):
-            self._stop(self.root)
-            self.ended_by = "stopTrigger"
-            return True
-        return False
-
-    def _evaluate_storyboard(self) -> None:
-        # the StopTrigger is evaluated at the end of every step, on the state just reached (so a run ends at
-        # the first step where it holds, as esmini does); only the initial state is checked here
-        if self.step_index == 0 and self._check_stop():
-            return
-        for story in self.root.children:
-            for act in story.children:
-                definition: m.Act = act.definition
-                if act.state == State.STANDBY:
-                    if definition.start_trigger is None or self.trigger(definition.start_trigger):
-                        self._set(act, Transition.START, State.RUNNING)
-                        for group in act.children:
-                            self._start_group(group)
-                elif act.state == State.RUNNING and self.trigger(definition.stop_trigger):
-                    self._stop(act)
-                    continue
-                if act.state != State.RUNNING:
-                    continue
-                for group in act.children:
-                    if group.state != State.RUNNING:
-                        continue
-                    for maneuver in group.children:
-                        if maneuver.state != State.RUNNING:
-                            continue
-                        for event in maneuver.children:
-                            if event.state != State.STANDBY:
-                                continue
-                            ev: m.Event = event.definition
-                            triggering: list[str] = []
-                            if ev.start_trigger is None or self.trigger(ev.start_trigger, triggering):
-                                gdef: m.ManeuverGroup = group.definition
-                                actors = gdef.actors
-                                if gdef.select_triggering_entities and triggering:
-                                    actors = tuple(dict.fromkeys(triggering))
-                                self._start_event(event, actors)
-
-    def _complete_elements(self) -> None:
-        # completion follows from the states of the children: nothing to do while no element changed state
-        if self._transitions == self._completed_at:
-            return
-        self._completed_at = self._transitions
-        for story in self.root.children:
-            for act in story.children:
-                if act.state != State.RUNNING:
-                    continue
-                for group in act.children:
-                    if group.state != State.RUNNING:
-                        continue
-                    for maneuver in group.children:
-                        if maneuver.state != State.RUNNING:
-                            continue
-                        for event in maneuver.children:
-                            if event.state == State.RUNNING and all(
-                                a.state == State.COMPLETE for a in event.children
-                            ):
-                                event.executions += 1
-                                if event.executions < event.definition.maximum_execution_count:
-                                    self._set(event, Transition.END, State.STANDBY)
-                                    for action in event.children:
-                                        action.state = State.STANDBY
-                                else:
-                                    self._set(event, Transition.END, State.COMPLETE)
-                        if all(
-                            e.state == State.COMPLETE or e.executions >= e.definition.maximum_execution_count
-                            for e in maneuver.children
-                        ):
-                            self._set(maneuver, Transition.END, State.COMPLETE)
-                    if all(mv.state == State.COMPLETE for mv in group.children):
-                        group.executions += 1
-                        if group.executions < group.definition.maximum_execution_count:
-                            self._start_group(group)
-                        else:
-                            self._set(group, Transition.END, State.COMPLETE)
-                if all(g.state == State.COMPLETE for g in act.children):
-                    self._set(act, Transition.END, State.COMPLETE)
-            if story.state == State.RUNNING and all(a.state == State.COMPLETE for a in story.children):
-                self._set(story, Transition.END, State.COMPLETE)
-
-    # --- stepping -------------------------------------------------------------------------------------
+        if self.sumo is not None:
+            self.sumo.change_lane(body, lane_id, duration)
 
     def step(self) -> WorldFrame:
         """Advance one step; returns the frame at the new time."""
@@ -1482,9 +331,12 @@ class ScenarioEngine:
         ghosts = self.ghosts
         if ghosts is not None:
             ghosts.begin_step()
-        if self._signal_cycles:
-            self._update_signals()
-        self._evaluate_storyboard()
+        if self.signal_control.cycles:
+            self.signal_control.update(self.time)
+        # the StopTrigger is evaluated at the end of every step, on the state just reached (so a run ends at
+        # the first step where it holds, as esmini does); only the initial state is checked here
+        if not (self.step_index == 0 and self._check_stop()):
+            self.story.evaluate()
         previous = []
         for body in self.bodies.values():
             previous.append((body, body.speed, body.heading, body.x, body.y))
@@ -1494,26 +346,14 @@ class ScenarioEngine:
                 if not runtime.done:
                     runtime.step(dt)
             self.init_runtimes = [r for r in self.init_runtimes if not r.done]
-        nodes: list[Node] = list({id(n): n for n in self.running.values()}.values())
-        if len(nodes) > 1:
-            # actions step in the storyboard's order (as esmini), not in the order they started
-            nodes = sorted(nodes, key=lambda n: self.action_order.get(id(n), 0))
-        for node in nodes:
-            runtimes: list[Runtime] = node.runtime or []
-            for runtime in runtimes:
-                self.owner = runtime.actor
-                runtime.step(dt)
-            if runtimes and all(r.done for r in runtimes):
-                self._release(node)
-                self._set(node, Transition.END, State.COMPLETE)
-        self._complete_elements()
+        self.story.step_actions(dt)
         for name in self._alks:
             if self.controllers[name][1]:  # active on the longitudinal domain: it sets the speed
                 driver = self.safety_drivers.get(name)
                 if driver is None:
-                    driver = self.safety_drivers[name] = extra_actions.SafetyDriver(self, self.bodies[name])
+                    driver = self.safety_drivers[name] = drivers.SafetyDriver(self, self.bodies[name])
                 driver.step(dt)
-        self._moved()
+        self.moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         sumo, road, tow_of = self.sumo, self.road, self.tow_of
         # entities an override-mode ACC moves itself, after the others (below)
@@ -1533,8 +373,8 @@ class ScenarioEngine:
                 continue
             if body.external:
                 self._move_external(body, dt)
-                if sumo is not None and sumo.has(body.name):
-                    sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+                if sumo is not None:
+                    sumo.place(body)
                 continue
             if body.entity.driver == "sumo" or (tow_of and body.name in tow_of):
                 continue  # SUMO moves it, or its tow vehicle drags it (below)
@@ -1563,25 +403,12 @@ class ScenarioEngine:
                     body.x += distance * math.cos(body.heading)
                     body.y += distance * math.sin(body.heading)
                 body.odometer += abs(distance)
-            if sumo is not None and sumo.has(body.name):
-                sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+            if sumo is not None:
+                sumo.place(body)
         if self.trailer_of:
             self.align_trailers(pull=True)
         if self.sumo is not None:
-            self.sumo.step()
-            for body in self.bodies.values():
-                if body.entity.driver != "sumo" or body.gone or body.external:
-                    continue
-                state = self.sumo.read(body.name)
-                if state is None:
-                    body.gone = True
-                    body.speed = 0.0
-                    if body.end_of_road_since is None:
-                        body.end_of_road_since = now
-                    continue
-                body.odometer += math.hypot(state.x - body.x, state.y - body.y)
-                body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
-                self._locate(body)
+            self.sumo.step(self.bodies.values(), now, self.locate)
         if self.acc_drivers:
             self._step_drivers(self.acc_drivers.values(), dt, now)
         if self.natural_drivers:
@@ -1591,10 +418,10 @@ class ScenarioEngine:
                 if not follower.actor.gone and not follower.actor.external:
                     self.measure.clear()
                     follower.step(dt)
-            self._moved()
+            self.moved()
         if ghosts is not None:
             ghosts.end_step(dt)
-            self._moved()
+            self.moved()
         for body, speed0, heading0, px, py in previous:
             speed = body.speed
             body.acceleration = (speed - speed0) / dt
@@ -1614,19 +441,20 @@ class ScenarioEngine:
             # an action that moves its entity itself (a trajectory) ended while moving it: it ends in this
             # step, so conditions on its end see it at the next (as esmini)
             self.ended_in_move = False
-            for node in list({id(n): n for n in self.running.values()}.values()):
-                runtimes = node.runtime or []
-                if runtimes and all(r.done for r in runtimes):
-                    self._release(node)
-                    self._set(node, Transition.END, State.COMPLETE)
-            self._complete_elements()
+            self.story.end_finished_actions()
         self.time = now
         self.step_index += 1
-        self._moved()
+        self.moved()
         self._check_stop()
 
+    def _check_stop(self) -> bool:
+        if self.story.check_stop():
+            self.ended_by = "stopTrigger"
+            return True
+        return False
+
     def _step_drivers(
-        self, stepped: Iterable[extra_actions.AccDriver | drivers.NaturalDriver], dt: float, now: float
+        self, stepped: Iterable[drivers.AccDriver | drivers.NaturalDriver], dt: float, now: float
     ) -> None:
         """esmini steps these controllers after the default motion of every entity, each seeing the others
         where they are after this step. An ACC sets its entity's speed and, in override mode, moves it with
@@ -1643,7 +471,7 @@ class ScenarioEngine:
                 self._start_lane_change(driver)
             elif driver.override and not driver.virtual:
                 self._move_body(body, dt, now)
-        self._moved()
+        self.moved()
 
     def _start_lane_change(self, driver: drivers.NaturalDriver) -> None:
         """The lane change a NaturalDriver decided: sinusoidal, over its laneChangeDuration, to its target
@@ -1657,10 +485,7 @@ class ScenarioEngine:
             target=m.AbsoluteTargetLane(lane),
         )
         runtime = LaneChangeRuntime(self, body, change)
-        running = self.running.get((body.name, "lateral"))
-        if running is not None:
-            self._release(running)
-            self._set(running, Transition.STOP, State.COMPLETE)
+        self.story.stop_action_of(body.name, "lateral")
         self.init_runtimes = [
             r for r in self.init_runtimes if not (r.actor is body and r.domain == "lateral")
         ]
@@ -1689,8 +514,8 @@ class ScenarioEngine:
                 body.x += distance * math.cos(body.heading)
                 body.y += distance * math.sin(body.heading)
             body.odometer += abs(distance)
-        if self.sumo is not None and self.sumo.has(body.name):
-            self.sumo.place(body.name, body.x, body.y, body.heading, body.speed)
+        if self.sumo is not None:
+            self.sumo.place(body)
 
     def drive_externally(self, name: str) -> None:
         """Make `name` externally driven from now on (`spec.control.entities`), as if its external
@@ -1705,20 +530,6 @@ class ScenarioEngine:
         body.external = True
         body.mover = None
 
-    def _locate(self, body: Body) -> None:
-        """Road coordinates (road, lane, s, offset, direction, z) of a body moved in world coordinates."""
-        if self.road is None:
-            return
-        rc = None
-        if body.road_id is not None:
-            rc = self.road.world_to_road_near(body.x, body.y, body.road_id, body.s)
-        if rc is None:
-            rc = self.road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
-        if rc is not None:
-            body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
-            body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
-            body.z = self.road.road_to_world(rc.road_id, rc.s, rc.t).z
-
     def _move_external(self, body: Body, dt: float) -> None:
         """An entity its external controller drives: moved by the control input; without one (no system
         under test attached, as in a headless conformance run) it stands still, as in esmini."""
@@ -1728,9 +539,9 @@ class ScenarioEngine:
         x, y, heading, speed = self.external.move(body.entity, body.x, body.y, body.heading, body.speed, dt)
         body.odometer += math.hypot(x - body.x, y - body.y)
         body.x, body.y, body.heading, body.speed = x, y, heading, speed
-        self._locate(body)
+        self.locate(body)
 
-    def _moved(self) -> None:
+    def moved(self) -> None:
         """Bodies moved: the per-step caches of their states and of condition measurements are stale."""
         self._states.clear()
         self.measure.clear()
@@ -1776,60 +587,13 @@ class ScenarioEngine:
         return WorldFrame(step=self.step_index, time=self.time, entities=entities, ego=self.ego)
 
     @property
+    def started(self) -> bool:
+        """The storyboard runs (Init is over)."""
+        return self.root.state == State.RUNNING
+
+    @property
     def ended(self) -> bool:
         return self.ended_by is not None
-
-
-def _walk_lane(road: OpenDrive, road_id: str, lane_id: int, s: float) -> tuple[str, int, float]:
-    """A lane position past a road's end continued along the lane's successors (before its start, along
-    its predecessors)."""
-    for _ in range(32):
-        if road_id not in road.roads:
-            return road_id, lane_id, s
-        length = road.road_length(road_id)
-        if 0.0 <= s <= length:
-            return road_id, lane_id, s
-        direction = 1 if s > length else -1
-        nxt = road.successor(road_id, lane_id, direction)
-        if nxt is None:
-            return road_id, lane_id, s
-        over = s - length if direction > 0 else -s
-        road_id, lane_id, new_dir = nxt
-        s = over if new_dir > 0 else road.road_length(road_id) - over
-    return road_id, lane_id, s
-
-
-def _directional(body: Body, heading: float, direction: str) -> float:
-    """A body's velocity along (longitudinal) or across (lateral, + left) `heading`; vertical: none here."""
-    if direction == "vertical":
-        return 0.0
-    c, s = math.cos(heading), math.sin(heading)
-    vx, vy = body.vx, body.vy
-    return c * vx + s * vy if direction == "longitudinal" else -s * vx + c * vy
-
-
-def _box_center(body: Body) -> tuple[float, float]:
-    """Centre of a body's bounding box in the map frame."""
-    box = body.entity.box
-    c, s = math.cos(body.heading), math.sin(body.heading)
-    return body.x + c * box.center_x - s * box.center_y, body.y + s * box.center_x + c * box.center_y
-
-
-def _signal_starts(controllers: tuple[m.SignalController, ...]) -> dict[str, tuple[float, int]]:
-    """When each signal controller starts its first phase: its delay, counted from the start of the
-    controller it references (if any)."""
-    by_name = {c.name: c for c in controllers}
-    out: dict[str, tuple[float, int]] = {}
-    for ctrl in controllers:
-        start = 0.0
-        seen: set[str] = set()
-        current: m.SignalController | None = ctrl
-        while current is not None and current.name not in seen:
-            seen.add(current.name)
-            start += current.delay
-            current = by_name.get(current.reference) if current.reference else None
-        out[ctrl.name] = (start, 0)
-    return out
 
 
 def _added_later(scenario: m.Scenario) -> set[str]:
@@ -1851,4 +615,4 @@ def _default_ego(scenario: m.Scenario) -> str:
     return names[0]
 
 
-__all__ = ["ScenarioEngine", "SimulationError", "compare", "update_pose_from_road"]
+__all__ = ["ScenarioEngine", "SimulationError", "update_pose_from_road"]

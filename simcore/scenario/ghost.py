@@ -1,7 +1,7 @@
 """esmini's FollowGhostController: a ghost entity runs the scenario's actions ahead in time and the real
 entity follows the ghost's trail with a simple vehicle model.
 
-Semantics as esmini implements them (ScenarioEngine::SetupGhost, ControllerFollowGhost, vehicle::Vehicle):
+Semantics as esmini implements them (ScenarioWorld::SetupGhost, ControllerFollowGhost, vehicle::Vehicle):
 
 - the first entity given a FollowGhostController (ObjectController or an AssignControllerAction in Init) gets a
   ghost: a copy of it named ``<name>_ghost`` without a controller. It receives copies of the entity's Init
@@ -44,8 +44,8 @@ from simcore.scenario import model as m
 from simcore.scenario.drivers import Vehicle, put
 
 if TYPE_CHECKING:
-    from simcore.scenario.engine import ScenarioEngine
     from simcore.scenario.motion import Body
+    from simcore.scenario.world import ScenarioWorld
 
 FOLLOW_GHOST = "FollowGhostController"
 SAMPLE_TIME = 0.2  # s between trail samples (esmini's GHOST_TRAIL_SAMPLE_TIME)
@@ -409,11 +409,11 @@ class GhostFollower:
 class Ghosts:
     """The ghost of a scenario run: its trail, esmini's clock (the head start's restart), the follower."""
 
-    def __init__(self, engine: ScenarioEngine, setup: GhostSetup) -> None:
-        self.engine = engine
+    def __init__(self, world: ScenarioWorld, setup: GhostSetup) -> None:
+        self.world = world
         self.setup = setup
-        self.ghost = engine.bodies[setup.ghost]
-        self.entity = engine.bodies[setup.entity]
+        self.ghost = world.bodies[setup.ghost]
+        self.entity = world.bodies[setup.entity]
         self.trail = Trail()
         # esmini's simulation time, accumulated as esmini does (its samples depend on its rounding)
         self.clock = 0.0 - setup.headstart
@@ -428,7 +428,7 @@ class Ghosts:
         self.trail.sample(g.x, g.y, self.clock, g.speed)
 
     def activate(self, active: bool) -> None:
-        e = self.engine
+        e = self.world
         if active and self.follower is None:
             self.follower = GhostFollower(self.entity, dict(self.setup.properties), self.setup.headstart)
             e.log.append(f"t={e.time:.2f} {self.entity.name}: FollowGhost controller activated")
@@ -440,7 +440,7 @@ class Ghosts:
         """The entities default motion leaves alone this step: the follower's (moved by it), and during the
         head start every entity but the ghost."""
         if self.restarting:
-            return {name for name in self.engine.bodies if name not in self.names}
+            return {name for name in self.world.bodies if name not in self.names}
         return {self.entity.name} if self.follower is not None else set()
 
     def begin_step(self) -> None:
@@ -456,7 +456,7 @@ class Ghosts:
         follower = self.follower
         if follower is not None and not self.restarting and not self.entity.gone:
             follower.step(dt, self.trail, clock)
-            put(self.engine, self.entity, follower.vehicle)
+            put(self.world, self.entity, follower.vehicle)
         g = self.ghost
         if not g.gone:
             self.trail.sample(g.x, g.y, clock, g.speed)
@@ -470,7 +470,7 @@ class Ghosts:
         ghost.posed = None
         if self.clock > SMALL and not self.warned:
             self.warned = True
-            self.engine.warnings.append(
-                f"{self.engine.source}: the ghost of {e.name!r} is put back on it at "
+            self.world.warnings.append(
+                f"{self.world.source}: the ghost of {e.name!r} is put back on it at "
                 f"t={self.clock:.2f} s: esmini then restarts the ghost's head start (not modelled)"
             )

@@ -1,0 +1,199 @@
+"""Speed, lane change and teleport: the runtimes of the private actions nearly every scenario uses."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from simcore.errors import BadInput
+from simcore.scenario import model as m
+from simcore.scenario.motion import Body, lane_shift, shape_peak_rate_factor, shape_value
+from simcore.scenario.runtime import Instant, Runtime
+
+if TYPE_CHECKING:
+    from simcore.scenario.action_world import ActionWorld
+
+
+class SpeedRuntime(Runtime):
+    domain = "longitudinal"
+
+    def __init__(self, world: ActionWorld, actor: Body, action: m.SpeedAction) -> None:
+        super().__init__(world, actor)
+        self.action = action
+        self.v0 = 0.0
+        self.elapsed = 0.0
+        self.duration = 0.0
+
+    def target(self) -> float:
+        target = self.action.target
+        if isinstance(target, m.AbsoluteTargetSpeed):
+            return target.value
+        reference = self.world.body(target.entity).speed
+        return reference + target.value if target.value_type == "delta" else reference * target.value
+
+    def start(self) -> None:
+        self.v0 = self.actor.speed
+        dyn = self.action.dynamics
+        target = self.target()
+        dv = abs(target - self.v0)
+        if dyn.dimension == "rate":
+            # the rate is bounded by the vehicle's performance (as esmini does)
+            perf = self.actor.entity.performance
+            limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
+            rate = min(dyn.value, limit) if limit > 0 else dyn.value
+            self.duration = dv / rate * shape_peak_rate_factor(dyn.shape) if rate > 0 else 0.0
+        elif dyn.dimension == "distance":
+            # every shape is symmetric, so the mean speed over the transition is (v0 + v1) / 2: the
+            # transition covers `value` metres in this time (as esmini does)
+            mean = (abs(self.v0) + abs(target)) / 2
+            self.duration = dyn.value / mean if mean > 1e-9 else 0.0
+        else:
+            self.duration = dyn.value
+        if dyn.dimension != "rate" and dyn.shape != "step" and self.duration > 0 and dv > 0:
+            # the shape's peak acceleration stays within the vehicle's performance: the transition is
+            # stretched when it would exceed it (as esmini does)
+            perf = self.actor.entity.performance
+            limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
+            peak = dv / self.duration * shape_peak_rate_factor(dyn.shape)
+            if limit > 0 and peak > limit:
+                self.duration = dv * shape_peak_rate_factor(dyn.shape) / limit
+        if self.actor.entity.driver == "sumo":
+            # the SUMO driver reaches the desired speed with its own dynamics
+            self.world.sumo_set_speed(self.actor, self.target())
+            self.done = not self._continuous
+            return
+        if dyn.shape == "step" or self.duration <= 0:
+            self._set(self.target())
+            self.done = not self._continuous
+
+    @property
+    def _continuous(self) -> bool:
+        return isinstance(self.action.target, m.RelativeTargetSpeed) and self.action.target.continuous
+
+    def _set(self, speed: float, dt: float | None = None) -> None:
+        if dt:
+            # the vehicle's performance bounds the acceleration (as esmini does)
+            perf = self.actor.entity.performance
+            v = self.actor.speed
+            speed = min(max(speed, v - perf.max_deceleration * dt), v + perf.max_acceleration * dt)
+        self.actor.speed = speed
+
+    def step(self, dt: float) -> None:
+        if self.actor.entity.driver == "sumo":
+            self.world.sumo_set_speed(self.actor, self.target())
+            return
+        if self.done or (self.action.dynamics.shape == "step" and self._continuous):
+            # following a moving target: within the vehicle's performance (as esmini does)
+            self._set(self.target(), dt)
+            return
+        self.elapsed += dt
+        dyn = self.action.dynamics
+        progress = self.elapsed / max(self.duration, 1e-9)
+        target = self.target()
+        self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress), dt)
+        if progress >= 1.0 - 1e-9:
+            self._set(target, dt)
+            # bounded by the vehicle's performance, the target may be reached later than the shape says
+            self.done = not self._continuous and abs(self.actor.speed - target) < 1e-9
+
+    def start_in_init(self) -> bool:
+        """In Init, a step (or zero-time) change to a fixed target is the initial speed: reached at once; with a
+        transition shape the speed changes over time from the start, as in a story."""
+        dyn = self.action.dynamics
+        if (dyn.shape == "step" or dyn.value == 0) and not self._continuous:
+            self.actor.speed = self.target()
+            return True
+        return False
+
+
+class LaneChangeRuntime(Runtime):
+    domain = "lateral"
+
+    def __init__(self, world: ActionWorld, actor: Body, action: m.LaneChangeAction) -> None:
+        super().__init__(world, actor)
+        self.action = action
+        self.elapsed = 0.0
+        self.start_odometer = 0.0
+        self.offset0 = 0.0
+        self.offset1 = 0.0
+
+    def start(self) -> None:
+        actor = self.actor
+        road = self.world.road
+        if road is None or actor.road_id is None:
+            raise BadInput(
+                f"LaneChangeAction on {actor.name!r}, which is not on a road", file=self.world.source
+            )
+        target = self.action.target
+        try:
+            if isinstance(target, m.AbsoluteTargetLane):
+                lane = target.lane_id
+                if lane not in road.lane_ids(actor.road_id, actor.s):
+                    raise ValueError(f"lane {lane} does not exist on road {actor.road_id} at s={actor.s:.1f}")
+            else:
+                reference = self.world.body(target.entity)
+                base = reference.lane_id if reference.road_id == actor.road_id else actor.lane_id
+                lane = lane_shift(road, actor.road_id, actor.s, base, target.value, reference.direction)
+        except ValueError as exc:
+            raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source) from None
+        t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
+        centre = road.lane_center_t(actor.road_id, lane, actor.s)
+        actor.lane_id = lane
+        actor.offset = t_now - centre
+        self.offset0 = actor.offset
+        self.offset1 = self.action.target_lane_offset * actor.direction
+        self.start_odometer = actor.odometer
+        self.target_lane = lane
+        if actor.entity.driver == "sumo":
+            self.world.sumo_change_lane(actor, lane, self.action.dynamics.value)
+            self.done = True
+            return
+        if self.action.dynamics.shape == "step" or self.action.dynamics.value <= 0:
+            actor.offset = self.offset1
+            self.done = True
+
+    def step(self, dt: float) -> None:
+        if self.done:
+            return
+        # the lane change moves the entity at the speed it has now: a speed action stepped after it in the
+        # storyboard's order changes the speed from the next step on (as esmini)
+        self.actor.extra["move_speed"] = self.actor.speed
+        dyn = self.action.dynamics
+        self.elapsed += dt
+        if dyn.dimension == "distance":
+            progress = (self.actor.odometer - self.start_odometer + abs(self.actor.speed) * dt) / dyn.value
+        elif dyn.dimension == "rate":  # lateral rate in m/s: duration from the lateral distance
+            duration = abs(self.offset1 - self.offset0) / dyn.value * shape_peak_rate_factor(dyn.shape)
+            progress = self.elapsed / max(duration, 1e-9)
+        else:
+            progress = self.elapsed / dyn.value
+        new_offset = self.offset0 + (self.offset1 - self.offset0) * shape_value(dyn.shape, progress)
+        self.actor.lateral_velocity = (new_offset - self.actor.offset) / dt
+        self.actor.offset = new_offset
+        if progress >= 1.0 - 1e-9:
+            self.actor.offset = self.offset1
+            self.actor.lateral_velocity = 0.0
+            self.done = True
+
+
+class TeleportRuntime(Instant):
+    domain = "teleport"
+
+    def __init__(self, world: ActionWorld, actor: Body, action: m.TeleportAction) -> None:
+        super().__init__(world, actor)
+        self.action = action
+
+    def start(self) -> None:
+        self.done = True
+        ghosts = self.world.ghosts
+        if ghosts is not None and id(self.action) in ghosts.setup.teleports:
+            ghosts.teleport(self.actor)  # the ghost put on its entity (esmini's AddedGhostTeleport)
+            return
+        if self.actor.name in self.world.tow_of:
+            return  # a towed trailer goes where its tow vehicle takes it (as esmini)
+        self.world.place(self.actor, self.action.position)
+        if self.actor.name in self.world.trailer_of:
+            self.world.align_trailers(self.actor)
+        if self.world.started:
+            # teleported during the run: it stays where it was put for the rest of this step (as esmini)
+            self.actor.extra["teleported"] = 1.0
+        self.done = True

@@ -1,0 +1,249 @@
+"""Where OpenSCENARIO positions are: world poses of every position type (lane, road, relative, route,
+trajectory), routes through the road network, and the road coordinates of entities moved in world
+coordinates. Pure functions of the road network and the entities' state (`ScenarioWorld`)."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from simcore.errors import BadInput
+from simcore.scenario import model as m
+from simcore.scenario import paths
+from simcore.scenario.motion import lane_shift, wrap_angle
+from simcore.scenario.world import Pose
+
+if TYPE_CHECKING:
+    from simcore.scenario.motion import Body
+    from simcore.scenario.world import ScenarioWorld
+    from simcore.world.opendrive import OpenDrive, RoadCoordinates
+
+
+def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = None) -> Pose:
+    """World (x, y, z, heading) of a position."""
+    road = world.road
+
+    def need_road() -> OpenDrive:
+        if road is None:
+            raise BadInput(
+                f"{type(position).__name__} needs a road network (RoadNetwork/LogicFile)",
+                file=world.source,
+            )
+        return road
+
+    def orient(base: float, orientation: m.Orientation | None) -> float:
+        if orientation is None:
+            return base
+        return orientation.h if orientation.type == "absolute" else wrap_angle(base + orientation.h)
+
+    try:
+        if isinstance(position, m.WorldPosition):
+            z = position.z if position.z is not None else 0.0
+            return position.x, position.y, z, position.h if position.h is not None else 0.0
+        if isinstance(position, m.LanePosition):
+            r = need_road()
+            road_id, lane_id, s_on = walk_lane(r, position.road_id, position.lane_id, position.s)
+            if (road_id, lane_id, s_on) != (position.road_id, position.lane_id, position.s):
+                # beyond the road's ends: on along the lane's links (the position keeps its lane)
+                length = r.road_length(road_id)
+                if not 0.0 <= s_on <= length:
+                    message = (
+                        f"{position.source or world.source}: LanePosition: road {position.road_id} "
+                        f"s={position.s:g} lies beyond "
+                        f"the lanes' links: placed at the end of road {road_id}"
+                    )
+                    if message not in world.warnings:
+                        world.warnings.append(message)
+                    s_on = min(max(s_on, 0.0), length)
+                pose = r.lane_to_world(road_id, lane_id, s_on, position.offset)
+                return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
+            pose = r.lane_to_world(position.road_id, position.lane_id, position.s, position.offset)
+            # relative orientation is relative to the lane's driving direction (as esmini does)
+            backward = r.drives_backward(position.road_id, position.lane_id)
+            base = pose.heading + (math.pi if backward else 0.0)
+            return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
+        if isinstance(position, m.RoadPosition):
+            r = need_road()
+            pose = r.road_to_world(position.road_id, position.s, position.t)
+            return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
+        if isinstance(position, m.TrajectoryPosition):
+            base_pose = (0.0, 0.0, 0.0, 0.0)
+            if for_body is not None:
+                base_pose = (for_body.x, for_body.y, for_body.z, for_body.heading)
+            path = paths.sample(position.trajectory, world.resolve_position, base_pose)
+            x, y, z, h = path.at(position.s)
+            x -= position.t * math.sin(h)
+            y += position.t * math.cos(h)
+            return x, y, z, wrap_angle(orient(h, position.orientation))
+        if isinstance(position, m.RoutePosition):
+            if position.entity is not None:
+                ref = world.body(position.entity)
+                return ref.x, ref.y, ref.z, orient(ref.heading, position.orientation)
+            r = need_road()
+            assert position.route is not None
+            road_id, s_on, direction = route_point(world, position.route, position.path_s or 0.0)
+            if position.lane_id is not None:
+                pose = r.lane_to_world(road_id, position.lane_id, s_on, position.lane_offset)
+            else:
+                pose = r.road_to_world(road_id, s_on, position.t)
+            base = pose.heading + (math.pi if direction < 0 else 0.0)
+            return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
+        ref = world.body(position.entity)
+        if isinstance(position, m.RelativeWorldPosition):
+            return (
+                ref.x + position.dx,
+                ref.y + position.dy,
+                ref.z + position.dz,
+                orient(ref.heading, position.orientation),
+            )
+        if isinstance(position, m.RelativeObjectPosition):
+            c, s = math.cos(ref.heading), math.sin(ref.heading)
+            return (
+                ref.x + c * position.dx - s * position.dy,
+                ref.y + s * position.dx + c * position.dy,
+                ref.z + position.dz,
+                orient(ref.heading, position.orientation),
+            )
+        r = need_road()
+        if ref.road_id is None:
+            raise BadInput(
+                f"{type(position).__name__}: entity {ref.name!r} is not on a road", file=world.source
+            )
+        if isinstance(position, m.RelativeLanePosition):
+            s_new = ref.s + position.ds * ref.direction
+            lane = lane_shift(r, ref.road_id, s_new, ref.lane_id, position.d_lane, ref.direction)
+            pose = r.lane_to_world(ref.road_id, lane, s_new, position.offset * ref.direction)
+            base = pose.heading + (math.pi if ref.direction < 0 else 0.0)
+            return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
+        if isinstance(position, m.RelativeRoadPosition):
+            t_ref = r.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
+            pose = r.road_to_world(ref.road_id, ref.s + position.ds, t_ref + position.dt)
+            return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
+    except (KeyError, ValueError) as exc:
+        raise BadInput(f"{type(position).__name__}: {exc}", file=world.source) from None
+    raise BadInput(f"position {type(position).__name__} is not supported", file=world.source)
+
+
+def route_point(world: ScenarioWorld, route: m.Route, path_s: float) -> tuple[str, float, int]:
+    """(road, s, direction) `path_s` metres along a route from its first waypoint."""
+    road = world.road
+    assert road is not None
+    points = []
+    for waypoint in route.waypoints:
+        x, y, _, h = world.resolve_position(waypoint.position)
+        rc = road.world_to_road(x, y, None, road_hint=getattr(waypoint.position, "road_id", None))
+        if rc is None:
+            raise BadInput(f"route {route.name!r}: a waypoint is on no road", file=world.source)
+        points.append((rc, 1 if math.cos(h - rc.heading) >= 0 else -1))
+    first, direction = points[0]
+    legs: list[tuple[str, int]] = [(first.road_id, direction)]
+    for rc, _ in points[1:]:
+        leg = paths.plan(road, legs[-1], rc.road_id)
+        if leg is None:
+            raise BadInput(f"route {route.name!r}: no way to road {rc.road_id}", file=world.source)
+        legs.extend(leg[1:])
+    s_on = first.s
+    remaining = path_s
+    for i, (road_id, d) in enumerate(legs):
+        length = road.road_length(road_id)
+        if i > 0:
+            s_on = 0.0 if d > 0 else length
+        room = (length - s_on) if d > 0 else s_on
+        if remaining <= room or i == len(legs) - 1:
+            return road_id, min(max(s_on + d * remaining, 0.0), length), d
+        remaining -= room
+    return legs[-1][0], s_on, legs[-1][1]
+
+
+def plan_route(world: ScenarioWorld, body: Body, targets: list[m.Position]) -> list[tuple[str, int]]:
+    """The roads (id, direction) a body drives through to pass every target position in order."""
+    road = world.road
+    if road is None or body.road_id is None:
+        return []
+    state = (body.road_id, body.direction)
+    out: list[tuple[str, int]] = []
+    for position in targets:
+        x, y, _, _ = world.resolve_position(position)
+        hint = getattr(position, "road_id", None)
+        rc = road.world_to_road(x, y, None, road_hint=hint)
+        if rc is None:
+            continue
+        if state[0] == rc.road_id and not out:
+            continue
+        leg = paths.plan(road, state, rc.road_id)
+        if leg is None:
+            world.warnings.append(
+                f"{world.source}: route of {body.name!r}: no way found to road {rc.road_id}"
+            )
+            continue
+        out.extend(leg[1:])
+        state = leg[-1]
+    return out
+
+
+def fixed_point(world: ScenarioWorld, position: m.Position) -> Pose:
+    """World pose of a condition's position: computed once when it depends on no entity."""
+    if isinstance(position, m.WorldPosition | m.LanePosition | m.RoadPosition):
+        key = id(position)
+        cached = world.memo.get(("fixed_point", key))
+        if cached is None:
+            cached = world.memo[("fixed_point", key)] = (position, world.resolve_position(position))
+        return cached[1]
+    return world.resolve_position(position)
+
+
+def walk_lane(road: OpenDrive, road_id: str, lane_id: int, s: float) -> tuple[str, int, float]:
+    """A lane position past a road's end continued along the lane's successors (before its start, along
+    its predecessors)."""
+    for _ in range(32):
+        if road_id not in road.roads:
+            return road_id, lane_id, s
+        length = road.road_length(road_id)
+        if 0.0 <= s <= length:
+            return road_id, lane_id, s
+        direction = 1 if s > length else -1
+        nxt = road.successor(road_id, lane_id, direction)
+        if nxt is None:
+            return road_id, lane_id, s
+        over = s - length if direction > 0 else -s
+        road_id, lane_id, new_dir = nxt
+        s = over if new_dir > 0 else road.road_length(road_id) - over
+    return road_id, lane_id, s
+
+
+def _nearest_road_point(road: OpenDrive, body: Body) -> RoadCoordinates | None:
+    """The road point under a body: near its last road position first, else anywhere."""
+    rc = None
+    if body.road_id is not None:
+        rc = road.world_to_road_near(body.x, body.y, body.road_id, body.s)
+    if rc is None:
+        rc = road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
+    return rc
+
+
+def locate(road: OpenDrive | None, body: Body) -> None:
+    """Road coordinates (road, lane, s, offset, direction, z) of a body moved in world coordinates."""
+    if road is None:
+        return
+    rc = _nearest_road_point(road, body)
+    if rc is not None:
+        body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
+        body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
+        body.z = road.road_to_world(rc.road_id, rc.s, rc.t).z
+
+
+def track(road: OpenDrive | None, body: Body, lock_lane: bool = False) -> None:
+    """Road coordinates of a body moved freely (a trajectory): its lane, s and offset from x/y. With
+    `lock_lane` the body follows that lane afterwards, in the direction it is heading."""
+    if road is None:
+        return
+    rc = _nearest_road_point(road, body)
+    if rc is None:
+        body.road_id = None
+        return
+    body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
+    body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
+    body.heading_offset = 0.0
+    body.posed = None
+    if lock_lane:
+        body.lateral_velocity = 0.0
