@@ -20,22 +20,46 @@ from simcore.scenario import model as m
 from simcore.scenario.parameters import Declaration, ParameterError, ParamValue, convert, declare, resolve
 
 MAX_SCENARIO_BYTES = 32 * 1024 * 1024
+# Structure bounds checked while parsing, before anything else (the XSD check, the reader) walks the tree:
+# OpenSCENARIO elements have at most a dozen attributes and real scenarios nest a few dozen levels deep.
+MAX_XML_DEPTH = 256
+MAX_XML_ATTRIBUTES = 256  # on one element
+MAX_XML_ELEMENTS = 1_000_000
 T = TypeVar("T")
 
 
-class _LineBuilder(ET.TreeBuilder):
-    """A tree builder that remembers the source line of every element (for warnings and errors)."""
+class XmlLimitExceeded(Exception):
+    """The XML is deeper, wider or larger than MAX_XML_*: raised by the builder, reported as BadInput."""
 
-    def __init__(self, lines: dict[int, int]) -> None:
+
+class _LineBuilder(ET.TreeBuilder):
+    """A tree builder that enforces the structure bounds and (with `lines`) remembers the source line of every
+    element (for warnings and errors)."""
+
+    def __init__(self, lines: dict[int, int] | None) -> None:
         super().__init__()
         self.lines = lines
         self.parser: Any = None
+        self.depth = 0
+        self.elements = 0
 
     def start(self, tag: Any, attrs: Any) -> ET.Element:
+        self.depth += 1
+        self.elements += 1
+        if self.depth > MAX_XML_DEPTH:
+            raise XmlLimitExceeded(f"elements nested more than {MAX_XML_DEPTH} deep")
+        if len(attrs) > MAX_XML_ATTRIBUTES:
+            raise XmlLimitExceeded(f"an element with {len(attrs)} attributes (at most {MAX_XML_ATTRIBUTES})")
+        if self.elements > MAX_XML_ELEMENTS:
+            raise XmlLimitExceeded(f"more than {MAX_XML_ELEMENTS} elements")
         element = super().start(tag, attrs)
-        if self.parser is not None:
+        if self.parser is not None and self.lines is not None:
             self.lines[id(element)] = int(self.parser.parser.CurrentLineNumber)
         return element
+
+    def end(self, tag: Any) -> ET.Element:
+        self.depth -= 1
+        return super().end(tag)
 
 
 def read_xml(
@@ -49,14 +73,15 @@ def read_xml(
     if size > max_bytes:
         raise BadInput(f"{what} is {size} bytes; at most {max_bytes} are allowed", file=str(path))
     try:
-        if lines is None:
-            return SafeET.parse(str(path)).getroot()
         builder = _LineBuilder(lines)
         parser = SafeET.DefusedXMLParser(target=builder)
         builder.parser = parser
         parser.feed(path.read_bytes())
         root: ET.Element = parser.close()
         return root
+    except XmlLimitExceeded as exc:
+        line = builder.parser.parser.CurrentLineNumber if builder.parser is not None else "?"
+        raise BadInput(f"{what} is too complex at line {line}: {exc}", file=str(path)) from None
     except DefusedXmlException as exc:
         raise BadInput(
             f"{what} uses forbidden XML constructs ({type(exc).__name__})", file=str(path)
