@@ -13,6 +13,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
+from rich.text import Text
 
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
 
@@ -30,8 +31,14 @@ console = Console(stderr=True)
 out = Console()
 
 
+def _line(label: str, style: str, text: object) -> Text:
+    """`label text` with the label styled and the text literal: file names, entity names and messages are
+    user-controlled, so never read as rich markup (`[/x]`) or emoji codes (`:100:`)."""
+    return Text.assemble((label, style), " ", str(text))
+
+
 def _fail(exc: CarlosError) -> typer.Exit:
-    console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+    console.print(_line("error:", "bold red", exc), highlight=False, soft_wrap=True)
     return typer.Exit(int(exc.exit_code))
 
 
@@ -195,20 +202,20 @@ def run(
             if summary["status"] == "error" and bus is not None and not progress.live.is_started:
                 # one run with other processes on its topics: say why it failed (a controller died, …)
                 console.print(
-                    f"index {summary['index']}: {summary['error']}", highlight=False, soft_wrap=True
+                    Text(f"index {summary['index']}: {summary['error']}"), highlight=False, soft_wrap=True
                 )
                 return
             if quiet or not progress.live.is_started:
                 return
             if summary["status"] == "error":
                 progress.console.print(
-                    f"[red]index {summary['index']} ({summary['scenario']}): {summary['error']}[/]",
+                    Text(f"index {summary['index']} ({summary['scenario']}): {summary['error']}", "red"),
                     highlight=False,
                 )
 
         def on_retry(i: int, attempt: int, reason: str) -> None:
             progress.console.print(
-                f"[yellow]index {i}: attempt {attempt} failed ({reason}); retrying[/]", highlight=False
+                Text(f"index {i}: attempt {attempt} failed ({reason}); retrying", "yellow"), highlight=False
             )
 
         with progress:
@@ -349,8 +356,11 @@ def _print_report(report: object) -> None:
     status = summary["status"]
     colour = "green" if status == "passed" else "red"
     out.print(
-        f"[bold {colour}]{status}[/] · {summary['counts']['total']} runs in {report.wall_seconds:.1f} s "
-        f"({report.skipped} resumed) · results: {report.output_url}",
+        Text.assemble(
+            (status, f"bold {colour}"),
+            f" · {summary['counts']['total']} runs in {report.wall_seconds:.1f} s "
+            f"({report.skipped} resumed) · results: {report.output_url}",
+        ),
         highlight=False,
         soft_wrap=True,
     )
@@ -399,7 +409,12 @@ def validate(
         raise typer.Exit(int(ExitCode.BAD_INPUT))
     plan = Plan(simulation_run.spec)
     out.print(
-        f"{manifest}: valid · {len(plan)} runs ({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})"
+        Text(
+            f"{manifest}: valid · {len(plan)} runs "
+            f"({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})"
+        ),
+        highlight=False,
+        soft_wrap=True,
     )
 
 
@@ -412,13 +427,13 @@ def _check_schemas(paths: list[Path]) -> int:
         try:
             report = check_openscenario(path)
         except CarlosError as exc:
-            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            console.print(_line("error:", "bold red", exc), highlight=False, soft_wrap=True)
             invalid += 1
             continue
         note = f" ({report.note})" if report.note else ""
         if report.valid:
             out.print(
-                f"{path}: valid against OpenSCENARIO {report.version} XSD{note}",
+                Text(f"{path}: valid against OpenSCENARIO {report.version} XSD{note}"),
                 highlight=False,
                 soft_wrap=True,
             )
@@ -426,8 +441,10 @@ def _check_schemas(paths: list[Path]) -> int:
         invalid += 1
         more = " (first ones)" if report.truncated else ""
         console.print(
-            f"[bold red]{path}[/]: {len(report.issues)} violation(s){more} of the OpenSCENARIO "
-            f"{report.version} XSD{note}",
+            Text.assemble(
+                (str(path), "bold red"),
+                f": {len(report.issues)} violation(s){more} of the OpenSCENARIO {report.version} XSD{note}",
+            ),
             highlight=False,
             soft_wrap=True,
         )
@@ -467,7 +484,7 @@ def plan(
         except IndexError as exc:
             raise _fail(BadInput(str(exc), field="--index")) from None
         table.add_row(
-            str(i), point.scenario.name, describe(point.sweep_values) or "(defaults)", str(point.seed)
+            str(i), point.scenario.name, Text(describe(point.sweep_values) or "(defaults)"), str(point.seed)
         )
     out.print(table)
 
@@ -587,7 +604,7 @@ def main() -> None:
     try:
         app()
     except CarlosError as exc:  # a last guard: never a traceback for our own errors
-        console.print(f"[bold red]error:[/] {exc}", highlight=False)
+        console.print(_line("error:", "bold red", exc), highlight=False, soft_wrap=True)
         sys.exit(int(exc.exit_code))
 
 

@@ -30,6 +30,7 @@ API_VERSION = "v1alpha1"
 KIND = "SimulationRun"
 
 _DNS_LABEL = re.compile(r"^[a-z0-9]([-a-z0-9]*[a-z0-9])?$")
+_DNS_PREFIX = re.compile(r"^[a-z0-9][-a-z0-9]*$")
 _PARAM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -44,11 +45,40 @@ class Model(BaseModel):
         validate_default=True,
     )
 
+    @model_validator(mode="before")
+    @classmethod
+    def _no_booleans_as_numbers(cls, data: Any) -> Any:
+        """YAML's true/false are not numbers: `stepSeconds: true` is refused instead of becoming 1.0."""
+        if isinstance(data, dict):
+            for name, field in cls.model_fields.items():
+                key = field.alias or name
+                value = data.get(key, data.get(name))
+                if isinstance(value, bool) and _is_number_type(field.annotation):
+                    raise ValueError(f"{key}: {str(value).lower()} is a boolean, not a number")
+        return data
+
+
+def _is_number_type(annotation: Any) -> bool:
+    """float, int, or one of them or None."""
+    if annotation in (float, int):
+        return True
+    arguments = getattr(annotation, "__args__", ())
+    return bool(arguments) and all(a in (float, int, type(None)) for a in arguments)
+
+
+def _dns_prefix(value: str) -> str:
+    if len(value) > 58 or not _DNS_PREFIX.match(value):
+        raise ValueError(
+            f"{value[:80]!r} is not a name prefix: use at most 58 lowercase letters, digits and '-', "
+            "starting with a letter or digit"
+        )
+    return value
+
 
 def _dns_label(value: str) -> str:
     if len(value) > 63 or not _DNS_LABEL.match(value):
         raise ValueError(
-            f"{value!r} is not a DNS-1123 label: use at most 63 lowercase letters, digits and '-', "
+            f"{value[:80]!r} is not a DNS-1123 label: use at most 63 lowercase letters, digits and '-', "
             "starting and ending with a letter or digit"
         )
     return value
@@ -76,7 +106,7 @@ class ObjectMeta(BaseModel):
     name: DnsLabel | None = Field(
         None, description="Name of the run; the results go under `<output>/<name>/`."
     )
-    generate_name: str | None = Field(
+    generate_name: Annotated[str, AfterValidator(_dns_prefix)] | None = Field(
         None, description="Prefix for a generated name (GitOps: a changed spec is a new run)."
     )
     namespace: str | None = Field(None, description="Namespace of the resource (cluster only).")

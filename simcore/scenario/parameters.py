@@ -15,6 +15,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from simcore.errors import shorten
+
 _REFERENCE = re.compile(r"^\$([A-Za-z_][A-Za-z0-9_]*)$")
 _EXPRESSION = re.compile(r"^\$\{(.*)\}$", re.DOTALL)
 _PARAM_IN_EXPR = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
@@ -31,14 +33,7 @@ class ParameterError(ValueError):
 # computing a number with billions of digits.
 MAX_EXPRESSION_CHARS = 1000
 MAX_INTEGER = 2**63
-MAX_SHOWN_CHARS = 80
-
-
-def shorten(text: str, limit: int = MAX_SHOWN_CHARS) -> str:
-    """Untrusted text cut to `limit` characters for an error message (with how much was left out)."""
-    if len(text) <= limit:
-        return text
-    return f"{text[:limit]}… ({len(text)} characters)"
+SHOWN_EXPRESSION_CHARS = 80
 
 
 def _in_range(value: Any) -> Any:
@@ -152,7 +147,7 @@ def format_value(value: ParamValue) -> str:
 def evaluate_expression(text: str, values: Mapping[str, ParamValue]) -> ParamValue:
     """Evaluate the inside of `${…}` with parameter values."""
 
-    shown = shorten(text)
+    shown = shorten(text, SHOWN_EXPRESSION_CHARS)
     if len(text) > MAX_EXPRESSION_CHARS:
         raise ParameterError(
             f"expression ${{{shown}}} is longer than {MAX_EXPRESSION_CHARS} characters: split it up"
