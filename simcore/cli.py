@@ -294,16 +294,18 @@ def _local_scenarios(simulation_run: object, manifest: Path) -> list[tuple[int, 
 def _preflight(simulation_run: object, manifest: Path) -> None:
     """Check what can be checked before any worker starts, so a typo fails at once with exit code 2: every
     local scenario file parses with the first permutation's parameters (all matrix, spec and scenario
-    parameter names declared, every element supported) and its road network file exists."""
+    parameter names declared, every manifest value of the declared type, every element supported) and its
+    road network file is one and parses safely (simcore.preflight)."""
     from simcore.plan import Plan
-    from simcore.scenario.xosc import declared_parameters, load_scenario
+    from simcore.preflight import check_parameter_types, check_road_file
+    from simcore.scenario.xosc import load_scenario, parameter_declarations
     from simcore.spec import SimulationRun
 
     assert isinstance(simulation_run, SimulationRun)
     spec = simulation_run.spec
     plan = Plan(spec)
     for position, scenario, path in _local_scenarios(simulation_run, manifest):
-        declared = declared_parameters(path)
+        declared = parameter_declarations(path)
         names = {**spec.parameters, **scenario.parameters, **spec.sweep.matrix}
         unknown = sorted(set(names) - set(declared))
         if unknown:
@@ -320,13 +322,10 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
                 file=str(manifest),
                 field=where,
             )
+        check_parameter_types(spec, position, declared, source=str(manifest))
         parsed = load_scenario(path, plan[plan.indexes_of(scenario.name).start].parameters)
-        if parsed.road_file is not None and not parsed.road_file.is_file():
-            raise BadInput(
-                f"road network {str(parsed.road_file)!r} not found",
-                file=str(path),
-                field="RoadNetwork/LogicFile",
-            )
+        if parsed.road_file is not None:
+            check_road_file(parsed.road_file, scenario_file=str(path))
 
 
 def _print_report(report: object) -> None:

@@ -83,3 +83,114 @@ def test_user_text_is_printed_literally(tmp_path: Path, name: str) -> None:
     code, stderr = _validate(tmp_path, text.replace("../maps/", str(ROOT / "examples" / "maps") + "/"))
     assert code == 2
     assert f"entity '{name}' is not declared" in stderr
+
+
+def _scenario_with(tmp_path: Path, old: str, new: str) -> Path:
+    scenario = tmp_path / "s.xosc"
+    text = BRAKING.read_text().replace("../maps/", str(ROOT / "examples" / "maps") + "/")
+    assert old in text
+    scenario.write_text(text.replace(old, new))
+    return scenario
+
+
+def _run_manifest(scenario: Path, extra: str = "") -> str:
+    return (
+        HEAD + f"metadata: {{name: t}}\nspec:\n  scenarios: [{{name: a, openscenario: {scenario}}}]\n" + extra
+    )
+
+
+@pytest.mark.parametrize(
+    ("extra", "expected"),
+    [
+        (
+            "  sweep: {matrix: {Gap: [40, 30, abc]}}\n",
+            "m.yaml: spec.sweep.matrix.Gap[2]: parameter 'Gap' (double): could not convert",
+        ),
+        (
+            "  parameters: {Speed: true}\n",
+            "m.yaml: spec.parameters.Speed: parameter 'Speed' (double): a boolean is not a number",
+        ),
+    ],
+)
+def test_parameter_type_errors_name_the_manifest_field(tmp_path: Path, extra: str, expected: str) -> None:
+    code, stderr = _validate(tmp_path, _run_manifest(BRAKING, extra))
+    assert code == 2
+    assert expected in stderr.replace(str(tmp_path) + "/", "")
+
+
+def test_an_undeclared_entity_in_a_condition_is_caught_by_validate(tmp_path: Path) -> None:
+    text = BRAKING.read_text()
+    # the first entityRef inside the Storyboard's Story (a condition or action), not Init's
+    story = text.index("<Story ")
+    ref = text.index('entityRef="', story)
+    end = text.index('"', ref + len('entityRef="'))
+    scenario = tmp_path / "s.xosc"
+    scenario.write_text(
+        (text[: ref + len('entityRef="')] + "Nobody" + text[end:]).replace(
+            "../maps/", str(ROOT / "examples" / "maps") + "/"
+        )
+    )
+    code, stderr = _validate(tmp_path, _run_manifest(scenario))
+    assert code == 2
+    assert "s.xosc: Story[" in stderr and "entity 'Nobody' is not declared in <Entities>" in stderr
+
+
+@pytest.mark.parametrize(
+    ("road", "content", "expected"),
+    [
+        (
+            "xxe.xodr",
+            '<?xml version="1.0"?><!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]><OpenDRIVE>&x;</OpenDRIVE>',
+            "xxe.xodr: unsafe XML rejected",
+        ),
+        (
+            "laughs.xodr",
+            '<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaa"><!ENTITY b "&a;&a;&a;">]><OpenDRIVE>&b;</OpenDRIVE>',
+            "laughs.xodr: unsafe XML rejected",
+        ),
+        (
+            "bomb.net.xml",
+            '<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaa"><!ENTITY b "&a;&a;&a;">]><net>&b;</net>',
+            "bomb.net.xml: SUMO network uses forbidden XML constructs",
+        ),
+        ("many.xodr", "<OpenDRIVE>" + "<geometry/>" * 100_001 + "</OpenDRIVE>", "100001 <geometry> records"),
+        ("../../../../../../../../etc/passwd", None, "is neither OpenDRIVE (.xodr) nor SUMO (.net.xml)"),
+        ("broken.xodr", "<OpenDRIVE><road>", "broken.xodr: not well-formed XML"),
+    ],
+    ids=["xxe", "billion-laughs", "net-xml-entities", "geometries", "passwd", "broken"],
+)
+def test_road_files_are_untrusted_input(
+    tmp_path: Path, road: str, content: str | None, expected: str
+) -> None:
+    if content is not None:
+        (tmp_path / road).write_text(content)
+    scenario = _scenario_with(tmp_path, str(ROOT / "examples" / "maps" / "highway.xodr"), road)
+    scenario.write_text(scenario.read_text().replace(f'"{road}"', f'"{tmp_path / road}"'))
+    code, stderr = _validate(tmp_path, _run_manifest(scenario))
+    assert code == 2, stderr
+    assert expected in stderr
+    assert len(stderr.splitlines()) == 1
+
+
+def test_a_parameter_road_path_gets_the_bucket_check(tmp_path: Path) -> None:
+    from simcore.errors import BadInput
+    from simcore.runner import _fetch_from_s3
+    from simcore.store import FileStore
+
+    bucket = tmp_path / "bucket"
+    (bucket / "scenarios").mkdir(parents=True)
+    text = BRAKING.read_text().replace('filepath="../maps/highway.xodr"', 'filepath="$Road"')
+    text = text.replace(
+        "<ParameterDeclarations>",
+        '<ParameterDeclarations><ParameterDeclaration name="Road" parameterType="string" value="x.xodr"/>',
+        1,
+    )
+    (bucket / "scenarios" / "s.xosc").write_text(text)
+    with pytest.raises(BadInput, match=r"road file '\.\./\.\./etc/passwd' lies outside the bucket"):
+        _fetch_from_s3(
+            "s3://b/scenarios/s.xosc",
+            tmp_path / "scratch",
+            lambda url: FileStore(bucket),
+            "f",
+            {"Road": "../../etc/passwd"},
+        )

@@ -6,6 +6,7 @@ size, and every problem raised as `BadInput` naming the file and the element pat
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping
@@ -337,6 +338,20 @@ def declared_parameters(path: str | Path) -> dict[str, str]:
     return {d.get("name", ""): d.get("value", "") for d in block.findall("ParameterDeclaration")}
 
 
+def parameter_declarations(path: str | Path) -> dict[str, Declaration]:
+    """The scenario's top-level parameter declarations by name (type and default as written)."""
+    root = read_xml(Path(path), what="OpenSCENARIO file")
+    block = root.find("ParameterDeclarations")
+    if block is None:
+        return {}
+    return {
+        d.get("name", ""): Declaration(
+            d.get("name", ""), d.get("parameterType", "string"), d.get("value", "")
+        )
+        for d in block.findall("ParameterDeclaration")
+    }
+
+
 def _declared_names(root: ET.Element) -> set[str]:
     block = root.find("ParameterDeclarations")
     if block is None:
@@ -359,6 +374,37 @@ def _check_references(scenario: m.Scenario, names: set[str]) -> None:
             for group in act.groups:
                 for actor in group.actors:
                     check(actor, f"Story[{story.name}]/Act[{act.name}]/ManeuverGroup[{group.name}]/Actors")
+    for story in scenario.stories:
+        for owner, name in _entity_references(story):
+            check(name, f"Story[{story.name}]: {owner}")
+    if scenario.stop_trigger is not None:
+        for owner, name in _entity_references(scenario.stop_trigger):
+            check(name, f"StopTrigger: {owner}")
+
+
+_ENTITY_FIELDS = ("entity", "entities", "triggering_entities", "actors")
+
+
+def _entity_references(root: object) -> list[tuple[str, str]]:
+    """(dataclass name, entity name) of every entity reference under a model object: the fields named in
+    _ENTITY_FIELDS of every dataclass (conditions, actions, positions), found without recursion."""
+    found: list[tuple[str, str]] = []
+    stack: list[object] = [root]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, tuple | list):
+            stack.extend(item)
+            continue
+        if not dataclasses.is_dataclass(item) or isinstance(item, type):
+            continue
+        for f in dataclasses.fields(item):
+            value = getattr(item, f.name)
+            if f.name in _ENTITY_FIELDS:
+                names = value if isinstance(value, tuple | list) else (value,)
+                found.extend((type(item).__name__, n) for n in names if isinstance(n, str) and n)
+            elif dataclasses.is_dataclass(value) or isinstance(value, tuple | list):
+                stack.append(value)
+    return found
 
 
 # --- catalogs and entities --------------------------------------------------------------------------------
