@@ -13,6 +13,7 @@ import json
 import multiprocessing as mp
 import os
 import queue
+import shutil
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -25,10 +26,11 @@ import yaml
 
 from simcore.errors import BadInput, ExitCode
 from simcore.evaluation.report import junit_xml, run_summary
+from simcore.lifetime import die_with_parent, make_scratch_root
 from simcore.plan import Plan
 from simcore.runner import RunOutcome, error_outcome, run_index, summary_bytes
 from simcore.spec import ScenarioRef, SimulationRun
-from simcore.store import Store, open_store
+from simcore.store import Store, StoreError, open_store
 from simcore.transport.bus import Bus
 
 _progress_queue: Any = None
@@ -43,14 +45,16 @@ class Settings:
     output_url: str
     endpoint: str | None
     region: str | None
+    scratch_root: Path | None = None  # the workers' scratch folders go here (simcore.lifetime)
 
 
 def make_store(url: str, settings: Settings) -> Store:
     return open_store(url, endpoint=settings.endpoint, region=settings.region)
 
 
-def _init_worker(progress: Any) -> None:
+def _init_worker(progress: Any, parent_pid: int) -> None:
     global _progress_queue
+    die_with_parent(parent_pid)
     _progress_queue = progress
 
 
@@ -60,8 +64,10 @@ def _report(index: int, sim_time: float) -> None:
 
 
 def _work(settings: Settings, index: int, attempt: int, final_attempt: bool) -> RunOutcome:
-    store = make_store(settings.output_url, settings)
+    """One index in a worker. The object store failing beyond its retries (StoreError) is not this index's
+    fault: it reaches the executor, which stops the run (exit code 3) keeping every finished index."""
     try:
+        store = make_store(settings.output_url, settings)
         return run_index(
             settings.run,
             index,
@@ -71,8 +77,11 @@ def _work(settings: Settings, index: int, attempt: int, final_attempt: bool) -> 
             attempt=attempt,
             final_attempt=final_attempt,
             progress=_report,
+            scratch_root=settings.scratch_root,
         )
-    except Exception as exc:  # object store failures: an infrastructure error of this index
+    except StoreError:
+        raise
+    except Exception as exc:  # anything else: an infrastructure error of this index
         return error_outcome(settings.run, index, attempt, f"{type(exc).__name__}: {exc}")
 
 
@@ -101,6 +110,12 @@ class RunReport:
         return int(self.summary["exitCode"])
 
 
+def kept_on_resume(summary: dict[str, Any]) -> bool:
+    """Whether a finished index's summary stands when the same run is invoked again: a pass or a test failure
+    does (rerunning cannot change it); an error (a crash, an outage, attempts used up) is run again."""
+    return summary.get("status") in ("passed", "failed")
+
+
 def _dump_spec(run: SimulationRun) -> bytes:
     return yaml.safe_dump(
         run.model_dump(mode="json", by_alias=True, exclude_none=True), sort_keys=False
@@ -119,7 +134,8 @@ def execute(
     bus: Bus | None = None,
 ) -> RunReport:
     """Run every index (or `indexes`) of `run`; returns the run-level report. Resumes by default: an index
-    whose summary.json is already in the output (from an interrupted invocation of the same spec) is kept.
+    whose summary.json is already in the output (from an interrupted invocation of the same spec) is kept
+    when it passed or failed; one that ended in an error runs again.
     With `bus` (a live view), the runs go one after another in this process and publish on it."""
     events = events or Events()
     spec = run.spec
@@ -147,7 +163,9 @@ def execute(
         for index in wanted:
             key = f"{name}/{index}/summary.json"
             if store.exists(key):
-                previous[index] = json.loads(store.get_bytes(key))
+                kept = json.loads(store.get_bytes(key))
+                if kept_on_resume(kept):
+                    previous[index] = kept
     store.put_bytes(f"{name}/run.yaml", spec_bytes)
     todo = [i for i in wanted if i not in previous]
     events.on_start(len(wanted), len(previous))
@@ -159,11 +177,49 @@ def execute(
     pending = list(todo)
     if bus is not None:
         _in_process(settings, store, pending, attempts, max_attempts, outcomes, events, bus)
+    if pending:
+        settings.scratch_root = make_scratch_root()
+        try:
+            _in_pool(settings, store, pending, attempts, max_attempts, outcomes, events, workers)
+        finally:
+            shutil.rmtree(settings.scratch_root, ignore_errors=True)
+    summary = run_summary(name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted))
+    summary["outputUrl"] = store.url_for(name)
+    store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
+    store.put_bytes(f"{name}/summary.json", summary_bytes(summary))
+    return RunReport(
+        run_name=name,
+        output_url=store.url_for(name),
+        summary=summary,
+        outcomes=outcomes,
+        skipped=len(previous),
+        wall_seconds=time.monotonic() - started,
+        optional_scenarios=[s for s in spec.scenarios if s.optional],
+    )
+
+
+def _in_pool(
+    settings: Settings,
+    store: Store,
+    pending: list[int],
+    attempts: dict[int, int],
+    max_attempts: int,
+    outcomes: dict[int, dict[str, Any]],
+    events: Events,
+    workers: int,
+) -> None:
+    """Run the pending indexes on worker processes (a crashed pool is rebuilt, its indexes retried). The
+    object store failing beyond its retries in a worker stops the run: no new index starts, the ones in
+    flight end, and the StoreError is raised (exit code 3; finished indexes stay in the store)."""
     context = mp.get_context("spawn")
     progress: Any = context.Queue()
-    while pending:
+    outage: StoreError | None = None
+    while pending and outage is None:
         with ProcessPoolExecutor(
-            max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(progress,)
+            max_workers=workers,
+            mp_context=context,
+            initializer=_init_worker,
+            initargs=(progress, os.getpid()),
         ) as pool:
             in_flight: dict[Future[RunOutcome], int] = {}
             broken = False
@@ -175,6 +231,10 @@ def execute(
                     index = in_flight.pop(future)
                     try:
                         outcome = future.result()
+                    except StoreError as exc:
+                        outage = outage or exc
+                        pending.clear()
+                        continue
                     except BrokenProcessPool:
                         broken = True
                         _crashed(index, attempts, max_attempts, pending, outcomes, settings, store, events)
@@ -192,19 +252,8 @@ def execute(
                     break
                 _submit(pool, settings, pending, in_flight, attempts, max_attempts, workers * 2)
     _drain(progress, events)
-    summary = run_summary(name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted))
-    summary["outputUrl"] = store.url_for(name)
-    store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
-    store.put_bytes(f"{name}/summary.json", summary_bytes(summary))
-    return RunReport(
-        run_name=name,
-        output_url=store.url_for(name),
-        summary=summary,
-        outcomes=outcomes,
-        skipped=len(previous),
-        wall_seconds=time.monotonic() - started,
-        optional_scenarios=[s for s in spec.scenarios if s.optional],
-    )
+    if outage is not None:
+        raise outage
 
 
 def _in_process(

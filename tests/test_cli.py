@@ -188,11 +188,12 @@ def test_an_index_that_errors_does_not_stop_the_sweep_and_resume_keeps_results(t
     assert bad["status"] == "error" and "-9" in bad["error"]
     assert bad["attempts"] == 1  # bad input is never retried
     assert "error" in (out / "t" / "1" / "log.txt").read_text()
-    # a second invocation resumes: nothing is rerun, the results stay
+    # a second invocation resumes: the passed index is kept, the errored one runs again
     before = (out / "t" / "0" / "recording.mcap").stat().st_mtime_ns
     again = carlos("run", manifest, "--output", f"file://{out}")
-    assert "2 of 2 runs already complete" in again.stderr + again.stdout
+    assert "1 of 2 runs already complete" in again.stderr + again.stdout
     assert (out / "t" / "0" / "recording.mcap").stat().st_mtime_ns == before
+    assert json.loads((out / "t" / "1" / "summary.json").read_text())["status"] == "error"
     # a changed spec under the same name is refused instead of mixing results
     manifest.write_text(manifest.read_text().replace("maxSeconds: 8", "maxSeconds: 9"))
     changed = carlos("run", manifest, "--output", f"file://{out}")
