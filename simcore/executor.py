@@ -116,6 +116,10 @@ def kept_on_resume(summary: dict[str, Any]) -> bool:
     return summary.get("status") in ("passed", "failed")
 
 
+def _exit_code_of(summary: dict[str, Any]) -> ExitCode:
+    return ExitCode.PASSED if summary.get("status") == "passed" else ExitCode.FAILED
+
+
 def _dump_spec(run: SimulationRun) -> bytes:
     return yaml.safe_dump(
         run.model_dump(mode="json", by_alias=True, exclude_none=True), sort_keys=False
@@ -328,6 +332,14 @@ def _crashed(
     events: Events,
 ) -> None:
     """An index whose worker process died: retry it, or record it as an error when out of attempts."""
+    key = f"{settings.run.name}/{index}/summary.json"
+    if store.exists(key):
+        written = json.loads(store.get_bytes(key))
+        if kept_on_resume(written) and written.get("attempts") == attempts[index]:
+            # the worker finished this attempt (its summary is written last) and died before reporting it
+            outcomes[index] = written
+            events.on_done(RunOutcome(index=index, summary=written, exit_code=_exit_code_of(written)))
+            return
     reason = "the worker process died (crash in the simulator)"
     if attempts[index] < max_attempts:
         events.on_retry(index, attempts[index], reason)
