@@ -15,7 +15,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
-from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
+from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError, shorten
 
 if TYPE_CHECKING:
     from simcore.transport.bus import Bus
@@ -296,12 +296,22 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
     local scenario file parses with the first permutation's parameters (all matrix, spec and scenario
     parameter names declared, every manifest value of the declared type, every element supported) and its
     road network file is one and parses safely (simcore.preflight)."""
-    from simcore.plan import Plan
-    from simcore.preflight import check_parameter_types, check_road_file
-    from simcore.scenario.xosc import load_scenario, parameter_declarations
     from simcore.spec import SimulationRun
 
     assert isinstance(simulation_run, SimulationRun)
+    try:
+        _preflight_scenarios(simulation_run, manifest)
+    except OSError as exc:  # a path the file system refuses (too long, a loop, no permission)
+        raise BadInput(
+            f"cannot read {shorten(str(exc.filename))!r}: {exc.strerror or exc}", file=str(manifest)
+        ) from None
+
+
+def _preflight_scenarios(simulation_run: Any, manifest: Path) -> None:
+    from simcore.plan import Plan
+    from simcore.preflight import check_parameter_types, check_road_file
+    from simcore.scenario.xosc import load_scenario, parameter_declarations
+
     spec = simulation_run.spec
     plan = Plan(spec)
     for position, scenario, path in _local_scenarios(simulation_run, manifest):

@@ -194,3 +194,20 @@ def test_a_parameter_road_path_gets_the_bucket_check(tmp_path: Path) -> None:
             "f",
             {"Road": "../../etc/passwd"},
         )
+
+
+def test_a_road_path_the_file_system_refuses_is_one_line(tmp_path: Path) -> None:
+    scenario = _scenario_with(tmp_path, str(ROOT / "examples" / "maps" / "highway.xodr"), "x" * 300 + ".xodr")
+    code, stderr = _validate(tmp_path, _run_manifest(scenario))
+    assert code == 2
+    assert "m.yaml: cannot read" in stderr and "File name too long" in stderr
+    assert len(stderr) < 600
+
+
+def test_an_unknown_xml_encoding_is_one_line(tmp_path: Path) -> None:
+    scenario = tmp_path / "s.xosc"
+    scenario.write_text('<?xml version="1.0" encoding="true"?>\n<OpenSCENARIO/>\n')
+    code, stderr = _validate(tmp_path, _run_manifest(scenario))
+    assert code == 2 and "s.xosc: OpenSCENARIO file declares an unknown encoding" in stderr
+    outcome = carlos_in_process("validate", scenario, "--schema")
+    assert outcome.exception is None and outcome.exit_code == 2

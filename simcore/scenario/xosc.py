@@ -89,6 +89,8 @@ def read_xml(
         ) from None
     except ET.ParseError as exc:
         raise BadInput(f"{what} is not well-formed XML: {exc}", file=str(path)) from None
+    except LookupError as exc:  # <?xml encoding="…"?> naming no known codec
+        raise BadInput(f"{what} declares an unknown encoding: {exc}", file=str(path)) from None
 
 
 class _Reader:

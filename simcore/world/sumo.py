@@ -81,7 +81,7 @@ def check_network_xml(path: Path) -> None:
         raise BadInput(
             f"SUMO network uses forbidden XML constructs ({type(exc).__name__})", file=str(path)
         ) from None
-    except ET.ParseError as exc:
+    except (ET.ParseError, LookupError) as exc:  # LookupError: an unknown encoding declared
         raise BadInput(f"SUMO network is not well-formed XML: {exc}", file=str(path)) from None
     if root_tag != "net":
         raise BadInput(f"root element is <{root_tag}>, expected <net> (a SUMO network)", file=str(path))
