@@ -314,6 +314,14 @@ def _preflight_scenarios(simulation_run: Any, manifest: Path) -> None:
 
     spec = simulation_run.spec
     plan = Plan(spec)
+    sut = spec.system_under_test
+    if sut is not None and sut.module is not None:
+        from simcore.sensors.loop import system_under_test_class
+
+        try:
+            system_under_test_class(sut, manifest.parent.resolve())
+        except BadInput as exc:
+            raise BadInput(exc.detail, file=str(manifest), field=exc.field) from None
     for position, scenario, path in _local_scenarios(simulation_run, manifest):
         declared = parameter_declarations(path)
         names = {**spec.parameters, **scenario.parameters, **spec.sweep.matrix}

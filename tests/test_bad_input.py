@@ -211,3 +211,31 @@ def test_an_unknown_xml_encoding_is_one_line(tmp_path: Path) -> None:
     assert code == 2 and "s.xosc: OpenSCENARIO file declares an unknown encoding" in stderr
     outcome = carlos_in_process("validate", scenario, "--schema")
     assert outcome.exception is None and outcome.exit_code == 2
+
+
+@pytest.mark.parametrize(
+    ("parameters", "expected"),
+    [
+        (
+            "{speed: fast}",
+            "spec.systemUnderTest.parameters.speed: examples.controller:CruiseController takes speed as float, not 'fast'",
+        ),
+        ("{speed: true}", "takes speed as float, not True"),
+        ("{stop_after: 1.5}", "takes stop_after as int | None, not 1.5"),
+        (
+            "{sped: 1}",
+            "spec.systemUnderTest.parameters: examples.controller:CruiseController does not take these parameters",
+        ),
+    ],
+)
+def test_system_under_test_parameters_are_checked_by_validate(
+    tmp_path: Path, parameters: str, expected: str
+) -> None:
+    sut = (
+        "  systemUnderTest: {module: 'examples.controller:CruiseController', "
+        f"pythonPath: ['{ROOT}'], parameters: {parameters}}}\n"
+    )
+    code, stderr = _validate(tmp_path, _run_manifest(BRAKING, sut))
+    assert code == 2, stderr
+    assert expected in stderr.replace(str(tmp_path) + "/", "")
+    assert stderr.startswith(f"error: {tmp_path / 'm.yaml'}")
