@@ -378,6 +378,8 @@ def run_index(
         )
         if error is None and summary["status"] == "failed":
             exit_code = ExitCode.FAILED
+        if exit_code == ExitCode.BAD_INPUT:
+            summary["badInput"] = True  # the run-level exit code keeps it apart from infrastructure
         log_lines.append(f"status: {summary['status']}")
         recording = scratch / "recording.mcap"
         if recording.is_file():

@@ -181,11 +181,11 @@ def test_an_index_that_errors_does_not_stop_the_sweep_and_resume_keeps_results(t
     manifest = _manifest(tmp_path, body)
     out = tmp_path / "out"
     result = carlos("run", manifest, "--output", f"file://{out}", "-j", "2")
-    assert result.returncode == 3, result.stderr  # a required run errored (not a test failure)
+    assert result.returncode == 2, result.stderr  # a required run errored on bad input (not a test failure)
     good = json.loads((out / "t" / "0" / "summary.json").read_text())
     bad = json.loads((out / "t" / "1" / "summary.json").read_text())
     assert good["status"] == "passed"
-    assert bad["status"] == "error" and "-9" in bad["error"]
+    assert bad["status"] == "error" and "-9" in bad["error"] and bad["badInput"] is True
     assert bad["attempts"] == 1  # bad input is never retried
     assert "error" in (out / "t" / "1" / "log.txt").read_text()
     # a second invocation resumes: the passed index is kept, the errored one runs again
