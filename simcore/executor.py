@@ -110,6 +110,19 @@ class RunReport:
         return int(self.summary["exitCode"])
 
 
+@dataclass
+class _Sweep:
+    """The state of one invocation's sweep, shared by the ways of running its indexes."""
+
+    settings: Settings
+    store: Store
+    pending: list[int]  # indexes still to run (retries are appended)
+    attempts: dict[int, int]
+    max_attempts: int
+    outcomes: dict[int, dict[str, Any]]  # final summaries by index
+    events: Events
+
+
 def kept_on_resume(summary: dict[str, Any]) -> bool:
     """Whether a finished index's summary stands when the same run is invoked again: a pass or a test failure
     does (rerunning cannot change it); an error (a crash, an outage, attempts used up) is run again."""
@@ -179,12 +192,13 @@ def execute(
     attempts = dict.fromkeys(todo, 0)
     max_attempts = spec.execution.retries + 1
     pending = list(todo)
+    sweep = _Sweep(settings, store, pending, attempts, max_attempts, outcomes, events)
     if bus is not None:
-        _in_process(settings, store, pending, attempts, max_attempts, outcomes, events, bus)
+        _in_process(sweep, bus)
     if pending:
         settings.scratch_root = make_scratch_root()
         try:
-            _in_pool(settings, store, pending, attempts, max_attempts, outcomes, events, workers)
+            _in_pool(sweep, workers)
         finally:
             shutil.rmtree(settings.scratch_root, ignore_errors=True)
     summary = run_summary(name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted))
@@ -202,23 +216,14 @@ def execute(
     )
 
 
-def _in_pool(
-    settings: Settings,
-    store: Store,
-    pending: list[int],
-    attempts: dict[int, int],
-    max_attempts: int,
-    outcomes: dict[int, dict[str, Any]],
-    events: Events,
-    workers: int,
-) -> None:
+def _in_pool(sweep: _Sweep, workers: int) -> None:
     """Run the pending indexes on worker processes (a crashed pool is rebuilt, its indexes retried). The
     object store failing beyond its retries in a worker stops the run: no new index starts, the ones in
     flight end, and the StoreError is raised (exit code 3; finished indexes stay in the store)."""
     context = mp.get_context("spawn")
     progress: Any = context.Queue()
     outage: StoreError | None = None
-    while pending and outage is None:
+    while sweep.pending and outage is None:
         with ProcessPoolExecutor(
             max_workers=workers,
             mp_context=context,
@@ -227,87 +232,75 @@ def _in_pool(
         ) as pool:
             in_flight: dict[Future[RunOutcome], int] = {}
             broken = False
-            _submit(pool, settings, pending, in_flight, attempts, max_attempts, workers * 2)
+            _submit(pool, sweep, in_flight, workers * 2)
             while in_flight:
                 done, _ = wait(list(in_flight), timeout=0.2, return_when=FIRST_COMPLETED)
-                _drain(progress, events)
+                _drain(progress, sweep.events)
                 for future in done:
                     index = in_flight.pop(future)
                     try:
                         outcome = future.result()
                     except StoreError as exc:
                         outage = outage or exc
-                        pending.clear()
+                        sweep.pending.clear()
                         continue
                     except BrokenProcessPool:
                         broken = True
-                        _crashed(index, attempts, max_attempts, pending, outcomes, settings, store, events)
+                        _crashed(sweep, index)
                         continue
-                    if outcome.exit_code == ExitCode.INFRASTRUCTURE and attempts[index] < max_attempts:
-                        events.on_retry(index, attempts[index], str(outcome.summary.get("error")))
-                        pending.append(index)
+                    if (
+                        outcome.exit_code == ExitCode.INFRASTRUCTURE
+                        and sweep.attempts[index] < sweep.max_attempts
+                    ):
+                        sweep.events.on_retry(index, sweep.attempts[index], str(outcome.summary.get("error")))
+                        sweep.pending.append(index)
                         continue
-                    outcomes[index] = outcome.summary
-                    events.on_done(outcome)
+                    sweep.outcomes[index] = outcome.summary
+                    sweep.events.on_done(outcome)
                 if broken:
                     for future, index in list(in_flight.items()):
                         in_flight.pop(future)
-                        _crashed(index, attempts, max_attempts, pending, outcomes, settings, store, events)
+                        _crashed(sweep, index)
                     break
-                _submit(pool, settings, pending, in_flight, attempts, max_attempts, workers * 2)
-    _drain(progress, events)
+                _submit(pool, sweep, in_flight, workers * 2)
+    _drain(progress, sweep.events)
     if outage is not None:
         raise outage
 
 
-def _in_process(
-    settings: Settings,
-    store: Store,
-    pending: list[int],
-    attempts: dict[int, int],
-    max_attempts: int,
-    outcomes: dict[int, dict[str, Any]],
-    events: Events,
-    bus: Bus,
-) -> None:
+def _in_process(sweep: _Sweep, bus: Bus) -> None:
     """Run the pending indexes here, one after another, publishing on `bus` (infrastructure errors retried)."""
-    while pending:
-        index = pending.pop(0)
-        attempts[index] += 1
+    while sweep.pending:
+        index = sweep.pending.pop(0)
+        sweep.attempts[index] += 1
         outcome = run_index(
-            settings.run,
+            sweep.settings.run,
             index,
-            base_dir=settings.base_dir,
-            store=store,
-            store_factory=lambda url: make_store(url, settings),
-            attempt=attempts[index],
-            final_attempt=attempts[index] >= max_attempts,
-            progress=events.on_progress,
+            base_dir=sweep.settings.base_dir,
+            store=sweep.store,
+            store_factory=lambda url: make_store(url, sweep.settings),
+            attempt=sweep.attempts[index],
+            final_attempt=sweep.attempts[index] >= sweep.max_attempts,
+            progress=sweep.events.on_progress,
             bus=bus,
         )
-        if outcome.exit_code == ExitCode.INFRASTRUCTURE and attempts[index] < max_attempts:
-            events.on_retry(index, attempts[index], str(outcome.summary.get("error")))
-            pending.append(index)
+        if outcome.exit_code == ExitCode.INFRASTRUCTURE and sweep.attempts[index] < sweep.max_attempts:
+            sweep.events.on_retry(index, sweep.attempts[index], str(outcome.summary.get("error")))
+            sweep.pending.append(index)
             continue
-        outcomes[index] = outcome.summary
-        events.on_done(outcome)
+        sweep.outcomes[index] = outcome.summary
+        sweep.events.on_done(outcome)
 
 
 def _submit(
-    pool: ProcessPoolExecutor,
-    settings: Settings,
-    pending: list[int],
-    in_flight: dict[Future[RunOutcome], int],
-    attempts: dict[int, int],
-    max_attempts: int,
-    limit: int,
+    pool: ProcessPoolExecutor, sweep: _Sweep, in_flight: dict[Future[RunOutcome], int], limit: int
 ) -> None:
     """Keep up to `limit` indexes queued in the pool (a small queue keeps retries and progress prompt)."""
-    while pending and len(in_flight) < limit:
-        index = pending.pop(0)
-        attempts[index] += 1
-        final = attempts[index] >= max_attempts
-        in_flight[pool.submit(_work, settings, index, attempts[index], final)] = index
+    while sweep.pending and len(in_flight) < limit:
+        index = sweep.pending.pop(0)
+        sweep.attempts[index] += 1
+        final = sweep.attempts[index] >= sweep.max_attempts
+        in_flight[pool.submit(_work, sweep.settings, index, sweep.attempts[index], final)] = index
 
 
 def _drain(progress: Any, events: Events) -> None:
@@ -321,32 +314,23 @@ def _drain(progress: Any, events: Events) -> None:
         events.on_progress(index, sim_time)
 
 
-def _crashed(
-    index: int,
-    attempts: dict[int, int],
-    max_attempts: int,
-    pending: list[int],
-    outcomes: dict[int, dict[str, Any]],
-    settings: Settings,
-    store: Store,
-    events: Events,
-) -> None:
+def _crashed(sweep: _Sweep, index: int) -> None:
     """An index whose worker process died: retry it, or record it as an error when out of attempts."""
-    key = f"{settings.run.name}/{index}/summary.json"
-    if store.exists(key):
-        written = json.loads(store.get_bytes(key))
-        if kept_on_resume(written) and written.get("attempts") == attempts[index]:
+    key = f"{sweep.settings.run.name}/{index}/summary.json"
+    if sweep.store.exists(key):
+        written = json.loads(sweep.store.get_bytes(key))
+        if kept_on_resume(written) and written.get("attempts") == sweep.attempts[index]:
             # the worker finished this attempt (its summary is written last) and died before reporting it
-            outcomes[index] = written
-            events.on_done(RunOutcome(index=index, summary=written, exit_code=_exit_code_of(written)))
+            sweep.outcomes[index] = written
+            sweep.events.on_done(RunOutcome(index=index, summary=written, exit_code=_exit_code_of(written)))
             return
     reason = "the worker process died (crash in the simulator)"
-    if attempts[index] < max_attempts:
-        events.on_retry(index, attempts[index], reason)
-        pending.append(index)
+    if sweep.attempts[index] < sweep.max_attempts:
+        sweep.events.on_retry(index, sweep.attempts[index], reason)
+        sweep.pending.append(index)
         return
-    outcome = error_outcome(settings.run, index, attempts[index], reason)
+    outcome = error_outcome(sweep.settings.run, index, sweep.attempts[index], reason)
     summary = outcome.summary
-    store.put_bytes(f"{settings.run.name}/{index}/summary.json", summary_bytes(summary))
-    outcomes[index] = summary
-    events.on_done(outcome)
+    sweep.store.put_bytes(f"{sweep.settings.run.name}/{index}/summary.json", summary_bytes(summary))
+    sweep.outcomes[index] = summary
+    sweep.events.on_done(outcome)

@@ -8,6 +8,7 @@ fields rejected with their path.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
 from pydantic import (
@@ -66,22 +67,26 @@ def _is_number_type(annotation: Any) -> bool:
     return bool(arguments) and all(a in (float, int, type(None)) for a in arguments)
 
 
-def _dns_prefix(value: str) -> str:
-    if len(value) > 58 or not _DNS_PREFIX.match(value):
-        raise ValueError(
-            f"{value[:80]!r} is not a name prefix: use at most 58 lowercase letters, digits and '-', "
-            "starting with a letter or digit"
-        )
-    return value
+def _dns_name(pattern: re.Pattern[str], limit: int, what: str) -> Callable[[str], str]:
+    """A validator of a Kubernetes name (or name prefix) with its rule in the message."""
+
+    def check(value: str) -> str:
+        if len(value) > limit or not pattern.match(value):
+            raise ValueError(
+                f"{value[:80]!r} is not {what}: use at most {limit} lowercase letters, digits and '-', "
+                + (
+                    "starting and ending with a letter or digit"
+                    if pattern is _DNS_LABEL
+                    else "starting with a letter or digit"
+                )
+            )
+        return value
+
+    return check
 
 
-def _dns_label(value: str) -> str:
-    if len(value) > 63 or not _DNS_LABEL.match(value):
-        raise ValueError(
-            f"{value[:80]!r} is not a DNS-1123 label: use at most 63 lowercase letters, digits and '-', "
-            "starting and ending with a letter or digit"
-        )
-    return value
+_dns_label = _dns_name(_DNS_LABEL, 63, "a DNS-1123 label")
+_dns_prefix = _dns_name(_DNS_PREFIX, 58, "a name prefix")
 
 
 def _param_name(value: str) -> str:
