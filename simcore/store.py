@@ -262,6 +262,10 @@ _CREDENTIAL_HINT = "check AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY"
 class S3Store:
     """An S3 bucket (AWS, MinIO, Ceph, SeaweedFS) under an optional key prefix."""
 
+    #: seconds a transiently failing operation is retried (set by __init__ from CARLOS_STORE_OUTAGE_SECONDS;
+    #: a store assembled around a shared client, as the operator's, keeps 0: its reconcile loop retries)
+    outage: float = 0.0
+
     def __init__(
         self,
         bucket: str,
