@@ -338,3 +338,29 @@ def test_file_store_writes_ordinary_file_modes(tmp_path: Path) -> None:
     umask = os.umask(0)
     os.umask(umask)
     assert mode == 0o666 & ~umask
+
+
+@pytest.mark.parametrize(
+    ("code", "status", "transient"),
+    [
+        ("ServiceUnavailable", 503, True),
+        ("InternalError", 500, True),
+        ("SlowDown", 503, True),
+        ("", 502, True),
+        ("AccessDenied", 403, False),
+        ("NoSuchKey", 404, False),
+        ("SignatureDoesNotMatch", 403, False),
+    ],
+)
+def test_5xx_and_throttling_are_transient_and_client_errors_are_not(
+    code: str, status: int, transient: bool
+) -> None:
+    from botocore.exceptions import ClientError, EndpointConnectionError
+
+    from simcore.store import is_transient
+
+    error = ClientError(
+        {"Error": {"Code": code}, "ResponseMetadata": {"HTTPStatusCode": status}}, "PutObject"
+    )
+    assert is_transient(error) is transient
+    assert is_transient(EndpointConnectionError(endpoint_url="http://127.0.0.1:9"))
