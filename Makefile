@@ -7,7 +7,8 @@ STAMP := $(VENV)/.installed
 SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages demo test test-slow lint typecheck wheel wheel-check bench conformance crds helm lint-chart images clean
+.PHONY: install system-packages demo test test-slow fuzz lint typecheck wheel wheel-check bench conformance crds helm lint-chart images clean
+
 
 install: $(STAMP)
 
@@ -34,6 +35,14 @@ test: install
 
 test-slow: install
 	$(PY) -m pytest -m slow tests
+
+# the mutation fuzzer of tests/test_fuzz.py with a big budget (FUZZ_CASES inputs through carlos validate),
+# then the fault-injection tests (kill -9 of carlos run and its workers, S3 outages); prints the figures
+FUZZ_CASES ?= 3000
+FUZZ_SEED ?= 15
+fuzz: install
+	$(PY) bench/fuzz.py $(FUZZ_CASES) $(FUZZ_SEED)
+	$(PY) -m pytest -m slow tests/test_faults.py
 
 lint: install
 	$(VENV)/bin/ruff check simcore operator tests bench tools

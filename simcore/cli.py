@@ -14,9 +14,10 @@ import typer.main
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
+from rich.text import Text
 from typer.core import TyperGroup
 
-from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
+from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError, shorten
 
 if TYPE_CHECKING:
     from typer.core import _click  # typer's click (vendored in typer >= 0.29); annotations only
@@ -63,8 +64,14 @@ console = Console(stderr=True)
 out = Console()
 
 
+def _line(label: str, style: str, text: object) -> Text:
+    """`label text` with the label styled and the text literal: file names, entity names and messages are
+    user-controlled, so never read as rich markup (`[/x]`) or emoji codes (`:100:`)."""
+    return Text.assemble((label, style), " ", str(text))
+
+
 def _fail(exc: CarlosError) -> typer.Exit:
-    console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+    console.print(_line("error:", "bold red", exc), highlight=False, soft_wrap=True)
     return typer.Exit(int(exc.exit_code))
 
 
@@ -228,20 +235,20 @@ def run(
             if summary["status"] == "error" and bus is not None and not progress.live.is_started:
                 # one run with other processes on its topics: say why it failed (a controller died, …)
                 console.print(
-                    f"index {summary['index']}: {summary['error']}", highlight=False, soft_wrap=True
+                    Text(f"index {summary['index']}: {summary['error']}"), highlight=False, soft_wrap=True
                 )
                 return
             if quiet or not progress.live.is_started:
                 return
             if summary["status"] == "error":
                 progress.console.print(
-                    f"[red]index {summary['index']} ({summary['scenario']}): {summary['error']}[/]",
+                    Text(f"index {summary['index']} ({summary['scenario']}): {summary['error']}", "red"),
                     highlight=False,
                 )
 
         def on_retry(i: int, attempt: int, reason: str) -> None:
             progress.console.print(
-                f"[yellow]index {i}: attempt {attempt} failed ({reason}); retrying[/]", highlight=False
+                Text(f"index {i}: attempt {attempt} failed ({reason}); retrying", "yellow"), highlight=False
             )
 
         with progress:
@@ -320,16 +327,36 @@ def _local_scenarios(simulation_run: object, manifest: Path) -> list[tuple[int, 
 def _preflight(simulation_run: object, manifest: Path) -> None:
     """Check what can be checked before any worker starts, so a typo fails at once with exit code 2: every
     local scenario file parses with the first permutation's parameters (all matrix, spec and scenario
-    parameter names declared, every element supported) and its road network file exists."""
-    from simcore.plan import Plan
-    from simcore.scenario.xosc import declared_parameters, load_scenario
+    parameter names declared, every manifest value of the declared type, every element supported) and its
+    road network file is one and parses safely (simcore.preflight)."""
     from simcore.spec import SimulationRun
 
     assert isinstance(simulation_run, SimulationRun)
+    try:
+        _preflight_scenarios(simulation_run, manifest)
+    except OSError as exc:  # a path the file system refuses (too long, a loop, no permission)
+        raise BadInput(
+            f"cannot read {shorten(str(exc.filename))!r}: {exc.strerror or exc}", file=str(manifest)
+        ) from None
+
+
+def _preflight_scenarios(simulation_run: Any, manifest: Path) -> None:
+    from simcore.plan import Plan
+    from simcore.preflight import check_parameter_types, check_road_file
+    from simcore.scenario.xosc import load_scenario, parameter_declarations
+
     spec = simulation_run.spec
     plan = Plan(spec)
+    sut = spec.system_under_test
+    if sut is not None and sut.module is not None:
+        from simcore.sensors.loop import system_under_test_class
+
+        try:
+            system_under_test_class(sut, manifest.parent.resolve())
+        except BadInput as exc:
+            raise BadInput(exc.detail, file=str(manifest), field=exc.field) from None
     for position, scenario, path in _local_scenarios(simulation_run, manifest):
-        declared = declared_parameters(path)
+        declared = parameter_declarations(path)
         names = {**spec.parameters, **scenario.parameters, **spec.sweep.matrix}
         unknown = sorted(set(names) - set(declared))
         if unknown:
@@ -346,13 +373,10 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
                 file=str(manifest),
                 field=where,
             )
+        check_parameter_types(spec, position, declared, source=str(manifest))
         parsed = load_scenario(path, plan[plan.indexes_of(scenario.name).start].parameters)
-        if parsed.road_file is not None and not parsed.road_file.is_file():
-            raise BadInput(
-                f"road network {str(parsed.road_file)!r} not found",
-                file=str(path),
-                field="RoadNetwork/LogicFile",
-            )
+        if parsed.road_file is not None:
+            check_road_file(parsed.road_file, scenario_file=str(path))
 
 
 def _print_report(report: object) -> None:
@@ -382,8 +406,11 @@ def _print_report(report: object) -> None:
     status = summary["status"]
     colour = "green" if status == "passed" else "red"
     out.print(
-        f"[bold {colour}]{status}[/] · {summary['counts']['total']} runs in {report.wall_seconds:.1f} s "
-        f"({report.skipped} resumed) · results: {report.output_url}",
+        Text.assemble(
+            (status, f"bold {colour}"),
+            f" · {summary['counts']['total']} runs in {report.wall_seconds:.1f} s "
+            f"({report.skipped} resumed) · results: {report.output_url}",
+        ),
         highlight=False,
         soft_wrap=True,
     )
@@ -432,7 +459,12 @@ def validate(
         raise typer.Exit(int(ExitCode.BAD_INPUT))
     plan = Plan(simulation_run.spec)
     out.print(
-        f"{manifest}: valid · {len(plan)} runs ({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})"
+        Text(
+            f"{manifest}: valid · {len(plan)} runs "
+            f"({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})"
+        ),
+        highlight=False,
+        soft_wrap=True,
     )
 
 
@@ -445,13 +477,13 @@ def _check_schemas(paths: list[Path]) -> int:
         try:
             report = check_openscenario(path)
         except CarlosError as exc:
-            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            console.print(_line("error:", "bold red", exc), highlight=False, soft_wrap=True)
             invalid += 1
             continue
         note = f" ({report.note})" if report.note else ""
         if report.valid:
             out.print(
-                f"{path}: valid against OpenSCENARIO {report.version} XSD{note}",
+                Text(f"{path}: valid against OpenSCENARIO {report.version} XSD{note}"),
                 highlight=False,
                 soft_wrap=True,
             )
@@ -459,8 +491,10 @@ def _check_schemas(paths: list[Path]) -> int:
         invalid += 1
         more = " (first ones)" if report.truncated else ""
         console.print(
-            f"[bold red]{path}[/]: {len(report.issues)} violation(s){more} of the OpenSCENARIO "
-            f"{report.version} XSD{note}",
+            Text.assemble(
+                (str(path), "bold red"),
+                f": {len(report.issues)} violation(s){more} of the OpenSCENARIO {report.version} XSD{note}",
+            ),
             highlight=False,
             soft_wrap=True,
         )
@@ -500,7 +534,7 @@ def plan(
         except IndexError as exc:
             raise _fail(BadInput(str(exc), field="--index")) from None
         table.add_row(
-            str(i), point.scenario.name, describe(point.sweep_values) or "(defaults)", str(point.seed)
+            str(i), point.scenario.name, Text(describe(point.sweep_values) or "(defaults)"), str(point.seed)
         )
     out.print(table)
 
@@ -587,7 +621,7 @@ def main() -> None:
     try:
         app()
     except CarlosError as exc:  # a last guard: never a traceback for our own errors
-        console.print(f"[bold red]error:[/] {exc}", highlight=False)
+        console.print(_line("error:", "bold red", exc), highlight=False, soft_wrap=True)
         sys.exit(int(exc.exit_code))
 
 

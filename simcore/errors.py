@@ -2,7 +2,26 @@
 
 from __future__ import annotations
 
+import re
 from enum import IntEnum
+
+MAX_SHOWN_CHARS = 200  # an untrusted value in a message: longer ones are cut (with their length)
+MAX_MESSAGE_CHARS = 2000
+_QUOTED = re.compile(rf"'[^']{{{MAX_SHOWN_CHARS},}}'|\"[^\"]{{{MAX_SHOWN_CHARS},}}\"")
+
+
+def shorten(text: str, limit: int = MAX_SHOWN_CHARS) -> str:
+    """Untrusted text cut to `limit` characters for a message, saying how long it was."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}… ({len(text)} characters)"
+
+
+def cap_message(message: str) -> str:
+    """A message with every quoted value longer than MAX_SHOWN_CHARS shortened, and at most
+    MAX_MESSAGE_CHARS in all: an error never echoes a 300 KB attribute back."""
+    capped = _QUOTED.sub(lambda m: m.group(0)[0] + shorten(m.group(0)[1:-1]) + m.group(0)[0], message)
+    return shorten(capped, MAX_MESSAGE_CHARS)
 
 
 class ExitCode(IntEnum):
@@ -26,6 +45,7 @@ class BadInput(CarlosError):
     def __init__(self, message: str, *, file: str | None = None, field: str | None = None) -> None:
         self.file = file
         self.field = field
+        message = cap_message(message)
         self.detail = message
         where = ": ".join(part for part in (file, field) if part)
         super().__init__(f"{where}: {message}" if where else message)

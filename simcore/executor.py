@@ -14,6 +14,7 @@ import json
 import multiprocessing as mp
 import os
 import queue
+import shutil
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -26,10 +27,11 @@ import yaml
 
 from simcore.errors import BadInput, ExitCode
 from simcore.evaluation.report import junit_xml, run_summary
+from simcore.lifetime import die_with_parent, make_scratch_root
 from simcore.plan import Plan
 from simcore.runner import RunOutcome, error_outcome, run_index, summary_bytes
 from simcore.spec import ScenarioRef, SimulationRun
-from simcore.store import Store, open_store
+from simcore.store import Store, StoreError, open_store
 from simcore.transport.bus import Bus
 
 _progress_queue: Any = None
@@ -44,14 +46,16 @@ class Settings:
     output_url: str
     endpoint: str | None
     region: str | None
+    scratch_root: Path | None = None  # the workers' scratch folders go here (simcore.lifetime)
 
 
 def make_store(url: str, settings: Settings) -> Store:
     return open_store(url, endpoint=settings.endpoint, region=settings.region)
 
 
-def _init_worker(progress: Any) -> None:
+def _init_worker(progress: Any, parent_pid: int) -> None:
     global _progress_queue
+    die_with_parent(parent_pid)
     _progress_queue = progress
 
 
@@ -61,8 +65,10 @@ def _report(index: int, sim_time: float) -> None:
 
 
 def _work(settings: Settings, index: int, attempt: int, final_attempt: bool) -> RunOutcome:
-    store = make_store(settings.output_url, settings)
+    """One index in a worker. The object store failing beyond its retries (StoreError) is not this index's
+    fault: it reaches the executor, which stops the run (exit code 3) keeping every finished index."""
     try:
+        store = make_store(settings.output_url, settings)
         return run_index(
             settings.run,
             index,
@@ -72,8 +78,11 @@ def _work(settings: Settings, index: int, attempt: int, final_attempt: bool) -> 
             attempt=attempt,
             final_attempt=final_attempt,
             progress=_report,
+            scratch_root=settings.scratch_root,
         )
-    except Exception as exc:  # object store failures: an infrastructure error of this index
+    except StoreError:
+        raise
+    except Exception as exc:  # anything else: an infrastructure error of this index
         return error_outcome(settings.run, index, attempt, f"{type(exc).__name__}: {exc}")
 
 
@@ -102,6 +111,29 @@ class RunReport:
         return int(self.summary["exitCode"])
 
 
+@dataclass
+class _Sweep:
+    """The state of one invocation's sweep, shared by the ways of running its indexes."""
+
+    settings: Settings
+    store: Store
+    pending: list[int]  # indexes still to run (retries are appended)
+    attempts: dict[int, int]
+    max_attempts: int
+    outcomes: dict[int, dict[str, Any]]  # final summaries by index
+    events: Events
+
+
+def kept_on_resume(summary: dict[str, Any]) -> bool:
+    """Whether a finished index's summary stands when the same run is invoked again: a pass or a test failure
+    does (rerunning cannot change it); an error (a crash, an outage, attempts used up) is run again."""
+    return summary.get("status") in ("passed", "failed")
+
+
+def _exit_code_of(summary: dict[str, Any]) -> ExitCode:
+    return ExitCode.PASSED if summary.get("status") == "passed" else ExitCode.FAILED
+
+
 def _dump_spec(run: SimulationRun) -> bytes:
     return yaml.safe_dump(
         run.model_dump(mode="json", by_alias=True, exclude_none=True), sort_keys=False
@@ -120,7 +152,8 @@ def execute(
     bus: Bus | None = None,
 ) -> RunReport:
     """Run every index (or `indexes`) of `run`; returns the run-level report. Resumes by default: an index
-    whose summary.json is already in the output (from an interrupted invocation of the same spec) is kept.
+    whose summary.json is already in the output (from an interrupted invocation of the same spec) is kept
+    when it passed or failed; one that ended in an error runs again.
     With `bus` (a live view), the runs go one after another in this process and publish on it."""
     events = events or Events()
     spec = run.spec
@@ -148,7 +181,9 @@ def execute(
         for index in wanted:
             key = f"{name}/{index}/summary.json"
             if store.exists(key):
-                previous[index] = json.loads(store.get_bytes(key))
+                kept = json.loads(store.get_bytes(key))
+                if kept_on_resume(kept):
+                    previous[index] = kept
     store.put_bytes(f"{name}/run.yaml", spec_bytes)
     todo = [i for i in wanted if i not in previous]
     events.on_start(len(wanted), len(previous))
@@ -158,43 +193,16 @@ def execute(
     attempts = dict.fromkeys(todo, 0)
     max_attempts = spec.execution.retries + 1
     pending = list(todo)
+    sweep = _Sweep(settings, store, pending, attempts, max_attempts, outcomes, events)
     if bus is not None or len(pending) == 1:
         # a live view's bus, or a single run: here, without paying for a worker process and its imports
-        _in_process(settings, store, pending, attempts, max_attempts, outcomes, events, bus)
-    context = mp.get_context("spawn")
-    progress: Any = context.Queue() if pending else None
-    while pending:
-        with ProcessPoolExecutor(
-            max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(progress,)
-        ) as pool:
-            in_flight: dict[Future[RunOutcome], int] = {}
-            broken = False
-            _submit(pool, settings, pending, in_flight, attempts, max_attempts, workers * 2)
-            while in_flight:
-                done, _ = wait(list(in_flight), timeout=0.2, return_when=FIRST_COMPLETED)
-                _drain(progress, events)
-                for future in done:
-                    index = in_flight.pop(future)
-                    try:
-                        outcome = future.result()
-                    except BrokenProcessPool:
-                        broken = True
-                        _crashed(index, attempts, max_attempts, pending, outcomes, settings, store, events)
-                        continue
-                    if outcome.exit_code == ExitCode.INFRASTRUCTURE and attempts[index] < max_attempts:
-                        events.on_retry(index, attempts[index], str(outcome.summary.get("error")))
-                        pending.append(index)
-                        continue
-                    outcomes[index] = outcome.summary
-                    events.on_done(outcome)
-                if broken:
-                    for future, index in list(in_flight.items()):
-                        in_flight.pop(future)
-                        _crashed(index, attempts, max_attempts, pending, outcomes, settings, store, events)
-                    break
-                _submit(pool, settings, pending, in_flight, attempts, max_attempts, workers * 2)
-    if progress is not None:
-        _drain(progress, events)
+        _in_process(sweep, bus)
+    if pending:
+        settings.scratch_root = make_scratch_root()
+        try:
+            _in_pool(sweep, workers)
+        finally:
+            shutil.rmtree(settings.scratch_root, ignore_errors=True)
     summary = run_summary(name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted))
     summary["outputUrl"] = store.url_for(name)
     store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
@@ -210,55 +218,92 @@ def execute(
     )
 
 
-def _in_process(
-    settings: Settings,
-    store: Store,
-    pending: list[int],
-    attempts: dict[int, int],
-    max_attempts: int,
-    outcomes: dict[int, dict[str, Any]],
-    events: Events,
-    bus: Bus | None,
-) -> None:
+def _in_pool(sweep: _Sweep, workers: int) -> None:
+    """Run the pending indexes on worker processes (a crashed pool is rebuilt, its indexes retried). The
+    object store failing beyond its retries in a worker stops the run: no new index starts, the ones in
+    flight end, and the StoreError is raised (exit code 3; finished indexes stay in the store)."""
+    context = mp.get_context("spawn")
+    progress: Any = context.Queue()
+    outage: StoreError | None = None
+    while sweep.pending and outage is None:
+        with ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=context,
+            initializer=_init_worker,
+            initargs=(progress, os.getpid()),
+        ) as pool:
+            in_flight: dict[Future[RunOutcome], int] = {}
+            broken = False
+            _submit(pool, sweep, in_flight, workers * 2)
+            while in_flight:
+                done, _ = wait(list(in_flight), timeout=0.2, return_when=FIRST_COMPLETED)
+                _drain(progress, sweep.events)
+                for future in done:
+                    index = in_flight.pop(future)
+                    try:
+                        outcome = future.result()
+                    except StoreError as exc:
+                        outage = outage or exc
+                        sweep.pending.clear()
+                        continue
+                    except BrokenProcessPool:
+                        broken = True
+                        _crashed(sweep, index)
+                        continue
+                    if (
+                        outcome.exit_code == ExitCode.INFRASTRUCTURE
+                        and sweep.attempts[index] < sweep.max_attempts
+                    ):
+                        sweep.events.on_retry(index, sweep.attempts[index], str(outcome.summary.get("error")))
+                        sweep.pending.append(index)
+                        continue
+                    sweep.outcomes[index] = outcome.summary
+                    sweep.events.on_done(outcome)
+                if broken:
+                    for future, index in list(in_flight.items()):
+                        in_flight.pop(future)
+                        _crashed(sweep, index)
+                    break
+                _submit(pool, sweep, in_flight, workers * 2)
+    _drain(progress, sweep.events)
+    if outage is not None:
+        raise outage
+
+
+def _in_process(sweep: _Sweep, bus: Bus | None) -> None:
     """Run the pending indexes here, one after another, publishing on `bus` (default: a bus of each run's
     own; infrastructure errors retried)."""
-    while pending:
-        index = pending.pop(0)
-        attempts[index] += 1
+    while sweep.pending:
+        index = sweep.pending.pop(0)
+        sweep.attempts[index] += 1
         outcome = run_index(
-            settings.run,
+            sweep.settings.run,
             index,
-            base_dir=settings.base_dir,
-            store=store,
-            store_factory=lambda url: make_store(url, settings),
-            attempt=attempts[index],
-            final_attempt=attempts[index] >= max_attempts,
-            progress=events.on_progress,
+            base_dir=sweep.settings.base_dir,
+            store=sweep.store,
+            store_factory=lambda url: make_store(url, sweep.settings),
+            attempt=sweep.attempts[index],
+            final_attempt=sweep.attempts[index] >= sweep.max_attempts,
+            progress=sweep.events.on_progress,
             bus=bus,
         )
-        if outcome.exit_code == ExitCode.INFRASTRUCTURE and attempts[index] < max_attempts:
-            events.on_retry(index, attempts[index], str(outcome.summary.get("error")))
-            pending.append(index)
+        if outcome.exit_code == ExitCode.INFRASTRUCTURE and sweep.attempts[index] < sweep.max_attempts:
+            sweep.events.on_retry(index, sweep.attempts[index], str(outcome.summary.get("error")))
+            sweep.pending.append(index)
             continue
-        outcomes[index] = outcome.summary
-        events.on_done(outcome)
+        sweep.outcomes[index] = outcome.summary
+        sweep.events.on_done(outcome)
 
 
 def _submit(
-    pool: ProcessPoolExecutor,
-    settings: Settings,
-    pending: list[int],
-    in_flight: dict[Future[RunOutcome], int],
-    attempts: dict[int, int],
-    max_attempts: int,
-    limit: int,
+    pool: ProcessPoolExecutor, sweep: _Sweep, in_flight: dict[Future[RunOutcome], int], limit: int
 ) -> None:
     """Keep up to `limit` indexes queued in the pool (a small queue keeps retries and progress prompt)."""
-    while pending and len(in_flight) < limit:
-        index = pending.pop(0)
-        attempts[index] += 1
-        final = attempts[index] >= max_attempts
-        in_flight[pool.submit(_work, settings, index, attempts[index], final)] = index
+    while sweep.pending and len(in_flight) < limit:
+        index = sweep.pending.pop(0)
+        sweep.attempts[index] += 1
+        final = sweep.attempts[index] >= sweep.max_attempts
+        in_flight[pool.submit(_work, sweep.settings, index, sweep.attempts[index], final)] = index
 
 
 def _drain(progress: Any, events: Events) -> None:
@@ -272,24 +317,23 @@ def _drain(progress: Any, events: Events) -> None:
         events.on_progress(index, sim_time)
 
 
-def _crashed(
-    index: int,
-    attempts: dict[int, int],
-    max_attempts: int,
-    pending: list[int],
-    outcomes: dict[int, dict[str, Any]],
-    settings: Settings,
-    store: Store,
-    events: Events,
-) -> None:
+def _crashed(sweep: _Sweep, index: int) -> None:
     """An index whose worker process died: retry it, or record it as an error when out of attempts."""
+    key = f"{sweep.settings.run.name}/{index}/summary.json"
+    if sweep.store.exists(key):
+        written = json.loads(sweep.store.get_bytes(key))
+        if kept_on_resume(written) and written.get("attempts") == sweep.attempts[index]:
+            # the worker finished this attempt (its summary is written last) and died before reporting it
+            sweep.outcomes[index] = written
+            sweep.events.on_done(RunOutcome(index=index, summary=written, exit_code=_exit_code_of(written)))
+            return
     reason = "the worker process died (crash in the simulator)"
-    if attempts[index] < max_attempts:
-        events.on_retry(index, attempts[index], reason)
-        pending.append(index)
+    if sweep.attempts[index] < sweep.max_attempts:
+        sweep.events.on_retry(index, sweep.attempts[index], reason)
+        sweep.pending.append(index)
         return
-    outcome = error_outcome(settings.run, index, attempts[index], reason)
+    outcome = error_outcome(sweep.settings.run, index, sweep.attempts[index], reason)
     summary = outcome.summary
-    store.put_bytes(f"{settings.run.name}/{index}/summary.json", summary_bytes(summary))
-    outcomes[index] = summary
-    events.on_done(outcome)
+    sweep.store.put_bytes(f"{sweep.settings.run.name}/{index}/summary.json", summary_bytes(summary))
+    sweep.outcomes[index] = summary
+    sweep.events.on_done(outcome)

@@ -12,6 +12,10 @@ from simcore.errors import BadInput
 from simcore.spec import SimulationRun
 
 MAX_MANIFEST_BYTES = 4 * 1024 * 1024
+# A manifest is a few hundred values a dozen levels deep; aliases (`*a`) count every time they are used, so
+# an alias bomb stops here instead of in validation.
+MAX_MANIFEST_DEPTH = 64
+MAX_MANIFEST_VALUES = 1_000_000
 
 
 def _location(loc: tuple[int | str, ...]) -> str:
@@ -38,6 +42,42 @@ def format_validation_error(error: ValidationError) -> str:
             message = "required field is missing"
         lines.append(f"{loc}: {message}" if loc else message)
     return "; ".join(lines)
+
+
+def check_shape(data: Any, *, source: str) -> None:
+    """Refuse a document nested deeper than MAX_MANIFEST_DEPTH or with more than MAX_MANIFEST_VALUES values
+    (aliases counted each time), without recursion."""
+    stack: list[tuple[Any, int]] = [(data, 1)]
+    values = 0
+    while stack:
+        node, depth = stack.pop()
+        values += 1
+        if values > MAX_MANIFEST_VALUES:
+            raise BadInput(f"more than {MAX_MANIFEST_VALUES} values (counting aliases)", file=source)
+        if depth > MAX_MANIFEST_DEPTH:
+            raise BadInput(f"nested more than {MAX_MANIFEST_DEPTH} levels deep", file=source)
+        if isinstance(node, dict):
+            stack.extend((v, depth + 1) for v in node.values())
+        elif isinstance(node, list):
+            stack.extend((v, depth + 1) for v in node)
+
+
+def _yaml_problem(exc: yaml.YAMLError, text: str) -> str:
+    """`invalid YAML at line L, column C: problem` for any PyYAML error (a reader error has an offset)."""
+    mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+    if mark is not None:
+        where = f" at line {mark.line + 1}, column {mark.column + 1}"
+    elif isinstance(exc, yaml.reader.ReaderError):
+        before = text[: exc.position]
+        where = f" at line {before.count(chr(10)) + 1}, column {len(before) - before.rfind(chr(10))}"
+    else:
+        where = ""
+    if isinstance(exc, yaml.reader.ReaderError):
+        code = exc.character if isinstance(exc.character, int) else ord(exc.character)
+        problem = f"character #x{code:04x} is not allowed in YAML (control characters must be escaped)"
+    else:
+        problem = getattr(exc, "problem", None) or getattr(exc, "context", None) or str(exc).splitlines()[0]
+    return f"invalid YAML{where}: {problem}"
 
 
 def parse_manifest(data: Any, *, source: str) -> SimulationRun:
@@ -72,13 +112,13 @@ def load_manifest(path: str | Path) -> SimulationRun:
     try:
         documents = [doc for doc in yaml.safe_load_all(text) if doc is not None]
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise BadInput(f"invalid YAML{where}: {problem}", file=source) from None
+        raise BadInput(_yaml_problem(exc, text), file=source) from None
+    except RecursionError:
+        raise BadInput(f"nested more than {MAX_MANIFEST_DEPTH} levels deep", file=source) from None
     if len(documents) != 1:
         raise BadInput(f"expected exactly one YAML document, found {len(documents)}", file=source)
     data = documents[0]
+    check_shape(data, source=source)
     if isinstance(data, dict):
         metadata = data.setdefault("metadata", {}) or {}
         if isinstance(metadata, dict) and not metadata.get("name") and not metadata.get("generateName"):

@@ -13,7 +13,7 @@ import posixpath
 import tempfile
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,6 +23,7 @@ from simcore.evaluation.criteria import CriterionResult, evaluate
 from simcore.evaluation.report import index_summary
 from simcore.pipeline import Progress, versions
 from simcore.plan import Plan, RunPoint
+from simcore.scenario.parameters import ParamValue
 from simcore.spec import SimulationRun
 from simcore.store import Store
 from simcore.transport.bus import Bus
@@ -56,13 +57,31 @@ def resolve_scenario_file(
     if source.startswith("file://"):
         return Path(source.removeprefix("file://")).expanduser()
     if source.startswith("s3://"):
-        return _fetch_from_s3(source, scratch, store_factory, field)
+        return _fetch_from_s3(source, scratch, store_factory, field, point.parameters)
     if "://" in source:
         raise BadInput(f"unsupported URL scheme in {source!r}: use a path, file:// or s3://", field=field)
     return (base_dir / source).resolve()
 
 
-def _fetch_from_s3(url: str, scratch: Path, store_factory: Callable[[str], Store], field: str) -> Path:
+def _road_parameter(scenario: Path, text: str, parameters: Mapping[str, ParamValue]) -> str:
+    """A `$name` / `${…}` road path resolved with the scenario's declared defaults and the run's values."""
+    from simcore.scenario.parameters import ParameterError, declare, resolve
+    from simcore.scenario.xosc import parameter_declarations
+
+    try:
+        values = declare(list(parameter_declarations(scenario).values()), {}, parameters)
+        return resolve(text, values)
+    except ParameterError as exc:
+        raise BadInput(str(exc), file=str(scenario), field="RoadNetwork/LogicFile") from None
+
+
+def _fetch_from_s3(
+    url: str,
+    scratch: Path,
+    store_factory: Callable[[str], Store],
+    field: str,
+    parameters: Mapping[str, ParamValue] | None = None,
+) -> Path:
     """Download an s3:// scenario and the road file it names (relative to it, within the same bucket) into
     a mirror of the bucket under `scratch`, so the relative path resolves locally as it does in the bucket."""
     bucket, _, key = url.removeprefix("s3://").partition("/")
@@ -78,7 +97,9 @@ def _fetch_from_s3(url: str, scratch: Path, store_factory: Callable[[str], Store
     root = read_xml(local, what="OpenSCENARIO file")
     logic = root.find("RoadNetwork/LogicFile")
     relative = logic.get("filepath") if logic is not None else None
-    if relative and not relative.startswith("$"):
+    if relative and relative.startswith("$"):  # a parameter: the same bucket check on its value
+        relative = _road_parameter(local, relative, parameters or {})
+    if relative:
         road_key = posixpath.normpath(posixpath.join(posixpath.dirname(key), relative))
         if road_key.startswith("../") or road_key.startswith("/"):
             raise BadInput(f"road file {relative!r} lies outside the bucket {bucket!r}", field=field)
@@ -218,6 +239,8 @@ def run_index(
         )
         if error is None and summary["status"] == "failed":
             exit_code = ExitCode.FAILED
+        if exit_code == ExitCode.BAD_INPUT:
+            summary["badInput"] = True  # the run-level exit code keeps it apart from infrastructure
         log_lines.append(f"status: {summary['status']}")
         recording = scratch / "recording.mcap"
         if recording.is_file():

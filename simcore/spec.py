@@ -8,6 +8,7 @@ fields rejected with their path.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
 from pydantic import (
@@ -30,6 +31,7 @@ API_VERSION = "v1alpha1"
 KIND = "SimulationRun"
 
 _DNS_LABEL = re.compile(r"^[a-z0-9]([-a-z0-9]*[a-z0-9])?$")
+_DNS_PREFIX = re.compile(r"^[a-z0-9][-a-z0-9]*$")
 _PARAM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -44,14 +46,47 @@ class Model(BaseModel):
         validate_default=True,
     )
 
+    @model_validator(mode="before")
+    @classmethod
+    def _no_booleans_as_numbers(cls, data: Any) -> Any:
+        """YAML's true/false are not numbers: `stepSeconds: true` is refused instead of becoming 1.0."""
+        if isinstance(data, dict):
+            for name, field in cls.model_fields.items():
+                key = field.alias or name
+                value = data.get(key, data.get(name))
+                if isinstance(value, bool) and _is_number_type(field.annotation):
+                    raise ValueError(f"{key}: {str(value).lower()} is a boolean, not a number")
+        return data
 
-def _dns_label(value: str) -> str:
-    if len(value) > 63 or not _DNS_LABEL.match(value):
-        raise ValueError(
-            f"{value!r} is not a DNS-1123 label: use at most 63 lowercase letters, digits and '-', "
-            "starting and ending with a letter or digit"
-        )
-    return value
+
+def _is_number_type(annotation: Any) -> bool:
+    """float, int, or one of them or None."""
+    if annotation in (float, int):
+        return True
+    arguments = getattr(annotation, "__args__", ())
+    return bool(arguments) and all(a in (float, int, type(None)) for a in arguments)
+
+
+def _dns_name(pattern: re.Pattern[str], limit: int, what: str) -> Callable[[str], str]:
+    """A validator of a Kubernetes name (or name prefix) with its rule in the message."""
+
+    def check(value: str) -> str:
+        if len(value) > limit or not pattern.match(value):
+            raise ValueError(
+                f"{value[:80]!r} is not {what}: use at most {limit} lowercase letters, digits and '-', "
+                + (
+                    "starting and ending with a letter or digit"
+                    if pattern is _DNS_LABEL
+                    else "starting with a letter or digit"
+                )
+            )
+        return value
+
+    return check
+
+
+_dns_label = _dns_name(_DNS_LABEL, 63, "a DNS-1123 label")
+_dns_prefix = _dns_name(_DNS_PREFIX, 58, "a name prefix")
 
 
 def _param_name(value: str) -> str:
@@ -76,7 +111,7 @@ class ObjectMeta(BaseModel):
     name: DnsLabel | None = Field(
         None, description="Name of the run; the results go under `<output>/<name>/`."
     )
-    generate_name: str | None = Field(
+    generate_name: Annotated[str, AfterValidator(_dns_prefix)] | None = Field(
         None, description="Prefix for a generated name (GitOps: a changed spec is a new run)."
     )
     namespace: str | None = Field(None, description="Namespace of the resource (cluster only).")

@@ -18,9 +18,14 @@ import contextlib
 import os
 import shutil
 import tempfile
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import IO, Any, Protocol, runtime_checkable
+from typing import IO, Any, Protocol, TypeVar, runtime_checkable
+
+from simcore.errors import BadInput, CarlosError, ExitCode
+
+T = TypeVar("T")
 
 __all__ = [
     "FileStore",
@@ -44,8 +49,59 @@ def _umask() -> int:
 _FILE_MODE = 0o666 & ~_umask()
 
 
-class StoreError(RuntimeError):
-    """An object-store operation failed; the message names the object and the cause (never a secret)."""
+class StoreError(CarlosError, RuntimeError):
+    """An object-store operation failed; the message names the object and the cause (never a secret). An
+    infrastructure error (exit code 3): a run ending on it is retried, its finished indexes are kept."""
+
+    exit_code = ExitCode.INFRASTRUCTURE
+
+
+#: how long an S3 operation is retried while the server is unreachable, answers 5xx or throttles
+#: (CARLOS_STORE_OUTAGE_SECONDS overrides); then the operation fails with StoreError
+DEFAULT_OUTAGE_SECONDS = 300.0
+_TRANSIENT_CODES = frozenset(
+    {"SlowDown", "Throttling", "ThrottlingException", "RequestTimeout", "ServiceUnavailable", "InternalError"}
+)
+
+
+def outage_seconds() -> float:
+    """The retry budget of an S3 operation: CARLOS_STORE_OUTAGE_SECONDS, else DEFAULT_OUTAGE_SECONDS."""
+    raw = os.environ.get("CARLOS_STORE_OUTAGE_SECONDS", "")
+    try:
+        value = float(raw) if raw.strip() else DEFAULT_OUTAGE_SECONDS
+    except ValueError:
+        raise BadInput(f"{raw!r} is not a number of seconds", field="CARLOS_STORE_OUTAGE_SECONDS") from None
+    if not 0 <= value <= 86_400:
+        raise BadInput(f"{raw!r} is not between 0 and 86400 seconds", field="CARLOS_STORE_OUTAGE_SECONDS")
+    return value
+
+
+def backoff_delays(budget: float, first: float = 0.5, cap: float = 10.0) -> Iterator[float]:
+    """Sleeps between attempts: doubling from `first` up to `cap`, as long as their sum stays in `budget`."""
+    spent, delay = 0.0, first
+    while spent + delay <= budget:
+        yield delay
+        spent += delay
+        delay = min(delay * 2, cap)
+
+
+def is_transient(exc: BaseException) -> bool:
+    """Whether an S3 failure may pass by itself: no connection, a timeout, a 5xx answer or throttling
+    (searched along the exception's causes; boto3's upload errors wrap the botocore one)."""
+    from botocore.exceptions import ClientError, ConnectionError, HTTPClientError
+
+    cause: BaseException | None = exc
+    seen = 0
+    while cause is not None and seen < 10:
+        if isinstance(cause, ConnectionError | HTTPClientError):  # refused, reset, timed out
+            return True
+        if isinstance(cause, ClientError):
+            code = str(cause.response.get("Error", {}).get("Code", ""))
+            status = cause.response.get("ResponseMetadata", {}).get("HTTPStatusCode") or 0
+            return code in _TRANSIENT_CODES or int(status) >= 500
+        cause = cause.__cause__ or cause.__context__
+        seen += 1
+    return "Max retries exceeded" in str(exc) or "Connection was closed" in str(exc)
 
 
 class NotFoundError(StoreError):
@@ -206,6 +262,10 @@ _CREDENTIAL_HINT = "check AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY"
 class S3Store:
     """An S3 bucket (AWS, MinIO, Ceph, SeaweedFS) under an optional key prefix."""
 
+    #: seconds a transiently failing operation is retried (set by __init__ from CARLOS_STORE_OUTAGE_SECONDS;
+    #: a store assembled around a shared client, as the operator's, keeps 0: its reconcile loop retries)
+    outage: float = 0.0
+
     def __init__(
         self,
         bucket: str,
@@ -218,6 +278,7 @@ class S3Store:
         read_timeout: float = 60.0,
         multipart_threshold: int = 64 * 1024 * 1024,
         multipart_chunksize: int = 16 * 1024 * 1024,
+        outage: float | None = None,
     ) -> None:
         import boto3
         from boto3.s3.transfer import TransferConfig
@@ -227,6 +288,7 @@ class S3Store:
             raise ValueError("S3 bucket name is empty")
         self.bucket = bucket
         self.prefix = prefix.strip("/")
+        self.outage = outage_seconds() if outage is None else outage
         env = os.environ
         self.endpoint = endpoint or env.get("AWS_ENDPOINT_URL_S3") or env.get("AWS_ENDPOINT_URL") or None
         self.region = region or env.get("AWS_REGION") or env.get("AWS_DEFAULT_REGION") or "us-east-1"
@@ -317,32 +379,55 @@ class S3Store:
             reason = f"{type(exc).__name__}: {exc}"
         return error_class(self._redact(f"S3 {op} {target} (endpoint {self._where()}) failed: {reason}"))
 
+    def _retrying(self, op: str, target: str, call: Callable[[], T]) -> T:
+        """`call()`, retried with backoff while it fails transiently (is_transient), for at most
+        `self.outage` seconds; other failures and the last one raise StoreError naming the object."""
+        from boto3.exceptions import S3UploadFailedError
+        from botocore.exceptions import BotoCoreError, ClientError
+
+        started = time.monotonic()
+        delays = backoff_delays(self.outage)
+        while True:
+            try:
+                return call()
+            except (BotoCoreError, ClientError, S3UploadFailedError) as exc:
+                delay = next(delays, None) if is_transient(exc) else None
+                if delay is None or time.monotonic() - started + delay > self.outage:
+                    error = self._error(op, target, exc)
+                    if is_transient(exc):
+                        waited = time.monotonic() - started
+                        error = type(error)(f"{error} (still failing after {waited:.0f} s of retries)")
+                    raise error from exc
+                time.sleep(delay)
+
     # --- API ---------------------------------------------------------------------------------------------
 
     def check_bucket(self) -> None:
         """Raise StoreError unless the bucket exists and the credentials may use it."""
-        from botocore.exceptions import BotoCoreError, ClientError
+        from botocore.exceptions import ClientError
 
         try:
-            self._client.head_bucket(Bucket=self.bucket)
-        except ClientError as exc:
-            code = str(exc.response.get("Error", {}).get("Code", ""))
+            self._retrying(
+                "access to bucket",
+                f"s3://{self.bucket}",
+                lambda: self._client.head_bucket(Bucket=self.bucket),
+            )
+        except StoreError as exc:
+            cause = exc.__cause__
+            code = (
+                str(cause.response.get("Error", {}).get("Code", "")) if isinstance(cause, ClientError) else ""
+            )
             if code in ("404", "NoSuchBucket", "NotFound"):
                 raise StoreError(
                     f"S3 bucket {self.bucket!r} does not exist at {self._where()}: create it first"
-                ) from exc
-            raise self._error("access to bucket", f"s3://{self.bucket}", exc) from exc
-        except BotoCoreError as exc:
-            raise self._error("access to bucket", f"s3://{self.bucket}", exc) from exc
+                ) from cause
+            raise
 
     def put_bytes(self, key: str, data: bytes) -> None:
-        from botocore.exceptions import BotoCoreError, ClientError
-
         full = self._key(key)
-        try:
-            self._client.put_object(Bucket=self.bucket, Key=full, Body=data)
-        except (BotoCoreError, ClientError) as exc:
-            raise self._error("put", self.url_for(key), exc) from exc
+        self._retrying(
+            "put", self.url_for(key), lambda: self._client.put_object(Bucket=self.bucket, Key=full, Body=data)
+        )
 
     def put_file(
         self,
@@ -353,58 +438,48 @@ class S3Store:
     ) -> None:
         """Upload a file (multipart above the threshold); `progress` is called with bytes sent so far
         per part (boto3's Callback). The key appears only once the whole upload has completed."""
-        from boto3.exceptions import S3UploadFailedError
-        from botocore.exceptions import BotoCoreError, ClientError
-
         full = self._key(key)
         if not Path(local_path).is_file():
             raise StoreError(f"cannot upload {local_path} to {self.url_for(key)}: not a file")
-        try:
-            self._client.upload_file(
+        self._retrying(
+            "upload",
+            self.url_for(key),
+            lambda: self._client.upload_file(
                 os.fspath(local_path), self.bucket, full, Config=self._transfer, Callback=progress
-            )
-        except (BotoCoreError, ClientError, S3UploadFailedError) as exc:
-            raise self._error("upload", self.url_for(key), exc) from exc
+            ),
+        )
 
     def get_bytes(self, key: str) -> bytes:
-        from botocore.exceptions import BotoCoreError, ClientError
-
         full = self._key(key)
-        try:
-            response = self._client.get_object(Bucket=self.bucket, Key=full)
-            return bytes(response["Body"].read())
-        except (BotoCoreError, ClientError) as exc:
-            raise self._error("get", self.url_for(key), exc) from exc
+        return self._retrying(
+            "get",
+            self.url_for(key),
+            lambda: bytes(self._client.get_object(Bucket=self.bucket, Key=full)["Body"].read()),
+        )
 
     def exists(self, key: str) -> bool:
-        from botocore.exceptions import BotoCoreError, ClientError
-
         full = self._key(key)
         try:
-            self._client.head_object(Bucket=self.bucket, Key=full)
-        except ClientError as exc:
-            error = self._error("head", self.url_for(key), exc)
-            if isinstance(error, NotFoundError):
-                return False
-            raise error from exc
-        except BotoCoreError as exc:
-            raise self._error("head", self.url_for(key), exc) from exc
+            self._retrying(
+                "head", self.url_for(key), lambda: self._client.head_object(Bucket=self.bucket, Key=full)
+            )
+        except NotFoundError:
+            return False
         return True
 
     def list(self, prefix: str = "") -> list[str]:
         """Keys (relative to the store's prefix) starting with `prefix`, sorted."""
-        from botocore.exceptions import BotoCoreError, ClientError
-
         _check_prefix(prefix)
         base = f"{self.prefix}/" if self.prefix else ""
-        keys: list[str] = []
-        try:
+
+        def keys() -> list[str]:
+            found: list[str] = []
             paginator = self._client.get_paginator("list_objects_v2")
             for page in paginator.paginate(Bucket=self.bucket, Prefix=base + prefix):
-                keys.extend(obj["Key"][len(base) :] for obj in page.get("Contents", []))
-        except (BotoCoreError, ClientError) as exc:
-            raise self._error("list", f"s3://{self.bucket}/{base}{prefix}", exc) from exc
-        return sorted(keys)
+                found.extend(obj["Key"][len(base) :] for obj in page.get("Contents", []))
+            return found
+
+        return sorted(self._retrying("list", f"s3://{self.bucket}/{base}{prefix}", keys))
 
     def url_for(self, key: str) -> str:
         return f"s3://{self.bucket}/{self._key(key)}"

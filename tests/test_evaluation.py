@@ -679,6 +679,19 @@ def test_required_failure_gives_exit_code_1() -> None:
     }
 
 
+def test_a_bad_input_error_gives_exit_code_2_apart_from_infrastructure() -> None:
+    passed = summary(0, "cut-in", {"collision": 0.0}, ["collision == 0"])
+    bad = {**summary(1, "cut-in", {}, [], error="no lane id=-9"), "badInput": True}
+    crashed = summary(2, "cut-in", {}, [], error="libsumo: connection closed")
+    assert run_summary("r", [passed, bad], total=2)["exitCode"] == 2
+    assert run_summary("r", [passed, bad, crashed], total=3)["exitCode"] == 2  # a retry cannot fix it
+    assert run_summary("r", [passed, crashed], total=3)["exitCode"] == 3
+    failed = summary(3, "cut-in", {"collision": 1.0}, ["collision == 0"])
+    assert run_summary("r", [passed, bad, crashed, failed], total=4)["exitCode"] == 1
+    optional_bad = {**summary(1, "o", {}, [], error="no lane", optional=True), "badInput": True}
+    assert run_summary("r", [passed, optional_bad], total=2)["exitCode"] == 0
+
+
 def test_required_error_and_missing_give_exit_code_3() -> None:
     summaries = [
         summary(0, "cut-in", {"collision": 0.0}, ["collision == 0"]),

@@ -56,3 +56,40 @@ def test_expression_result_types() -> None:
     assert evaluate_expression("1 + 2", {}) == 3
     assert evaluate_expression("1 / 2", {}) == 0.5
     assert evaluate_expression("2 == 2", {}) is True
+
+
+@pytest.mark.parametrize(
+    ("expression", "expected"),
+    [
+        ("${10**10**10}", "out of range"),
+        ("${2 ** 1000000}", "out of range"),
+        ("${9e308*10}", "not a finite number"),
+        ("${1e999}", "not a finite number"),
+        ("${pow(10, 400)}", "out of range"),
+        ("${(-8) ** 0.5}", "math domain error"),
+        ("${" + "9" * 900 + "}", "out of range"),
+        ("${" + "(" * 600 + "1" + ")" * 600 + "}", "longer than"),
+    ],
+)
+def test_hostile_expressions_fail_fast_with_a_short_message(expression: str, expected: str) -> None:
+    import time
+
+    started = time.monotonic()
+    with pytest.raises(ParameterError, match=expected) as info:
+        resolve(expression, {})
+    assert time.monotonic() - started < 1.0
+    assert len(str(info.value)) < 300  # the expression is shortened, never echoed whole
+
+
+def test_integer_powers_stay_exact_while_in_range() -> None:
+    assert resolve("${2 ** 62}", {}) == str(2**62)
+    assert resolve("${3 ** 39}", {}) == str(3**39)
+    assert resolve("${2 ** -1}", {}) == "0.5"
+    assert resolve("${(-1) ** 1000001}", {}) == "-1"
+
+
+def test_declared_values_must_be_finite() -> None:
+    with pytest.raises(ParameterError, match=r"'X' \(double\).*finite"):
+        declare([Declaration("X", "double", "inf")], {})
+    with pytest.raises(ParameterError, match=r"'N' \(integer\).*finite"):
+        declare([Declaration("N", "integer", "nan")], {})

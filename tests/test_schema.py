@@ -110,6 +110,27 @@ def test_unsafe_or_broken_xml_is_bad_input_before_any_schema_work(tmp_path: Path
 
 
 @pytest.mark.parametrize(
+    ("inside", "expected"),
+    [
+        ("<X>" * 300 + "</X>" * 300, "nested more than 256 deep"),
+        ("<X " + " ".join(f'a{i}="{i}"' for i in range(50_000)) + "/>", "50000 attributes"),
+    ],
+    ids=["deep", "wide"],
+)
+def test_deep_or_wide_xml_is_refused_before_the_schema_check(
+    tmp_path: Path, inside: str, expected: str
+) -> None:
+    import time
+
+    path = tmp_path / "hostile.xosc"
+    path.write_text(f'<OpenSCENARIO><FileHeader revMajor="1" revMinor="2"/>{inside}</OpenSCENARIO>')
+    started = time.monotonic()
+    with pytest.raises(BadInput, match=f"too complex at line 1: .*{expected}"):
+        schema.check_openscenario(path)
+    assert time.monotonic() - started < 5.0
+
+
+@pytest.mark.parametrize(
     "path", sorted((ROOT / "examples" / "scenarios").glob("*.xosc")), ids=lambda p: p.name
 )
 def test_the_example_scenarios_are_valid(path: Path) -> None:

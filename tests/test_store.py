@@ -203,6 +203,7 @@ def test_s3_failed_multipart_upload_leaves_no_key(s3_env: S3Server, tmp_path: Pa
         multipart_threshold=5 * MiB,
         multipart_chunksize=5 * MiB,
         max_attempts=2,
+        outage=1.0,
     )
     src = tmp_path / "big.bin"
     src.write_bytes(os.urandom(12 * MiB))
@@ -275,10 +276,59 @@ def test_s3_missing_bucket(s3_env: S3Server) -> None:
 @pytest.mark.s3
 def test_s3_unreachable_endpoint(s3_env: S3Server) -> None:
     store = S3Store.from_url(
-        f"s3://{s3_env.bucket}/x", endpoint="http://127.0.0.1:9", max_attempts=2, connect_timeout=1
+        f"s3://{s3_env.bucket}/x",
+        endpoint="http://127.0.0.1:9",
+        max_attempts=2,
+        connect_timeout=1,
+        outage=2.0,
     )
-    with pytest.raises(StoreError, match=re.escape("cannot connect to the endpoint http://127.0.0.1:9")):
+    started = time.monotonic()
+    with pytest.raises(
+        StoreError, match=re.escape("cannot connect to the endpoint http://127.0.0.1:9")
+    ) as info:
         store.put_bytes("a.json", b"{}")
+    assert "s of retries" in str(info.value)
+    assert 1.0 <= time.monotonic() - started < 30  # retried with backoff for the bounded time, then given up
+
+
+@pytest.mark.s3
+def test_s3_transient_failures_are_retried_until_they_pass(s3_env: S3Server) -> None:
+    """The connection drops on the first three PUTs (beyond botocore's own retries): the store backs off and
+    tries again; the fourth succeeds and the object is there once."""
+    store = S3Store.from_url(f"s3://{s3_env.bucket}/flaky", max_attempts=1, outage=30.0)
+    dropped: list[str] = []
+
+    def drop_three(request: AWSPreparedRequest, **_: object) -> None:
+        if len(dropped) < 3:
+            dropped.append(request.url)
+            raise ConnectionClosedError(endpoint_url=request.url)
+
+    store._client.meta.events.register("before-send.s3.PutObject", drop_three)
+    store.put_bytes("run/0/summary.json", b"{}")
+    assert len(dropped) == 3
+    assert store.get_bytes("run/0/summary.json") == b"{}"
+
+
+def test_backoff_delays_double_up_to_the_cap_within_the_budget() -> None:
+    from simcore.store import backoff_delays
+
+    assert list(backoff_delays(10.0)) == [0.5, 1.0, 2.0, 4.0]
+    assert list(backoff_delays(0.0)) == []
+    delays = list(backoff_delays(100.0, cap=10.0))
+    assert max(delays) == 10.0 and sum(delays) <= 100.0
+
+
+def test_the_outage_budget_comes_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    from simcore.errors import BadInput
+    from simcore.store import DEFAULT_OUTAGE_SECONDS, outage_seconds
+
+    monkeypatch.delenv("CARLOS_STORE_OUTAGE_SECONDS", raising=False)
+    assert outage_seconds() == DEFAULT_OUTAGE_SECONDS
+    monkeypatch.setenv("CARLOS_STORE_OUTAGE_SECONDS", "12.5")
+    assert outage_seconds() == 12.5
+    monkeypatch.setenv("CARLOS_STORE_OUTAGE_SECONDS", "soon")
+    with pytest.raises(BadInput, match="CARLOS_STORE_OUTAGE_SECONDS"):
+        outage_seconds()
 
 
 def test_file_store_writes_ordinary_file_modes(tmp_path: Path) -> None:
@@ -288,3 +338,29 @@ def test_file_store_writes_ordinary_file_modes(tmp_path: Path) -> None:
     umask = os.umask(0)
     os.umask(umask)
     assert mode == 0o666 & ~umask
+
+
+@pytest.mark.parametrize(
+    ("code", "status", "transient"),
+    [
+        ("ServiceUnavailable", 503, True),
+        ("InternalError", 500, True),
+        ("SlowDown", 503, True),
+        ("", 502, True),
+        ("AccessDenied", 403, False),
+        ("NoSuchKey", 404, False),
+        ("SignatureDoesNotMatch", 403, False),
+    ],
+)
+def test_5xx_and_throttling_are_transient_and_client_errors_are_not(
+    code: str, status: int, transient: bool
+) -> None:
+    from botocore.exceptions import ClientError, EndpointConnectionError
+
+    from simcore.store import is_transient
+
+    error = ClientError(
+        {"Error": {"Code": code}, "ResponseMetadata": {"HTTPStatusCode": status}}, "PutObject"
+    )
+    assert is_transient(error) is transient
+    assert is_transient(EndpointConnectionError(endpoint_url="http://127.0.0.1:9"))

@@ -10,7 +10,9 @@ Run-level counting (every index lands in exactly one bucket, so
 
 The run's `status` is `passed` when `failed == errors == missing == 0`, else `failed`. Its `exitCode`
 (DESIGN.md): 1 when a required index failed (a test failure wins over everything else, because a retry
-cannot fix it), else 3 when a required index errored or an index is missing (infrastructure), else 0.
+cannot fix it), else 2 when a required index errored on bad input (its summary has `badInput: true`: a
+retry cannot fix that either), else 3 when a required index errored or an index is missing
+(infrastructure), else 0.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ STATUSES: tuple[str, ...] = ("passed", "failed", "error")
 
 EXIT_PASSED = 0
 EXIT_TEST_FAILED = 1
+EXIT_BAD_INPUT = 2
 EXIT_INFRASTRUCTURE = 3
 
 
@@ -131,6 +134,7 @@ def run_summary(run_name: str, index_summaries: Iterable[Mapping[str, Any]], tot
     scenarios: dict[str, dict[str, Any]] = {}
     aggregates: dict[str, dict[str, _Aggregate]] = {}
     seen: set[int] = set()
+    bad_input = False
     for summary in index_summaries:
         index = summary["index"]
         if not 0 <= index < total:
@@ -166,12 +170,16 @@ def run_summary(run_name: str, index_summaries: Iterable[Mapping[str, Any]], tot
             if aggregate is None:
                 aggregate = metric_aggregates[metric] = _Aggregate()
             aggregate.add(float(value))
+        if bucket == "errors" and summary.get("badInput"):
+            bad_input = True
     counts["missing"] = total - len(seen)
     for name, scenario in scenarios.items():
         scenario["metrics"] = {metric: a.as_dict() for metric, a in aggregates[name].items()}
 
     if counts["failed"]:
         exit_code = EXIT_TEST_FAILED
+    elif bad_input:
+        exit_code = EXIT_BAD_INPUT
     elif counts["errors"] or counts["missing"]:
         exit_code = EXIT_INFRASTRUCTURE
     else:

@@ -97,7 +97,12 @@ def check_openscenario(path: Path, max_issues: int = MAX_ISSUES) -> SchemaReport
     from lxml import etree
 
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False)
-    tree = etree.parse(str(path), parser)
+    try:
+        tree = etree.parse(str(path), parser)
+    except (
+        etree.XMLSyntaxError
+    ) as exc:  # libxml2 is stricter than expat in a few places (the XML declaration)
+        raise BadInput(f"OpenSCENARIO file is not well-formed XML: {exc}", file=str(path)) from None
     for error in _schema(version).iter_errors(tree):
         if len(report.issues) >= max_issues:
             report.truncated = True

@@ -6,6 +6,7 @@ size, and every problem raised as `BadInput` naming the file and the element pat
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping
@@ -20,22 +21,46 @@ from simcore.scenario import model as m
 from simcore.scenario.parameters import Declaration, ParameterError, ParamValue, convert, declare, resolve
 
 MAX_SCENARIO_BYTES = 32 * 1024 * 1024
+# Structure bounds checked while parsing, before anything else (the XSD check, the reader) walks the tree:
+# OpenSCENARIO elements have at most a dozen attributes and real scenarios nest a few dozen levels deep.
+MAX_XML_DEPTH = 256
+MAX_XML_ATTRIBUTES = 256  # on one element
+MAX_XML_ELEMENTS = 1_000_000
 T = TypeVar("T")
 
 
-class _LineBuilder(ET.TreeBuilder):
-    """A tree builder that remembers the source line of every element (for warnings and errors)."""
+class XmlLimitExceeded(Exception):
+    """The XML is deeper, wider or larger than MAX_XML_*: raised by the builder, reported as BadInput."""
 
-    def __init__(self, lines: dict[int, int]) -> None:
+
+class _LineBuilder(ET.TreeBuilder):
+    """A tree builder that enforces the structure bounds and (with `lines`) remembers the source line of every
+    element (for warnings and errors)."""
+
+    def __init__(self, lines: dict[int, int] | None) -> None:
         super().__init__()
         self.lines = lines
         self.parser: Any = None
+        self.depth = 0
+        self.elements = 0
 
     def start(self, tag: Any, attrs: Any) -> ET.Element:
+        self.depth += 1
+        self.elements += 1
+        if self.depth > MAX_XML_DEPTH:
+            raise XmlLimitExceeded(f"elements nested more than {MAX_XML_DEPTH} deep")
+        if len(attrs) > MAX_XML_ATTRIBUTES:
+            raise XmlLimitExceeded(f"an element with {len(attrs)} attributes (at most {MAX_XML_ATTRIBUTES})")
+        if self.elements > MAX_XML_ELEMENTS:
+            raise XmlLimitExceeded(f"more than {MAX_XML_ELEMENTS} elements")
         element = super().start(tag, attrs)
-        if self.parser is not None:
+        if self.parser is not None and self.lines is not None:
             self.lines[id(element)] = int(self.parser.parser.CurrentLineNumber)
         return element
+
+    def end(self, tag: Any) -> ET.Element:
+        self.depth -= 1
+        return super().end(tag)
 
 
 def read_xml(
@@ -49,20 +74,23 @@ def read_xml(
     if size > max_bytes:
         raise BadInput(f"{what} is {size} bytes; at most {max_bytes} are allowed", file=str(path))
     try:
-        if lines is None:
-            return SafeET.parse(str(path)).getroot()
         builder = _LineBuilder(lines)
         parser = SafeET.DefusedXMLParser(target=builder)
         builder.parser = parser
         parser.feed(path.read_bytes())
         root: ET.Element = parser.close()
         return root
+    except XmlLimitExceeded as exc:
+        line = builder.parser.parser.CurrentLineNumber if builder.parser is not None else "?"
+        raise BadInput(f"{what} is too complex at line {line}: {exc}", file=str(path)) from None
     except DefusedXmlException as exc:
         raise BadInput(
             f"{what} uses forbidden XML constructs ({type(exc).__name__})", file=str(path)
         ) from None
     except ET.ParseError as exc:
         raise BadInput(f"{what} is not well-formed XML: {exc}", file=str(path)) from None
+    except LookupError as exc:  # <?xml encoding="…"?> naming no known codec
+        raise BadInput(f"{what} declares an unknown encoding: {exc}", file=str(path)) from None
 
 
 class _Reader:
@@ -312,6 +340,20 @@ def declared_parameters(path: str | Path) -> dict[str, str]:
     return {d.get("name", ""): d.get("value", "") for d in block.findall("ParameterDeclaration")}
 
 
+def parameter_declarations(path: str | Path) -> dict[str, Declaration]:
+    """The scenario's top-level parameter declarations by name (type and default as written)."""
+    root = read_xml(Path(path), what="OpenSCENARIO file")
+    block = root.find("ParameterDeclarations")
+    if block is None:
+        return {}
+    return {
+        d.get("name", ""): Declaration(
+            d.get("name", ""), d.get("parameterType", "string"), d.get("value", "")
+        )
+        for d in block.findall("ParameterDeclaration")
+    }
+
+
 def _declared_names(root: ET.Element) -> set[str]:
     block = root.find("ParameterDeclarations")
     if block is None:
@@ -334,6 +376,37 @@ def _check_references(scenario: m.Scenario, names: set[str]) -> None:
             for group in act.groups:
                 for actor in group.actors:
                     check(actor, f"Story[{story.name}]/Act[{act.name}]/ManeuverGroup[{group.name}]/Actors")
+    for story in scenario.stories:
+        for owner, name in _entity_references(story):
+            check(name, f"Story[{story.name}]: {owner}")
+    if scenario.stop_trigger is not None:
+        for owner, name in _entity_references(scenario.stop_trigger):
+            check(name, f"StopTrigger: {owner}")
+
+
+_ENTITY_FIELDS = ("entity", "entities", "triggering_entities", "actors")
+
+
+def _entity_references(root: object) -> list[tuple[str, str]]:
+    """(dataclass name, entity name) of every entity reference under a model object: the fields named in
+    _ENTITY_FIELDS of every dataclass (conditions, actions, positions), found without recursion."""
+    found: list[tuple[str, str]] = []
+    stack: list[object] = [root]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, tuple | list):
+            stack.extend(item)
+            continue
+        if not dataclasses.is_dataclass(item) or isinstance(item, type):
+            continue
+        for f in dataclasses.fields(item):
+            value = getattr(item, f.name)
+            if f.name in _ENTITY_FIELDS:
+                names = value if isinstance(value, tuple | list) else (value,)
+                found.extend((type(item).__name__, n) for n in names if isinstance(n, str) and n)
+            elif dataclasses.is_dataclass(value) or isinstance(value, tuple | list):
+                stack.append(value)
+    return found
 
 
 # --- catalogs and entities --------------------------------------------------------------------------------

@@ -23,7 +23,9 @@ import logging
 import os
 import sys
 import traceback
-from collections.abc import Mapping
+import types
+import typing
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -89,8 +91,9 @@ def node_environment(sut: SystemUnderTest, environ: Mapping[str, str]) -> dict[s
     return out
 
 
-def load_system_under_test(sut: SystemUnderTest, bus: Bus, base_dir: Path | None) -> Any:
-    """Import `sut.module` (`package.module:Class`) and construct `Class(bus, **sut.parameters)`."""
+def system_under_test_class(sut: SystemUnderTest, base_dir: Path | None) -> Any:
+    """Import `sut.module` (`package.module:Class`) and check that `Class(bus, **sut.parameters)` fits its
+    signature, names and (annotated as bool, int, float or str) types: bad input before any run."""
     field = "spec.systemUnderTest.module"
     assert sut.module is not None
     module_name, _, class_name = sut.module.partition(":")
@@ -113,13 +116,53 @@ def load_system_under_test(sut: SystemUnderTest, bus: Bus, base_dir: Path | None
     if node_class is None or not callable(node_class):
         raise BadInput(f"{module_name!r} has no class {class_name!r}", field=field)
     try:
-        inspect.signature(node_class).bind(bus, **sut.parameters)
+        signature = inspect.signature(node_class, eval_str=True)
+        signature.bind(None, **sut.parameters)
     except TypeError as exc:
         raise BadInput(
             f"{sut.module} does not take these parameters: {exc}", field="spec.systemUnderTest.parameters"
         ) from None
-    except ValueError:
-        pass  # no signature to check (a builtin): let the call decide
+    except (ValueError, NameError):
+        return node_class  # no signature to check (a builtin, an unresolvable annotation): the call decides
+    for name, value in sut.parameters.items():
+        parameter = signature.parameters.get(name)
+        if parameter is not None and not _fits(value, parameter.annotation):
+            raise BadInput(
+                f"{sut.module} takes {name} as {_type_name(parameter.annotation)}, not {value!r}",
+                field=f"spec.systemUnderTest.parameters.{name}",
+            )
+    return node_class
+
+
+_SIMPLE_TYPES: dict[Any, Callable[[Any], bool]] = {
+    bool: lambda v: isinstance(v, bool),
+    int: lambda v: isinstance(v, int) and not isinstance(v, bool),
+    float: lambda v: isinstance(v, int | float) and not isinstance(v, bool),
+    str: lambda v: isinstance(v, str),
+    type(None): lambda v: v is None,
+}
+
+
+def _fits(value: Any, annotation: Any) -> bool:
+    """Whether a YAML value fits a simple annotation (bool, int, float, str, None or a union of them); any
+    other annotation is left to the class."""
+    options = (
+        typing.get_args(annotation)
+        if isinstance(annotation, types.UnionType) or (typing.get_origin(annotation) is typing.Union)
+        else (annotation,)
+    )
+    if not all(option in _SIMPLE_TYPES for option in options):
+        return True
+    return any(_SIMPLE_TYPES[option](value) for option in options)
+
+
+def _type_name(annotation: Any) -> str:
+    return getattr(annotation, "__name__", None) or str(annotation)
+
+
+def load_system_under_test(sut: SystemUnderTest, bus: Bus, base_dir: Path | None) -> Any:
+    """Import `sut.module` (`package.module:Class`) and construct `Class(bus, **sut.parameters)`."""
+    node_class = system_under_test_class(sut, base_dir)
     try:
         return node_class(bus, **sut.parameters)
     except (TypeError, ValueError) as exc:

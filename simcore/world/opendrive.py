@@ -58,6 +58,10 @@ __all__ = [
 MAX_FILE_BYTES = 64 * 1024 * 1024
 """Files (and strings) larger than this are refused."""
 
+MAX_GEOMETRIES = 100_000
+"""planView geometry records per file; more are refused before parsing (netconvert would take minutes and
+gigabytes on them, then silently make an empty network). Large real maps have a few ten thousand."""
+
 DRIVING_LANE_TYPES = frozenset(
     {"driving", "entry", "exit", "onramp", "offramp", "connectingramp", "bidirectional", "sliplane"}
 )
@@ -914,6 +918,12 @@ class OpenDrive:
 
     @classmethod
     def _from_bytes(cls, data: bytes, name: str) -> OpenDrive:
+        geometries = data.count(b"<geometry")
+        if geometries > MAX_GEOMETRIES:
+            raise OpenDriveError(
+                f"{name}: {geometries} <geometry> records, more than the {MAX_GEOMETRIES} allowed: "
+                "split the road network"
+            )
         try:
             root = DET.fromstring(data, forbid_dtd=False, forbid_entities=True, forbid_external=True)
         except DefusedXmlException as e:

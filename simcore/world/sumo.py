@@ -54,11 +54,45 @@ def sumo_version() -> str:
     return version("eclipse-sumo")
 
 
+MAX_NETWORK_BYTES = 512 * 1024 * 1024
+
+
+def check_network_xml(path: Path) -> None:
+    """A SUMO `.net.xml` is untrusted input too: streamed once through defusedxml (no DTD entities, no external
+    references, bounded size, well-formed, root <net>) before SUMO reads it."""
+    import xml.etree.ElementTree as ET
+
+    import defusedxml.ElementTree as SafeET
+    from defusedxml import DefusedXmlException
+
+    size = path.stat().st_size
+    if size > MAX_NETWORK_BYTES:
+        raise BadInput(
+            f"SUMO network is {size} bytes; at most {MAX_NETWORK_BYTES} are allowed", file=str(path)
+        )
+    root_tag = None
+    try:
+        for event, element in SafeET.iterparse(str(path), events=("start", "end")):
+            if root_tag is None:
+                root_tag = element.tag
+            if event == "end":
+                element.clear()
+    except DefusedXmlException as exc:
+        raise BadInput(
+            f"SUMO network uses forbidden XML constructs ({type(exc).__name__})", file=str(path)
+        ) from None
+    except (ET.ParseError, LookupError) as exc:  # LookupError: an unknown encoding declared
+        raise BadInput(f"SUMO network is not well-formed XML: {exc}", file=str(path)) from None
+    if root_tag != "net":
+        raise BadInput(f"root element is <{root_tag}>, expected <net> (a SUMO network)", file=str(path))
+
+
 def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
     """The SUMO network for an OpenDRIVE file (converted once, cached by content hash) or a `.net.xml`."""
     if not road_file.is_file():
         raise BadInput("road network file not found", file=str(road_file))
     if road_file.name.endswith(".net.xml"):
+        check_network_xml(road_file)
         return road_file
     if road_file.suffix != ".xodr":
         raise BadInput("road network must be OpenDRIVE (.xodr) or SUMO (.net.xml)", file=str(road_file))
