@@ -9,6 +9,11 @@ Gaps of kmock 0.8 filled here (test side only):
   prefix): `parse_path` is wrapped so they address the `namespaces` resource (kopf lists and watches
   Namespaces when it serves named namespaces, and serves only those that exist).
 No garbage collector: owner references are asserted, not acted on.
+
+Stricter than kmock: every create and patch is validated as an API server would before it is stored
+(tests/apiserver.py): built-in kinds against the Kubernetes OpenAPI schemas (strict), SimulationRuns against
+the shipped CRD (crds/simulationrun.yaml: its structural schema and its CEL rules, `oldSelf` on update); a
+refused request answers 422 Invalid with the field errors, and `CarlosEmulator.refused` keeps them.
 """
 
 from __future__ import annotations
@@ -30,8 +35,9 @@ from typing import Any
 
 import aiohttp.web
 import kmock
-from kmock._internal import enums, parsing, rendering
+from kmock._internal import enums, k8s, parsing, rendering
 
+from tests.apiserver import Invalid, merge_patch, shipped_crd, validate_builtin
 from tests.kubelet import Kubelet
 
 RESOURCES = {
@@ -88,6 +94,43 @@ class CarlosEmulator(kmock.KubernetesEmulator):
 
     _versions = itertools.count(1)
 
+    def __attrs_post_init__(self) -> None:
+        super().__attrs_post_init__()
+        self.refused: list[str] = []  # the problems of every request refused as invalid
+        self.validate = True
+
+    def _check(self, request: rendering.Request) -> None:
+        """Validate the object a create or patch would store; raise 422 as the API server does."""
+        assert request.resource is not None
+        res = request.resource
+        group_version = f"{res.group}/{res.version}" if res.group else str(res.version)
+        kind = RESOURCES.get(f"{group_version}/{res.plural}")
+        old: dict[str, Any] | None = None
+        if request.action == enums.action.CREATE:
+            new = dict(request.data)
+        else:
+            key = (request.resource, request.namespace, request.name)
+            if key not in self._objects or self._objects[key].deleted:
+                return  # kmock answers 404
+            old = dict(self._objects[key].raw)
+            new = merge_patch(old, request.data)
+            if request.subresource == "status":
+                new["spec"] = old.get("spec")  # the status subresource never changes spec
+            elif "status" in (kind.subresources if kind else set()):
+                new["status"] = old.get("status")  # nor the main resource the status
+                new = {k: v for k, v in new.items() if v is not None}
+        if kind is not None:
+            new.setdefault("kind", kind.kind)
+            new.setdefault("apiVersion", group_version)
+        try:
+            if new.get("kind") == "SimulationRun":
+                shipped_crd().validate(new, old)
+            else:
+                validate_builtin(new)
+        except Invalid as exc:
+            self.refused.append(str(exc))
+            raise k8s.KubernetesError(status=422, reason="Invalid", message=str(exc)) from None
+
     async def _handle(self, request: rendering.Request) -> aiohttp.web.StreamResponse:
         if len(self._requests) > 2 * self.HISTORY:
             del self._requests[: -self.HISTORY]
@@ -104,6 +147,11 @@ class CarlosEmulator(kmock.KubernetesEmulator):
             elif request.action == enums.action.UPDATE:
                 meta = request.data.setdefault("metadata", {})
                 meta["resourceVersion"] = str(next(self._versions))
+            if self.validate and request.action in (enums.action.CREATE, enums.action.UPDATE):
+                try:
+                    self._check(request)
+                except k8s.KubernetesError as exc:
+                    return await self._render_error(exc)
         response = await super()._handle(request)
         if request.action == enums.action.CREATE and response.status == 200 and not response.prepared:
             response.set_status(201)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -30,6 +31,7 @@ from carlos_operator.status import (
 from simcore.errors import BadInput
 from simcore.manifest import parse_manifest
 from simcore.spec import SimulationRun
+from tests.apiserver import Invalid, admit
 
 SETTINGS = OperatorSettings.from_env(
     {
@@ -357,3 +359,35 @@ def test_the_pod_transport_is_an_operator_setting() -> None:
     assert env["CARLOS_TRANSPORT"] == "loopback"
     with pytest.raises(BadInput, match=r"CARLOS_POD_TRANSPORT='zmq' is not one of dds, loopback"):
         OperatorSettings.from_env({"CARLOS_POD_TRANSPORT": "zmq"})
+
+
+EXAMPLE_RUNS = sorted(
+    p
+    for folder in ("examples/runs", "examples/gitops/runs", "examples/gitops/ci")
+    for p in (Path(__file__).resolve().parent.parent / folder).glob("*.yaml")
+    if p.name != "kustomization.yaml"
+)
+
+
+@pytest.mark.parametrize("path", EXAMPLE_RUNS, ids=[f"{p.parent.name}/{p.name}" for p in EXAMPLE_RUNS])
+def test_every_object_built_for_an_example_is_accepted_by_the_strict_stand_in(path: Path) -> None:
+    """What the operator creates for each example manifest passes the API server's checks (tests/apiserver.py:
+    strict OpenAPI schemas of the oldest supported Kubernetes version)."""
+    for body in yaml.safe_load_all(path.read_text()):
+        if not body or body.get("kind") != "SimulationRun":
+            continue
+        body["metadata"].setdefault("name", f"{body['metadata'].get('generateName', 'run-')}abcde")
+        body["metadata"].update(namespace="sims", uid="0b5c7a4e-1d2f-4a8b-9c3d-2e1f0a9b8c7d")
+        admit(body)
+        output = body["spec"].setdefault("output", {})
+        if not str(output.get("url", "s3://")).startswith("s3://"):
+            output["url"] = "s3://results/runs"  # a local example's file:// output, as on a cluster
+        run = load(body)
+        for obj in (
+            build_configmap(run, body, SETTINGS),
+            build_job(run, body, SETTINGS, resolve_output(run, SETTINGS)),
+        ):
+            try:
+                admit(obj)
+            except Invalid as exc:
+                pytest.fail(f"{path.name}: {exc}")
