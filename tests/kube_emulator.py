@@ -345,6 +345,8 @@ class JobRunner:
                 secrets[name] = {k: base64.b64encode(v.encode()).decode() for k, v in data.items()}
         rules = spec.get("podFailurePolicy", {}).get("rules", [])
         limit = int(spec.get("backoffLimitPerIndex", 0))
+        max_failed = spec.get("maxFailedIndexes")
+        job_failure: list[str] = []  # the reason the whole Job failed (FailJob, maxFailedIndexes)
         lock = threading.Lock()
         completed: list[int] = []
         failed: list[int] = []
@@ -366,7 +368,7 @@ class JobRunner:
 
         def run_index(index: int) -> None:
             failures = 0
-            while True:
+            while not job_failure:  # a failed Job starts no more pods
                 key = (meta["uid"], index)
                 self.attempts[key] = self.attempts.get(key, 0) + 1
 
@@ -401,9 +403,16 @@ class JobRunner:
                     if codes and codes.get("operator") == "In" and exit_code in codes.get("values", []):
                         action = rule["action"]
                         break
+                if action == "FailJob":
+                    with lock:
+                        failed.append(index)
+                        job_failure.append("PodFailurePolicy")
+                    break
                 if action == "FailIndex" or (action == "Count" and failures + 1 > limit):
                     with lock:
                         failed.append(index)
+                        if max_failed is not None and len(failed) > int(max_failed):
+                            job_failure.append("MaxFailedIndexesExceeded")
                     break
                 if action == "Count":
                     failures += 1
@@ -416,7 +425,7 @@ class JobRunner:
         condition = {
             "type": finished,
             "status": "True",
-            "reason": "FailedIndexes" if failed else "",
+            "reason": (job_failure[0] if job_failure else "FailedIndexes") if failed else "",
             "lastTransitionTime": _now(),
         }
         if finished == "Failed":

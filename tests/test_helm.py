@@ -152,6 +152,15 @@ VALUE_SETS: dict[str, dict[str, Any]] = {
         },
     },
     "job-ttl": {"jobTTLSeconds": 3600},
+    "run-pods": {
+        "runPods": {
+            "resources": {
+                "requests": {"cpu": 4, "memory": "8Gi", "ephemeral-storage": "20Gi"},
+                "limits": {"cpu": 8, "memory": "16Gi", "ephemeral-storage": "30Gi"},
+            },
+            "sidecarResources": {"requests": {"cpu": "50m", "memory": "64Mi"}, "limits": {"memory": "256Mi"}},
+        }
+    },
     "existing-service-account": {"serviceAccount": {"create": False, "name": "carlos-operator"}},
     "no-rbac": {"rbac": {"create": False}},
     "scheduling": {
@@ -198,6 +207,7 @@ def test_every_value_is_documented() -> None:
             "limits",
             "cpu",
             "memory",
+            "ephemeral-storage",
         ):
             continue  # documented once above `images` and `resources`
         if i == 0 or not lines[i - 1].strip().startswith("#"):
@@ -498,6 +508,14 @@ def test_images_and_operator_settings(rendered: tuple[str, dict[str, Any], list[
     assert env.get("CARLOS_DEFAULT_S3_ENDPOINT") == (store.get("endpoint") or None)
     assert env.get("CARLOS_DEFAULT_S3_SECRET") == (store.get("credentialsSecret") or None)
     assert env["CARLOS_JOB_TTL_SECONDS"] == str(values.get("jobTTLSeconds", 604800))
+    from carlos_operator.builders import OperatorSettings
+
+    settings = OperatorSettings.from_env(env)  # the run pods' resource defaults reach the operator
+    for got, key in ((settings.run_resources, "resources"), (settings.sidecar_resources, "sidecarResources")):
+        chosen = values.get("runPods", {}).get(key, {})
+        for part in ("requests", "limits"):
+            want = {**defaults["runPods"][key][part], **chosen.get(part, {})}  # helm merges maps
+            assert got[part] == {k: str(v) for k, v in want.items()}, (key, part)
     assert not any("valueFrom" in e for e in container["env"]), "the operator reads no Secret"
 
 

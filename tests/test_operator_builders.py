@@ -105,13 +105,20 @@ def test_job_is_an_indexed_job_with_the_failure_policy() -> None:
     assert spec["ttlSecondsAfterFinished"] > 0 and spec["activeDeadlineSeconds"] > 600
     rules = spec["podFailurePolicy"]["rules"]
     by_action = {r["action"]: r for r in rules}
-    assert by_action["FailIndex"]["onExitCodes"]["values"] == [1, 2]
+    assert by_action["FailJob"]["onExitCodes"]["values"] == [2]  # bad input: the same for every index
+    assert by_action["FailIndex"]["onExitCodes"]["values"] == [1]
     assert by_action["Count"]["onExitCodes"]["values"] == [3]
+    assert [r["action"] for r in rules][:2] == ["FailJob", "FailIndex"]
+    assert "maxFailedIndexes" not in spec
     assert all(r["onExitCodes"]["containerName"] == "simcore" for r in rules if "onExitCodes" in r)
     pod = spec["template"]["spec"]
     assert pod["restartPolicy"] == "Never" and pod["automountServiceAccountToken"] is False
     assert pod["activeDeadlineSeconds"] == 600 + 300
     assert pod["securityContext"]["runAsNonRoot"] is True
+    ids = {k: pod["securityContext"][k] for k in ("runAsUser", "runAsGroup", "fsGroup")}
+    assert ids == {"runAsUser": 10001, "runAsGroup": 10001, "fsGroup": 10001}  # the images' user
+    for absent in ("nodeSelector", "tolerations", "affinity", "priorityClassName", "serviceAccountName"):
+        assert absent not in pod
     assert pod["securityContext"]["seccompProfile"] == {"type": "RuntimeDefault"}
     assert [c["name"] for c in pod["initContainers"]] == ["bridge", "recorder"]
     assert [c["name"] for c in pod["containers"]] == ["simcore"]
@@ -391,3 +398,72 @@ def test_every_object_built_for_an_example_is_accepted_by_the_strict_stand_in(pa
                 admit(obj)
             except Invalid as exc:
                 pytest.fail(f"{path.name}: {exc}")
+
+
+def test_every_container_has_requests_and_limits_with_defaults() -> None:
+    body = manifest()
+    pod = build_job(load(body), body, SETTINGS, resolve_output(load(body), SETTINGS))["spec"]["template"][
+        "spec"
+    ]
+    for container in [*pod["initContainers"], *pod["containers"]]:
+        resources = container["resources"]
+        assert set(resources["requests"]) == {"cpu", "memory", "ephemeral-storage"}, container["name"]
+        assert {"memory", "ephemeral-storage"} <= set(resources["limits"]), container["name"]
+    (simcore,) = pod["containers"]
+    assert simcore["resources"]["requests"]["memory"] == "1Gi"
+
+
+def test_execution_resources_and_scheduling_reach_the_pod() -> None:
+    execution = {
+        "retries": 1,
+        "maxFailedIndexes": 5,
+        "resources": {
+            "requests": {"cpu": 2, "memory": "8Gi", "ephemeral-storage": "20Gi"},
+            "limits": {"cpu": "4"},
+        },
+        "nodeSelector": {"node.kubernetes.io/instance-type": "c6i.4xlarge"},
+        "tolerations": [{"key": "sim", "operator": "Exists", "effect": "NoSchedule"}],
+        "affinity": {
+            "nodeAffinity": {
+                "requiredDuringSchedulingIgnoredDuringExecution": {
+                    "nodeSelectorTerms": [
+                        {"matchExpressions": [{"key": "zone", "operator": "In", "values": ["a"]}]}
+                    ]
+                }
+            }
+        },
+        "priorityClassName": "batch-low",
+        "serviceAccountName": "sim-runner",
+    }
+    body = manifest(
+        execution=execution,
+        systemUnderTest={"name": "detector", "image": "reg/detector:1"},
+    )
+    run = load(body)
+    job = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))
+    admit(job)  # the API server takes it: a request above the default limit raised that limit
+    assert job["spec"]["maxFailedIndexes"] == 5
+    pod = job["spec"]["template"]["spec"]
+    (simcore,) = pod["containers"]
+    assert simcore["resources"]["requests"] == {"cpu": "2", "memory": "8Gi", "ephemeral-storage": "20Gi"}
+    assert simcore["resources"]["limits"] == {"cpu": "4", "memory": "8Gi", "ephemeral-storage": "20Gi"}
+    sut = next(c for c in pod["initContainers"] if c["name"] == "detector")
+    assert sut["resources"] == simcore["resources"]
+    bridge = next(c for c in pod["initContainers"] if c["name"] == "bridge")
+    assert bridge["resources"]["requests"]["cpu"] == "100m"  # the sidecar defaults
+    assert pod["nodeSelector"] == execution["nodeSelector"]
+    assert pod["tolerations"] == execution["tolerations"]
+    assert pod["affinity"] == execution["affinity"]
+    assert pod["priorityClassName"] == "batch-low"
+    assert pod["serviceAccountName"] == "sim-runner" and pod["automountServiceAccountToken"] is True
+
+
+def test_operator_resource_defaults_come_from_the_environment() -> None:
+    settings = OperatorSettings.from_env(
+        {"CARLOS_RUN_RESOURCES": '{"requests": {"cpu": "3", "memory": "2Gi"}, "limits": {"memory": "2Gi"}}'}
+    )
+    assert settings.run_resources == {"requests": {"cpu": "3", "memory": "2Gi"}, "limits": {"memory": "2Gi"}}
+    with pytest.raises(BadInput, match="CARLOS_SIDECAR_RESOURCES"):
+        OperatorSettings.from_env({"CARLOS_SIDECAR_RESOURCES": '{"requests": {"gpu": "1"}}'})
+    with pytest.raises(BadInput, match="CARLOS_RUN_RESOURCES"):
+        OperatorSettings.from_env({"CARLOS_RUN_RESOURCES": '{"requests": {"cpu": "lots"}}'})
