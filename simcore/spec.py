@@ -852,8 +852,15 @@ class IndexFailure(Model):
 class SimulationRunStatus(Model):
     """Observed state, written by the operator (or by `carlos run` into the run-level summary)."""
 
-    phase: Literal["Pending", "Running", "Succeeded", "Failed", "Suspended"] | None = Field(
-        None, description="Run phase."
+    phase: Literal["Pending", "Running", "Succeeded", "Failed", "Suspended", "Unknown"] | None = Field(
+        None,
+        description=(
+            "Run phase. Unknown: the run's Job is gone before every result was read (the run cannot finish; "
+            "create it again under a new name)."
+        ),
+    )
+    observed_generation: int | None = Field(
+        None, description="The metadata.generation of the SimulationRun this status is about."
     )
     progress: str | None = Field(None, description="Finished runs / total, e.g. `12/50`.")
     total: int | None = Field(None, description="Number of runs (scenarios × permutations).")

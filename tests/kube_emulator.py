@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import collections
 import datetime as dt
 import itertools
 import os
@@ -53,11 +54,12 @@ RESOURCES = {
         namespaced=True,
         singular="job",
         subresources={"status"},
-        verbs={"get", "list", "watch", "create", "patch"},
+        verbs={"get", "list", "watch", "create", "patch", "delete"},
     ),
     "v1/configmaps": kmock.ResourceInfo(
-        kind="ConfigMap", namespaced=True, singular="configmap", verbs={"get", "create"}
+        kind="ConfigMap", namespaced=True, singular="configmap", verbs={"get", "create", "delete"}
     ),
+    "v1/pods": kmock.ResourceInfo(kind="Pod", namespaced=True, singular="pod", verbs={"list", "create"}),
     "v1/secrets": kmock.ResourceInfo(
         kind="Secret", namespaced=True, singular="secret", verbs={"get", "create"}
     ),
@@ -81,6 +83,29 @@ def _parse_path_with_namespaces(path: str) -> parsing.ParsedPath:
 parsing.parse_path = _parse_path_with_namespaces  # rendering calls parsing.parse_path at request time
 
 
+def matches(selector: str | None, labels: dict[str, str] | None) -> bool:
+    """A label selector as the API server reads it: `key`, `!key`, `key=value`, `key!=value`, comma-joined."""
+    labels = labels or {}
+    for term in (selector or "").split(","):
+        term = term.strip()
+        if not term:
+            continue
+        if "!=" in term:
+            key, value = term.split("!=", 1)
+            if labels.get(key.strip()) == value.strip():
+                return False
+        elif "=" in term:
+            key, value = term.replace("==", "=").split("=", 1)
+            if labels.get(key.strip()) != value.strip():
+                return False
+        elif term.startswith("!"):
+            if term[1:] in labels:
+                return False
+        elif term not in labels:
+            return False
+    return True
+
+
 def _now() -> str:
     return dt.datetime.now(tz=dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
@@ -98,6 +123,29 @@ class CarlosEmulator(kmock.KubernetesEmulator):
         super().__attrs_post_init__()
         self.refused: list[str] = []  # the problems of every request refused as invalid
         self.validate = True
+        self.calls: collections.Counter[tuple[str, str]] = collections.Counter()  # (action, plural) → count
+        self.selectors: list[tuple[str, str]] = []  # (plural, labelSelector) of every list and watch
+
+    async def _serve_list(self, request: rendering.Request) -> Any:
+        """kmock's list, then the label selector applied (the API server selects, kmock does not)."""
+        result = await super()._serve_list(request)
+        selector = request.params.get("labelSelector")
+        if selector and isinstance(result, dict):
+            result["items"] = [i for i in result["items"] if matches(selector, i["metadata"].get("labels"))]
+        limit = request.params.get("limit")
+        if limit and isinstance(result, dict) and str(limit).isdigit():
+            result["items"] = result["items"][: int(limit)]
+        return result
+
+    async def _serve_watch(self, request: rendering.Request) -> Any:
+        selector = request.params.get("labelSelector")
+        async for event in super()._serve_watch(request):
+            if (
+                not selector
+                or not isinstance(event, dict)
+                or matches(selector, event.get("object", {}).get("metadata", {}).get("labels"))
+            ):
+                yield event
 
     def _check(self, request: rendering.Request) -> None:
         """Validate the object a create or patch would store; raise 422 as the API server does."""
@@ -134,6 +182,13 @@ class CarlosEmulator(kmock.KubernetesEmulator):
     async def _handle(self, request: rendering.Request) -> aiohttp.web.StreamResponse:
         if len(self._requests) > 2 * self.HISTORY:
             del self._requests[: -self.HISTORY]
+        if request.resource is not None:
+            action = str(request.action.value if request.action else request.method)
+            self.calls[(action, request.resource.plural or "")] += 1
+            if request.action in (enums.action.LIST, enums.action.WATCH):
+                self.selectors.append(
+                    (request.resource.plural or "", request.params.get("labelSelector", ""))
+                )
         if request.resource is not None and isinstance(request.data, dict):
             if request.action == enums.action.CREATE:
                 meta = request.data.setdefault("metadata", {})
@@ -147,6 +202,12 @@ class CarlosEmulator(kmock.KubernetesEmulator):
             elif request.action == enums.action.UPDATE:
                 meta = request.data.setdefault("metadata", {})
                 meta["resourceVersion"] = str(next(self._versions))
+                key = (request.resource, request.namespace, request.name)
+                if request.subresource is None and "spec" in request.data and key in self._objects:
+                    old = dict(self._objects[key].raw)  # ObjectsArray has no .get
+                    if merge_patch(old.get("spec"), request.data["spec"]) != old.get("spec"):
+                        generation = int(old.get("metadata", {}).get("generation") or 1)
+                        meta["generation"] = generation + 1  # a spec change, as the API server counts
             if self.validate and request.action in (enums.action.CREATE, enums.action.UPDATE):
                 try:
                     self._check(request)
@@ -202,8 +263,10 @@ class Cluster:
     def start_operator(self, namespaces: list[str] | None = None) -> None:
         """kopf on its own thread and event loop (it waits for every task of its loop when stopping):
         cluster-wide, or serving `namespaces` (as `carlos operator --namespace NS`)."""
-        import carlos_operator.handlers  # noqa: F401 - registers the handlers
+        import carlos_operator.handlers  # registers the handlers
         import kopf
+
+        carlos_operator.handlers.WATCH_NAMESPACES[:] = list(namespaces or [])
 
         stop = threading.Event()
 
@@ -456,6 +519,7 @@ def operator_env(s3_endpoint: str) -> dict[str, str]:
     return {
         "CARLOS_DEFAULT_S3_ENDPOINT": s3_endpoint,
         "CARLOS_RESYNC_SECONDS": "0.5",
+        "CARLOS_SECRET_NAMESPACES": "default",
         "CARLOS_IMAGE_SIMCORE": "local/simcore:test",
         "CARLOS_IMAGE_BRIDGE": "local/bridge:test",
         "CARLOS_IMAGE_RECORDER": "local/recorder:test",

@@ -109,7 +109,7 @@ def test_crd_resource_shape() -> None:
     compression = schema["properties"]["spec"]["properties"]["recording"]["properties"]["compression"]
     assert compression["enum"] == ["zstd", "lz4", "none"]
     phases = schema["properties"]["status"]["properties"]["phase"]["enum"]
-    assert set(phases) == {"Pending", "Running", "Succeeded", "Failed", "Suspended"}
+    assert set(phases) == {"Pending", "Running", "Succeeded", "Failed", "Suspended", "Unknown"}
 
 
 def test_spec_immutability_rule_covers_every_field_declared_to_cel_but_suspend() -> None:

@@ -32,6 +32,7 @@ RELEASE_NAMESPACE = "carlos-system"
 try:
     from carlos_operator.rbac import CLUSTER_RULES as _CLUSTER
     from carlos_operator.rbac import NAMESPACED_RULES as _NAMESPACED
+    from carlos_operator.rbac import SECRET_RULES as _SECRET
 
     def _table(rules: list[dict[str, list[str]]]) -> dict[tuple[str, str], set[str]]:
         table: dict[tuple[str, str], set[str]] = {}
@@ -42,6 +43,7 @@ try:
         return table
 
     NAMESPACED_RULES = _table(_NAMESPACED)
+    SECRET_RULES = _table(_SECRET)
     CLUSTER_RULES = _table(_CLUSTER)
 except ModuleNotFoundError:  # until the operator declares them: the issue's list
     NAMESPACED_RULES = {
@@ -49,9 +51,9 @@ except ModuleNotFoundError:  # until the operator declares them: the issue's lis
         ("carlos.dev", "simulationruns/status"): {"patch"},
         ("batch", "jobs"): {"get", "list", "watch", "create", "patch"},
         ("", "configmaps"): {"get", "create"},
-        ("", "secrets"): {"get"},
         ("", "events"): {"create"},
     }
+    SECRET_RULES = {("", "secrets"): {"get"}}
     CLUSTER_RULES = {("", "namespaces"): {"get", "list", "watch"}}
 
 
@@ -152,6 +154,11 @@ VALUE_SETS: dict[str, dict[str, Any]] = {
         },
     },
     "job-ttl": {"jobTTLSeconds": 3600},
+    "secret-namespaces": {
+        "watchNamespaces": ["sim-a", "sim-b"],
+        "secretReferences": {"namespaces": ["sim-b"]},
+    },
+    "secret-namespaces-cluster-wide": {"secretReferences": {"namespaces": ["team-x"]}},
     "run-pods": {
         "runPods": {
             "resources": {
@@ -242,7 +249,9 @@ def test_every_object_passes_the_kubernetes_api_schema(
 
 def test_names_and_namespaces(rendered: tuple[str, dict[str, Any], list[dict[str, Any]]]) -> None:
     _, values, objects = rendered
-    watched = set(values.get("watchNamespaces", []))
+    watched = set(values.get("watchNamespaces", [])) | set(
+        values.get("secretReferences", {}).get("namespaces", [])
+    )
     cluster_scoped = {"ClusterRole", "ClusterRoleBinding", "CustomResourceDefinition"}
     seen = set()
     for obj in objects:
@@ -291,11 +300,25 @@ def test_rbac_is_least_privilege(rendered: tuple[str, dict[str, Any], list[dict[
                 assert all("*" not in item for item in rule[field])
             if "secrets" in rule["resources"]:
                 assert rule["verbs"] == ["get"], "Secrets: get by name only, never list or watch"
-            assert not {"delete", "deletecollection", "escalate", "bind", "impersonate"} & set(rule["verbs"])
+            assert not {"deletecollection", "escalate", "bind", "impersonate"} & set(rule["verbs"])
+            if "delete" in rule["verbs"]:  # only an earlier run's own Job and ConfigMap (uid precondition)
+                assert set(rule["resources"]) <= {"jobs", "configmaps"}, rule
 
+    # blockOwnerDeletion on the Job's and ConfigMap's owner references needs update on the finalizers
+    assert any(
+        ("carlos.dev", "simulationruns/finalizers", "update") in rule_triples(role["rules"]) for role in roles
+    )
     watched = values.get("watchNamespaces", [])
-    namespaced = of_kind(objects, "Role")
+    secret_roles = [r for r in of_kind(objects, "Role") if r["metadata"]["name"].endswith("-secrets")]
+    namespaced = [r for r in of_kind(objects, "Role") if r not in secret_roles]
     cluster = of_kind(objects, "ClusterRole")
+    allowed = values.get("secretReferences", {}).get("namespaces", [])
+    assert sorted(r["metadata"]["namespace"] for r in secret_roles) == sorted(allowed)
+    for role in secret_roles:
+        assert rule_triples(role["rules"]) == triples(SECRET_RULES)
+    for role in [*namespaced, *cluster]:
+        assert not any(rule["resources"] == ["secrets"] for rule in role["rules"]), "Secrets: opt-in only"
+    assert _env(objects).get("CARLOS_SECRET_NAMESPACES", "") == ",".join(allowed)
     if watched:
         assert sorted(r["metadata"]["namespace"] for r in namespaced) == sorted(watched)
         for role in namespaced:
@@ -330,17 +353,19 @@ def test_rbac_is_least_privilege(rendered: tuple[str, dict[str, Any], list[dict[
 def test_rules_equal_the_operators_rbac_rules(helm: Path, tmp_path: Path) -> None:
     """The chart grants exactly what the operator declares it needs (operator/carlos_operator/rbac.py)."""
     try:
-        from carlos_operator.rbac import CLUSTER_RULES, NAMESPACED_RULES, RBAC_RULES
+        from carlos_operator.rbac import CLUSTER_RULES, NAMESPACED_RULES, RBAC_RULES, SECRET_RULES
     except ModuleNotFoundError:
         pytest.skip("operator/carlos_operator/rbac.py (RBAC_RULES) is not there yet (issue 5)")
 
     def diff(granted: set[tuple[str, str, str]], declared: set[tuple[str, str, str]]) -> str:
         return f"the chart grants {sorted(granted - declared)} beyond rbac.py and misses {sorted(declared - granted)}"
 
-    objects = render(helm, {}, tmp_path)
+    objects = render(helm, {"secretReferences": {"namespaces": ["team-x"]}}, tmp_path)
     (cluster_role,) = of_kind(objects, "ClusterRole")
-    granted = rule_triples(cluster_role["rules"])
+    (secret_role,) = of_kind(objects, "Role")
+    granted = rule_triples(cluster_role["rules"]) | rule_triples(secret_role["rules"])
     assert granted == rule_triples(RBAC_RULES), "cluster-wide: " + diff(granted, rule_triples(RBAC_RULES))
+    assert rule_triples(secret_role["rules"]) == rule_triples(SECRET_RULES)
 
     objects = render(helm, {"watchNamespaces": ["sim-a", "sim-b"]}, tmp_path)
     for role in of_kind(objects, "Role"):

@@ -49,7 +49,8 @@ def test_spec_is_immutable_but_suspend_through_the_emulator(kube: tuple[Cluster,
     k.custom.create_namespaced_custom_object(
         GROUP, VERSION, "default", PLURAL, _run(), _preload_content=False
     )
-    assert _patch(k, {"spec": {"suspend": True}})["spec"]["suspend"] is True
+    suspended = _patch(k, {"spec": {"suspend": True}})
+    assert suspended["spec"]["suspend"] is True and suspended["metadata"]["generation"] == 2
     assert _patch(k, {"status": {"phase": "Suspended"}}, status=True)["status"]["phase"] == "Suspended"
     with pytest.raises(ApiException) as refused:
         _patch(k, {"spec": {"simulation": {"stepSeconds": 0.5}}})
@@ -87,3 +88,37 @@ def test_a_field_the_kind_does_not_have_is_refused(kube: tuple[Cluster, Kube]) -
             GROUP, VERSION, "default", PLURAL, run, _preload_content=False
         )
     assert invalid.value.status == 422 and "retries" in str(invalid.value.body)
+
+
+def test_the_job_watch_has_the_server_select_the_operators_jobs(kube: tuple[Cluster, Kube]) -> None:
+    import time
+
+    from carlos_operator.jobwatch import JobWatch
+
+    from tests.kube_emulator import wait_for
+
+    c, k = kube
+    events: list[tuple[str, str]] = []
+    watch = JobWatch(k, [], lambda kind, job: events.append((kind, job["metadata"]["name"])))
+    watch.start()
+    try:
+        template = {"spec": {"restartPolicy": "Never", "containers": [{"name": "c", "image": "i"}]}}
+        for name, labels in (("ours", {"carlos.dev/run": "r"}), ("foreign", {"app": "web"})):
+            job = {
+                "apiVersion": "batch/v1",
+                "kind": "Job",
+                "metadata": {"name": name, "namespace": "default", "labels": labels},
+                "spec": {"template": template},
+            }
+            k.create_job("default", job)
+        k.batch.patch_namespaced_job_status(
+            "ours", "default", {"status": {"active": 1}}, _preload_content=False
+        )
+        wait_for(lambda: ("MODIFIED", "ours") in events, 10, "the watch event of our Job")
+        time.sleep(0.5)
+        assert {name for _, name in events} == {"ours"}  # the foreign Job never reached the operator
+        assert c.emulator is not None
+        jobs = [selector for plural, selector in c.emulator.selectors if plural == "jobs"]
+        assert jobs and all(selector == "carlos.dev/run" for selector in jobs)
+    finally:
+        watch.stop()

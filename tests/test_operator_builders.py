@@ -467,3 +467,13 @@ def test_operator_resource_defaults_come_from_the_environment() -> None:
         OperatorSettings.from_env({"CARLOS_SIDECAR_RESOURCES": '{"requests": {"gpu": "1"}}'})
     with pytest.raises(BadInput, match="CARLOS_RUN_RESOURCES"):
         OperatorSettings.from_env({"CARLOS_RUN_RESOURCES": '{"requests": {"cpu": "lots"}}'})
+
+
+def test_same_named_runs_of_two_namespaces_never_share_object_keys() -> None:
+    run = load(manifest())
+    urls = {ns: resolve_output(run, SETTINGS, namespace=ns).url for ns in ("team-a", "team-b")}
+    assert urls == {"team-a": "s3://results/runs/team-a", "team-b": "s3://results/runs/team-b"}
+    body = manifest()
+    job = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS, namespace="sims"))
+    env = {e["name"]: e.get("value") for e in job["spec"]["template"]["spec"]["containers"][0]["env"]}
+    assert env["CARLOS_OUTPUT_URL"] == "s3://results/runs/sims"  # pods write <url>/<namespace>/<run>/<index>/

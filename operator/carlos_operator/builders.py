@@ -155,6 +155,8 @@ class OperatorSettings:
     pull_policies: dict[str, str] = field(default_factory=dict)  # role → imagePullPolicy
     extra_labels: dict[str, str] = field(default_factory=dict)
     pod_transport: str = "dds"  # CARLOS_TRANSPORT of the pods: dds | loopback
+    #: namespaces whose runs may name Secrets (CARLOS_SECRET_NAMESPACES; Helm secretReferences.namespaces)
+    secret_namespaces: frozenset[str] = frozenset()
     #: requests/limits of simcore and the system under test unless the run sets spec.execution.resources
     run_resources: dict[str, dict[str, str]] = field(default_factory=lambda: copy.deepcopy(RUN_RESOURCES))
     #: requests/limits of the bridge and the recorder
@@ -185,6 +187,9 @@ class OperatorSettings:
                 field="CARLOS_POD_TRANSPORT",
             )
         return cls(
+            secret_namespaces=frozenset(
+                n.strip() for n in env.get("CARLOS_SECRET_NAMESPACES", "").split(",") if n.strip()
+            ),
             run_resources=_resources_setting(env, "CARLOS_RUN_RESOURCES", RUN_RESOURCES),
             sidecar_resources=_resources_setting(env, "CARLOS_SIDECAR_RESOURCES", SIDECAR_RESOURCES),
             pod_transport=transport,
@@ -236,9 +241,11 @@ def owner_reference(body: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def resolve_output(run: SimulationRun, settings: OperatorSettings) -> Output:
+def resolve_output(run: SimulationRun, settings: OperatorSettings, *, namespace: str | None = None) -> Output:
     """The output of a cluster run: `spec.output.url` when set, else the operator's default; only s3://
-    (pods are ephemeral). Raises BadInput with the field to fix."""
+    (pods are ephemeral). With `namespace` (the operator always gives it) results go under
+    `<url>/<namespace>/<run>/`, so same-named runs of two namespaces never share keys. Raises BadInput with
+    the field to fix."""
     out = run.spec.output
     url = out.url if "url" in out.model_fields_set else settings.default_output_url
     if url is None:
@@ -253,6 +260,8 @@ def resolve_output(run: SimulationRun, settings: OperatorSettings) -> Output:
             field="spec.output.url",
         )
     secret = out.credentials_secret_ref.name if out.credentials_secret_ref else settings.default_s3_secret
+    if namespace:
+        url = f"{url.rstrip('/')}/{namespace}"
     return Output(
         url=url, endpoint=out.endpoint or settings.default_s3_endpoint, region=out.region, secret=secret
     )
@@ -260,6 +269,18 @@ def resolve_output(run: SimulationRun, settings: OperatorSettings) -> Output:
 
 #: Kubernetes' limit on completions of an Indexed Job with backoffLimitPerIndex
 MAX_COMPLETIONS = 100_000
+
+
+def secret_references(run: SimulationRun) -> list[str]:
+    """The fields of a run that name a Secret of its namespace."""
+    fields = []
+    if run.spec.output.credentials_secret_ref is not None:
+        fields.append("spec.output.credentialsSecretRef")
+    sut = run.spec.system_under_test
+    for position, var in enumerate(sut.env if sut is not None else []):
+        if var.secret_key_ref is not None:
+            fields.append(f"spec.systemUnderTest.env[{position}].secretKeyRef")
+    return fields
 
 
 def check_cluster_spec(run: SimulationRun) -> None:
