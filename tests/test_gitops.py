@@ -103,6 +103,20 @@ def test_health_without_status_is_progressing() -> None:
             "2 errors",
         ),
         ({"phase": "Suspended", "progress": "0/6"}, "Suspended", "spec.suspend"),
+        (
+            {
+                "phase": "Unknown",
+                "conditions": [
+                    {
+                        "type": "Complete",
+                        "status": "Unknown",
+                        "message": "the Job carlos-r is gone with 3 of 6",
+                    }
+                ],
+            },
+            "Degraded",
+            "is gone",
+        ),
     ],
 )
 def test_health_from_status(status: dict[str, Any], expected: str, in_message: str) -> None:
