@@ -7,6 +7,9 @@
   recording every summary in the Tally plus one `aggregate`, and one `aggregate` alone (an update when
   nothing new finished). Baseline: a bare loop counting the summaries' statuses.
 - memory: resident set of the operator process idle, and after 1,000 SimulationRuns are accepted with Jobs.
+- requests: Kubernetes API and S3 requests of one 52,500-index run (the controller in process with an
+  in-memory API and store that count every call): over its life (the Job reporting progress in 10 steps),
+  then when a restarted operator sees it finished (baseline: the run's life), and when it restarts halfway.
 
 Goals (issue 5): latency ≤ 0.5 s, aggregation ≤ 1 s, memory ≤ 150 MB. Prints a table; the last line is one
 JSON object with the figures. No assertions. `BENCH_RUNS` (default 1000) and `BENCH_LATENCY_RUNS` (20)
@@ -117,6 +120,99 @@ def bench_aggregation(total: int = 50_000) -> dict[str, float]:
     return {"full": full, "update": update, "baseline": baseline}
 
 
+def bench_requests(total: int = 52_500) -> dict[str, int]:
+    """API and S3 requests of one run: its life, a restart after it finished, a restart halfway."""
+    from carlos_operator.builders import OperatorSettings, job_name
+    from carlos_operator.controller import Controller
+
+    from tests.test_operator_controller import FakeKube, FakeStore, run_body, summary
+
+    class Counting(FakeKube):
+        def __init__(self) -> None:
+            super().__init__()
+            self.calls = 0
+
+        def __getattribute__(self, name: str) -> Any:
+            attr = object.__getattribute__(self, name)
+            if callable(attr) and not name.startswith("_") and name != "event":
+                object.__setattr__(self, "calls", object.__getattribute__(self, "calls") + 1)
+            return attr
+
+    class CountingStore(FakeStore):
+        def __init__(self) -> None:
+            super().__init__()
+            self.puts = 0
+
+        def put_bytes(self, key: str, data: bytes) -> None:
+            self.puts += 1
+            super().put_bytes(key, data)
+
+    settings = OperatorSettings.from_env({"CARLOS_SECRET_NAMESPACES": "default"})
+
+    def controller(kube: FakeKube, store: FakeStore) -> Controller:
+        return Controller(kube, settings, batch=500, store_factory=lambda k, ns, out: store)  # type: ignore[arg-type]
+
+    def drain(c: Controller) -> None:
+        while c._queue:
+            key = c._queue.pop(0)
+            c._queued.discard(key)
+            c.reconcile(key)
+
+    def requests(kube: Counting, store: CountingStore) -> int:
+        return int(kube.calls) + store.gets + store.puts
+
+    kube, store = Counting(), CountingStore()
+    c = controller(kube, store)
+    c.observe_run("ADDED", run_body("r", "uid-1", total))
+    drain(c)
+    job = kube.jobs[job_name("r")]
+    store_setup = store.puts
+    for step in range(1, 11):  # the Job reports progress; the pods have written their summaries
+        done = total * step // 10
+        for i in range(total * (step - 1) // 10, done):
+            store.objects[f"r/{i}/summary.json"] = summary(i)
+        job["status"] = {"completedIndexes": f"0-{done - 1}", "startTime": "2026-01-01T00:00:00Z"}
+        if step == 10:
+            job["status"]["conditions"] = [{"type": "Complete", "status": "True"}]
+        c.observe_job("MODIFIED", job)
+        drain(c)
+    life = {"api": int(kube.calls), "s3_gets": store.gets, "s3_puts": store.puts - store_setup + 1}
+    final = kube.status_patches[-1]
+    assert final["phase"] == "Succeeded" and final["passed"] == total, final
+    # restart: a new controller sees the finished run and its Job (not yet expired)
+    before = (int(kube.calls), store.gets, store.puts)
+    c2 = controller(kube, store)
+    c2.observe_run("ADDED", run_body("r", "uid-1", total, final))
+    c2.observe_job("ADDED", job)
+    drain(c2)
+    after = (int(kube.calls) - before[0], store.gets - before[1], store.puts - before[2])
+    # restart halfway: the summaries read so far are read once more, never three times
+    kube3, store3 = Counting(), CountingStore()
+    half = total // 2
+    for i in range(half):
+        store3.objects[f"r/{i}/summary.json"] = summary(i)
+    c3 = controller(kube3, store3)
+    c3.observe_run("ADDED", run_body("r", "uid-1", total))
+    drain(c3)
+    job3 = kube3.jobs[job_name("r")]
+    job3["status"] = {"completedIndexes": f"0-{half - 1}", "active": 10, "startTime": "2026-01-01T00:00:00Z"}
+    running = {"phase": "Running", "startTime": "2026-01-01T00:00:00Z", "conditions": []}
+    gets = store3.gets
+    c4 = controller(kube3, store3)
+    c4.observe_run("ADDED", run_body("r", "uid-1", total, running))
+    c4.observe_job("ADDED", job3)
+    drain(c4)
+    return {
+        "life_api": life["api"],
+        "life_s3_gets": life["s3_gets"],
+        "life_s3_puts": life["s3_puts"],
+        "restart_finished_api": after[0],
+        "restart_finished_s3": after[1] + after[2],
+        "restart_halfway_s3_gets": store3.gets - gets,
+        "indexes": total,
+    }
+
+
 def main() -> None:
     weed = find_weed()
     if weed is None:
@@ -218,6 +314,7 @@ def main() -> None:
         time.sleep(12)  # one resync pass over every run
         loaded_rss, peak_rss = rss_mb(operator.pid)
         agg = bench_aggregation()
+        req = bench_requests()
     finally:
         if operator is not None:
             operator.terminate()
@@ -247,6 +344,24 @@ def main() -> None:
             f"{agg['full'] / agg['baseline']:.1f}× a bare counting loop ({agg['baseline'] * 1000:.1f} ms)",
         ),
         ("status update of a 50,000-index run", f"{agg['update'] * 1000:.1f} ms", "", ""),
+        (
+            f"requests of a {req['indexes']:,}-index run (API + S3)",
+            f"{req['life_api']} + {req['life_s3_gets'] + req['life_s3_puts']:,}",
+            "",
+            f"S3: {req['life_s3_gets']:,} GETs, {req['life_s3_puts']} PUTs",
+        ),
+        (
+            "… after a restart, run finished (API + S3)",
+            f"{req['restart_finished_api']} + {req['restart_finished_s3']}",
+            "0 S3",
+            f"{(req['restart_finished_api'] + req['restart_finished_s3']) / (req['life_api'] + req['life_s3_gets']):.4f}× its life",
+        ),
+        (
+            "… after a restart halfway (S3 GETs)",
+            f"{req['restart_halfway_s3_gets']:,}",
+            "",
+            "each finished summary read once more",
+        ),
         ("operator RSS idle", f"{idle_rss:.0f} MB", "", ""),
         (
             f"operator RSS with {RUNS} runs",
@@ -275,6 +390,12 @@ def main() -> None:
                 "rss_idle_mb": round(idle_rss, 1),
                 "rss_loaded_mb": round(loaded_rss, 1),
                 "rss_peak_mb": round(peak_rss, 1),
+                **{f"requests_{k}": v for k, v in req.items()},
+                "restart_finished_ratio": round(
+                    (req["restart_finished_api"] + req["restart_finished_s3"])
+                    / (req["life_api"] + req["life_s3_gets"]),
+                    5,
+                ),
             }
         )
     )

@@ -414,6 +414,47 @@ class Output(Model):
     )
 
 
+#: a Kubernetes resource quantity: 2, "500m", "4Gi", "1.5"
+_QUANTITY = r"^[0-9]+(\.[0-9]+)?(m|k|M|G|T|P|E|Ki|Mi|Gi|Ti|Pi|Ei)?$"
+Quantity = StrictInt | Annotated[StrictStr, Field(pattern=_QUANTITY, max_length=32)]
+_DNS_SUBDOMAIN = r"^[a-z0-9]([-a-z0-9]*[a-z0-9])?(\.[a-z0-9]([-a-z0-9]*[a-z0-9])?)*$"
+
+
+class ResourceList(Model):
+    """Amounts of compute resources, as in a Kubernetes container (`cpu: 2`, `memory: 4Gi`)."""
+
+    cpu: Quantity | None = Field(None, description="CPU cores: 2, `500m` (millicores).")
+    memory: Quantity | None = Field(None, description="Memory: `512Mi`, `4Gi`.")
+    ephemeral_storage: Quantity | None = Field(
+        None,
+        alias="ephemeral-storage",
+        description="Local scratch disk (the pod's /scratch and container logs): `10Gi`.",
+    )
+
+
+class Resources(Model):
+    """Requests and limits of a run's working containers (cluster only)."""
+
+    requests: ResourceList | None = Field(
+        None, description="What the scheduler reserves (and Kueue and ResourceQuotas count)."
+    )
+    limits: ResourceList | None = Field(None, description="The most a container may use.")
+
+
+class Toleration(Model):
+    """A taint the run's pods tolerate, as in a Kubernetes pod."""
+
+    key: str | None = Field(None, max_length=317, description="Taint key; empty with operator Exists: all.")
+    operator: Literal["Exists", "Equal"] = Field("Equal", description="Exists or Equal. Default Equal.")
+    value: str | None = Field(None, max_length=63, description="Taint value (operator Equal).")
+    effect: Literal["NoSchedule", "PreferNoSchedule", "NoExecute"] | None = Field(
+        None, description="Taint effect. Default: every effect."
+    )
+    toleration_seconds: int | None = Field(
+        None, ge=0, description="NoExecute: how long the pod stays bound after the taint appears."
+    )
+
+
 class Execution(Model):
     """How the runs are executed."""
 
@@ -440,6 +481,46 @@ class Execution(Model):
         description=(
             "Kueue LocalQueue to submit the run's Job to (cluster only): the Job is created suspended with "
             "the label `kueue.x-k8s.io/queue-name` and Kueue admits it. Default: none (no Kueue)."
+        ),
+    )
+    max_failed_indexes: int | None = Field(
+        None,
+        ge=0,
+        le=100_000,
+        description=(
+            "Cluster: the Job fails as soon as more runs than this have failed (test failures, errors); the "
+            "remaining runs are not started. Default: no limit (every run is tried)."
+        ),
+    )
+    resources: Resources | None = Field(
+        None,
+        description=(
+            "Cluster: requests and limits of the simcore container and of the system under test (the bridge "
+            "and the recorder get the operator's sidecar defaults). Default: the operator's defaults (Helm "
+            "value runPods.resources)."
+        ),
+    )
+    node_selector: dict[str, Annotated[str, Field(max_length=63)]] | None = Field(
+        None, description="Cluster: node labels the run's pods need."
+    )
+    tolerations: list[Toleration] | None = Field(None, description="Cluster: taints the run's pods tolerate.")
+    affinity: dict[str, Any] | None = Field(
+        None,
+        description=(
+            "Cluster: the pods' affinity (nodeAffinity, podAffinity, podAntiAffinity), as in a Kubernetes pod; "
+            "checked by the API server when the Job is created."
+        ),
+    )
+    priority_class_name: str | None = Field(
+        None, max_length=253, pattern=_DNS_SUBDOMAIN, description="Cluster: PriorityClass of the run's pods."
+    )
+    service_account_name: str | None = Field(
+        None,
+        max_length=253,
+        pattern=_DNS_SUBDOMAIN,
+        description=(
+            "Cluster: ServiceAccount of the run's pods (e.g. for cloud workload identity); its token is then "
+            "mounted. Default: the namespace's default account, without a token."
         ),
     )
 
@@ -806,8 +887,15 @@ class IndexFailure(Model):
 class SimulationRunStatus(Model):
     """Observed state, written by the operator (or by `carlos run` into the run-level summary)."""
 
-    phase: Literal["Pending", "Running", "Succeeded", "Failed", "Suspended"] | None = Field(
-        None, description="Run phase."
+    phase: Literal["Pending", "Running", "Succeeded", "Failed", "Suspended", "Unknown"] | None = Field(
+        None,
+        description=(
+            "Run phase. Unknown: the run's Job is gone before every result was read (the run cannot finish; "
+            "create it again under a new name)."
+        ),
+    )
+    observed_generation: int | None = Field(
+        None, description="The metadata.generation of the SimulationRun this status is about."
     )
     progress: str | None = Field(None, description="Finished runs / total, e.g. `12/50`.")
     total: int | None = Field(None, description="Number of runs (scenarios × permutations).")

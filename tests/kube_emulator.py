@@ -9,12 +9,18 @@ Gaps of kmock 0.8 filled here (test side only):
   prefix): `parse_path` is wrapped so they address the `namespaces` resource (kopf lists and watches
   Namespaces when it serves named namespaces, and serves only those that exist).
 No garbage collector: owner references are asserted, not acted on.
+
+Stricter than kmock: every create and patch is validated as an API server would before it is stored
+(tests/apiserver.py): built-in kinds against the Kubernetes OpenAPI schemas (strict), SimulationRuns against
+the shipped CRD (crds/simulationrun.yaml: its structural schema and its CEL rules, `oldSelf` on update); a
+refused request answers 422 Invalid with the field errors, and `CarlosEmulator.refused` keeps them.
 """
 
 from __future__ import annotations
 
 import asyncio
 import base64
+import collections
 import datetime as dt
 import itertools
 import os
@@ -30,8 +36,9 @@ from typing import Any
 
 import aiohttp.web
 import kmock
-from kmock._internal import enums, parsing, rendering
+from kmock._internal import enums, k8s, parsing, rendering
 
+from tests.apiserver import Invalid, merge_patch, shipped_crd, validate_builtin
 from tests.kubelet import Kubelet
 
 RESOURCES = {
@@ -47,11 +54,12 @@ RESOURCES = {
         namespaced=True,
         singular="job",
         subresources={"status"},
-        verbs={"get", "list", "watch", "create", "patch"},
+        verbs={"get", "list", "watch", "create", "patch", "delete"},
     ),
     "v1/configmaps": kmock.ResourceInfo(
-        kind="ConfigMap", namespaced=True, singular="configmap", verbs={"get", "create"}
+        kind="ConfigMap", namespaced=True, singular="configmap", verbs={"get", "create", "delete"}
     ),
+    "v1/pods": kmock.ResourceInfo(kind="Pod", namespaced=True, singular="pod", verbs={"list", "create"}),
     "v1/secrets": kmock.ResourceInfo(
         kind="Secret", namespaced=True, singular="secret", verbs={"get", "create"}
     ),
@@ -75,6 +83,29 @@ def _parse_path_with_namespaces(path: str) -> parsing.ParsedPath:
 parsing.parse_path = _parse_path_with_namespaces  # rendering calls parsing.parse_path at request time
 
 
+def matches(selector: str | None, labels: dict[str, str] | None) -> bool:
+    """A label selector as the API server reads it: `key`, `!key`, `key=value`, `key!=value`, comma-joined."""
+    labels = labels or {}
+    for term in (selector or "").split(","):
+        term = term.strip()
+        if not term:
+            continue
+        if "!=" in term:
+            key, value = term.split("!=", 1)
+            if labels.get(key.strip()) == value.strip():
+                return False
+        elif "=" in term:
+            key, value = term.replace("==", "=").split("=", 1)
+            if labels.get(key.strip()) != value.strip():
+                return False
+        elif term.startswith("!"):
+            if term[1:] in labels:
+                return False
+        elif term not in labels:
+            return False
+    return True
+
+
 def _now() -> str:
     return dt.datetime.now(tz=dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
@@ -88,9 +119,76 @@ class CarlosEmulator(kmock.KubernetesEmulator):
 
     _versions = itertools.count(1)
 
+    def __attrs_post_init__(self) -> None:
+        super().__attrs_post_init__()
+        self.refused: list[str] = []  # the problems of every request refused as invalid
+        self.validate = True
+        self.calls: collections.Counter[tuple[str, str]] = collections.Counter()  # (action, plural) → count
+        self.selectors: list[tuple[str, str]] = []  # (plural, labelSelector) of every list and watch
+
+    async def _serve_list(self, request: rendering.Request) -> Any:
+        """kmock's list, then the label selector applied (the API server selects, kmock does not)."""
+        result = await super()._serve_list(request)
+        selector = request.params.get("labelSelector")
+        if selector and isinstance(result, dict):
+            result["items"] = [i for i in result["items"] if matches(selector, i["metadata"].get("labels"))]
+        limit = request.params.get("limit")
+        if limit and isinstance(result, dict) and str(limit).isdigit():
+            result["items"] = result["items"][: int(limit)]
+        return result
+
+    async def _serve_watch(self, request: rendering.Request) -> Any:
+        selector = request.params.get("labelSelector")
+        async for event in super()._serve_watch(request):
+            if (
+                not selector
+                or not isinstance(event, dict)
+                or matches(selector, event.get("object", {}).get("metadata", {}).get("labels"))
+            ):
+                yield event
+
+    def _check(self, request: rendering.Request) -> None:
+        """Validate the object a create or patch would store; raise 422 as the API server does."""
+        assert request.resource is not None
+        res = request.resource
+        group_version = f"{res.group}/{res.version}" if res.group else str(res.version)
+        kind = RESOURCES.get(f"{group_version}/{res.plural}")
+        old: dict[str, Any] | None = None
+        if request.action == enums.action.CREATE:
+            new = dict(request.data)
+        else:
+            key = (request.resource, request.namespace, request.name)
+            if key not in self._objects or self._objects[key].deleted:
+                return  # kmock answers 404
+            old = dict(self._objects[key].raw)
+            new = merge_patch(old, request.data)
+            if request.subresource == "status":
+                new["spec"] = old.get("spec")  # the status subresource never changes spec
+            elif "status" in (kind.subresources if kind else set()):
+                new["status"] = old.get("status")  # nor the main resource the status
+                new = {k: v for k, v in new.items() if v is not None}
+        if kind is not None:
+            new.setdefault("kind", kind.kind)
+            new.setdefault("apiVersion", group_version)
+        try:
+            if new.get("kind") == "SimulationRun":
+                shipped_crd().validate(new, old)
+            else:
+                validate_builtin(new)
+        except Invalid as exc:
+            self.refused.append(str(exc))
+            raise k8s.KubernetesError(status=422, reason="Invalid", message=str(exc)) from None
+
     async def _handle(self, request: rendering.Request) -> aiohttp.web.StreamResponse:
         if len(self._requests) > 2 * self.HISTORY:
             del self._requests[: -self.HISTORY]
+        if request.resource is not None:
+            action = str(request.action.value if request.action else request.method)
+            self.calls[(action, request.resource.plural or "")] += 1
+            if request.action in (enums.action.LIST, enums.action.WATCH):
+                self.selectors.append(
+                    (request.resource.plural or "", request.params.get("labelSelector", ""))
+                )
         if request.resource is not None and isinstance(request.data, dict):
             if request.action == enums.action.CREATE:
                 meta = request.data.setdefault("metadata", {})
@@ -104,6 +202,17 @@ class CarlosEmulator(kmock.KubernetesEmulator):
             elif request.action == enums.action.UPDATE:
                 meta = request.data.setdefault("metadata", {})
                 meta["resourceVersion"] = str(next(self._versions))
+                key = (request.resource, request.namespace, request.name)
+                if request.subresource is None and "spec" in request.data and key in self._objects:
+                    old = dict(self._objects[key].raw)  # ObjectsArray has no .get
+                    if merge_patch(old.get("spec"), request.data["spec"]) != old.get("spec"):
+                        generation = int(old.get("metadata", {}).get("generation") or 1)
+                        meta["generation"] = generation + 1  # a spec change, as the API server counts
+            if self.validate and request.action in (enums.action.CREATE, enums.action.UPDATE):
+                try:
+                    self._check(request)
+                except k8s.KubernetesError as exc:
+                    return await self._render_error(exc)
         response = await super()._handle(request)
         if request.action == enums.action.CREATE and response.status == 200 and not response.prepared:
             response.set_status(201)
@@ -154,8 +263,10 @@ class Cluster:
     def start_operator(self, namespaces: list[str] | None = None) -> None:
         """kopf on its own thread and event loop (it waits for every task of its loop when stopping):
         cluster-wide, or serving `namespaces` (as `carlos operator --namespace NS`)."""
-        import carlos_operator.handlers  # noqa: F401 - registers the handlers
+        import carlos_operator.handlers  # registers the handlers
         import kopf
+
+        carlos_operator.handlers.WATCH_NAMESPACES[:] = list(namespaces or [])
 
         stop = threading.Event()
 
@@ -297,6 +408,8 @@ class JobRunner:
                 secrets[name] = {k: base64.b64encode(v.encode()).decode() for k, v in data.items()}
         rules = spec.get("podFailurePolicy", {}).get("rules", [])
         limit = int(spec.get("backoffLimitPerIndex", 0))
+        max_failed = spec.get("maxFailedIndexes")
+        job_failure: list[str] = []  # the reason the whole Job failed (FailJob, maxFailedIndexes)
         lock = threading.Lock()
         completed: list[int] = []
         failed: list[int] = []
@@ -318,7 +431,7 @@ class JobRunner:
 
         def run_index(index: int) -> None:
             failures = 0
-            while True:
+            while not job_failure:  # a failed Job starts no more pods
                 key = (meta["uid"], index)
                 self.attempts[key] = self.attempts.get(key, 0) + 1
 
@@ -353,9 +466,16 @@ class JobRunner:
                     if codes and codes.get("operator") == "In" and exit_code in codes.get("values", []):
                         action = rule["action"]
                         break
+                if action == "FailJob":
+                    with lock:
+                        failed.append(index)
+                        job_failure.append("PodFailurePolicy")
+                    break
                 if action == "FailIndex" or (action == "Count" and failures + 1 > limit):
                     with lock:
                         failed.append(index)
+                        if max_failed is not None and len(failed) > int(max_failed):
+                            job_failure.append("MaxFailedIndexesExceeded")
                     break
                 if action == "Count":
                     failures += 1
@@ -368,7 +488,7 @@ class JobRunner:
         condition = {
             "type": finished,
             "status": "True",
-            "reason": "FailedIndexes" if failed else "",
+            "reason": (job_failure[0] if job_failure else "FailedIndexes") if failed else "",
             "lastTransitionTime": _now(),
         }
         if finished == "Failed":
@@ -399,6 +519,7 @@ def operator_env(s3_endpoint: str) -> dict[str, str]:
     return {
         "CARLOS_DEFAULT_S3_ENDPOINT": s3_endpoint,
         "CARLOS_RESYNC_SECONDS": "0.5",
+        "CARLOS_SECRET_NAMESPACES": "default",
         "CARLOS_IMAGE_SIMCORE": "local/simcore:test",
         "CARLOS_IMAGE_BRIDGE": "local/bridge:test",
         "CARLOS_IMAGE_RECORDER": "local/recorder:test",

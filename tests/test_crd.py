@@ -13,6 +13,7 @@ import yaml
 from carlos_operator.crd import SPEC_IMMUTABLE_MESSAGE, crd, crd_yaml
 
 from simcore.spec import SimulationRunSpec
+from tests.apiserver import CustomResourceValidator, Invalid, declared
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = sorted((ROOT / "examples" / "runs").glob("*.yaml"))
@@ -108,18 +109,73 @@ def test_crd_resource_shape() -> None:
     compression = schema["properties"]["spec"]["properties"]["recording"]["properties"]["compression"]
     assert compression["enum"] == ["zstd", "lz4", "none"]
     phases = schema["properties"]["status"]["properties"]["phase"]["enum"]
-    assert set(phases) == {"Pending", "Running", "Succeeded", "Failed", "Suspended"}
+    assert set(phases) == {"Pending", "Running", "Succeeded", "Failed", "Suspended", "Unknown"}
 
 
-def test_spec_immutability_rule_covers_every_field_but_suspend() -> None:
+def test_spec_immutability_rule_covers_every_field_declared_to_cel_but_suspend() -> None:
     rules = _schema()["properties"]["spec"]["x-kubernetes-validations"]
     assert len(rules) == 1 and rules[0]["message"] == SPEC_IMMUTABLE_MESSAGE
     rule = rules[0]["rule"]
+    spec = _schema()["properties"]["spec"]
     for name in SimulationRunSpec.model_json_schema(by_alias=True)["properties"]:
-        if name == "suspend":
-            assert "self.suspend" not in rule
+        if name == "suspend" or declared(spec["properties"][name]) is None:
+            assert f"self.{name}" not in rule, name
         else:
             assert f"self.{name} == oldSelf.{name}" in rule
+
+
+def _old_rule_naming_every_field() -> dict[str, Any]:
+    """The CRD as it shipped before: its immutability rule named every spec field but suspend."""
+    resource = copy.deepcopy(crd())
+    spec = resource["spec"]["versions"][0]["schema"]["openAPIV3Schema"]["properties"]["spec"]
+    parts = [
+        f"(has(self.{n}) ? has(oldSelf.{n}) && self.{n} == oldSelf.{n} : !has(oldSelf.{n}))"
+        for n in spec["properties"]
+        if n != "suspend"
+    ]
+    spec["x-kubernetes-validations"] = [{"rule": " && ".join(parts), "message": SPEC_IMMUTABLE_MESSAGE}]
+    return resource
+
+
+def test_the_strict_stand_in_refuses_a_rule_naming_undeclared_fields() -> None:
+    with pytest.raises(Invalid) as refused:
+        CustomResourceValidator(_old_rule_naming_every_field())
+    problems = " ".join(refused.value.problems)
+    assert "undefined field 'parameters'" in problems and "undefined field 'sensors'" in problems
+
+
+@pytest.mark.parametrize("path", ["crds/simulationrun.yaml", "helm/carlos/crds/simulationrun.yaml"])
+def test_the_shipped_crd_is_accepted_by_the_strict_stand_in(path: str) -> None:
+    validator = CustomResourceValidator(yaml.safe_load((ROOT / path).read_text()))
+    assert [r.transition for r in validator.rules] == [True]
+
+
+def _named(path: Path) -> dict[str, Any]:
+    manifest = yaml.safe_load(path.read_text())
+    manifest.setdefault("metadata", {}).setdefault("name", path.stem)
+    manifest["metadata"].pop("generateName", None)
+    return dict(manifest)
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=[p.name for p in EXAMPLES])
+def test_spec_changes_are_refused_on_update_but_suspend(path: Path) -> None:
+    validator = CustomResourceValidator(yaml.safe_load((ROOT / "crds/simulationrun.yaml").read_text()))
+    old = _named(path)
+    validator.validate(old)  # create
+    resumed = copy.deepcopy(old)
+    resumed["spec"]["suspend"] = not old["spec"].get("suspend", False)
+    resumed["status"] = {"phase": "Running"}
+    validator.validate(resumed, old)
+    changed = copy.deepcopy(old)
+    changed["spec"].setdefault("execution", {})["retries"] = 1 + int(
+        old["spec"].get("execution", {}).get("retries", 1)
+    )
+    with pytest.raises(Invalid, match="spec is immutable"):
+        validator.validate(changed, old)
+    dropped = copy.deepcopy(old)
+    dropped["spec"].pop("simulation", None) or dropped["spec"].pop("scenarios")
+    with pytest.raises(Invalid):
+        validator.validate(dropped, old)
 
 
 def _validator() -> jsonschema.Draft4Validator:

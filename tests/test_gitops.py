@@ -11,14 +11,13 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-import jsonschema
-import kubernetes_validate
 import lupa
 import pytest
 import yaml
 
 from simcore.spec import SimulationRun
-from tests.test_helm import KUBERNETES_VERSION, render
+from tests.apiserver import admit
+from tests.test_helm import render
 from tests.tooling import helm_binary
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -105,6 +104,20 @@ def test_health_without_status_is_progressing() -> None:
             "2 errors",
         ),
         ({"phase": "Suspended", "progress": "0/6"}, "Suspended", "spec.suspend"),
+        (
+            {
+                "phase": "Unknown",
+                "conditions": [
+                    {
+                        "type": "Complete",
+                        "status": "Unknown",
+                        "message": "the Job carlos-r is gone with 3 of 6",
+                    }
+                ],
+            },
+            "Degraded",
+            "is gone",
+        ),
     ],
 )
 def test_health_from_status(status: dict[str, Any], expected: str, in_message: str) -> None:
@@ -184,27 +197,17 @@ def test_argocd_cm_carries_the_same_lua() -> None:
     }
     embedded = cm["data"]["resource.customizations.health.carlos.dev_SimulationRun"]
     assert embedded == LUA.read_text(), "argocd-cm.yaml drifted from health-simulationrun.lua"
-    kubernetes_validate.validate(cm, KUBERNETES_VERSION, strict=True)
-
-
-def crd_schema() -> dict[str, Any] | None:
-    path = ROOT / "crds" / "simulationrun.yaml"
-    if not path.exists():
-        return None
-    crd = yaml.safe_load(path.read_text())
-    (version,) = [v for v in crd["spec"]["versions"] if v["storage"]]
-    schema: dict[str, Any] = version["schema"]["openAPIV3Schema"]
-    return schema
+    admit(cm)
 
 
 def check_simulation_run(obj: dict[str, Any], where: str) -> SimulationRun:
-    """Valid for the spec models and for the CRD's schema (OpenAPI v3.0 = JSON Schema draft 4 keywords);
-    every scenario is a file the image ships."""
+    """Valid for the spec models and accepted by the strict stand-in (the shipped CRD's schema and CEL
+    rules, tests/apiserver.py); every scenario is a file the image ships."""
     run = SimulationRun.model_validate(obj)
-    schema = crd_schema()
-    if schema is not None:
-        errors = sorted(jsonschema.Draft4Validator(schema).iter_errors(obj), key=str)
-        assert not errors, f"{where}: {[e.message for e in errors]}"
+    named = json.loads(json.dumps(obj))
+    if not named["metadata"].get("name"):
+        named["metadata"]["name"] = named["metadata"]["generateName"] + "x1y2z"  # as the API server names it
+    admit(named)
     from simcore.scenario.xosc import declared_parameters
 
     for scenario in run.spec.scenarios:
@@ -276,15 +279,14 @@ def test_kustomization_builds_and_every_object_validates(tmp_path: Path) -> None
     kinds = sorted(o["kind"] for o in objects)
     for kind in ("Deployment", "ServiceAccount", "Role", "RoleBinding", "SimulationRun", "Namespace"):
         assert kind in kinds
-    if crd_schema() is not None:
-        assert "CustomResourceDefinition" in kinds
+    assert "CustomResourceDefinition" in kinds
     values = yaml.safe_load((GITOPS / "kustomization.yaml").read_text())["helmCharts"][0]["valuesInline"]
     for obj in objects:
         if obj["kind"] == "SimulationRun":
             check_simulation_run(obj, "kustomize build")
             assert obj["metadata"]["namespace"] in values["watchNamespaces"]
         else:
-            kubernetes_validate.validate(obj, KUBERNETES_VERSION, strict=True)
+            admit(obj)
     namespaces = {o["metadata"]["name"] for o in objects if o["kind"] == "Namespace"}
     assert namespaces == {"carlos-system", *values["watchNamespaces"]}
     roles = [o for o in objects if o["kind"] == "Role"]

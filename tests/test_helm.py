@@ -13,13 +13,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import kubernetes_validate
 import pytest
 import yaml
 
+from tests.apiserver import Invalid, admit
+
 ROOT = Path(__file__).resolve().parents[1]
 CHART = ROOT / "helm" / "carlos"
-KUBERNETES_VERSION = "1.30.0"  # the oldest version the chart supports (Chart.yaml kubeVersion)
 RELEASE_NAMESPACE = "carlos-system"
 
 #: The operator's declared needs (operator/carlos_operator/rbac.py), as (apiGroup, resource) → verbs. The
@@ -28,6 +28,7 @@ RELEASE_NAMESPACE = "carlos-system"
 try:
     from carlos_operator.rbac import CLUSTER_RULES as _CLUSTER
     from carlos_operator.rbac import NAMESPACED_RULES as _NAMESPACED
+    from carlos_operator.rbac import SECRET_RULES as _SECRET
 
     def _table(rules: list[dict[str, list[str]]]) -> dict[tuple[str, str], set[str]]:
         table: dict[tuple[str, str], set[str]] = {}
@@ -38,6 +39,7 @@ try:
         return table
 
     NAMESPACED_RULES = _table(_NAMESPACED)
+    SECRET_RULES = _table(_SECRET)
     CLUSTER_RULES = _table(_CLUSTER)
 except ModuleNotFoundError:  # until the operator declares them: the issue's list
     NAMESPACED_RULES = {
@@ -45,9 +47,9 @@ except ModuleNotFoundError:  # until the operator declares them: the issue's lis
         ("carlos.dev", "simulationruns/status"): {"patch"},
         ("batch", "jobs"): {"get", "list", "watch", "create", "patch"},
         ("", "configmaps"): {"get", "create"},
-        ("", "secrets"): {"get"},
         ("", "events"): {"create"},
     }
+    SECRET_RULES = {("", "secrets"): {"get"}}
     CLUSTER_RULES = {("", "namespaces"): {"get", "list", "watch"}}
 
 
@@ -119,6 +121,20 @@ VALUE_SETS: dict[str, dict[str, Any]] = {
         },
     },
     "job-ttl": {"jobTTLSeconds": 3600},
+    "secret-namespaces": {
+        "watchNamespaces": ["sim-a", "sim-b"],
+        "secretReferences": {"namespaces": ["sim-b"]},
+    },
+    "secret-namespaces-cluster-wide": {"secretReferences": {"namespaces": ["team-x"]}},
+    "run-pods": {
+        "runPods": {
+            "resources": {
+                "requests": {"cpu": 4, "memory": "8Gi", "ephemeral-storage": "20Gi"},
+                "limits": {"cpu": 8, "memory": "16Gi", "ephemeral-storage": "30Gi"},
+            },
+            "sidecarResources": {"requests": {"cpu": "50m", "memory": "64Mi"}, "limits": {"memory": "256Mi"}},
+        }
+    },
     "existing-service-account": {"serviceAccount": {"create": False, "name": "carlos-operator"}},
     "no-rbac": {"rbac": {"create": False}},
     "scheduling": {
@@ -165,6 +181,7 @@ def test_every_value_is_documented() -> None:
             "limits",
             "cpu",
             "memory",
+            "ephemeral-storage",
         ):
             continue  # documented once above `images` and `resources`
         if i == 0 or not lines[i - 1].strip().startswith("#"):
@@ -184,22 +201,24 @@ def test_helm_lint_strict(helm: Path, name: str, tmp_path: Path) -> None:
 def test_every_object_passes_the_kubernetes_api_schema(
     rendered: tuple[str, dict[str, Any], list[dict[str, Any]]],
 ) -> None:
-    """Strict schemas (unknown fields are errors) of the oldest supported Kubernetes version."""
+    """`helm install` through the strict stand-in (tests/apiserver.py): strict schemas (unknown fields are
+    errors) of the oldest supported Kubernetes version; the CRD structural with every CEL rule compiled."""
     _, _, objects = rendered
     assert objects
     for obj in objects:
         if obj["kind"] == "ServiceMonitor":
             continue  # a prometheus-operator CRD: no bundled schema; checked in test_service_monitor
         try:
-            kubernetes_validate.validate(obj, KUBERNETES_VERSION, strict=True)
-        except kubernetes_validate.ValidationError as exc:
-            path = ".".join(str(p) for p in exc.path)
-            pytest.fail(f"{obj['kind']}/{obj['metadata']['name']}: {path}: {exc.message}")
+            admit(obj)
+        except Invalid as exc:
+            pytest.fail(f"{obj['kind']}/{obj['metadata']['name']}: {exc}")
 
 
 def test_names_and_namespaces(rendered: tuple[str, dict[str, Any], list[dict[str, Any]]]) -> None:
     _, values, objects = rendered
-    watched = set(values.get("watchNamespaces", []))
+    watched = set(values.get("watchNamespaces", [])) | set(
+        values.get("secretReferences", {}).get("namespaces", [])
+    )
     cluster_scoped = {"ClusterRole", "ClusterRoleBinding", "CustomResourceDefinition"}
     seen = set()
     for obj in objects:
@@ -248,11 +267,25 @@ def test_rbac_is_least_privilege(rendered: tuple[str, dict[str, Any], list[dict[
                 assert all("*" not in item for item in rule[field])
             if "secrets" in rule["resources"]:
                 assert rule["verbs"] == ["get"], "Secrets: get by name only, never list or watch"
-            assert not {"delete", "deletecollection", "escalate", "bind", "impersonate"} & set(rule["verbs"])
+            assert not {"deletecollection", "escalate", "bind", "impersonate"} & set(rule["verbs"])
+            if "delete" in rule["verbs"]:  # only an earlier run's own Job and ConfigMap (uid precondition)
+                assert set(rule["resources"]) <= {"jobs", "configmaps"}, rule
 
+    # blockOwnerDeletion on the Job's and ConfigMap's owner references needs update on the finalizers
+    assert any(
+        ("carlos.dev", "simulationruns/finalizers", "update") in rule_triples(role["rules"]) for role in roles
+    )
     watched = values.get("watchNamespaces", [])
-    namespaced = of_kind(objects, "Role")
+    secret_roles = [r for r in of_kind(objects, "Role") if r["metadata"]["name"].endswith("-secrets")]
+    namespaced = [r for r in of_kind(objects, "Role") if r not in secret_roles]
     cluster = of_kind(objects, "ClusterRole")
+    allowed = values.get("secretReferences", {}).get("namespaces", [])
+    assert sorted(r["metadata"]["namespace"] for r in secret_roles) == sorted(allowed)
+    for role in secret_roles:
+        assert rule_triples(role["rules"]) == triples(SECRET_RULES)
+    for role in [*namespaced, *cluster]:
+        assert not any(rule["resources"] == ["secrets"] for rule in role["rules"]), "Secrets: opt-in only"
+    assert _env(objects).get("CARLOS_SECRET_NAMESPACES", "") == ",".join(allowed)
     if watched:
         assert sorted(r["metadata"]["namespace"] for r in namespaced) == sorted(watched)
         for role in namespaced:
@@ -287,17 +320,19 @@ def test_rbac_is_least_privilege(rendered: tuple[str, dict[str, Any], list[dict[
 def test_rules_equal_the_operators_rbac_rules(helm: Path, tmp_path: Path) -> None:
     """The chart grants exactly what the operator declares it needs (operator/carlos_operator/rbac.py)."""
     try:
-        from carlos_operator.rbac import CLUSTER_RULES, NAMESPACED_RULES, RBAC_RULES
+        from carlos_operator.rbac import CLUSTER_RULES, NAMESPACED_RULES, RBAC_RULES, SECRET_RULES
     except ModuleNotFoundError:
         pytest.skip("operator/carlos_operator/rbac.py (RBAC_RULES) is not there yet (issue 5)")
 
     def diff(granted: set[tuple[str, str, str]], declared: set[tuple[str, str, str]]) -> str:
         return f"the chart grants {sorted(granted - declared)} beyond rbac.py and misses {sorted(declared - granted)}"
 
-    objects = render(helm, {}, tmp_path)
+    objects = render(helm, {"secretReferences": {"namespaces": ["team-x"]}}, tmp_path)
     (cluster_role,) = of_kind(objects, "ClusterRole")
-    granted = rule_triples(cluster_role["rules"])
+    (secret_role,) = of_kind(objects, "Role")
+    granted = rule_triples(cluster_role["rules"]) | rule_triples(secret_role["rules"])
     assert granted == rule_triples(RBAC_RULES), "cluster-wide: " + diff(granted, rule_triples(RBAC_RULES))
+    assert rule_triples(secret_role["rules"]) == rule_triples(SECRET_RULES)
 
     objects = render(helm, {"watchNamespaces": ["sim-a", "sim-b"]}, tmp_path)
     for role in of_kind(objects, "Role"):
@@ -465,6 +500,14 @@ def test_images_and_operator_settings(rendered: tuple[str, dict[str, Any], list[
     assert env.get("CARLOS_DEFAULT_S3_ENDPOINT") == (store.get("endpoint") or None)
     assert env.get("CARLOS_DEFAULT_S3_SECRET") == (store.get("credentialsSecret") or None)
     assert env["CARLOS_JOB_TTL_SECONDS"] == str(values.get("jobTTLSeconds", 604800))
+    from carlos_operator.builders import OperatorSettings
+
+    settings = OperatorSettings.from_env(env)  # the run pods' resource defaults reach the operator
+    for got, key in ((settings.run_resources, "resources"), (settings.sidecar_resources, "sidecarResources")):
+        chosen = values.get("runPods", {}).get(key, {})
+        for part in ("requests", "limits"):
+            want = {**defaults["runPods"][key][part], **chosen.get(part, {})}  # helm merges maps
+            assert got[part] == {k: str(v) for k, v in want.items()}, (key, part)
     assert not any("valueFrom" in e for e in container["env"]), "the operator reads no Secret"
 
 

@@ -91,7 +91,7 @@ def results(s3: S3Server, monkeypatch: pytest.MonkeyPatch) -> Any:
 
     for key, value in s3.env().items():
         monkeypatch.setenv(key, value)
-    return open_store(f"s3://{s3.bucket}/operator", endpoint=s3.endpoint, region=s3.region)
+    return open_store(f"s3://{s3.bucket}/operator/default", endpoint=s3.endpoint, region=s3.region)
 
 
 def runner(kube: Kube, s3: S3Server, tmp_path: Path, **kw: Any) -> JobRunner:
@@ -119,7 +119,9 @@ def test_run_succeeds_end_to_end(
         0,
         0,
     )
-    assert st["progress"] == "3/3" and st["resultsURL"].endswith("/operator/e2e-pass")
+    assert st["progress"] == "3/3" and st["resultsURL"].endswith(
+        "/operator/default/e2e-pass"
+    )  # <url>/<namespace>/<run>
     conditions = {x["type"]: x for x in st["conditions"]}
     assert conditions["Accepted"]["status"] == "True" and conditions["Complete"]["status"] == "True"
     assert st.get("completionTime") and st.get("startTime")

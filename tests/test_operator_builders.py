@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -30,6 +31,7 @@ from carlos_operator.status import (
 from simcore.errors import BadInput
 from simcore.manifest import parse_manifest
 from simcore.spec import SimulationRun
+from tests.apiserver import Invalid, admit
 
 SETTINGS = OperatorSettings.from_env(
     {
@@ -103,13 +105,20 @@ def test_job_is_an_indexed_job_with_the_failure_policy() -> None:
     assert spec["ttlSecondsAfterFinished"] > 0 and spec["activeDeadlineSeconds"] > 600
     rules = spec["podFailurePolicy"]["rules"]
     by_action = {r["action"]: r for r in rules}
-    assert by_action["FailIndex"]["onExitCodes"]["values"] == [1, 2]
+    assert by_action["FailJob"]["onExitCodes"]["values"] == [2]  # bad input: the same for every index
+    assert by_action["FailIndex"]["onExitCodes"]["values"] == [1]
     assert by_action["Count"]["onExitCodes"]["values"] == [3]
+    assert [r["action"] for r in rules][:2] == ["FailJob", "FailIndex"]
+    assert "maxFailedIndexes" not in spec
     assert all(r["onExitCodes"]["containerName"] == "simcore" for r in rules if "onExitCodes" in r)
     pod = spec["template"]["spec"]
     assert pod["restartPolicy"] == "Never" and pod["automountServiceAccountToken"] is False
     assert pod["activeDeadlineSeconds"] == 600 + 300
     assert pod["securityContext"]["runAsNonRoot"] is True
+    ids = {k: pod["securityContext"][k] for k in ("runAsUser", "runAsGroup", "fsGroup")}
+    assert ids == {"runAsUser": 10001, "runAsGroup": 10001, "fsGroup": 10001}  # the images' user
+    for absent in ("nodeSelector", "tolerations", "affinity", "priorityClassName", "serviceAccountName"):
+        assert absent not in pod
     assert pod["securityContext"]["seccompProfile"] == {"type": "RuntimeDefault"}
     assert [c["name"] for c in pod["initContainers"]] == ["bridge", "recorder"]
     assert [c["name"] for c in pod["containers"]] == ["simcore"]
@@ -357,3 +366,114 @@ def test_the_pod_transport_is_an_operator_setting() -> None:
     assert env["CARLOS_TRANSPORT"] == "loopback"
     with pytest.raises(BadInput, match=r"CARLOS_POD_TRANSPORT='zmq' is not one of dds, loopback"):
         OperatorSettings.from_env({"CARLOS_POD_TRANSPORT": "zmq"})
+
+
+EXAMPLE_RUNS = sorted(
+    p
+    for folder in ("examples/runs", "examples/gitops/runs", "examples/gitops/ci")
+    for p in (Path(__file__).resolve().parent.parent / folder).glob("*.yaml")
+    if p.name != "kustomization.yaml"
+)
+
+
+@pytest.mark.parametrize("path", EXAMPLE_RUNS, ids=[f"{p.parent.name}/{p.name}" for p in EXAMPLE_RUNS])
+def test_every_object_built_for_an_example_is_accepted_by_the_strict_stand_in(path: Path) -> None:
+    """What the operator creates for each example manifest passes the API server's checks (tests/apiserver.py:
+    strict OpenAPI schemas of the oldest supported Kubernetes version)."""
+    for body in yaml.safe_load_all(path.read_text()):
+        if not body or body.get("kind") != "SimulationRun":
+            continue
+        body["metadata"].setdefault("name", f"{body['metadata'].get('generateName', 'run-')}abcde")
+        body["metadata"].update(namespace="sims", uid="0b5c7a4e-1d2f-4a8b-9c3d-2e1f0a9b8c7d")
+        admit(body)
+        output = body["spec"].setdefault("output", {})
+        if not str(output.get("url", "s3://")).startswith("s3://"):
+            output["url"] = "s3://results/runs"  # a local example's file:// output, as on a cluster
+        run = load(body)
+        for obj in (
+            build_configmap(run, body, SETTINGS),
+            build_job(run, body, SETTINGS, resolve_output(run, SETTINGS)),
+        ):
+            try:
+                admit(obj)
+            except Invalid as exc:
+                pytest.fail(f"{path.name}: {exc}")
+
+
+def test_every_container_has_requests_and_limits_with_defaults() -> None:
+    body = manifest()
+    pod = build_job(load(body), body, SETTINGS, resolve_output(load(body), SETTINGS))["spec"]["template"][
+        "spec"
+    ]
+    for container in [*pod["initContainers"], *pod["containers"]]:
+        resources = container["resources"]
+        assert set(resources["requests"]) == {"cpu", "memory", "ephemeral-storage"}, container["name"]
+        assert {"memory", "ephemeral-storage"} <= set(resources["limits"]), container["name"]
+    (simcore,) = pod["containers"]
+    assert simcore["resources"]["requests"]["memory"] == "1Gi"
+
+
+def test_execution_resources_and_scheduling_reach_the_pod() -> None:
+    execution = {
+        "retries": 1,
+        "maxFailedIndexes": 5,
+        "resources": {
+            "requests": {"cpu": 2, "memory": "8Gi", "ephemeral-storage": "20Gi"},
+            "limits": {"cpu": "4"},
+        },
+        "nodeSelector": {"node.kubernetes.io/instance-type": "c6i.4xlarge"},
+        "tolerations": [{"key": "sim", "operator": "Exists", "effect": "NoSchedule"}],
+        "affinity": {
+            "nodeAffinity": {
+                "requiredDuringSchedulingIgnoredDuringExecution": {
+                    "nodeSelectorTerms": [
+                        {"matchExpressions": [{"key": "zone", "operator": "In", "values": ["a"]}]}
+                    ]
+                }
+            }
+        },
+        "priorityClassName": "batch-low",
+        "serviceAccountName": "sim-runner",
+    }
+    body = manifest(
+        execution=execution,
+        systemUnderTest={"name": "detector", "image": "reg/detector:1"},
+    )
+    run = load(body)
+    job = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))
+    admit(job)  # the API server takes it: a request above the default limit raised that limit
+    assert job["spec"]["maxFailedIndexes"] == 5
+    pod = job["spec"]["template"]["spec"]
+    (simcore,) = pod["containers"]
+    assert simcore["resources"]["requests"] == {"cpu": "2", "memory": "8Gi", "ephemeral-storage": "20Gi"}
+    assert simcore["resources"]["limits"] == {"cpu": "4", "memory": "8Gi", "ephemeral-storage": "20Gi"}
+    sut = next(c for c in pod["initContainers"] if c["name"] == "detector")
+    assert sut["resources"] == simcore["resources"]
+    bridge = next(c for c in pod["initContainers"] if c["name"] == "bridge")
+    assert bridge["resources"]["requests"]["cpu"] == "100m"  # the sidecar defaults
+    assert pod["nodeSelector"] == execution["nodeSelector"]
+    assert pod["tolerations"] == execution["tolerations"]
+    assert pod["affinity"] == execution["affinity"]
+    assert pod["priorityClassName"] == "batch-low"
+    assert pod["serviceAccountName"] == "sim-runner" and pod["automountServiceAccountToken"] is True
+
+
+def test_operator_resource_defaults_come_from_the_environment() -> None:
+    settings = OperatorSettings.from_env(
+        {"CARLOS_RUN_RESOURCES": '{"requests": {"cpu": "3", "memory": "2Gi"}, "limits": {"memory": "2Gi"}}'}
+    )
+    assert settings.run_resources == {"requests": {"cpu": "3", "memory": "2Gi"}, "limits": {"memory": "2Gi"}}
+    with pytest.raises(BadInput, match="CARLOS_SIDECAR_RESOURCES"):
+        OperatorSettings.from_env({"CARLOS_SIDECAR_RESOURCES": '{"requests": {"gpu": "1"}}'})
+    with pytest.raises(BadInput, match="CARLOS_RUN_RESOURCES"):
+        OperatorSettings.from_env({"CARLOS_RUN_RESOURCES": '{"requests": {"cpu": "lots"}}'})
+
+
+def test_same_named_runs_of_two_namespaces_never_share_object_keys() -> None:
+    run = load(manifest())
+    urls = {ns: resolve_output(run, SETTINGS, namespace=ns).url for ns in ("team-a", "team-b")}
+    assert urls == {"team-a": "s3://results/runs/team-a", "team-b": "s3://results/runs/team-b"}
+    body = manifest()
+    job = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS, namespace="sims"))
+    env = {e["name"]: e.get("value") for e in job["spec"]["template"]["spec"]["containers"][0]["env"]}
+    assert env["CARLOS_OUTPUT_URL"] == "s3://results/runs/sims"  # pods write <url>/<namespace>/<run>/<index>/

@@ -1,5 +1,7 @@
 """The controller with an in-memory Kubernetes API and object store: adoption, conflicts, catching up on
-summaries after a restart without publishing lower counts, the run-level summary."""
+summaries after a restart without publishing lower counts, the run-level summary, and the lifecycle on a
+real cluster: finished runs never read again, a Job that disappears, prerequisites that appear late, pods
+that cannot start, Kueue holds, observedGeneration."""
 
 from __future__ import annotations
 
@@ -7,7 +9,7 @@ import json
 from typing import Any
 
 from carlos_operator.builders import OperatorSettings, job_name
-from carlos_operator.controller import Controller
+from carlos_operator.controller import Controller, _store_for
 from carlos_operator.kube import Conflict, NotFound
 
 from simcore.store import NotFoundError
@@ -17,6 +19,7 @@ class FakeStore:
     def __init__(self) -> None:
         self.objects: dict[str, bytes] = {}
         self.gets = 0
+        self.opened = 0
 
     def exists(self, key: str) -> bool:
         return key in self.objects
@@ -41,9 +44,29 @@ class FakeKube:
         self.status_patches: list[dict[str, Any]] = []
         self.events: list[tuple[str, str]] = []
         self.job_creates = 0
+        self.secrets: dict[str, dict[str, str]] = {
+            "s3": {"AWS_ACCESS_KEY_ID": "a", "AWS_SECRET_ACCESS_KEY": "b"}
+        }
+        self.secret_reads = 0
+        self.deleted: list[tuple[str, str, str]] = []
+        self.pods: list[dict[str, Any]] = []
+        self.pod_lists: list[tuple[str, int]] = []
 
     def read_secret_data(self, namespace: str, name: str) -> dict[str, str]:
-        return {"AWS_ACCESS_KEY_ID": "a", "AWS_SECRET_ACCESS_KEY": "b"}
+        self.secret_reads += 1
+        if name not in self.secrets:
+            raise NotFound(name)
+        return self.secrets[name]
+
+    def delete(self, kind: str, namespace: str, name: str, uid: str) -> None:
+        self.deleted.append((kind, name, uid))
+        table = self.jobs if kind == "Job" else self.configmaps
+        if name in table and table[name]["metadata"].get("uid", uid) == uid:
+            del table[name]
+
+    def list_pods(self, namespace: str, selector: str, limit: int) -> list[dict[str, Any]]:
+        self.pod_lists.append((selector, limit))
+        return self.pods[:limit]
 
     def create_configmap(self, namespace: str, body: dict[str, Any]) -> dict[str, Any]:
         if body["metadata"]["name"] in self.configmaps:
@@ -52,6 +75,8 @@ class FakeKube:
         return body
 
     def read_configmap(self, namespace: str, name: str) -> dict[str, Any]:
+        if name not in self.configmaps:
+            raise NotFound(name)
         return self.configmaps[name]
 
     def create_job(self, namespace: str, body: dict[str, Any]) -> dict[str, Any]:
@@ -91,9 +116,17 @@ def run_body(name: str, uid: str, n: int, status: dict[str, Any] | None = None) 
     }
 
 
-def controller(kube: FakeKube, store: FakeStore, batch: int = 500) -> Controller:
-    settings = OperatorSettings.from_env({})
-    return Controller(kube, settings, batch=batch, store_factory=lambda k, ns, out: store)  # type: ignore[arg-type]
+def controller(
+    kube: FakeKube, store: FakeStore, batch: int = 500, secrets: str = "default", **kw: Any
+) -> Controller:
+    settings = OperatorSettings.from_env({"CARLOS_SECRET_NAMESPACES": secrets})
+
+    def factory(k: Any, namespace: str, output: Any) -> FakeStore:
+        _store_for(k, namespace, output)  # the real credential checks (no request is made)
+        store.opened += 1
+        return store
+
+    return Controller(kube, settings, batch=batch, store_factory=factory, **kw)  # type: ignore[arg-type]
 
 
 def drain(c: Controller) -> None:
@@ -125,15 +158,16 @@ def test_create_adopt_and_conflict() -> None:
     c2.observe_run("ADDED", run_body("r", "uid-1", 3, kube.status_patches[-1]))
     drain(c2)
     assert len(kube.jobs) == 1 and c2.runs[("default", "r")].ensured
-    # another run of the same name (another uid) does not take over the Job
-    kube2_store = FakeStore()
-    kube2_store.objects = dict(store.objects)
-    c3 = controller(kube, kube2_store)
+    # a Job of that name that belongs to something else is never taken over
+    for table in (kube.jobs, kube.configmaps):
+        table[job_name("r")]["metadata"]["ownerReferences"] = [{"kind": "Workflow", "name": "x", "uid": "w"}]
+    c3 = controller(kube, store)
     c3.observe_run("ADDED", run_body("r", "uid-2", 3))
     drain(c3)
     rejected = kube.status_patches[-1]
     assert rejected["conditions"][0]["status"] == "False"
     assert rejected["conditions"][0]["reason"] == "NameConflict"
+    assert kube.deleted == []
 
 
 def test_different_spec_under_an_existing_name_is_rejected() -> None:
@@ -198,3 +232,251 @@ def test_missing_summary_of_a_failed_index_is_an_error() -> None:
     final = kube.status_patches[-1]
     assert final["phase"] == "Failed" and final["errors"] == 1
     assert "without writing its summary" in final["failures"][0]["reason"]
+
+
+def test_run_deleted_and_created_again_while_its_old_objects_exist_starts() -> None:
+    kube, store = FakeKube(), FakeStore()
+    c = controller(kube, store, backoff=0.01)
+    c.observe_run("ADDED", run_body("r", "uid-1", 3))
+    drain(c)
+    for table in (kube.jobs, kube.configmaps):
+        table[job_name("r")]["metadata"]["uid"] = "old-object"
+    # the run is deleted and created again before the garbage collector removed its ConfigMap and Job
+    c.observe_run("DELETED", run_body("r", "uid-1", 3))
+    c.observe_run("ADDED", run_body("r", "uid-2", 3))
+    drain(c)
+    assert ("ConfigMap", job_name("r"), "old-object") in kube.deleted
+    waiting = kube.status_patches[-1]
+    assert waiting["phase"] == "Pending"
+    assert {"type": "Prerequisites", "status": "False", "reason": "PreviousRunCleanup"}.items() <= {
+        k: v for c in waiting["conditions"] if c["type"] == "Prerequisites" for k, v in c.items()
+    }.items()
+    for _ in range(3):  # the backoff timer re-queues it; the old Job is deleted next, then the new one made
+        c.enqueue(("default", "r"))
+        drain(c)
+    owners = kube.jobs[job_name("r")]["metadata"]["ownerReferences"]
+    assert [o["uid"] for o in owners] == ["uid-2"]
+    assert not any(p["conditions"][0].get("reason") == "NameConflict" for p in kube.status_patches)
+
+
+def _finish(kube: FakeKube, store: FakeStore, n: int) -> dict[str, Any]:
+    job = kube.jobs[job_name("r")]
+    job["status"] = {
+        "completedIndexes": f"0-{n - 1}",
+        "startTime": "2026-01-01T00:00:00Z",
+        "conditions": [{"type": "Complete", "status": "True"}],
+    }
+    return job
+
+
+def test_a_finished_run_is_never_read_again_after_a_restart() -> None:
+    n = 50
+    kube, store = FakeKube(), FakeStore()
+    for i in range(n):
+        store.put_bytes(f"r/{i}/summary.json", summary(i))
+    c = controller(kube, store)
+    c.observe_run("ADDED", run_body("r", "uid-1", n))
+    drain(c)
+    c.observe_job("MODIFIED", _finish(kube, store, n))
+    drain(c)
+    final = kube.status_patches[-1]
+    assert final["phase"] == "Succeeded" and store.objects["r/summary.json"]
+    first = store.gets
+    assert first == 3 * n  # counted once, then the run-level summary and junit.xml
+    # restart: the run and its (not yet expired) Job are seen again
+    opened, reads, patches = store.opened, kube.secret_reads, len(kube.status_patches)
+    c2 = controller(kube, store)
+    c2.observe_run("ADDED", run_body("r", "uid-1", n, final))
+    c2.observe_job("ADDED", kube.jobs[job_name("r")])
+    drain(c2)
+    assert store.gets == first  # not one summary read again
+    assert (store.opened, kube.secret_reads, len(kube.status_patches)) == (opened, reads, patches)
+
+
+def test_a_job_that_disappears_leaves_the_run_unknown_never_pending() -> None:
+    kube, store = FakeKube(), FakeStore()
+    store.put_bytes("r/0/summary.json", summary(0))
+    c = controller(kube, store)
+    c.observe_run("ADDED", run_body("r", "uid-1", 3))
+    drain(c)
+    job = kube.jobs[job_name("r")]
+    job["status"] = {"completedIndexes": "0", "active": 2, "startTime": "2026-01-01T00:00:00Z"}
+    c.observe_job("MODIFIED", job)
+    drain(c)
+    assert kube.status_patches[-1]["phase"] == "Running"
+    del kube.jobs[job_name("r")]
+    c.observe_job("DELETED", job)
+    drain(c)
+    gone = kube.status_patches[-1]
+    assert gone["phase"] == "Unknown" and gone["passed"] == 1
+    complete = next(x for x in gone["conditions"] if x["type"] == "Complete")
+    assert complete["status"] == "Unknown" and complete["reason"] == "JobGone"
+    assert ("Warning", "JobGone") in kube.events
+    # later passes and a restarted operator leave it there: no Pending, no second Job
+    c.enqueue(("default", "r"))
+    drain(c)
+    c2 = controller(kube, store)
+    c2.observe_run("ADDED", run_body("r", "uid-1", 3, gone))
+    drain(c2)
+    assert kube.status_patches[-1]["phase"] == "Unknown"
+    assert kube.job_creates == 1 and kube.jobs == {}
+
+
+def test_a_restart_after_the_job_started_never_creates_a_second_one() -> None:
+    kube, store = FakeKube(), FakeStore()
+    running = {"phase": "Running", "startTime": "2026-01-01T00:00:00Z", "conditions": []}
+    c = controller(kube, store)
+    c.observe_run("ADDED", run_body("r", "uid-1", 3, running))
+    drain(c)
+    assert kube.job_creates == 0 and kube.status_patches[-1]["phase"] == "Unknown"
+
+
+def test_a_missing_secret_is_waited_for_with_backoff_and_shown() -> None:
+    kube, store = FakeKube(), FakeStore()
+    kube.secrets = {}
+    c = controller(kube, store, backoff=0.01)
+    c.observe_run("ADDED", run_body("r", "uid-1", 3))
+    drain(c)
+    waiting = kube.status_patches[-1]
+    assert waiting["phase"] == "Pending" and kube.jobs == {}
+    prerequisites = next(x for x in waiting["conditions"] if x["type"] == "Prerequisites")
+    assert prerequisites["status"] == "False" and prerequisites["reason"] == "SecretNotFound"
+    assert "credentialsSecretRef" in prerequisites["message"]
+    assert ("Warning", "SecretNotFound") in kube.events
+    assert c.runs[("default", "r")].waits == 1
+    c.enqueue(("default", "r"))
+    drain(c)
+    assert c.runs[("default", "r")].waits == 2 and kube.events.count(("Warning", "SecretNotFound")) == 1
+    kube.secrets["s3"] = {
+        "AWS_ACCESS_KEY_ID": "a",
+        "AWS_SECRET_ACCESS_KEY": "b",
+    }  # External Secrets caught up
+    c.enqueue(("default", "r"))
+    drain(c)
+    assert list(kube.jobs) == [job_name("r")]
+    assert not any(x["type"] == "Prerequisites" for x in kube.status_patches[-1]["conditions"])
+
+
+def test_a_missing_scenario_configmap_is_waited_for() -> None:
+    kube, store = FakeKube(), FakeStore()
+    body = run_body("r", "uid-1", 1)
+    body["spec"]["scenarios"] = [{"name": "s", "configMapRef": {"name": "scenarios", "key": "s.xosc"}}]
+    c = controller(kube, store, backoff=0.01)
+    c.observe_run("ADDED", body)
+    drain(c)
+    reason = next(x for x in kube.status_patches[-1]["conditions"] if x["type"] == "Prerequisites")["reason"]
+    assert reason == "ConfigMapNotFound" and kube.jobs == {}
+    kube.configmaps["scenarios"] = {"metadata": {"name": "scenarios"}, "data": {"s.xosc": "<x/>"}}
+    c.enqueue(("default", "r"))
+    drain(c)
+    assert job_name("r") in kube.jobs
+
+
+def test_pods_that_cannot_start_surface_in_conditions_and_events() -> None:
+    kube, store = FakeKube(), FakeStore()
+    c = controller(kube, store, pod_check=0.0)
+    c.observe_run("ADDED", run_body("r", "uid-1", 3))
+    drain(c)
+    job = kube.jobs[job_name("r")]
+    job["status"] = {"active": 3, "startTime": "2026-01-01T00:00:00Z"}
+    kube.pods = [
+        {
+            "metadata": {"name": f"carlos-r-{i}-x"},
+            "status": {
+                "initContainerStatuses": [{"name": "bridge", "state": {"running": {}}}],
+                "containerStatuses": [
+                    {
+                        "name": "simcore",
+                        "state": {
+                            "waiting": {"reason": "ImagePullBackOff", "message": "Back-off pulling image"}
+                        },
+                    }
+                ],
+            },
+        }
+        for i in range(3)
+    ]
+    c.observe_job("MODIFIED", job)
+    drain(c)
+    status = kube.status_patches[-1]
+    stuck = next(x for x in status["conditions"] if x["type"] == "PodsStuck")
+    assert stuck["status"] == "True" and stuck["reason"] == "ImagePullBackOff"
+    assert "carlos-r-0-x" in stuck["message"] and "simcore" in stuck["message"]
+    assert ("Warning", "ImagePullBackOff") in kube.events
+    assert kube.pod_lists[-1] == (f"job-name={job_name('r')}", 20)  # by label, bounded
+    kube.pods = []
+    c.enqueue(("default", "r"))
+    drain(c)
+    stuck = next(x for x in kube.status_patches[-1]["conditions"] if x["type"] == "PodsStuck")
+    assert stuck["status"] == "False"
+
+
+def test_status_carries_observed_generation() -> None:
+    kube, store = FakeKube(), FakeStore()
+    c = controller(kube, store)
+    body = run_body("r", "uid-1", 3)
+    body["metadata"]["generation"] = 4
+    c.observe_run("ADDED", body)
+    drain(c)
+    assert kube.status_patches[-1]["observedGeneration"] == 4
+
+
+def test_suspended_run_with_a_queue_is_held_until_resumed() -> None:
+    kube, store = FakeKube(), FakeStore()
+    body = run_body("r", "uid-1", 3)
+    body["spec"]["suspend"] = True
+    body["spec"]["execution"] = {"queueName": "team-a"}
+    c = controller(kube, store)
+    c.observe_run("ADDED", body)
+    drain(c)
+    assert kube.jobs == {} and kube.status_patches[-1]["phase"] == "Suspended"
+    resumed = json.loads(json.dumps(body))
+    resumed["spec"]["suspend"] = False
+    c.observe_run("MODIFIED", resumed)
+    drain(c)
+    job = kube.jobs[job_name("r")]
+    assert job["spec"]["suspend"] is True  # Kueue admits it
+    assert job["metadata"]["labels"]["kueue.x-k8s.io/queue-name"] == "team-a"
+
+
+def test_a_user_chosen_endpoint_never_gets_the_operators_credentials() -> None:
+    kube, store = FakeKube(), FakeStore()
+    body = run_body("r", "uid-1", 1)
+    body["spec"]["output"] = {"url": "s3://bucket/out", "endpoint": "https://attacker.example"}
+    c = controller(kube, store)
+    c.observe_run("ADDED", body)
+    drain(c)
+    rejected = kube.status_patches[-1]["conditions"][0]
+    assert rejected["reason"] == "CredentialsRequired" and "credentialsSecretRef" in rejected["message"]
+    assert kube.jobs == {} and store.opened == 0
+
+
+def test_secret_references_are_opt_in_per_namespace() -> None:
+    kube, store = FakeKube(), FakeStore()
+    c = controller(kube, store, secrets="other")
+    c.observe_run("ADDED", run_body("r", "uid-1", 1))
+    drain(c)
+    rejected = kube.status_patches[-1]["conditions"][0]
+    assert rejected["reason"] == "SecretReferencesNotAllowed"
+    assert (
+        "spec.output.credentialsSecretRef" in rejected["message"]
+        and "secretReferences" in rejected["message"]
+    )
+    assert kube.secret_reads == 0 and kube.jobs == {}
+    body = run_body("r2", "uid-2", 1)
+    body["spec"]["output"] = {"url": "s3://bucket/out"}
+    body["spec"]["systemUnderTest"] = {
+        "name": "node",
+        "image": "reg/node:1",
+        "env": [{"name": "TOKEN", "secretKeyRef": {"name": "api", "key": "token"}}],
+    }
+    c.observe_run("ADDED", body)
+    drain(c)
+    message = kube.status_patches[-1]["conditions"][0]["message"]
+    assert "spec.systemUnderTest.env[0].secretKeyRef" in message
+    # a run that names no Secret runs; the operator reads none for it
+    plain = run_body("r3", "uid-3", 1)
+    plain["spec"]["output"] = {"url": "s3://bucket/out"}
+    c.observe_run("ADDED", plain)
+    drain(c)
+    assert job_name("r3") in kube.jobs and kube.secret_reads == 0

@@ -25,7 +25,9 @@ restarted operator adopts what exists and deleting the run deletes them (results
 
 from __future__ import annotations
 
+import copy
 import hashlib
+import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -52,7 +54,7 @@ INDEX_FAILURES_ANNOTATION = "batch.kubernetes.io/job-index-failure-count"
 DEFAULT_PARALLELISM = 10
 #: a per-pod backstop beyond `execution.timeoutSeconds` (simcore enforces the limit itself)
 POD_DEADLINE_GRACE_S = 300
-UID = 65532  # the images' non-root user
+UID = 10001  # the images' non-root user (images/*/Dockerfile)
 POD_TRANSPORTS = ("dds", "loopback")
 #: the DDS domain of every pod (pods are isolated by their own loopback, not by the domain)
 POD_DOMAIN_ID = 0
@@ -60,6 +62,75 @@ POD_DOMAIN_ID = 0
 POD_DDS_CONFIG = loopback_config()
 #: the ROS 2 middleware of the system under test's container (a ros:jazzy image's default is Fast DDS)
 SUT_RMW = "rmw_cyclonedds_cpp"
+
+
+#: default requests/limits of the containers that do a run's work (Helm value runPods.resources)
+RUN_RESOURCES = {
+    "requests": {"cpu": "1", "memory": "1Gi", "ephemeral-storage": "1Gi"},
+    "limits": {"memory": "4Gi", "ephemeral-storage": "12Gi"},
+}
+#: default requests/limits of the bridge and the recorder (Helm value runPods.sidecarResources)
+SIDECAR_RESOURCES = {
+    "requests": {"cpu": "100m", "memory": "128Mi", "ephemeral-storage": "100Mi"},
+    "limits": {"memory": "512Mi", "ephemeral-storage": "1Gi"},
+}
+_RESOURCE_NAMES = ("cpu", "memory", "ephemeral-storage")
+
+
+def _resources_setting(
+    env: dict[str, str], name: str, default: dict[str, dict[str, str]]
+) -> dict[str, dict[str, str]]:
+    """A resources setting (JSON `{"requests": {...}, "limits": {...}}`), checked; absent: `default`."""
+    text = env.get(name, "").strip()
+    if not text:
+        return copy.deepcopy(default)
+    try:
+        value = json.loads(text)
+        out = {
+            part: {str(k): str(v) for k, v in (value.get(part) or {}).items()}
+            for part in ("requests", "limits")
+        }
+        for part in out.values():
+            for key, quantity in part.items():
+                if key not in _RESOURCE_NAMES:
+                    raise ValueError(f"unknown resource {key!r} (use {', '.join(_RESOURCE_NAMES)})")
+                _quantity(quantity)
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise BadInput(
+            f'{name}: {exc} (JSON: {{"requests": {{...}}, "limits": {{...}}}})', field=name
+        ) from None
+    return out
+
+
+def _quantity(text: str) -> float:
+    from kubernetes.utils.quantity import parse_quantity
+
+    return float(parse_quantity(text))
+
+
+def container_resources(
+    defaults: dict[str, dict[str, str]], chosen: dict[str, dict[str, Any]] | None = None
+) -> dict[str, dict[str, str]]:
+    """Requests and limits: the run's own (spec.execution.resources) over the defaults, field by field. A
+    request the run raises above a default limit it did not set raises that limit too (the API server
+    refuses a request above its limit)."""
+    chosen = chosen or {}
+    requests = {
+        **defaults.get("requests", {}),
+        **{k: str(v) for k, v in (chosen.get("requests") or {}).items()},
+    }
+    limits = {**defaults.get("limits", {}), **{k: str(v) for k, v in (chosen.get("limits") or {}).items()}}
+    for key, request in requests.items():
+        if (
+            key in limits
+            and key not in (chosen.get("limits") or {})
+            and _quantity(request) > _quantity(limits[key])
+        ):
+            limits[key] = request
+    out = {"requests": requests}
+    if limits:
+        out["limits"] = limits
+    return out
 
 
 def _package_version() -> str:
@@ -84,6 +155,14 @@ class OperatorSettings:
     pull_policies: dict[str, str] = field(default_factory=dict)  # role → imagePullPolicy
     extra_labels: dict[str, str] = field(default_factory=dict)
     pod_transport: str = "dds"  # CARLOS_TRANSPORT of the pods: dds | loopback
+    #: namespaces whose runs may name Secrets (CARLOS_SECRET_NAMESPACES; Helm secretReferences.namespaces)
+    secret_namespaces: frozenset[str] = frozenset()
+    #: requests/limits of simcore and the system under test unless the run sets spec.execution.resources
+    run_resources: dict[str, dict[str, str]] = field(default_factory=lambda: copy.deepcopy(RUN_RESOURCES))
+    #: requests/limits of the bridge and the recorder
+    sidecar_resources: dict[str, dict[str, str]] = field(
+        default_factory=lambda: copy.deepcopy(SIDECAR_RESOURCES)
+    )
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> OperatorSettings:
@@ -108,6 +187,11 @@ class OperatorSettings:
                 field="CARLOS_POD_TRANSPORT",
             )
         return cls(
+            secret_namespaces=frozenset(
+                n.strip() for n in env.get("CARLOS_SECRET_NAMESPACES", "").split(",") if n.strip()
+            ),
+            run_resources=_resources_setting(env, "CARLOS_RUN_RESOURCES", RUN_RESOURCES),
+            sidecar_resources=_resources_setting(env, "CARLOS_SIDECAR_RESOURCES", SIDECAR_RESOURCES),
             pod_transport=transport,
             pull_policies=policies,
             image_simcore=image("simcore"),
@@ -157,9 +241,11 @@ def owner_reference(body: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def resolve_output(run: SimulationRun, settings: OperatorSettings) -> Output:
+def resolve_output(run: SimulationRun, settings: OperatorSettings, *, namespace: str | None = None) -> Output:
     """The output of a cluster run: `spec.output.url` when set, else the operator's default; only s3://
-    (pods are ephemeral). Raises BadInput with the field to fix."""
+    (pods are ephemeral). With `namespace` (the operator always gives it) results go under
+    `<url>/<namespace>/<run>/`, so same-named runs of two namespaces never share keys. Raises BadInput with
+    the field to fix."""
     out = run.spec.output
     url = out.url if "url" in out.model_fields_set else settings.default_output_url
     if url is None:
@@ -174,6 +260,8 @@ def resolve_output(run: SimulationRun, settings: OperatorSettings) -> Output:
             field="spec.output.url",
         )
     secret = out.credentials_secret_ref.name if out.credentials_secret_ref else settings.default_s3_secret
+    if namespace:
+        url = f"{url.rstrip('/')}/{namespace}"
     return Output(
         url=url, endpoint=out.endpoint or settings.default_s3_endpoint, region=out.region, secret=secret
     )
@@ -181,6 +269,18 @@ def resolve_output(run: SimulationRun, settings: OperatorSettings) -> Output:
 
 #: Kubernetes' limit on completions of an Indexed Job with backoffLimitPerIndex
 MAX_COMPLETIONS = 100_000
+
+
+def secret_references(run: SimulationRun) -> list[str]:
+    """The fields of a run that name a Secret of its namespace."""
+    fields = []
+    if run.spec.output.credentials_secret_ref is not None:
+        fields.append("spec.output.credentialsSecretRef")
+    sut = run.spec.system_under_test
+    for position, var in enumerate(sut.env if sut is not None else []):
+        if var.secret_key_ref is not None:
+            fields.append(f"spec.systemUnderTest.env[{position}].secretKeyRef")
+    return fields
 
 
 def check_cluster_spec(run: SimulationRun) -> None:
@@ -366,9 +466,20 @@ def build_job(
         mounts.append(
             {"name": f"scenarios-{position}", "mountPath": f"{SCENARIO_DIR}/{cm}", "readOnly": True}
         )
+    execution = spec.execution
+    chosen = (
+        execution.resources.model_dump(mode="json", by_alias=True, exclude_none=True)
+        if execution.resources
+        else None
+    )
+    work_resources = container_resources(settings.run_resources, chosen)
+    sidecar_resources = container_resources(settings.sidecar_resources)
     simcore = _container("simcore", settings, run, output, mounts)
+    simcore["resources"] = work_resources
     bridge = _sidecar(_container("bridge", settings, run, output, mounts), BUS_PORT)
+    bridge["resources"] = sidecar_resources
     recorder = _sidecar(_container("recorder", settings, run, output, mounts), RECORDER_READY_PORT)
+    recorder["resources"] = copy.deepcopy(sidecar_resources)
     sidecars = [bridge, recorder]
     sut = spec.system_under_test
     if sut is not None and sut.image:
@@ -378,6 +489,7 @@ def build_job(
             "image": sut.image,
             "imagePullPolicy": "IfNotPresent",
             "restartPolicy": "Always",
+            "resources": copy.deepcopy(work_resources),
         }
         node.pop("args")
         node.pop("envFrom", None)  # the object-store credentials are CARLOS' business, not the node's
@@ -416,6 +528,19 @@ def build_job(
     }
     if settings.image_pull_secrets:
         pod_spec["imagePullSecrets"] = [{"name": s} for s in settings.image_pull_secrets]
+    if execution.node_selector:
+        pod_spec["nodeSelector"] = dict(execution.node_selector)
+    if execution.tolerations:
+        pod_spec["tolerations"] = [
+            t.model_dump(mode="json", by_alias=True, exclude_none=True) for t in execution.tolerations
+        ]
+    if execution.affinity:
+        pod_spec["affinity"] = copy.deepcopy(execution.affinity)
+    if execution.priority_class_name:
+        pod_spec["priorityClassName"] = execution.priority_class_name
+    if execution.service_account_name:
+        pod_spec["serviceAccountName"] = execution.service_account_name
+        pod_spec["automountServiceAccountToken"] = True  # workload identity reads the account's token
     exit_codes = {"containerName": "simcore", "operator": "In"}
     return {
         "apiVersion": "batch/v1",
@@ -431,15 +556,22 @@ def build_job(
             "completions": total,
             "parallelism": parallelism,
             "backoffLimitPerIndex": spec.execution.retries,
+            **(
+                {"maxFailedIndexes": execution.max_failed_indexes}
+                if execution.max_failed_indexes is not None
+                else {}
+            ),
             "podFailurePolicy": {
                 "rules": [
-                    # ran and a required criterion failed, or bad input: the index fails, never retried
+                    # bad input is the same for every index: the whole Job fails at once
+                    {
+                        "action": "FailJob",
+                        "onExitCodes": {**exit_codes, "values": [int(ExitCode.BAD_INPUT)]},
+                    },
+                    # ran and a required criterion failed: the index fails, never retried
                     {
                         "action": "FailIndex",
-                        "onExitCodes": {
-                            **exit_codes,
-                            "values": [int(ExitCode.FAILED), int(ExitCode.BAD_INPUT)],
-                        },
+                        "onExitCodes": {**exit_codes, "values": [int(ExitCode.FAILED)]},
                     },
                     # infrastructure error: counts towards backoffLimitPerIndex (execution.retries)
                     {

@@ -3,19 +3,31 @@
 kopf delivers the watch events (handlers.py); this module does the work on a pool of threads:
 
 - `ensure`: validate the spec (invalid → `Accepted=False` with the reason and a Warning event, nothing
-  created); write `run.yaml` to the object store; create the ConfigMap and the Indexed Job under
-  deterministic names with owner references. A 409 means the object exists: it is adopted when its owner is
-  this run, so a restarted operator never creates a second Job. A run whose status is terminal is left
-  alone (its Job may be gone after `ttlSecondsAfterFinished`).
+  created); wait, with backoff, for what the run names but may not exist yet (its Secret, its scenario
+  ConfigMaps: External Secrets, sealed-secrets) and show it as the `Prerequisites` condition; write `run.yaml`
+  to the object store; create the ConfigMap and the Indexed Job under deterministic names with owner
+  references. A 409 means the object exists: it is adopted when its owner is this run (a restarted operator
+  never creates a second Job); when its owner is an earlier run of the same name (deleted and created again
+  before the garbage collector got to it) it is deleted and the creation retried. A run held by
+  `spec.suspend` with a Kueue `queueName` gets its Job only when resumed (Kueue owns a queued Job's
+  `suspend`). A Job is created once: a run whose status shows it started never gets a second one.
+- A run whose recorded status is terminal is finished: nothing is read or written for it again, after a
+  restart too (the run-level summary is written before the terminal status). A Job that disappears before
+  the run finished (deleted, or expired) leaves the run `Unknown`, never back to `Pending`.
 - `reconcile`: read the per-index summaries the Job reports finished and not yet counted (at most
   `batch` per pass, in parallel), aggregate the status (status.py), patch it when it changed, post events
   on transitions, and when every index is final write the run-level `summary.json` and `junit.xml`.
 
-Runs are re-queued when their Job changes (watch events) and every `resync` seconds while not terminal.
+While a run's pods are active, its pods are read by label (at most `POD_SAMPLE`, every `pod_check`
+seconds): a container waiting for a reason that does not pass by itself (ImagePullBackOff,
+CreateContainerConfigError…) is shown as the `PodsStuck` condition and a Warning event.
+
+Runs are re-queued when their Job changes (watch events) and every `resync` seconds while not finished.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -36,9 +48,11 @@ from carlos_operator.builders import (
     job_name,
     manifest_yaml,
     resolve_output,
+    scenario_configmaps,
+    secret_references,
 )
 from carlos_operator.kube import Conflict, Kube, NotFound, now_rfc3339
-from carlos_operator.status import TERMINAL_PHASES, Tally, aggregate, job_finished
+from carlos_operator.status import TERMINAL_PHASES, Tally, aggregate, condition, job_finished
 from simcore.errors import BadInput, CarlosError
 from simcore.evaluation.report import junit_xml, run_summary
 from simcore.manifest import parse_manifest
@@ -50,6 +64,25 @@ log = logging.getLogger("carlos.operator")
 Key = tuple[str, str]  # (namespace, name)
 
 
+#: phases after which a run is never reconciled again
+FINISHED_PHASES = (*TERMINAL_PHASES, "Unknown")
+#: container waiting reasons that do not pass by themselves (a pod in them never starts)
+STUCK_REASONS = frozenset(
+    {
+        "ImagePullBackOff",
+        "ErrImagePull",
+        "InvalidImageName",
+        "CreateContainerConfigError",
+        "CreateContainerError",
+        "RunContainerError",
+    }
+)
+#: pods read per check (bounded: a run may have thousands)
+POD_SAMPLE = 20
+#: a missing prerequisite is looked for again after 5 s, 10 s, 20 s … at most this often
+MAX_BACKOFF_S = 300.0
+
+
 class Rejected(Exception):
     """The run cannot be accepted: `reason` (CamelCase) and a message naming the field to fix."""
 
@@ -57,6 +90,10 @@ class Rejected(Exception):
         super().__init__(message)
         self.reason = reason
         self.message = message
+
+
+class Waiting(Rejected):
+    """Something the run names does not exist yet (or is being deleted): retried with backoff."""
 
 
 @dataclass
@@ -71,6 +108,12 @@ class RunState:
     store: Any = None
     ensured: bool = False
     last_status: dict[str, Any] = field(default_factory=dict)
+    generation: int | None = None
+    job_seen: bool = False  # its Job existed (created, adopted, or the status shows it started)
+    held: bool = False  # suspended with a queueName: the Job is not created yet
+    waits: int = 0  # consecutive waits for a prerequisite (the backoff exponent)
+    pods_checked: float = 0.0  # monotonic time of the last pod check
+    stuck: tuple[str, str] | None = None  # (reason, message) of a pod that cannot start
 
 
 def _store_for(kube: Kube, namespace: str, output: Output) -> Any:
@@ -81,12 +124,13 @@ def _store_for(kube: Kube, namespace: str, output: Output) -> Any:
         try:
             creds = kube.read_secret_data(namespace, output.secret)
         except NotFound:
-            raise Rejected(
+            raise Waiting(
                 "SecretNotFound",
-                f"spec.output.credentialsSecretRef: Secret {output.secret!r} not found in namespace {namespace!r}",
+                f"spec.output.credentialsSecretRef: Secret {output.secret!r} not found in namespace "
+                f"{namespace!r}; the run starts when it exists",
             ) from None
         if not creds.get("AWS_ACCESS_KEY_ID") or not creds.get("AWS_SECRET_ACCESS_KEY"):
-            raise Rejected(
+            raise Waiting(
                 "SecretIncomplete",
                 f"spec.output.credentialsSecretRef: Secret {output.secret!r} needs the keys AWS_ACCESS_KEY_ID "
                 "and AWS_SECRET_ACCESS_KEY",
@@ -154,12 +198,16 @@ class Controller:
         workers: int = 4,
         resync: float = 10.0,
         batch: int = 500,
+        pod_check: float = 30.0,
+        backoff: float = 5.0,
         store_factory: Callable[[Kube, str, Output], Any] = _store_for,
     ) -> None:
         self.kube = kube
         self.settings = settings
         self.resync = resync
         self.batch = batch
+        self.pod_check = pod_check
+        self.backoff = backoff
         self.store_factory = store_factory
         self.runs: dict[Key, RunState] = {}
         self.jobs: dict[Key, dict[str, Any]] = {}  # (namespace, job name) → Job
@@ -179,7 +227,9 @@ class Controller:
         meta = body.get("metadata", {})
         body = slim_run(body)
         meta = body["metadata"] = {
-            k: meta[k] for k in ("name", "namespace", "uid", "generateName", "labels") if k in meta
+            k: meta[k]
+            for k in ("name", "namespace", "uid", "generateName", "labels", "generation")
+            if k in meta
         }
         key = (meta.get("namespace") or "", meta.get("name") or "")
         with self._lock:
@@ -191,6 +241,8 @@ class Controller:
                 state = self.runs[key] = RunState(body=body, uid=str(meta.get("uid")))
             else:
                 state.body = body
+            generation = meta.get("generation")
+            state.generation = int(generation) if generation is not None else None
         self.enqueue(key)
 
     def observe_job(self, event_type: str, body: dict[str, Any]) -> None:
@@ -234,7 +286,7 @@ class Controller:
     def _resync_loop(self) -> None:
         while not self._stop.wait(self.resync):
             with self._lock:
-                keys = [k for k, s in self.runs.items() if s.last_status.get("phase") not in TERMINAL_PHASES]
+                keys = [k for k, s in self.runs.items() if s.last_status.get("phase") not in FINISHED_PHASES]
             for key in keys:
                 self.enqueue(key)
 
@@ -281,19 +333,88 @@ class Controller:
             state.last_status = status
         if _condition(status, "Accepted") == "False":
             return  # rejected: nothing to do until a new run (the spec is immutable)
+        if state.last_status.get("phase") in FINISHED_PHASES:
+            # finished: the verdict and the run-level summary are recorded; nothing is read again
+            self._observe_generation(state)
+            return
         if not state.ensured:
             try:
                 self.ensure(state)
+            except Waiting as exc:
+                self._wait(key, state, exc.reason, exc.message)
+                return
             except Rejected as exc:
                 self._reject(state, exc.reason, exc.message)
                 return
-        if (
-            state.last_status.get("phase") in TERMINAL_PHASES
-            and state.tally is not None
-            and state.tally.finalized
-        ):
+            if state.waits:
+                state.waits = 0
+        if state.held:
+            self._hold(state)
             return
         self._update_status(key, state)
+
+    def _observe_generation(self, state: RunState) -> None:
+        """A finished run whose spec.suspend changed: only observedGeneration moves."""
+        if state.generation is not None and state.last_status.get("observedGeneration") != state.generation:
+            meta = state.body["metadata"]
+            self.kube.patch_run_status(
+                meta.get("namespace"), meta["name"], {"observedGeneration": state.generation}
+            )
+            state.last_status = {**state.last_status, "observedGeneration": state.generation}
+
+    def _publish(self, state: RunState, status: dict[str, Any]) -> None:
+        """Patch the run's status (with observedGeneration) when it changed."""
+        if state.generation is not None:
+            status["observedGeneration"] = state.generation
+        if _comparable(status) != _comparable(state.last_status):
+            meta = state.body["metadata"]
+            self.kube.patch_run_status(meta.get("namespace"), meta["name"], status)
+            state.last_status = status
+
+    def _wait(self, key: Key, state: RunState, reason: str, message: str) -> None:
+        """A prerequisite is missing: Pending with the `Prerequisites` condition; retried with backoff."""
+        previous = {c.get("type"): c for c in state.last_status.get("conditions") or []}
+        before = previous.get("Prerequisites")
+        status = {
+            **{k: v for k, v in state.last_status.items() if k != "conditions"},
+            "phase": "Pending",
+            "conditions": [
+                *(c for c in state.last_status.get("conditions") or [] if c.get("type") != "Prerequisites"),
+                condition(previous, "Prerequisites", False, reason, message, now_rfc3339()),
+            ],
+        }
+        self._publish(state, status)
+        if before is None or before.get("reason") != reason:
+            self.kube.event(state.body, "Warning", reason, message)
+        delay = min(self.backoff * 2**state.waits, MAX_BACKOFF_S)
+        state.waits += 1
+        metrics.ERRORS.labels(kind=reason).inc()
+        log.info("%s/%s waits %.0f s: %s", *key, delay, message)
+        timer = threading.Timer(delay, self.enqueue, args=(key,))
+        timer.daemon = True
+        timer.start()
+
+    def _hold(self, state: RunState) -> None:
+        """Suspended with a queueName: no Job until resumed (Kueue would unsuspend a queued Job)."""
+        status = {
+            "phase": "Suspended",
+            "total": state.tally.total if state.tally else None,
+            "jobName": job_name(state.run.name) if state.run else None,
+            "conditions": [
+                condition(
+                    {c.get("type"): c for c in state.last_status.get("conditions") or []},
+                    "Accepted",
+                    True,
+                    "Held",
+                    "spec.suspend: the Job is submitted to its Kueue queue when the run is resumed",
+                    now_rfc3339(),
+                )
+            ],
+        }
+        phase_before = state.last_status.get("phase")
+        self._publish(state, {k: v for k, v in status.items() if v is not None})
+        if phase_before != "Suspended":
+            self.kube.event(state.body, "Normal", "Suspended", "held: the Job is created when resumed")
 
     def _reject(self, state: RunState, reason: str, message: str) -> None:
         now = now_rfc3339()
@@ -310,8 +431,7 @@ class Controller:
             ],
         }
         meta = state.body["metadata"]
-        self.kube.patch_run_status(meta.get("namespace"), meta["name"], status)
-        state.last_status = status
+        self._publish(state, status)
         self.kube.event(state.body, "Warning", reason, message)
         metrics.set_phase(state.uid, "Failed")
         log.info("rejected %s/%s: %s", meta.get("namespace"), meta["name"], message)
@@ -324,17 +444,55 @@ class Controller:
         try:
             run = parse_manifest(json.loads(json.dumps(document)), source=f"{namespace}/{meta['name']}")
             check_cluster_spec(run)
-            output = resolve_output(run, self.settings)
+            output = resolve_output(run, self.settings, namespace=namespace)
         except CarlosError as exc:
             raise Rejected("InvalidSpec", str(exc)) from None
+        chosen = run.spec.output.endpoint
+        if (
+            chosen
+            and not run.spec.output.credentials_secret_ref
+            and chosen != self.settings.default_s3_endpoint
+        ):
+            raise Rejected(
+                "CredentialsRequired",
+                f"spec.output.endpoint {chosen!r}: a run that names its own object store must name its "
+                "credentials too (spec.output.credentialsSecretRef); the operator's own are only for its "
+                "default store",
+            )
+        allowed = namespace in self.settings.secret_namespaces
+        named = secret_references(run)
+        if named and not allowed:
+            raise Rejected(
+                "SecretReferencesNotAllowed",
+                f"{named[0]}: runs in namespace {namespace!r} may not name Secrets (the operator's "
+                "administrator allows it per namespace: Helm value secretReferences.namespaces)",
+            )
         state.run, state.output = run, output
         total = len(Plan(run.spec))
         if state.tally is None or state.tally.total != total:
             state.tally = Tally(total)
-        state.store = self.store_factory(self.kube, namespace, output)
-        if state.last_status.get("phase") in TERMINAL_PHASES:
-            state.ensured = True  # finished earlier (its Job may be gone): adopt, create nothing
+        for position, name in enumerate(scenario_configmaps(run)):
+            try:
+                self.kube.read_configmap(namespace, name)
+            except NotFound:
+                raise Waiting(
+                    "ConfigMapNotFound",
+                    f"spec.scenarios[{position}].configMapRef: ConfigMap {name!r} not found in namespace "
+                    f"{namespace!r}; the run starts when it exists",
+                ) from None
+        # the operator reads a Secret only where allowed; elsewhere its own credentials reach its default store
+        state.store = self.store_factory(
+            self.kube, namespace, output if allowed else dataclasses.replace(output, secret=None)
+        )
+        started = bool(state.last_status.get("startTime")) or state.last_status.get("phase") == "Running"
+        if started:
+            state.job_seen = True  # its Job ran: adopt it if it is still there, never create another
+            state.ensured = True
             return
+        suspended = bool(state.body.get("spec", {}).get("suspend"))
+        state.held = bool(suspended and run.spec.execution.queue_name)
+        if state.held:
+            return  # Kueue would admit (unsuspend) a queued Job: it is created when the run is resumed
         spec_bytes = manifest_yaml(run).encode()
         run_yaml = f"{run.name}/run.yaml"
         if state.store.exists(run_yaml):
@@ -362,6 +520,7 @@ class Controller:
         with self._lock:
             self.jobs.setdefault((namespace, job["metadata"]["name"]), slim_job(job))
         state.ensured = True
+        state.job_seen = True
         if created:
             metrics.JOBS_CREATED.inc()
             self.kube.event(
@@ -375,13 +534,23 @@ class Controller:
             log.info("adopted Job %s/%s", namespace, job["metadata"]["name"])
 
     def _check_owned(self, obj: dict[str, Any], state: RunState, what: str) -> None:
-        owners = obj.get("metadata", {}).get("ownerReferences") or []
-        if not any(o.get("uid") == state.uid for o in owners):
-            raise Rejected(
-                "NameConflict",
-                f"{what} {obj['metadata']['name']!r} exists and belongs to something else: delete it or "
-                "rename the run",
+        meta = obj.get("metadata", {})
+        owners = meta.get("ownerReferences") or []
+        if any(o.get("uid") == state.uid for o in owners):
+            return
+        run_name = state.body["metadata"]["name"]
+        if any(o.get("kind") == "SimulationRun" and o.get("name") == run_name for o in owners):
+            # an earlier run of the same name (deleted, created again before the garbage collector came)
+            namespace = state.body["metadata"].get("namespace") or "default"
+            self.kube.delete(what, namespace, meta["name"], str(meta.get("uid")))
+            raise Waiting(
+                "PreviousRunCleanup",
+                f"{what} {meta['name']!r} of an earlier run named {run_name!r} is being deleted; retrying",
             )
+        raise Rejected(
+            "NameConflict",
+            f"{what} {meta['name']!r} exists and belongs to something else: delete it or rename the run",
+        )
 
     def _job(self, state: RunState) -> dict[str, Any] | None:
         assert state.run is not None
@@ -402,8 +571,11 @@ class Controller:
         assert state.run is not None and state.tally is not None and state.output is not None
         run, tally = state.run, state.tally
         job = self._job(state)
-        # spec.suspend is the one field that may change after creation: read it from the latest body
-        suspend = bool(state.body.get("spec", {}).get("suspend") or run.spec.execution.queue_name)
+        if job is not None:
+            state.job_seen = True
+        # spec.suspend is the one field that may change after creation: read it from the latest body.
+        # A queued (Kueue) Job's suspend is Kueue's: the run holds it before creation instead (_hold).
+        suspend = bool(state.body.get("spec", {}).get("suspend"))
         if (
             job is not None
             and not run.spec.execution.queue_name
@@ -420,10 +592,10 @@ class Controller:
                 tally.record(summary)
         if more:
             self.enqueue(key)  # more finished indexes to read: the next batch right after this pass
-        if job is None and state.last_status.get("phase") in TERMINAL_PHASES:
-            tally.finalized = True  # finished and its Job expired: keep the recorded status
-            return
         previous = state.last_status
+        if job is None and state.job_seen:
+            self._job_gone(state)
+            return
         reported = sum(int(previous.get(k) or 0) for k in ("passed", "testFailures", "errors"))
         if more and tally.known_count < reported:
             return  # catching up after a restart: never publish counts lower than the ones already shown
@@ -436,16 +608,79 @@ class Controller:
             previous=previous,
         )
         status["jobName"] = job_name(run.name)
+        if job is not None and status["phase"] not in TERMINAL_PHASES:
+            self._check_pods(state, job, status)
         if status["phase"] in TERMINAL_PHASES and not tally.finalized:
             self._finalize(state, job)
             tally.finalized = True
-        if _comparable(status) != _comparable(previous):
-            meta = state.body["metadata"]
-            self.kube.patch_run_status(meta.get("namespace"), meta["name"], status)
-            if status["phase"] != previous.get("phase"):
-                self._transition(state, previous.get("phase"), status)
-            state.last_status = status
+        before = previous.get("phase")
+        self._publish(state, status)
+        if status["phase"] != before:
+            self._transition(state, before, status)
         metrics.set_phase(state.uid, status["phase"])
+
+    def _job_gone(self, state: RunState) -> None:
+        """The run's Job disappeared before the run finished: the results read so far stay, the run is
+        `Unknown` (never `Pending` again, never a second Job)."""
+        assert state.run is not None and state.tally is not None
+        tally = state.tally
+        previous = state.last_status
+        name = job_name(state.run.name)
+        message = (
+            f"the Job {name} is gone with {tally.known_count} of {tally.total} results read; the run cannot "
+            "finish: create it again under a new name"
+        )
+        conditions = {c.get("type"): c for c in previous.get("conditions") or []}
+        status = {
+            **{k: v for k, v in previous.items() if k not in ("conditions", "active")},
+            "phase": "Unknown",
+            "active": 0,
+            "jobName": name,
+            "passed": tally.counts[1],
+            "testFailures": tally.counts[2],
+            "errors": tally.counts[3],
+            "total": tally.total,
+            "conditions": [
+                *(c for c in conditions.values() if c.get("type") not in ("Running", "Complete")),
+                condition(conditions, "Running", False, "JobGone", message, now_rfc3339()),
+                {
+                    "type": "Complete",
+                    "status": "Unknown",
+                    "reason": "JobGone",
+                    "message": message,
+                    "lastTransitionTime": now_rfc3339(),
+                },
+            ],
+        }
+        self._publish(state, status)
+        if previous.get("phase") != "Unknown":
+            self.kube.event(state.body, "Warning", "JobGone", message)
+        metrics.set_phase(state.uid, "Unknown")
+
+    def _check_pods(self, state: RunState, job: dict[str, Any], status: dict[str, Any]) -> None:
+        """Pods of an active Job that cannot start (image, config): the `PodsStuck` condition and an event.
+        Read by label, at most POD_SAMPLE pods, at most every `pod_check` seconds."""
+        if int(status.get("active") or 0) > 0 and time.monotonic() - state.pods_checked >= self.pod_check:
+            state.pods_checked = time.monotonic()
+            meta = job["metadata"]
+            try:
+                pods = self.kube.list_pods(
+                    meta.get("namespace") or "default", f"job-name={meta['name']}", POD_SAMPLE
+                )
+            except Exception as exc:  # best effort: the run's status does not depend on it
+                log.warning("reading the pods of %s failed: %s", meta["name"], exc)
+                pods = None
+            if pods is not None:
+                state.stuck = stuck_reason(pods)
+                if state.stuck is not None:
+                    before = _condition(state.last_status, "PodsStuck")
+                    if before != "True":
+                        self.kube.event(state.body, "Warning", *state.stuck)
+        previous = {c.get("type"): c for c in state.last_status.get("conditions") or []}
+        reason, message = state.stuck or ("PodsStarting", "")
+        status["conditions"].append(
+            condition(previous, "PodsStuck", state.stuck is not None, reason, message, now_rfc3339())
+        )
 
     def _transition(self, state: RunState, before: str | None, status: dict[str, Any]) -> None:
         phase = status["phase"]
@@ -504,6 +739,24 @@ class Controller:
             return None
 
 
+def stuck_reason(pods: list[dict[str, Any]]) -> tuple[str, str] | None:
+    """(reason, message) of the first container of `pods` waiting for a reason in STUCK_REASONS."""
+    for pod in pods:
+        status = pod.get("status") or {}
+        for container in [
+            *(status.get("initContainerStatuses") or []),
+            *(status.get("containerStatuses") or []),
+        ]:
+            waiting = (container.get("state") or {}).get("waiting") or {}
+            if waiting.get("reason") in STUCK_REASONS:
+                name = (pod.get("metadata") or {}).get("name")
+                detail = str(waiting.get("message") or "")[:300]
+                return str(
+                    waiting["reason"]
+                ), f"pod {name} container {container.get('name')}: {detail}".rstrip(": ")
+    return None
+
+
 def _missing_summary(run: SimulationRun, index: int, reason: str) -> dict[str, Any]:
     from simcore.runner import error_outcome
 
@@ -536,9 +789,9 @@ def slim_run(body: dict[str, Any]) -> dict[str, Any]:
 
 
 def _condition(status: dict[str, Any], kind: str) -> str | None:
-    for condition in status.get("conditions") or []:
-        if condition.get("type") == kind:
-            return str(condition.get("status"))
+    for entry in status.get("conditions") or []:
+        if entry.get("type") == kind:
+            return str(entry.get("status"))
     return None
 
 

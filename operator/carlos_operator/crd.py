@@ -25,7 +25,7 @@ from typing import Any
 
 import yaml
 
-from simcore.spec import API_GROUP, API_VERSION, KIND, SimulationRun, SimulationRunSpec
+from simcore.spec import API_GROUP, API_VERSION, KIND, SimulationRun
 
 PLURAL = "simulationruns"
 SINGULAR = "simulationrun"
@@ -169,11 +169,29 @@ def openapi_schema(model: type[Any], *, root: str = "") -> dict[str, Any]:
     return _translate(schema, defs, root or model.__name__)
 
 
-def _immutable_rule() -> str:
-    """CEL: every field of spec but `suspend` equals the old one (presence included)."""
+def declared_to_cel(node: dict[str, Any]) -> bool:
+    """Whether Kubernetes declares a schema node to CEL (apiserver `SchemaDeclType`): typed, or
+    int-or-string; an array only when its items are, a map only when its values are. A node with only
+    `x-kubernetes-preserve-unknown-fields` is not, and a rule that names it fails to compile."""
+    if node.get("x-kubernetes-int-or-string"):
+        return True
+    kind = node.get("type")
+    if kind == "array":
+        return isinstance(node.get("items"), dict) and declared_to_cel(node["items"])
+    if kind == "object" and isinstance(node.get("additionalProperties"), dict):
+        return declared_to_cel(node["additionalProperties"])
+    return kind is not None
+
+
+def _immutable_rule(spec: dict[str, Any]) -> str:
+    """CEL: every field of spec declared to CEL but `suspend` equals the old one (presence included).
+
+    Fields whose values mix types (`parameters`: bool | int | float | string; `sensors`: one of several
+    sensor objects) are not declared to CEL, so no rule can name them: the operator runs the spec it
+    accepted first (its ConfigMap and run.yaml are written once), whatever a later edit says."""
     parts = []
-    for name in SimulationRunSpec.model_json_schema(by_alias=True)["properties"]:
-        if name == "suspend":
+    for name, child in spec["properties"].items():
+        if name == "suspend" or not declared_to_cel(child):
             continue
         parts.append(
             f"(has(self.{name}) ? has(oldSelf.{name}) && self.{name} == oldSelf.{name} : !has(oldSelf.{name}))"
@@ -186,7 +204,7 @@ def crd() -> dict[str, Any]:
     full = SimulationRun.model_json_schema(by_alias=True, mode="validation")
     defs = full.get("$defs", {})
     spec = _translate(full["properties"]["spec"], defs, "spec")
-    spec["x-kubernetes-validations"] = [{"rule": _immutable_rule(), "message": SPEC_IMMUTABLE_MESSAGE}]
+    spec["x-kubernetes-validations"] = [{"rule": _immutable_rule(spec), "message": SPEC_IMMUTABLE_MESSAGE}]
     status = _translate(full["properties"]["status"], defs, "status")
     conditions = status["properties"]["conditions"]
     conditions["x-kubernetes-list-type"] = "map"

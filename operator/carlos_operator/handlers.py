@@ -3,6 +3,10 @@
 Only event handlers: kopf keeps no handler state on the SimulationRuns and adds no finalizer, so deleting a
 run never waits for the operator (owner references delete its Job and ConfigMap), and a restarted operator
 simply sees every run again (kopf lists them first) and the controller adopts what exists.
+
+The operator's Jobs are watched by jobwatch.py, not kopf: kopf filters labels on the client (every Job of
+the cluster would be streamed), the JobWatch has the API server select them. `WATCH_NAMESPACES` (set by
+`carlos operator` before kopf starts) names the namespaces it watches; empty: every namespace.
 """
 
 from __future__ import annotations
@@ -15,13 +19,17 @@ from typing import Any
 import kopf
 
 from carlos_operator import metrics
-from carlos_operator.builders import RUN_LABEL, OperatorSettings
+from carlos_operator.builders import OperatorSettings
 from carlos_operator.controller import Controller
+from carlos_operator.jobwatch import JobWatch
 from carlos_operator.kube import Kube
 from simcore.spec import API_GROUP, API_VERSION
 
 PLURAL = "simulationruns"
 _controller: Controller | None = None
+_jobs: JobWatch | None = None
+#: the namespaces served (the same as kopf's); empty: every namespace
+WATCH_NAMESPACES: list[str] = []
 
 
 def _float_env(name: str, default: float) -> float:
@@ -39,7 +47,7 @@ def _plain(body: Any) -> dict[str, Any]:
 def startup(
     settings: kopf.OperatorSettings, logger: logging.Logger | logging.LoggerAdapter[Any], **_: Any
 ) -> None:
-    global _controller
+    global _controller, _jobs
     # without these, kopf's watch streams can hang forever on a silently dropped connection
     settings.watching.server_timeout = int(_float_env("CARLOS_WATCH_SERVER_TIMEOUT", 300))
     settings.watching.client_timeout = _float_env("CARLOS_WATCH_CLIENT_TIMEOUT", 330)
@@ -55,6 +63,8 @@ def startup(
         workers=int(_float_env("CARLOS_RECONCILE_WORKERS", 4)),
     )
     _controller.start()
+    _jobs = JobWatch(_controller.kube, WATCH_NAMESPACES, _controller.observe_job)
+    _jobs.start()
     logger.info("carlos operator started")
 
 
@@ -66,7 +76,10 @@ def login(**kwargs: Any) -> kopf.ConnectionInfo | None:
 
 @kopf.on.cleanup()
 def cleanup(**_: Any) -> None:
-    global _controller
+    global _controller, _jobs
+    if _jobs is not None:
+        _jobs.stop()
+        _jobs = None
     if _controller is not None:
         _controller.stop()
         _controller = None
@@ -78,12 +91,6 @@ def run_event(type: str | None, body: kopf.Body, **_: Any) -> None:
         _controller.observe_run(type or "ADDED", _plain(body))
         if type == "DELETED":
             metrics.forget(str(body.get("metadata", {}).get("uid")))
-
-
-@kopf.on.event("batch", "v1", "jobs", labels={RUN_LABEL: kopf.PRESENT})
-def job_event(type: str | None, body: kopf.Body, **_: Any) -> None:
-    if _controller is not None:
-        _controller.observe_job(type or "ADDED", _plain(body))
 
 
 @kopf.on.probe(id="simulationruns")

@@ -108,6 +108,39 @@ class Kube:
             _raise(exc)
             raise
 
+    def delete(self, kind: str, namespace: str, name: str, uid: str) -> None:
+        """Delete a Job or ConfigMap, only if it is still the object `uid` (a precondition: never a newer
+        one of the same name); its pods go in the background."""
+        body = {"preconditions": {"uid": uid}, "propagationPolicy": "Background"}
+        call = self.batch.delete_namespaced_job if kind == "Job" else self.core.delete_namespaced_config_map
+        try:
+            call(name, namespace, body=_any(body), _preload_content=False)
+        except ApiException as exc:
+            if exc.status == 404:
+                return
+            _raise(exc)
+
+    def list_pods(self, namespace: str, selector: str, limit: int) -> list[dict[str, Any]]:
+        """At most `limit` pods of `namespace` matching the label `selector` (selected by the server)."""
+        try:
+            data = _json(
+                self.core.list_namespaced_pod(
+                    namespace, label_selector=selector, limit=limit, _preload_content=False
+                )
+            )
+        except ApiException as exc:
+            _raise(exc)
+            raise
+        return list(data.get("items") or [])[:limit]
+
+    def list_jobs(self, namespace: str | None, selector: str) -> dict[str, Any]:
+        """Jobs matching the label `selector` (selected by the server), in `namespace` or every one."""
+        if namespace:
+            call = self.batch.list_namespaced_job(namespace, label_selector=selector, _preload_content=False)
+        else:
+            call = self.batch.list_job_for_all_namespaces(label_selector=selector, _preload_content=False)
+        return _json(call)
+
     # Secrets (the object-store credentials a run names)
     def read_secret_data(self, namespace: str, name: str) -> dict[str, str]:
         try:

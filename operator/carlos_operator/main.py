@@ -13,8 +13,10 @@ def run_operator(*, namespaces: Sequence[str], liveness_port: int = 8080, metric
     import kopf
     from prometheus_client import start_http_server
 
-    import carlos_operator.handlers  # noqa: F401 - registers the handlers
+    import carlos_operator.handlers  # registers the handlers
     from carlos_operator.builders import OperatorSettings
+
+    carlos_operator.handlers.WATCH_NAMESPACES[:] = list(namespaces)
 
     OperatorSettings.from_env()  # a bad setting (e.g. CARLOS_POD_TRANSPORT) fails here, exit code 2
 

@@ -135,7 +135,7 @@ class Tally:
         return self.counts[PASSED] + self.counts[FAILED] + self.counts[ERROR]
 
 
-def _condition(
+def condition(
     previous: Mapping[str, Mapping[str, Any]], kind: str, status: bool, reason: str, message: str, now: str
 ) -> dict[str, Any]:
     value = "True" if status else "False"
@@ -187,7 +187,7 @@ def aggregate(
     finished = job_finished(job)
     done = succeeded + failed
     conditions = [
-        _condition(conditions_before, "Accepted", True, "Valid", "the spec is valid; the Job is created", now)
+        condition(conditions_before, "Accepted", True, "Valid", "the spec is valid; the Job is created", now)
     ]
     if job is None:
         phase = "Pending"
@@ -204,7 +204,7 @@ def aggregate(
         phase = "Pending"
     running = phase == "Running"
     conditions.append(
-        _condition(
+        condition(
             conditions_before,
             "Running",
             running,
@@ -215,7 +215,7 @@ def aggregate(
     )
     complete = phase in TERMINAL_PHASES
     conditions.append(
-        _condition(
+        condition(
             conditions_before,
             "Complete",
             complete,
@@ -234,9 +234,9 @@ def aggregate(
         else:
             reason = "TestFailures"
             message = f"{tally.counts[FAILED]} runs failed their criteria, {tally.counts[ERROR]} errors"
-        conditions.append(_condition(conditions_before, "Failed", True, reason, message, now))
+        conditions.append(condition(conditions_before, "Failed", True, reason, message, now))
     else:
-        conditions.append(_condition(conditions_before, "Failed", False, "NoFailure", "", now))
+        conditions.append(condition(conditions_before, "Failed", False, "NoFailure", "", now))
     status: dict[str, Any] = {
         "phase": phase,
         "progress": f"{done}/{total}",

@@ -1,6 +1,6 @@
 -- Argo CD health check for carlos.dev/SimulationRun: Progressing while it runs, Healthy when every required
 -- criterion passed, Degraded when a run failed its criteria or ended in an error, Suspended while
--- spec.suspend holds it. Reads only the status the operator writes (phase, progress, conditions, counts).
+-- spec.suspend holds it, Degraded too when its Job vanished before it finished (Unknown). Reads only the status the operator writes (phase, progress, conditions, counts).
 local hs = {}
 
 local function condition(status, kind)
@@ -47,6 +47,13 @@ if status.phase == "Failed" or (failed ~= nil and failed.status == "True") then
     message = message .. " (results: " .. status.resultsURL .. ")"
   end
   hs.message = message
+  return hs
+end
+
+if status.phase == "Unknown" then
+  local complete = condition(status, "Complete")
+  hs.status = "Degraded"
+  hs.message = (complete ~= nil and complete.message) or "the run's Job is gone before it finished"
   return hs
 end
 

@@ -77,18 +77,28 @@ the run summary); never list or watch.
 - apiGroups: ["carlos.dev"]
   resources: ["simulationruns/status"]
   verbs: ["patch"]
+- apiGroups: ["carlos.dev"]
+  resources: ["simulationruns/finalizers"]
+  verbs: ["update"]
 - apiGroups: ["batch"]
   resources: ["jobs"]
-  verbs: ["get", "list", "watch", "create", "patch"]
+  verbs: ["get", "list", "watch", "create", "patch", "delete"]
 - apiGroups: [""]
   resources: ["configmaps"]
-  verbs: ["get", "create"]
+  verbs: ["get", "create", "delete"]
 - apiGroups: [""]
-  resources: ["secrets"]
-  verbs: ["get"]
+  resources: ["pods"]
+  verbs: ["list"]
 - apiGroups: [""]
   resources: ["events"]
   verbs: ["create"]
+{{- end -}}
+
+{{/* Only in the namespaces of secretReferences.namespaces: runs there may name Secrets. */}}
+{{- define "carlos.secretRules" -}}
+- apiGroups: [""]
+  resources: ["secrets"]
+  verbs: ["get"]
 {{- end -}}
 
 {{/* Cluster-scoped, in both modes: kopf lists and watches namespaces to serve the ones it is given. */}}
