@@ -15,6 +15,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError
+from simcore.workflow import commands as workflow
 
 if TYPE_CHECKING:
     from simcore.transport.bus import Bus
@@ -163,6 +164,9 @@ def run(
             console=console,
             disable=quiet or (not console.is_terminal and os.environ.get("CARLOS_PROGRESS") != "1"),
         )
+        from simcore.workflow.terminal import ProgressLines
+
+        lines = None if quiet or not progress.disable else ProgressLines(simulation_run.name, _plain)
         state = {"passed": 0, "failed": 0, "errors": 0, "sim": 0.0}
         live_sim: dict[int, float] = {}
         started = time.monotonic()
@@ -176,6 +180,8 @@ def run(
 
         def on_start(count: int, skipped: int) -> None:
             progress.update(task, total=count, completed=skipped, stats=stats())
+            if lines is not None:
+                lines.start(count, skipped)
             if skipped:
                 console.print(
                     f"resuming: {skipped} of {count} runs already complete (use --fresh to rerun them)"
@@ -192,6 +198,8 @@ def run(
             key = {"passed": "passed", "failed": "failed"}.get(summary["status"], "errors")
             state[key] += 1
             progress.update(task, advance=1, stats=stats())
+            if lines is not None:
+                lines.index_done(summary["status"])
             if summary["status"] == "error" and bus is not None and not progress.live.is_started:
                 # one run with other processes on its topics: say why it failed (a controller died, …)
                 console.print(
@@ -234,6 +242,10 @@ def run(
             hub.close()
     _print_report(report)
     raise typer.Exit(report.exit_code)
+
+
+def _plain(line: str) -> None:
+    console.print(line, highlight=False, soft_wrap=True, markup=False)
 
 
 def _dds_bus(domain_id: int | None) -> Bus:
@@ -346,6 +358,10 @@ def _print_report(report: object) -> None:
             "yes" if name in optional else "",
         )
     out.print(table)
+    from simcore.workflow.terminal import failure_lines
+
+    for line in failure_lines(list(report.outcomes.values())):
+        out.print(line, highlight=False, soft_wrap=True, markup=False)
     status = summary["status"]
     colour = "green" if status == "passed" else "red"
     out.print(
@@ -354,6 +370,10 @@ def _print_report(report: object) -> None:
         highlight=False,
         soft_wrap=True,
     )
+    if report.report_url is not None:
+        out.print(f"report: {report.report_url}", highlight=False, soft_wrap=True)
+    else:
+        console.print(f"report.html not written: {report.report_error}", highlight=False, soft_wrap=True)
 
 
 @app.command()
@@ -581,6 +601,9 @@ def conformance(
         conf.write_results(results, out_file, directory)
         if out_file.suffix != ".json":
             conf.write_results(results, out_file.with_suffix(".json"), directory)
+
+
+app.command()(workflow.report)
 
 
 def main() -> None:

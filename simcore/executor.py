@@ -95,6 +95,8 @@ class RunReport:
     skipped: int = 0
     wall_seconds: float = 0.0
     optional_scenarios: list[ScenarioRef] = field(default_factory=list)
+    report_url: str | None = None
+    report_error: str | None = None
 
     @property
     def exit_code(self) -> int:
@@ -130,7 +132,7 @@ def execute(
     store = make_store(url, settings)
     plan = Plan(spec)
     total = len(plan)
-    wanted = list(range(total)) if indexes is None else indexes
+    wanted = list(range(total)) if indexes is None else list(dict.fromkeys(indexes))
     for index in wanted:
         if not 0 <= index < total:
             raise BadInput(f"index {index} is out of range 0..{total - 1}", field="--index")
@@ -192,10 +194,13 @@ def execute(
                     break
                 _submit(pool, settings, pending, in_flight, attempts, max_attempts, workers * 2)
     _drain(progress, events)
-    summary = run_summary(name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted))
+    summary = run_summary(
+        name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted), expected=set(wanted)
+    )
     summary["outputUrl"] = store.url_for(name)
     store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
     store.put_bytes(f"{name}/summary.json", summary_bytes(summary))
+    report_url, report_error = _html_report(store, run, summary, [outcomes[i] for i in sorted(outcomes)])
     return RunReport(
         run_name=name,
         output_url=store.url_for(name),
@@ -204,7 +209,22 @@ def execute(
         skipped=len(previous),
         wall_seconds=time.monotonic() - started,
         optional_scenarios=[s for s in spec.scenarios if s.optional],
+        report_url=report_url,
+        report_error=report_error,
     )
+
+
+def _html_report(
+    store: Store, run: SimulationRun, summary: dict[str, Any], index_summaries: list[dict[str, Any]]
+) -> tuple[str | None, str | None]:
+    """(URL of report.html, None), or (None, why it could not be written): the results are complete
+    without it, so a failure here never changes the run's outcome."""
+    from simcore.report.html import write_after_run
+
+    try:
+        return write_after_run(store, run, summary, index_summaries), None
+    except Exception as exc:  # a plot of unusual data, a store hiccup: the report is an extra
+        return None, f"{type(exc).__name__}: {exc}"
 
 
 def _in_process(
