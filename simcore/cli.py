@@ -300,12 +300,15 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
     """Check what can be checked before any worker starts, so a typo fails at once with exit code 2: every
     local scenario file parses with the first permutation's parameters (all matrix, spec and scenario
     parameter names declared, every element supported) and its road network file exists."""
+    from simcore.checks import check_criteria_metrics, check_system_under_test
     from simcore.plan import Plan
     from simcore.scenario.xosc import declared_parameters, load_scenario
     from simcore.spec import SimulationRun
 
     assert isinstance(simulation_run, SimulationRun)
     spec = simulation_run.spec
+    check_criteria_metrics(spec, str(manifest))
+    check_system_under_test(spec, manifest.parent.resolve(), str(manifest))
     plan = Plan(spec)
     for position, scenario, path in _local_scenarios(simulation_run, manifest):
         declared = declared_parameters(path)

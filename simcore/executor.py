@@ -129,7 +129,11 @@ def execute(
     settings = Settings(
         run=run, base_dir=base_dir, output_url=url, endpoint=spec.output.endpoint, region=spec.output.region
     )
-    store = make_store(url, settings)
+    try:
+        store = make_store(url, settings)
+    except ValueError as exc:  # an unsupported scheme or an empty path
+        hint = f" (a folder: file://{url})" if "://" not in url else ""
+        raise BadInput(f"{exc}{hint}", field="--output" if output_url else "spec.output.url") from None
     plan = Plan(spec)
     total = len(plan)
     wanted = list(range(total)) if indexes is None else list(dict.fromkeys(indexes))

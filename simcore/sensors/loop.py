@@ -89,8 +89,9 @@ def node_environment(sut: SystemUnderTest, environ: Mapping[str, str]) -> dict[s
     return out
 
 
-def load_system_under_test(sut: SystemUnderTest, bus: Bus, base_dir: Path | None) -> Any:
-    """Import `sut.module` (`package.module:Class`) and construct `Class(bus, **sut.parameters)`."""
+def import_system_under_test(sut: SystemUnderTest, base_dir: Path | None) -> Any:
+    """Import `sut.module` (`package.module:Class`, `sut.python_path` relative to `base_dir`) and return
+    the class, checked to take `(bus, **sut.parameters)`."""
     field = "spec.systemUnderTest.module"
     assert sut.module is not None
     module_name, _, class_name = sut.module.partition(":")
@@ -113,13 +114,19 @@ def load_system_under_test(sut: SystemUnderTest, bus: Bus, base_dir: Path | None
     if node_class is None or not callable(node_class):
         raise BadInput(f"{module_name!r} has no class {class_name!r}", field=field)
     try:
-        inspect.signature(node_class).bind(bus, **sut.parameters)
+        inspect.signature(node_class).bind(None, **sut.parameters)
     except TypeError as exc:
         raise BadInput(
             f"{sut.module} does not take these parameters: {exc}", field="spec.systemUnderTest.parameters"
         ) from None
     except ValueError:
         pass  # no signature to check (a builtin): let the call decide
+    return node_class
+
+
+def load_system_under_test(sut: SystemUnderTest, bus: Bus, base_dir: Path | None) -> Any:
+    """Import `sut.module` (`package.module:Class`) and construct `Class(bus, **sut.parameters)`."""
+    node_class = import_system_under_test(sut, base_dir)
     try:
         return node_class(bus, **sut.parameters)
     except (TypeError, ValueError) as exc:
