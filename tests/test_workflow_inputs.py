@@ -84,3 +84,22 @@ def test_failed_runs_are_listed_with_criterion_value_and_message_and_progress_go
     # stdout is not a TTY: plain progress lines on stderr, the last one with every index
     assert "automated-testing-failing: 4 runs" in result.stderr
     assert "automated-testing-failing: 4/4 done · passed 3 failed 1 errors 0" in result.stderr
+
+
+def test_closed_loop_example_python_path_comment_names_the_folder_of_the_examples_package() -> None:
+    import re
+
+    text = (RUNS / "closed-loop.yaml").read_text()
+    match = re.search(r'pythonPath:\s*#?\s*\[\s*"([^"]+)"\]', text)
+    assert match is not None
+    assert (RUNS / match.group(1) / "examples" / "controller" / "__init__.py").is_file()
+
+
+def test_readme_lists_every_lidar_point_field() -> None:
+    from simcore.sensors.lidar import POINT_DTYPE
+
+    readme = (ROOT / "README.md").read_text()
+    fields = ", ".join(POINT_DTYPE.names or ())
+    assert f"sensor_msgs/PointCloud2 ({fields})" in readme
+    for wording in ("this session", "The issue's", "session before"):
+        assert wording not in readme
