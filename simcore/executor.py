@@ -164,7 +164,7 @@ def execute(
     max_attempts = spec.execution.retries + 1
     pending = list(todo)
     if bus is not None:
-        _in_process(settings, store, pending, attempts, max_attempts, outcomes, events, bus)
+        _in_process(settings, store, pending, attempts, outcomes, events, bus)
     context = mp.get_context("spawn")
     progress: Any = context.Queue()
     while pending:
@@ -236,12 +236,14 @@ def _in_process(
     store: Store,
     pending: list[int],
     attempts: dict[int, int],
-    max_attempts: int,
     outcomes: dict[int, dict[str, Any]],
     events: Events,
     bus: Bus,
 ) -> None:
-    """Run the pending indexes here, one after another, publishing on `bus` (infrastructure errors retried)."""
+    """Run the pending indexes here, one after another, publishing on `bus`. A run closes the bus when it
+    ends (its subscribers see the end; another process' transport is torn down), so an attempt cannot be
+    repeated on it: every attempt is final, and an infrastructure error is reported with its own cause
+    instead of the closed bus' error of a retry."""
     while pending:
         index = pending.pop(0)
         attempts[index] += 1
@@ -252,14 +254,10 @@ def _in_process(
             store=store,
             store_factory=lambda url: make_store(url, settings),
             attempt=attempts[index],
-            final_attempt=attempts[index] >= max_attempts,
+            final_attempt=True,
             progress=events.on_progress,
             bus=bus,
         )
-        if outcome.exit_code == ExitCode.INFRASTRUCTURE and attempts[index] < max_attempts:
-            events.on_retry(index, attempts[index], str(outcome.summary.get("error")))
-            pending.append(index)
-            continue
         outcomes[index] = outcome.summary
         events.on_done(outcome)
 

@@ -213,10 +213,11 @@ def test_unimportable_system_under_test_is_bad_input(tmp_path: Path) -> None:
     done = subprocess.run(
         [*CARLOS, "run", str(manifest)], cwd=tmp_path, capture_output=True, text=True, timeout=300
     )
-    assert done.returncode != 0, done.stdout + done.stderr
-    summary = json.loads((tmp_path / "results" / "missing" / "0" / "summary.json").read_text())
-    assert summary["status"] == "error" and "Traceback" not in summary["error"]
-    assert "spec.systemUnderTest.module: cannot import 'no_such_package.detector'" in summary["error"]
+    # caught before any run starts: bad input (exit 2), one line, nothing simulated
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "spec.systemUnderTest.module: cannot import 'no_such_package.detector'" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert not (tmp_path / "results" / "missing" / "0").exists()
 
 
 class Exploding:

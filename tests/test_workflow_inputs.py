@@ -103,3 +103,19 @@ def test_readme_lists_every_lidar_point_field() -> None:
     assert f"sensor_msgs/PointCloud2 ({fields})" in readme
     for wording in ("this session", "The issue's", "session before"):
         assert wording not in readme
+
+
+def test_closed_loop_startup_timeout_is_reported_with_its_own_cause(tmp_path: Path) -> None:
+    manifest = (RUNS / "closed-loop.yaml").read_text()
+    manifest = manifest.replace("../scenarios/cut-in.xosc", CUT_IN).replace(
+        "startupTimeoutSeconds: 120", "startupTimeoutSeconds: 1"
+    )
+    path = tmp_path / "closed-loop.yaml"
+    path.write_text(manifest + "  execution:\n    retries: 2\n")
+    result = carlos(
+        "run", path, "--transport", "loopback", "--bus-port", "0", "--output", f"file://{tmp_path}/out"
+    )
+    assert result.returncode == 3, result.stdout + result.stderr
+    assert "no node subscribed to /carlos/Ego/odometry within 1 s" in result.stdout
+    assert "Bad file descriptor" not in result.stdout + result.stderr
+    assert "retrying" not in result.stderr
