@@ -607,6 +607,7 @@ def conformance(
 
 
 app.command()(workflow.report)
+app.command()(workflow.submit)
 
 
 def main() -> None:
