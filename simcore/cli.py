@@ -606,8 +606,15 @@ def conformance(
             conf.write_results(results, out_file.with_suffix(".json"), directory)
 
 
-app.command()(workflow.report)
-app.command()(workflow.submit)
+for _command in (
+    workflow.report,
+    workflow.submit,
+    workflow.get,
+    workflow.watch,
+    workflow.logs,
+    workflow.results,
+):
+    app.command()(_command)
 
 
 def main() -> None:

@@ -4,11 +4,15 @@ infrastructure errors; `simcore.cli.main` prints it as one line with its exit co
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from simcore.errors import BadInput
+
+if TYPE_CHECKING:
+    from simcore.results import RunResults
+    from simcore.workflow.status import RunState
 
 
 def report(
@@ -76,3 +80,107 @@ def submit(
     create(packed)
     where = packed.run["metadata"]["namespace"]
     typer.echo(f"simulationrun.carlos.dev/{simulation_run.name} created in namespace {where}")
+
+
+_RUN_HELP = "A run: its results URL (file://…/<run>, s3://…/<run>) or its name on the cluster."
+_NAMESPACE = typer.Option("--namespace", "-n", help="Cluster namespace (default: the kubeconfig context's).")
+
+
+def _results_of(run: str, namespace: str | None) -> RunResults:
+    """The results of `run`: a URL directly, a cluster run through its status.resultsURL."""
+    from simcore.results import open_results
+    from simcore.workflow.status import cluster_runs, state_of_object
+    from simcore.workflow.submit import current_namespace
+
+    if "://" in run:
+        return open_results(run, field_name="RUN")
+    state = state_of_object(cluster_runs(namespace or current_namespace(), run)[0])
+    if not state.results_url:
+        raise BadInput(f"run {run!r} has no results yet (phase {state.phase})", field="RUN")
+    return open_results(state.results_url, field_name="status.resultsURL")
+
+
+def _states(run: str | None, namespace: str | None) -> list[RunState]:
+    from simcore.workflow.status import cluster_runs, state_of_object, state_of_results
+    from simcore.workflow.submit import current_namespace
+
+    if run is not None and "://" in run:
+        return [state_of_results(_results_of(run, namespace))]
+    return [state_of_object(o) for o in cluster_runs(namespace or current_namespace(), run)]
+
+
+def get(
+    run: Annotated[
+        str | None, typer.Argument(help=_RUN_HELP + " Default: every run of the namespace.")
+    ] = None,
+    namespace: Annotated[str | None, _NAMESPACE] = None,
+) -> None:
+    """Show runs: phase, progress, passed/failed/errors and the first failures."""
+    states = _states(run, namespace)
+    if not states:
+        typer.echo("no SimulationRuns")
+    for state in states:
+        typer.echo(state.line())
+        for line in state.failures if run is not None else ():
+            typer.echo(f"  {line}")
+
+
+def watch(
+    run: Annotated[str, typer.Argument(help=_RUN_HELP)],
+    namespace: Annotated[str | None, _NAMESPACE] = None,
+    interval: Annotated[float, typer.Option(min=0.1, help="Seconds between polls.")] = 2.0,
+    timeout: Annotated[float, typer.Option(min=0, help="Give up after this many seconds (0: never).")] = 0.0,
+) -> None:
+    """Follow a run until it ends, one line per change; exit code as `carlos run` (0 passed, 1 failed)."""
+    import time
+
+    started = time.monotonic()
+    last = None
+    while True:
+        state = _states(run, namespace)[0]
+        if state.line() != last:
+            last = state.line()
+            typer.echo(last)
+        if state.finished:
+            for line in state.failures:
+                typer.echo(f"  {line}")
+            raise typer.Exit(0 if state.phase == "Succeeded" else 1)
+        if timeout and time.monotonic() - started > timeout:
+            raise typer.Exit(3)
+        time.sleep(interval)
+
+
+def logs(
+    run: Annotated[str, typer.Argument(help=_RUN_HELP)],
+    index: Annotated[int, typer.Option("--index", "-i", min=0, help="The index whose log.txt to print.")],
+    namespace: Annotated[str | None, _NAMESPACE] = None,
+) -> None:
+    """Print one index's log.txt from the run's results."""
+    from simcore.store import StoreError
+
+    results = _results_of(run, namespace)
+    try:
+        text = results.store.get_bytes(f"{index}/log.txt").decode("utf-8", "replace")
+    except StoreError:
+        raise BadInput(f"no log of index {index} in {results.url}", field="--index") from None
+    typer.echo(text, nl=False)
+
+
+def results(
+    run: Annotated[str, typer.Argument(help=_RUN_HELP)],
+    download: Annotated[Path | None, typer.Option("--download", help="Copy every file here.")] = None,
+    namespace: Annotated[str | None, _NAMESPACE] = None,
+) -> None:
+    """List the run's result files (URLs), or download them all (`--download DIR`)."""
+    from simcore.store import FileStore
+
+    found = _results_of(run, namespace)
+    keys = found.store.list()
+    if download is None:
+        for key in keys:
+            typer.echo(found.store.url_for(key))
+        return
+    target = FileStore(download / found.name)
+    for key in keys:
+        target.put_bytes(key, found.store.get_bytes(key))
+    typer.echo(f"{len(keys)} files → {download / found.name}")

@@ -226,13 +226,10 @@ def current_namespace() -> str:
     return str((context or {}).get("context", {}).get("namespace") or "default")
 
 
-def create(packed: Packed) -> str:
-    """Create the run (suspended), its ConfigMap owned by it, upload oversized inputs, resume the run.
-    Returns the run's uid. Kubernetes errors become one-line CarlosErrors."""
+def kube_clients() -> tuple[Any, Any]:
+    """(CustomObjectsApi, CoreV1Api) configured as kubectl is: KUBECONFIG (several files merged) or
+    ~/.kube/config and its current context, else the pod's service account."""
     from kubernetes import client, config
-    from kubernetes.client.exceptions import ApiException
-
-    from simcore.errors import SimulationError
 
     try:
         config.load_kube_config()
@@ -241,8 +238,18 @@ def create(packed: Packed) -> str:
             config.load_incluster_config()
         except Exception as exc:
             raise BadInput(f"no Kubernetes configuration: {exc}", field="KUBECONFIG") from None
+    return client.CustomObjectsApi(), client.CoreV1Api()
+
+
+def create(packed: Packed) -> str:
+    """Create the run (suspended), its ConfigMap owned by it, upload oversized inputs, resume the run.
+    Returns the run's uid. Kubernetes errors become one-line CarlosErrors."""
+    from kubernetes.client.exceptions import ApiException
+
+    from simcore.errors import SimulationError
+
     namespace, name = packed.run["metadata"]["namespace"], packed.run["metadata"]["name"]
-    custom, core = client.CustomObjectsApi(), client.CoreV1Api()
+    custom, core = kube_clients()
     wanted_suspend = bool(packed.run["spec"].get("suspend", False))
     body = {**packed.run, "spec": {**packed.run["spec"], "suspend": True}}
     if packed.uploads:

@@ -39,7 +39,7 @@ def eta_seconds(done: int, total: int, elapsed: float) -> float | None:
     return elapsed / done * (total - done)
 
 
-def _duration(seconds: float) -> str:
+def duration(seconds: float) -> str:
     seconds = max(0.0, seconds)
     if seconds < 60:
         return f"{seconds:.0f} s"
@@ -91,6 +91,6 @@ class ProgressLines:
         c = self.counts
         self.emit(
             f"{self.name}: {self.skipped + self.done}/{self.total} done · passed {c['passed']} failed "
-            f"{c['failed']} errors {c['error']} · {_duration(elapsed)} elapsed"
-            + ("" if eta is None or finished else f" · ETA {_duration(eta)}")
+            f"{c['failed']} errors {c['error']} · {duration(elapsed)} elapsed"
+            + ("" if eta is None or finished else f" · ETA {duration(eta)}")
         )
