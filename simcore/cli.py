@@ -613,6 +613,7 @@ for _command in (
     workflow.watch,
     workflow.logs,
     workflow.results,
+    workflow.export,
 ):
     app.command()(_command)
 

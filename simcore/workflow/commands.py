@@ -184,3 +184,22 @@ def results(
     for key in keys:
         target.put_bytes(key, found.store.get_bytes(key))
     typer.echo(f"{len(keys)} files → {download / found.name}")
+
+
+def export(
+    results_url: Annotated[str, typer.Argument(help="The run's results: file://…/<run> or s3://…/<run>.")],
+    output_format: Annotated[str, typer.Option("--format", help="parquet or kitti.")],
+    out_dir: Annotated[Path, typer.Option("--out", help="Folder (or a .parquet file) to write.")] = Path("."),
+) -> None:
+    """Export the results: `parquet` (one row per index) or `kitti` (lidar frames, labels, calibration)."""
+    from simcore.export import export_kitti, export_parquet
+    from simcore.results import open_results
+
+    if output_format not in ("parquet", "kitti"):
+        raise BadInput(f"unknown format {output_format!r}: use parquet or kitti", field="--format")
+    results = open_results(results_url)
+    if output_format == "parquet":
+        typer.echo(f"{len(results.indexes)} rows → {export_parquet(results, out_dir)}")
+        return
+    where, frames = export_kitti(results, out_dir)
+    typer.echo(f"{frames} lidar frames → {where}")
