@@ -614,6 +614,7 @@ for _command in (
     workflow.logs,
     workflow.results,
     workflow.export,
+    workflow.rerun,
 ):
     app.command()(_command)
 

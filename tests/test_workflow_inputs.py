@@ -84,6 +84,13 @@ def test_failed_runs_are_listed_with_criterion_value_and_message_and_progress_go
     # stdout is not a TTY: plain progress lines on stderr, the last one with every index
     assert "automated-testing-failing: 4 runs" in result.stderr
     assert "automated-testing-failing: 4/4 done · passed 3 failed 1 errors 0" in result.stderr
+    # a new run over the failed index only, beside the old one; scenarios found through the recordings
+    rerun = carlos("rerun", (tmp_path / "automated-testing-failing").as_uri(), "--failed")
+    assert rerun.returncode == 1, rerun.stderr
+    assert "automated-testing-failing-rerun: rerunning indexes 1 of automated-testing-failing" in rerun.stdout
+    assert "failed braking[1]: minTimeHeadway >= 30" in rerun.stdout
+    rerun_dir = tmp_path / "automated-testing-failing-rerun"
+    assert sorted(p.name for p in rerun_dir.iterdir() if p.is_dir()) == ["1"]
 
 
 def test_closed_loop_example_python_path_comment_names_the_folder_of_the_examples_package() -> None:

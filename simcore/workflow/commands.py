@@ -203,3 +203,37 @@ def export(
         return
     where, frames = export_kitti(results, out_dir)
     typer.echo(f"{frames} lidar frames → {where}")
+
+
+def rerun(
+    results_url: Annotated[str, typer.Argument(help="The run's results: file://…/<run> or s3://…/<run>.")],
+    failed: Annotated[bool, typer.Option("--failed", help="Rerun the failed and errored indexes.")] = False,
+    base_dir: Annotated[
+        Path | None,
+        typer.Option("--base-dir", help="Folder of the original manifest (relative scenario paths)."),
+    ] = None,
+    parallel: Annotated[int | None, typer.Option("--parallel", "-j", min=1, help="Worker processes.")] = None,
+) -> None:
+    """A new run `<run>-rerun` over the failed indexes only, beside the old one; exit code as `carlos run`."""
+    from simcore.executor import execute
+    from simcore.results import open_results
+    from simcore.workflow.rerun import rerun_spec
+    from simcore.workflow.terminal import failure_lines
+
+    if not failed:
+        raise BadInput("say what to rerun: --failed", field="--failed")
+    results = open_results(results_url)
+    run, indexes, base = rerun_spec(results, base_dir)
+    typer.echo(f"{run.name}: rerunning indexes {', '.join(map(str, indexes))} of {results.name}")
+    report = execute(
+        run,
+        base_dir=base,
+        output_url=results.url.rsplit("/", 1)[0],
+        parallel=parallel,
+        indexes=indexes,
+        fresh=True,
+    )
+    for line in failure_lines(list(report.outcomes.values())):
+        typer.echo(line)
+    typer.echo(f"{report.summary['status']} · results: {report.output_url}")
+    raise typer.Exit(report.exit_code)
