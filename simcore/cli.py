@@ -18,6 +18,7 @@ from rich.text import Text
 from typer.core import TyperGroup
 
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError, shorten
+from simcore.workflow import commands as workflow
 
 if TYPE_CHECKING:
     from typer.core import _click  # typer's click (vendored in typer >= 0.29); annotations only
@@ -203,6 +204,9 @@ def run(
             console=console,
             disable=quiet or (not console.is_terminal and os.environ.get("CARLOS_PROGRESS") != "1"),
         )
+        from simcore.workflow.terminal import ProgressLines
+
+        lines = None if quiet or not progress.disable else ProgressLines(simulation_run.name, _plain)
         state = {"passed": 0, "failed": 0, "errors": 0, "sim": 0.0}
         live_sim: dict[int, float] = {}
         started = time.monotonic()
@@ -216,6 +220,8 @@ def run(
 
         def on_start(count: int, skipped: int) -> None:
             progress.update(task, total=count, completed=skipped, stats=stats())
+            if lines is not None:
+                lines.start(count, skipped)
             if skipped:
                 console.print(
                     f"resuming: {skipped} of {count} runs already complete (use --fresh to rerun them)"
@@ -232,6 +238,8 @@ def run(
             key = {"passed": "passed", "failed": "failed"}.get(summary["status"], "errors")
             state[key] += 1
             progress.update(task, advance=1, stats=stats())
+            if lines is not None:
+                lines.index_done(summary["status"])
             if summary["status"] == "error" and bus is not None and not progress.live.is_started:
                 # one run with other processes on its topics: say why it failed (a controller died, …)
                 console.print(
@@ -274,6 +282,10 @@ def run(
             hub.close()
     _print_report(report)
     raise typer.Exit(report.exit_code)
+
+
+def _plain(line: str) -> None:
+    console.print(line, highlight=False, soft_wrap=True, markup=False)
 
 
 def _dds_bus(domain_id: int | None) -> Bus:
@@ -341,20 +353,15 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
 
 
 def _preflight_scenarios(simulation_run: Any, manifest: Path) -> None:
+    from simcore.checks import check_criteria_metrics, check_system_under_test
     from simcore.plan import Plan
     from simcore.preflight import check_parameter_types, check_road_file
     from simcore.scenario.xosc import load_scenario, parameter_declarations
 
     spec = simulation_run.spec
+    check_criteria_metrics(spec, str(manifest))
+    check_system_under_test(spec, manifest.parent.resolve(), str(manifest))
     plan = Plan(spec)
-    sut = spec.system_under_test
-    if sut is not None and sut.module is not None:
-        from simcore.sensors.loop import system_under_test_class
-
-        try:
-            system_under_test_class(sut, manifest.parent.resolve())
-        except BadInput as exc:
-            raise BadInput(exc.detail, file=str(manifest), field=exc.field) from None
     for position, scenario, path in _local_scenarios(simulation_run, manifest):
         declared = parameter_declarations(path)
         names = {**spec.parameters, **scenario.parameters, **spec.sweep.matrix}
@@ -403,6 +410,10 @@ def _print_report(report: object) -> None:
             "yes" if name in optional else "",
         )
     out.print(table)
+    from simcore.workflow.terminal import failure_lines
+
+    for line in failure_lines(list(report.outcomes.values())):
+        out.print(line, highlight=False, soft_wrap=True, markup=False)
     status = summary["status"]
     colour = "green" if status == "passed" else "red"
     out.print(
@@ -414,6 +425,10 @@ def _print_report(report: object) -> None:
         highlight=False,
         soft_wrap=True,
     )
+    if report.report_url is not None:
+        out.print(f"report: {report.report_url}", highlight=False, soft_wrap=True)
+    else:
+        console.print(f"report.html not written: {report.report_error}", highlight=False, soft_wrap=True)
 
 
 @app.command()
@@ -615,6 +630,19 @@ def conformance(
         conf.write_results(results, out_file, directory)
         if out_file.suffix != ".json":
             conf.write_results(results, out_file.with_suffix(".json"), directory)
+
+
+for _command in (
+    workflow.report,
+    workflow.submit,
+    workflow.get,
+    workflow.watch,
+    workflow.logs,
+    workflow.results,
+    workflow.export,
+    workflow.rerun,
+):
+    app.command()(_command)
 
 
 def main() -> None:

@@ -105,6 +105,8 @@ class RunReport:
     skipped: int = 0
     wall_seconds: float = 0.0
     optional_scenarios: list[ScenarioRef] = field(default_factory=list)
+    report_url: str | None = None
+    report_error: str | None = None
 
     @property
     def exit_code(self) -> int:
@@ -161,10 +163,14 @@ def execute(
     settings = Settings(
         run=run, base_dir=base_dir, output_url=url, endpoint=spec.output.endpoint, region=spec.output.region
     )
-    store = make_store(url, settings)
+    try:
+        store = make_store(url, settings)
+    except ValueError as exc:  # an unsupported scheme or an empty path
+        hint = f" (a folder: file://{url})" if "://" not in url else ""
+        raise BadInput(f"{exc}{hint}", field="--output" if output_url else "spec.output.url") from None
     plan = Plan(spec)
     total = len(plan)
-    wanted = list(range(total)) if indexes is None else indexes
+    wanted = list(range(total)) if indexes is None else list(dict.fromkeys(indexes))
     for index in wanted:
         if not 0 <= index < total:
             raise BadInput(f"index {index} is out of range 0..{total - 1}", field="--index")
@@ -203,10 +209,13 @@ def execute(
             _in_pool(sweep, workers)
         finally:
             shutil.rmtree(settings.scratch_root, ignore_errors=True)
-    summary = run_summary(name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted))
+    summary = run_summary(
+        name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted), expected=set(wanted)
+    )
     summary["outputUrl"] = store.url_for(name)
     store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
     store.put_bytes(f"{name}/summary.json", summary_bytes(summary))
+    report_url, report_error = _html_report(store, run, summary, [outcomes[i] for i in sorted(outcomes)])
     return RunReport(
         run_name=name,
         output_url=store.url_for(name),
@@ -215,6 +224,8 @@ def execute(
         skipped=len(previous),
         wall_seconds=time.monotonic() - started,
         optional_scenarios=[s for s in spec.scenarios if s.optional],
+        report_url=report_url,
+        report_error=report_error,
     )
 
 
@@ -270,12 +281,28 @@ def _in_pool(sweep: _Sweep, workers: int) -> None:
         raise outage
 
 
+def _html_report(
+    store: Store, run: SimulationRun, summary: dict[str, Any], index_summaries: list[dict[str, Any]]
+) -> tuple[str | None, str | None]:
+    """(URL of report.html, None), or (None, why it could not be written): the results are complete
+    without it, so a failure here never changes the run's outcome."""
+    from simcore.report.html import write_after_run
+
+    try:
+        return write_after_run(store, run, summary, index_summaries), None
+    except Exception as exc:  # a plot of unusual data, a store hiccup: the report is an extra
+        return None, f"{type(exc).__name__}: {exc}"
+
+
 def _in_process(sweep: _Sweep, bus: Bus | None) -> None:
     """Run the pending indexes here, one after another, publishing on `bus` (default: a bus of each run's
-    own; infrastructure errors retried)."""
+    own; infrastructure errors retried). A run closes a given bus when it ends (its subscribers see the end;
+    another process' transport is torn down), so an attempt cannot be repeated on it: there every attempt is
+    final, and an infrastructure error is reported with its own cause instead of the closed bus' error."""
     while sweep.pending:
         index = sweep.pending.pop(0)
         sweep.attempts[index] += 1
+        final = bus is not None or sweep.attempts[index] >= sweep.max_attempts
         outcome = run_index(
             sweep.settings.run,
             index,
@@ -283,11 +310,11 @@ def _in_process(sweep: _Sweep, bus: Bus | None) -> None:
             store=sweep.store,
             store_factory=lambda url: make_store(url, sweep.settings),
             attempt=sweep.attempts[index],
-            final_attempt=sweep.attempts[index] >= sweep.max_attempts,
+            final_attempt=final,
             progress=sweep.events.on_progress,
             bus=bus,
         )
-        if outcome.exit_code == ExitCode.INFRASTRUCTURE and sweep.attempts[index] < sweep.max_attempts:
+        if outcome.exit_code == ExitCode.INFRASTRUCTURE and not final:
             sweep.events.on_retry(index, sweep.attempts[index], str(outcome.summary.get("error")))
             sweep.pending.append(index)
             continue

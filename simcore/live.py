@@ -1,5 +1,6 @@
 """Live view: a Foxglove WebSocket server (foxglove-sdk) on 127.0.0.1 serving the run's topics as they are
-published, paced to real time (or a multiple of it), for Foxglove Studio or any foxglove.sdk.v1 client.
+published, paced to real time (or a multiple of it), for Foxglove Studio or any foxglove.sdk.v1 client, and
+for foxglove.websocket.v1 clients (older Foxglove Studio, Lichtblick) through `simcore.live_front`.
 
 It is a bus subscriber: every message is forwarded with its ROS 2 schema (`ros2msg`) and CDR encoding, so
 Foxglove decodes point clouds and TF natively. Neither Foxglove nor a stock RViz draws
@@ -90,6 +91,7 @@ class LiveServer:
     port: int = 8765
     speed: float = 1.0
     _server: Any = None
+    _front: Any = None
     _context: Any = None
     _channels: dict[str, Any] = field(default_factory=dict)
     _start_wall: float | None = None
@@ -97,15 +99,22 @@ class LiveServer:
     def start(self) -> LiveServer:
         import foxglove
 
+        from simcore.live_front import SubprotocolFront
+
         self._context = foxglove.Context()
         self._server = foxglove.start_server(
             name="carlos",
-            host=self.host,
-            port=self.port,
+            host="127.0.0.1",
+            port=0,
             context=self._context,
             capabilities=[foxglove.Capability.Time],
         )
-        self.port = self._server.port
+        try:
+            self._front = SubprotocolFront(self.host, self.port, self._server.port).start()
+        except BaseException:
+            self._server.stop()
+            raise
+        self.port = self._front.port
         return self
 
     @property
@@ -148,6 +157,9 @@ class LiveServer:
             time.sleep(wait)
 
     def stop(self) -> None:
+        if self._front is not None:
+            self._front.stop()
+            self._front = None
         if self._server is not None:
             self._server.stop()
             self._server = None

@@ -97,6 +97,10 @@ def load_manifest(path: str | Path) -> SimulationRun:
     """Read and validate a manifest file. A missing `metadata.name` is taken from the file name."""
     path = Path(path)
     source = str(path)
+    if path.is_dir():
+        raise BadInput(
+            "is a directory: give a manifest file, e.g. examples/runs/automated-testing.yaml", file=source
+        )
     try:
         size = path.stat().st_size
     except FileNotFoundError:

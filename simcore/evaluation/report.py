@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import re
 import xml.etree.ElementTree as ET
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from typing import Any, Literal
 
 from simcore.evaluation.criteria import CriterionResult, format_number, verdict
@@ -120,16 +120,24 @@ def _new_counts() -> dict[str, int]:
     return {"runs": 0, "passed": 0, "failed": 0, "errors": 0, "optionalFailed": 0}
 
 
-def run_summary(run_name: str, index_summaries: Iterable[Mapping[str, Any]], total: int) -> dict[str, Any]:
+def run_summary(
+    run_name: str,
+    index_summaries: Iterable[Mapping[str, Any]],
+    total: int,
+    expected: Collection[int] | None = None,
+) -> dict[str, Any]:
     """The run-level summary.json from the per-index summaries (streamed once; see the module docstring).
 
     Fields: `run`, `status`, `exitCode`, `counts` {total, passed, failed, errors, optionalFailed, missing},
     `scenarios` {name: {optional, counts {runs, passed, failed, errors, optionalFailed},
     metrics {metric: {min, mean, max, count}}}} in order of first appearance. A metric's `count` is the
     number of that scenario's indexes that had it (metrics can be absent). Raises ValueError for an index
-    outside `0 … total-1`, a repeated index or an unknown status."""
+    outside `0 … total-1`, a repeated index or an unknown status. `expected`: the selected indexes (e.g.
+    `--index 4 --index 7`; `total` is then their count) instead of `0 … total-1`."""
     if total < 0:
         raise ValueError(f"total must be >= 0, not {total}")
+    if expected is not None and len(set(expected)) != total:
+        raise ValueError(f"total is {total} but {len(set(expected))} indexes are expected")
     counts = {"total": total, "passed": 0, "failed": 0, "errors": 0, "optionalFailed": 0, "missing": 0}
     scenarios: dict[str, dict[str, Any]] = {}
     aggregates: dict[str, dict[str, _Aggregate]] = {}
@@ -137,7 +145,9 @@ def run_summary(run_name: str, index_summaries: Iterable[Mapping[str, Any]], tot
     bad_input = False
     for summary in index_summaries:
         index = summary["index"]
-        if not 0 <= index < total:
+        if expected is not None and index not in expected:
+            raise ValueError(f"index {index} is not among the selected indexes")
+        if expected is None and not 0 <= index < total:
             raise ValueError(f"index {index} is outside 0…{total - 1}")
         if index in seen:
             raise ValueError(f"index {index} has two summaries")

@@ -1,0 +1,52 @@
+"""Checks of a manifest that need more than its schema, run by `carlos validate` and before `carlos run`
+starts any worker (bad input, exit 2, instead of a run that fails every index)."""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+
+from simcore.errors import BadInput
+from simcore.evaluation.metrics import KNOWN_METRICS
+from simcore.spec import SimulationRunSpec
+
+#: metrics the runner adds besides `KNOWN_METRICS` (the perception loop's)
+_RUNNER_METRICS = frozenset({"systemUnderTest.failed"})
+
+
+def unknown_metric(metric: str, detection: bool) -> str | None:
+    """Why `metric` can never be measured (None when it can), with the closest known names (pure)."""
+    if metric in KNOWN_METRICS or metric in _RUNNER_METRICS:
+        return None
+    if metric.startswith("detection."):
+        if detection:
+            return None  # per class and distance band: the names depend on the data
+        return f"metric {metric!r} needs spec.evaluation.detection"
+    close = difflib.get_close_matches(metric, sorted(KNOWN_METRICS | _RUNNER_METRICS), n=3, cutoff=0.6)
+    hint = f"did you mean {' or '.join(close)}? " if close else ""
+    return f"unknown metric {metric!r}: {hint}known: {', '.join(sorted(KNOWN_METRICS))}, detection.*"
+
+
+def check_criteria_metrics(spec: SimulationRunSpec, file: str) -> None:
+    """Every criterion names a metric that a run can measure."""
+    detection = spec.evaluation.detection is not None
+    named = [(f"spec.evaluation.criteria[{i}]", c) for i, c in enumerate(spec.evaluation.criteria)]
+    for p, scenario in enumerate(spec.scenarios):
+        named += [(f"spec.scenarios[{p}].criteria[{i}]", c) for i, c in enumerate(scenario.criteria)]
+    for field, criterion in named:
+        problem = unknown_metric(criterion.metric, detection)
+        if problem is not None:
+            raise BadInput(problem, file=file, field=field)
+
+
+def check_system_under_test(spec: SimulationRunSpec, base_dir: Path, file: str) -> None:
+    """A local system under test (`module`) can be imported and has its class (it is not constructed)."""
+    from simcore.sensors.loop import system_under_test_class
+
+    sut = spec.system_under_test
+    if sut is None or sut.module is None:
+        return
+    try:
+        system_under_test_class(sut, base_dir)
+    except BadInput as exc:
+        raise BadInput(exc.detail, file=file, field=exc.field) from None

@@ -1,0 +1,151 @@
+"""report.html after `carlos run` and from `carlos report`: content, self-containment, and how it renders in
+a real headless Chromium (skipped when Debian's `chromium` is not installed)."""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from simcore.report.html import criteria_rows, swept_parameters, worst_indexes
+from tests.chromium import find_chromium, load_page
+from tests.test_cli import RUNS, carlos
+
+SELECTED = (0, 5, 6, 11)  # not 0..k-1: the run-level summary must accept any selection
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> tuple[subprocess.CompletedProcess[str], Path]:
+    out = tmp_path_factory.mktemp("results")
+    selection = [arg for i in SELECTED for arg in ("-i", str(i))]
+    result = carlos("run", RUNS / "data-generation.yaml", "--output", f"file://{out}", "-j", "2", *selection)
+    return result, out / "data-generation"
+
+
+def test_a_selection_of_indexes_runs_and_writes_the_report_next_to_the_summary(
+    demo: tuple[subprocess.CompletedProcess[str], Path],
+) -> None:
+    result, run_dir = demo
+    assert result.returncode == 0, result.stderr + result.stdout
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["counts"] == {
+        "total": 4,
+        "passed": 4,
+        "failed": 0,
+        "errors": 0,
+        "optionalFailed": 0,
+        "missing": 0,
+    }
+    assert f"report: {(run_dir / 'report.html').as_uri()}" in result.stdout
+    page = (run_dir / "report.html").read_text()
+    assert "<h1>SimulationRun data-generation</h1>" in page
+    # relative links to every index's recording and log, next to the summary
+    for i in SELECTED:
+        assert f'href="{i}/recording.mcap"' in page and f'href="{i}/log.txt"' in page
+
+
+def test_report_is_self_contained(demo: tuple[subprocess.CompletedProcess[str], Path]) -> None:
+    page = (demo[1] / "report.html").read_text()
+    assert "<script" not in page and "<link" not in page and "<img" not in page
+    assert not re.search(r"""(src|href)=["']?(https?:)?//""", page)
+    assert not re.search(r"url\((?!#)", page)  # only references to the page's own SVG definitions
+    assert page.count('<svg role="img"') >= 2 + 4  # heat map, distributions, a bird's-eye plot per index
+
+
+def test_report_command_writes_the_file_with_absolute_links(
+    demo: tuple[subprocess.CompletedProcess[str], Path], tmp_path: Path
+) -> None:
+    _, run_dir = demo
+    target = tmp_path / "r.html"
+    result = carlos("report", run_dir.parent.as_uri(), "--out", target, "--worst", "2")
+    assert result.returncode == 0, result.stderr
+    page = target.read_text()
+    assert f'href="{(run_dir / "5" / "recording.mcap").as_uri()}"' in page
+    assert page.count("bird&#x27;s-eye view") == 2
+    assert "pass/fail heat map over" in page
+
+
+def test_report_on_a_path_without_results_is_bad_input(tmp_path: Path) -> None:
+    result = carlos("report", tmp_path.as_uri())
+    assert result.returncode == 2
+    assert "RESULTS_URL" in result.stderr and "not the results of one run" in result.stderr
+    assert "Traceback" not in result.stderr
+    result = carlos("report", "ftp://x/y")
+    assert result.returncode == 2 and "unsupported store URL" in result.stderr
+
+
+@pytest.mark.skipif(
+    find_chromium() is None, reason="Debian's chromium is not installed (apt-get install chromium)"
+)
+def test_report_renders_its_plots_in_headless_chromium(
+    demo: tuple[subprocess.CompletedProcess[str], Path], tmp_path: Path
+) -> None:
+    from PIL import Image
+
+    probe = """[...document.querySelectorAll('svg.plot')].map(s => {
+        const r = s.getBoundingClientRect();
+        return {w: r.width, h: r.height, paths: s.querySelectorAll('path').length,
+                label: s.getAttribute('aria-label')};
+    })"""
+    page = load_page(demo[1] / "report.html", probe)
+    assert page.errors == []
+    plots = page.probe
+    assert len(plots) >= 6
+    assert all(p["w"] > 300 and p["h"] > 150 and p["paths"] > 10 for p in plots), plots
+    (tmp_path / "report.png").write_bytes(page.screenshot)
+    image = Image.open(io.BytesIO(page.screenshot)).convert("RGB")
+    assert image.height > 2000
+    colours = {colour for _, colour in image.getcolors(maxcolors=1 << 20) or []}
+    # drawn, not blank: the pass colour of the heat map, the histogram bars, matplotlib's first line colour
+    for wanted in ((0x2E, 0x7D, 0x32), (0x15, 0x65, 0xC0), (0x1F, 0x77, 0xB4)):
+        assert wanted in colours, wanted
+
+
+def test_worst_indexes_rank_errors_failures_collisions_then_distance() -> None:
+    indexes = [
+        {"index": 0, "status": "passed", "metrics": {"minDistance": 5.0}},
+        {"index": 1, "status": "passed", "metrics": {"minDistance": 1.0}},
+        {"index": 2, "status": "failed", "metrics": {"minDistance": 9.0}},
+        {"index": 3, "status": "passed", "metrics": {"collision": 1.0, "minDistance": 0.0}},
+        {"index": 4, "status": "error", "metrics": {}},
+    ]
+    assert [s["index"] for s in worst_indexes(indexes, 4)] == [4, 2, 3, 1]
+
+
+def test_criteria_rows_and_swept_parameters() -> None:
+    def summary(i: int, speed: float, actual: float | None, passed: bool) -> dict[str, object]:
+        return {
+            "index": i,
+            "scenario": "s",
+            "parameters": {"speed": speed, "gap": 1.0, "mode": "a"},
+            "criteria": [
+                {
+                    "name": "minDistance >= 2",
+                    "metric": "minDistance",
+                    "expected": ">= 2",
+                    "actual": actual,
+                    "passed": passed,
+                    "optional": False,
+                }
+            ],
+        }
+
+    rows = criteria_rows(
+        [summary(0, 10.0, 3.0, True), summary(1, 20.0, 1.0, False), summary(2, 30, None, False)]
+    )
+    assert rows == [
+        {
+            "scenario": "s",
+            "criterion": "minDistance >= 2",
+            "expected": ">= 2",
+            "optional": False,
+            "passed": 1,
+            "failed": 2,
+            "values": [3.0, 1.0],
+        }
+    ]
+    assert swept_parameters([summary(0, 10.0, 1, True), summary(1, 20.0, 1, True)]) == ["speed"]

@@ -1,0 +1,187 @@
+"""`carlos submit`: every example manifest becomes objects the operator accepts, and one submitted example
+runs to Succeeded in kmock's emulator with the test kubelet, results in the real S3 server."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from carlos_operator.builders import (
+    OperatorSettings,
+    build_configmap,
+    build_job,
+    check_cluster_spec,
+    resolve_output,
+)
+from carlos_operator.kube import Kube
+
+from simcore.spec import SimulationRun
+from simcore.store import open_store
+from simcore.workflow.submit import inputs_name
+from tests.kube_emulator import Cluster, JobRunner, wait_for
+from tests.s3server import S3Server
+from tests.test_cli import ROOT, RUNS, carlos
+from tests.test_operator import env, terminal  # noqa: F401 - env: the emulator fixture, reused
+
+EXAMPLES = sorted(RUNS.glob("*.yaml"))
+
+
+def _objects(text: str) -> tuple[dict[str, Any] | None, dict[str, Any]]:
+    docs = [d for d in yaml.safe_load_all(text) if d]
+    configmaps = [d for d in docs if d["kind"] == "ConfigMap"]
+    runs = [d for d in docs if d["kind"] == "SimulationRun"]
+    assert len(runs) == 1 and len(configmaps) <= 1
+    return (configmaps[0] if configmaps else None), runs[0]
+
+
+@pytest.mark.parametrize("example", EXAMPLES, ids=lambda p: p.stem)
+def test_dry_run_objects_are_accepted_by_the_operator(example: Path) -> None:
+    result = carlos("submit", example, "--dry-run", "-o", "yaml", "--namespace", "sims")
+    assert result.returncode == 0, result.stderr
+    configmap, body = _objects(result.stdout)
+    assert body["metadata"]["namespace"] == "sims"
+    run = SimulationRun.model_validate(body)
+    check_cluster_spec(run)  # raises BadInput for anything a pod could not reach
+    settings = OperatorSettings.from_env({"CARLOS_DEFAULT_OUTPUT_URL": "s3://results/carlos"})
+    output = resolve_output(run, settings)
+    assert output.url == "s3://results/carlos"  # file://./results of the example means nothing in a pod
+    owner = {
+        "metadata": {"name": run.name, "uid": "u1", "namespace": "sims"},
+        "apiVersion": "carlos.dev/v1alpha1",
+    }
+    build_configmap(run, owner, settings)
+    job = build_job(run, owner, settings, output)
+    assert configmap is not None and configmap["metadata"]["name"] == inputs_name(run.name)
+    mounted = {v["configMap"]["name"] for v in job["spec"]["template"]["spec"]["volumes"] if "configMap" in v}
+    assert configmap["metadata"]["name"] in mounted
+    data = configmap["data"]
+    for scenario in body["spec"]["scenarios"]:
+        ref = scenario["configMapRef"]
+        assert "openscenario" not in scenario and ref["name"] == configmap["metadata"]["name"]
+        text = data[ref["key"]]
+        road = re.search(r'<LogicFile filepath="([^"]+)"', text)
+        assert road is not None and road.group(1) in data  # the road is a key beside the scenario
+
+
+def test_submit_refuses_what_a_cluster_cannot_run(tmp_path: Path) -> None:
+    manifest = tmp_path / "local.yaml"
+    manifest.write_text(
+        (RUNS / "perception.yaml")
+        .read_text()
+        .replace("    image: ghcr.io/carlos-sim/carlos-detector:0.1.0\n", "")
+    )
+    result = carlos("submit", manifest, "--dry-run")
+    assert result.returncode == 2 and "spec.systemUnderTest.image" in result.stderr
+    result = carlos("submit", RUNS / "prototyping.yaml", "--dry-run", "--results", "file:///tmp/x")
+    assert result.returncode == 2 and "--results" in result.stderr and "s3://" in result.stderr
+
+
+def test_kubectl_plugin_name_is_installed() -> None:
+    plugin = Path(sys.executable).with_name("kubectl-carlos")
+    assert plugin.is_file()
+    done = subprocess.run([str(plugin), "submit", "--help"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and "--dry-run" in done.stdout
+
+
+@pytest.mark.s3
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_submitted_example_runs_to_succeeded_with_results_in_s3(
+    env: tuple[Cluster, Kube],  # noqa: F811 - the fixture imported from tests.test_operator
+    s3_server: S3Server,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    c, kube = env
+    monkeypatch.setenv("CARLOS_DEFAULT_S3_SECRET", "s3")  # the Helm value: the example names no Secret
+    c.start_operator()
+    # the test kubelet maps env values that lie inside a mount, and CARLOS_SCENARIO_DIR is the parent of the
+    # ConfigMap mounts: stand in for it with the ConfigMap's content as the dry run prints it
+    dry = carlos("submit", RUNS / "prototyping.yaml", "--dry-run", "-n", "default")
+    planned, _ = _objects(dry.stdout)
+    assert planned is not None
+    mounted = tmp_path / "scenarios" / planned["metadata"]["name"]
+    mounted.mkdir(parents=True)
+    for key, text in planned["data"].items():
+        (mounted / key).write_text(text)
+    jobs = JobRunner(
+        kube=kube,
+        workdir=tmp_path,
+        extra_env={"AWS_REGION": s3_server.region, "CARLOS_SCENARIO_DIR": str(mounted.parent)},
+    ).start()
+    try:
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "simcore.cli",
+                "submit",
+                str(RUNS / "prototyping.yaml"),
+                "-n",
+                "default",
+                "--results",
+                f"s3://{s3_server.bucket}/submitted",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            cwd=ROOT,
+            env=dict(os.environ),
+        )
+        assert done.returncode == 0, done.stderr
+        assert "simulationrun.carlos.dev/prototyping created in namespace default" in done.stdout
+        st = wait_for(lambda: terminal(kube, "prototyping"), 120, "a terminal phase")
+    finally:
+        jobs.stop()
+    assert jobs.errors == []
+    assert st["phase"] == "Succeeded", st
+    configmap = next(m for m in c.objects("configmaps") if m["metadata"]["name"] == "prototyping-inputs")
+    run_uid = kube.custom.get_namespaced_custom_object(
+        "carlos.dev", "v1alpha1", "default", "simulationruns", "prototyping"
+    )["metadata"]["uid"]
+    assert configmap["metadata"]["ownerReferences"][0]["uid"] == run_uid
+    assert configmap["data"] == planned["data"]
+    for key, value in s3_server.env().items():
+        monkeypatch.setenv(key, value)
+    store = open_store(
+        f"s3://{s3_server.bucket}/submitted", endpoint=s3_server.endpoint, region=s3_server.region
+    )
+    summary = json.loads(store.get_bytes("prototyping/summary.json"))
+    assert summary["status"] == "passed" and summary["counts"]["total"] == 1
+    assert store.exists("prototyping/0/recording.mcap")
+    # the same run through its name on the cluster
+    assert "prototyping: Succeeded 1/1 · passed 1 failed 0 errors 0" in carlos("get", "-n", "default").stdout
+    assert carlos("watch", "prototyping", "-n", "default").returncode == 0
+    log = carlos("logs", "prototyping", "-i", "0", "-n", "default")
+    assert log.returncode == 0 and "index 0" in log.stdout, log.stderr
+
+
+def test_inputs_over_the_configmap_limit_go_to_the_object_store(monkeypatch: pytest.MonkeyPatch) -> None:
+    from simcore import errors
+    from simcore.manifest import load_manifest
+    from simcore.workflow import submit
+
+    monkeypatch.setattr(submit, "CONFIGMAP_LIMIT", 1000)
+    manifest = RUNS / "automated-testing.yaml"
+    run = load_manifest(manifest)
+    with pytest.raises(errors.BadInput, match="over a ConfigMap"):
+        submit.pack(run, manifest, "default")
+    packed = submit.pack(run, manifest, "default", results_url="s3://bucket/out")
+    assert packed.configmap() is None and "automated-testing/inputs/highway.xodr" in packed.uploads
+    sources = [s["openscenario"] for s in packed.run["spec"]["scenarios"]]
+    assert sources[0] == "s3://bucket/out/automated-testing/inputs/cut-in.xosc"
+    scenario = packed.uploads["automated-testing/inputs/cut-in.xosc"].decode()
+    assert '<LogicFile filepath="highway.xodr"' in scenario  # resolves beside it, as the pod fetches it
+
+
+def test_configmap_names_stay_dns_labels() -> None:
+    assert inputs_name("demo") == "demo-inputs"
+    long = inputs_name("x" * 63)
+    assert len(long) <= 63 and long.endswith("-inputs")
