@@ -212,6 +212,10 @@ def run(
             )
 
         with progress:
+            if simulation_run.spec.search is not None:
+                report = _search(simulation_run, manifest, output, parallel, fresh or bool(index) or live)
+                _print_report(report)
+                raise typer.Exit(report.exit_code)
             report = execute(
                 simulation_run,
                 base_dir=manifest.parent.resolve(),
@@ -313,6 +317,11 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
                 file=str(manifest),
                 field=where,
             )
+        if spec.search is not None:
+            from simcore.search.driver import search_space
+
+            search_space(simulation_run, path)
+            continue
         parsed = load_scenario(path, plan[plan.indexes_of(scenario.name).start].parameters)
         if parsed.road_file is not None and not parsed.road_file.is_file():
             raise BadInput(
@@ -320,6 +329,44 @@ def _preflight(simulation_run: object, manifest: Path) -> None:
                 file=str(path),
                 field="RoadNetwork/LogicFile",
             )
+
+
+def _search(
+    simulation_run: Any, manifest: Path, output: str | None, parallel: int | None, selective: bool
+) -> Any:
+    """`carlos run` of a manifest with spec.search: the search's rounds; returns the final RunReport."""
+    from simcore.search.driver import run_search
+
+    if selective:
+        raise BadInput(
+            "a search runs all its rounds: --index, --fresh and --live are for sweeps", field="spec.search"
+        )
+    found = _local_scenarios(simulation_run, manifest)
+    if not found:
+        raise BadInput(
+            "a search runs a local scenario file (not a ConfigMap or s3://)", field="spec.scenarios"
+        )
+    result = run_search(
+        simulation_run,
+        base_dir=manifest.parent.resolve(),
+        scenario_file=found[0][2],
+        output_url=output,
+        parallel=parallel,
+        on_round=lambda d: console.print(
+            f"round {d['rounds'][-1]['round']}: {d['runs']} runs, {d['failures']} failing", highlight=False
+        ),
+    )
+    document = result.document
+    best = document["best"]
+    out.print(
+        f"search: {document['runs']} runs in {len(document['rounds'])} rounds · {document['failures']} failing · "
+        f"best {document['objective']['metric']} "
+        f"{'n/a' if best is None else format(best['objective'], '.3g')}"
+        + (f" · failing points: {document['failingScenarios']}" if "failingScenarios" in document else ""),
+        highlight=False,
+        soft_wrap=True,
+    )
+    return result.run
 
 
 def _print_report(report: object) -> None:
