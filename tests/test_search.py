@@ -190,3 +190,45 @@ def test_failing_points_export_reproduces_their_verdict_when_run_alone(tmp_path:
             for n, v in rerun.outcomes[k]["parameters"].items()
             if n in by_index[index]["parameters"]
         } == by_index[index]["parameters"]
+
+
+def _optimise(tmp_path: Path, strategy: str, seed: int) -> list[dict[str, Any]]:
+    """Three rounds of 8 asks against a known loss, reloading the journal study each round."""
+    from simcore.search.optimizer import Study
+    from simcore.search.space import Dimension
+
+    space = [Dimension("x", 0.0, 1.0), Dimension("n", 0, 5, integer=True), Dimension("c", choices=("a", "b"))]
+    journal = tmp_path / f"{strategy}-{seed}-{len(list(tmp_path.iterdir()))}.journal"
+    asked: list[dict[str, Any]] = []
+    for round_number in range(3):
+        study = Study(journal, strategy, seed, round_number, startup=8)
+        points = study.ask(space, 8)
+        for position, point in enumerate(points):
+            study.tell(position, (point["x"] - 0.2) ** 2 + point["n"] + (point["c"] == "b"))
+        asked.extend(points)
+        assert study.completed() == 8 * (round_number + 1)
+    return asked
+
+
+@pytest.mark.parametrize("strategy", ["random", "lhs", "tpe", "cmaes", "boundary"])
+def test_every_strategy_asks_valid_points_deterministically(tmp_path: Path, strategy: str) -> None:
+    first = _optimise(tmp_path, strategy, 7)
+    assert first == _optimise(tmp_path, strategy, 7)
+    assert first != _optimise(tmp_path, strategy, 8)
+    assert len({json.dumps(p, sort_keys=True) for p in first}) > 20  # no round repeats an earlier one
+    for point in first:
+        assert 0 <= point["x"] <= 1 and point["n"] in range(6) and point["c"] in ("a", "b")
+
+
+def test_strategy_gp_without_pytorch_is_bad_input() -> None:
+    from simcore.errors import BadInput
+    from simcore.search.optimizer import check_strategy
+
+    pytest.importorskip("optuna")
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        with pytest.raises(BadInput, match="PyTorch"):
+            check_strategy("gp")
+    else:
+        check_strategy("gp")

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import json
 import tempfile
+import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,8 @@ STATE_VERSION = 1
 class SearchReport:
     run: RunReport
     document: dict[str, Any]
+    #: per round run by this call: (seconds in the optimiser: load, ask, tell; seconds of the whole round)
+    timings: list[tuple[float, float]] = field(default_factory=list)
 
 
 def search_space(run: SimulationRun, scenario_file: Path) -> list[Dimension]:
@@ -140,12 +143,15 @@ def run_search(
         points_file = work / "points.xosc"
         points = _load_state(run, store, journal)
         report: RunReport | None = None
+        timings: list[tuple[float, float]] = []
         while len(points) < search.budget or report is None:
             start = len(points)
             round_number = start // search.batch_size
             count = min(search.batch_size, search.budget - start)
+            started = time.perf_counter()
             study = Study(journal, search.strategy, seed, round_number, startup=search.batch_size)
             asked = study.ask(space, count) if count else []
+            optimizer_seconds = time.perf_counter() - started
             every: list[dict[str, ParameterValue]] = [p["parameters"] for p in points] + asked
             points_file.write_bytes(
                 distribution_xml(scenario_file, every, f"search {run.name}: evaluated points")
@@ -173,8 +179,11 @@ def run_search(
                         "explore": explore,
                     }
                 )
+            told = time.perf_counter()
             for position, value in enumerate(_losses(run, points, start)):
                 study.tell(position, value)
+            optimizer_seconds += time.perf_counter() - told
+            timings.append((optimizer_seconds, time.perf_counter() - started))
             store.put_bytes(f"{prefix}/state.json", _state_bytes(run, journal, points))
             on_round(search_document(run.name, search, seed, space, points))
         document = search_document(run.name, search, seed, space, points)
@@ -189,4 +198,4 @@ def run_search(
                 ),
             )
         store.put_bytes(f"{run.name}/search.json", (json.dumps(document, indent=2) + "\n").encode())
-    return SearchReport(run=report, document=document)
+    return SearchReport(run=report, document=document, timings=timings)
