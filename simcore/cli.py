@@ -445,8 +445,11 @@ def validate(
     if schema and _check_schemas(list(dict.fromkeys(paths))) != 0:
         raise typer.Exit(int(ExitCode.BAD_INPUT))
     plan = Plan(simulation_run.spec)
+    search = simulation_run.spec.search
     out.print(
         f"{manifest}: valid · {len(plan)} runs ({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})"
+        if search is None
+        else f"{manifest}: valid · a {search.strategy} search of {search.budget} runs in rounds of {search.batch_size}"
     )
 
 

@@ -232,3 +232,29 @@ def test_strategy_gp_without_pytorch_is_bad_input() -> None:
             check_strategy("gp")
     else:
         check_strategy("gp")
+
+
+def test_carlos_run_of_a_search_prints_its_rounds_and_exit_code(tmp_path: Path) -> None:
+    search = {"parameters": SPACE, "strategy": "random", "budget": 4, "batchSize": 2, "seed": 1}
+    manifest = _manifest(tmp_path, search, max_seconds=3)
+    command = [
+        sys.executable,
+        "-m",
+        "simcore.cli",
+        "run",
+        str(manifest),
+        "-o",
+        f"file://{tmp_path}/out",
+        "-j",
+        "2",
+    ]
+    result = subprocess.run(command, capture_output=True, text=True, check=False, cwd=ROOT)
+    assert result.returncode == 1, (
+        result.stderr
+    )  # 3 s ends before Ego closes in: minTimeToCollision is absent, every run fails
+    assert "round 1: 4 runs" in result.stderr and "search: 4 runs in 2 rounds · 4 failing" in result.stdout
+    document = json.loads((tmp_path / "out" / "s" / "search.json").read_text())
+    assert [p["index"] for p in document["points"]] == [0, 1, 2, 3]
+    assert (tmp_path / "out" / "s" / "search" / "failing.xosc").is_file()
+    again = subprocess.run([*command, "--index", "1"], capture_output=True, text=True, check=False, cwd=ROOT)
+    assert again.returncode == 2 and "--index" in again.stderr
