@@ -167,7 +167,7 @@ def test_output_and_cluster_checks() -> None:
         check_cluster_spec(load(manifest(sweep={"matrix": {"a": list(range(1000)), "b": list(range(101))}})))
     check_cluster_spec(load(manifest()))
     search = {"parameters": [{"name": "a", "min": 0, "max": 1}], "objective": {"metric": "minDistance"}}
-    with pytest.raises(BadInput, match="spec.search"):
+    with pytest.raises(BadInput, match=r"spec\.search"):
         check_cluster_spec(
             load(manifest(search=search, sweep={}, scenarios=manifest()["spec"]["scenarios"][:1]))
         )

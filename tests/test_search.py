@@ -120,6 +120,7 @@ def test_bad_search_specs_are_bad_input(tmp_path: Path, search: dict[str, Any], 
     assert "Traceback" not in result.stderr
 
 
+@pytest.mark.slow
 def test_search_is_deterministic_and_resumes_between_and_within_rounds(tmp_path: Path) -> None:
     search = {"parameters": SPACE, "strategy": "tpe", "budget": 8, "batchSize": 4, "seed": 3}
     manifest = _manifest(tmp_path, search, max_seconds=4)
@@ -192,16 +193,16 @@ def test_failing_points_export_reproduces_their_verdict_when_run_alone(tmp_path:
         } == by_index[index]["parameters"]
 
 
-def _optimise(tmp_path: Path, strategy: str, seed: int) -> list[dict[str, Any]]:
+def _optimise(strategy: str, seed: int) -> list[dict[str, Any]]:
     """Three rounds of 8 asks against a known loss, reloading the journal study each round."""
     from simcore.search.optimizer import Study
     from simcore.search.space import Dimension
 
     space = [Dimension("x", 0.0, 1.0), Dimension("n", 0, 5, integer=True), Dimension("c", choices=("a", "b"))]
-    journal = tmp_path / f"{strategy}-{seed}-{len(list(tmp_path.iterdir()))}.journal"
+    log: list[dict[str, Any]] = []
     asked: list[dict[str, Any]] = []
     for round_number in range(3):
-        study = Study(journal, strategy, seed, round_number, startup=8)
+        study = Study(log, strategy, seed, round_number, startup=8)
         points = study.ask(space, 8)
         for position, point in enumerate(points):
             study.tell(position, (point["x"] - 0.2) ** 2 + point["n"] + (point["c"] == "b"))
@@ -211,10 +212,10 @@ def _optimise(tmp_path: Path, strategy: str, seed: int) -> list[dict[str, Any]]:
 
 
 @pytest.mark.parametrize("strategy", ["random", "lhs", "tpe", "cmaes", "boundary"])
-def test_every_strategy_asks_valid_points_deterministically(tmp_path: Path, strategy: str) -> None:
-    first = _optimise(tmp_path, strategy, 7)
-    assert first == _optimise(tmp_path, strategy, 7)
-    assert first != _optimise(tmp_path, strategy, 8)
+def test_every_strategy_asks_valid_points_deterministically(strategy: str) -> None:
+    first = _optimise(strategy, 7)
+    assert first == _optimise(strategy, 7)
+    assert first != _optimise(strategy, 8)
     assert len({json.dumps(p, sort_keys=True) for p in first}) > 20  # no round repeats an earlier one
     for point in first:
         assert 0 <= point["x"] <= 1 and point["n"] in range(6) and point["c"] in ("a", "b")
@@ -234,6 +235,7 @@ def test_strategy_gp_without_pytorch_is_bad_input() -> None:
         check_strategy("gp")
 
 
+@pytest.mark.slow
 def test_carlos_run_of_a_search_prints_its_rounds_and_exit_code(tmp_path: Path) -> None:
     search = {"parameters": SPACE, "strategy": "random", "budget": 4, "batchSize": 2, "seed": 1}
     manifest = _manifest(tmp_path, search, max_seconds=3)

@@ -17,11 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from simcore.errors import BadInput
 from simcore.evaluation.metrics import KNOWN_METRICS
-from simcore.executor import Events, RunReport, execute
+from simcore.executor import Events, RunReport, _dump_spec, execute
 from simcore.search.export import distribution_xml
 from simcore.search.objective import MARGIN, loss, raw_value
 from simcore.search.optimizer import Study, check_strategy
@@ -66,33 +64,25 @@ def derived_run(run: SimulationRun, points_file: Path) -> SimulationRun:
     return run.model_copy(update={"spec": spec})
 
 
-def _state_bytes(run: SimulationRun, journal: Path, points: list[dict[str, Any]]) -> bytes:
-    state = {
-        "version": STATE_VERSION,
-        "spec": yaml.safe_dump(
-            run.model_dump(mode="json", by_alias=True, exclude_none=True), sort_keys=False
-        ),
-        "study": journal.read_text(encoding="utf-8") if journal.exists() else "",
-        "points": points,
-    }
+def _state_bytes(run: SimulationRun, log: list[dict[str, Any]], points: list[dict[str, Any]]) -> bytes:
+    state = {"version": STATE_VERSION, "spec": _dump_spec(run).decode(), "study": log, "points": points}
     return (json.dumps(state, indent=1) + "\n").encode()
 
 
-def _load_state(run: SimulationRun, store: Store, journal: Path) -> list[dict[str, Any]]:
+def _load_state(run: SimulationRun, store: Store) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """(the study's journal log, the evaluated points) stored after the last complete round."""
     key = f"{run.name}/search/state.json"
     if not store.exists(key):
-        return []
+        return [], []
     state = json.loads(store.get_bytes(key))
-    spec = yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True), sort_keys=False)
+    spec = _dump_spec(run).decode()
     if state.get("version") != STATE_VERSION or state.get("spec") != spec:
         raise BadInput(
             f"a search named {run.name!r} with a different spec is already stored at {store.url_for(run.name)}: "
             "change metadata.name",
             field="metadata.name",
         )
-    journal.write_text(state["study"], encoding="utf-8")
-    points: list[dict[str, Any]] = state["points"]
-    return points
+    return list(state["study"]), list(state["points"])
 
 
 def _losses(run: SimulationRun, points: list[dict[str, Any]], start: int) -> list[float | None]:
@@ -139,9 +129,8 @@ def run_search(
     prefix = f"{run.name}/search"
     with tempfile.TemporaryDirectory(prefix="carlos-search-") as scratch:
         work = Path(scratch)
-        journal = work / "study.journal"
         points_file = work / "points.xosc"
-        points = _load_state(run, store, journal)
+        log, points = _load_state(run, store)
         report: RunReport | None = None
         timings: list[tuple[float, float]] = []
         while len(points) < search.budget or report is None:
@@ -149,7 +138,8 @@ def run_search(
             round_number = start // search.batch_size
             count = min(search.batch_size, search.budget - start)
             started = time.perf_counter()
-            study = Study(journal, search.strategy, seed, round_number, startup=search.batch_size)
+            round_log = list(log)  # the stored log stays as it was until the round completes
+            study = Study(round_log, search.strategy, seed, round_number, startup=search.batch_size)
             asked = study.ask(space, count) if count else []
             optimizer_seconds = time.perf_counter() - started
             every: list[dict[str, ParameterValue]] = [p["parameters"] for p in points] + asked
@@ -184,7 +174,8 @@ def run_search(
                 study.tell(position, value)
             optimizer_seconds += time.perf_counter() - told
             timings.append((optimizer_seconds, time.perf_counter() - started))
-            store.put_bytes(f"{prefix}/state.json", _state_bytes(run, journal, points))
+            log = round_log
+            store.put_bytes(f"{prefix}/state.json", _state_bytes(run, log, points))
             on_round(search_document(run.name, search, seed, space, points))
         document = search_document(run.name, search, seed, space, points)
         document["outputUrl"] = store.url_for(run.name)

@@ -1,7 +1,8 @@
 """The adapter around optuna: samplers per strategy, the persisted study, asking and telling in batches.
 
-The study lives in an optuna journal file (every trial with its sampler state, e.g. CMA-ES's). Each round
-loads it with a sampler seeded from (seed, round), so the points a round asks depend only on the seed, the
+The study is an optuna journal: its log (every trial with its sampler state, e.g. CMA-ES's) is a list of
+JSON objects the driver stores with the results; this process is its only writer, so it lives in memory
+between stores (no file locks per ask). Each round loads it with a sampler seeded from (seed, round), so the points a round asks depend only on the seed, the
 round and the results before it: a search interrupted mid-round asks the same points again when it resumes.
 optuna is imported here only.
 """
@@ -11,7 +12,6 @@ from __future__ import annotations
 import hashlib
 import warnings
 from collections.abc import Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from simcore.errors import BadInput
@@ -84,15 +84,32 @@ def _distribution(dimension: Dimension) -> Any:
     return optuna.distributions.FloatDistribution(dimension.low, dimension.high)
 
 
-class Study:
-    """The persisted optuna study of a search (a journal file)."""
+def _memory_backend(log: list[dict[str, Any]]) -> Any:
+    from optuna.storages.journal import BaseJournalBackend
 
-    def __init__(self, journal: Path, strategy: str, seed: int, round_number: int, startup: int) -> None:
+    class MemoryJournal(BaseJournalBackend):
+        """optuna's journal over a list (appended to in place)."""
+
+        def read_logs(self, log_number_from: int) -> list[dict[str, Any]]:
+            return log[log_number_from:]
+
+        def append_logs(self, logs: list[dict[str, Any]]) -> None:
+            log.extend(logs)
+
+    return MemoryJournal()
+
+
+class Study:
+    """The optuna study of a search over its journal `log` (JSON objects, appended to in place)."""
+
+    def __init__(
+        self, log: list[dict[str, Any]], strategy: str, seed: int, round_number: int, startup: int
+    ) -> None:
         import optuna
-        from optuna.storages.journal import JournalFileBackend, JournalStorage
+        from optuna.storages.journal import JournalStorage
 
         optuna.logging.set_verbosity(optuna.logging.WARNING)
-        storage = JournalStorage(JournalFileBackend(str(journal)))
+        storage = JournalStorage(_memory_backend(log))
         self._optuna = optuna
         self.study = optuna.create_study(
             study_name=STUDY_NAME,
