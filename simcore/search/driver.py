@@ -20,6 +20,7 @@ from typing import Any
 from simcore.errors import BadInput
 from simcore.evaluation.metrics import KNOWN_METRICS
 from simcore.executor import Events, RunReport, _dump_spec, execute
+from simcore.scenario.parameters import format_value
 from simcore.search.export import distribution_xml
 from simcore.search.objective import MARGIN, loss, raw_value
 from simcore.search.optimizer import Study, check_strategy
@@ -83,6 +84,17 @@ def _load_state(run: SimulationRun, store: Store) -> tuple[list[dict[str, Any]],
             field="metadata.name",
         )
     return list(state["study"]), list(state["points"])
+
+
+def _check_resumed(summary: dict[str, Any], parameters: dict[str, ParameterValue], name: str) -> None:
+    """An index kept from an interrupted round must be the point the study asks again."""
+    stored = summary.get("parameters", {})
+    if any(str(stored.get(key)) != format_value(value) for key, value in parameters.items()):
+        raise BadInput(
+            f"index {summary['index']} of search {name!r} was run with other parameters than the resumed "
+            "study asks (a different optuna version?): change metadata.name to start the search anew",
+            field="metadata.name",
+        )
 
 
 def _losses(run: SimulationRun, points: list[dict[str, Any]], start: int) -> list[float | None]:
@@ -159,6 +171,7 @@ def run_search(
             explore = search.strategy in ("random", "lhs") or round_number == 0
             for position, parameters in enumerate(asked):
                 summary = report.outcomes[start + position]
+                _check_resumed(summary, parameters, run.name)
                 points.append(
                     {
                         "index": start + position,
