@@ -260,6 +260,10 @@ def run(
             )
 
         with progress:
+            if simulation_run.spec.search is not None:
+                report = _search(simulation_run, manifest, output, parallel, fresh or bool(index) or live)
+                _print_report(report)
+                raise typer.Exit(report.exit_code)
             report = execute(
                 simulation_run,
                 base_dir=manifest.parent.resolve(),
@@ -381,9 +385,52 @@ def _preflight_scenarios(simulation_run: Any, manifest: Path) -> None:
                 field=where,
             )
         check_parameter_types(spec, position, declared, source=str(manifest))
+        if spec.search is not None:
+            from simcore.search.driver import search_space
+
+            search_space(simulation_run, path)
+            continue
         parsed = load_scenario(path, plan[plan.indexes_of(scenario.name).start].parameters)
         if parsed.road_file is not None:
             check_road_file(parsed.road_file, scenario_file=str(path))
+
+
+def _search(
+    simulation_run: Any, manifest: Path, output: str | None, parallel: int | None, selective: bool
+) -> Any:
+    """`carlos run` of a manifest with spec.search: the search's rounds; returns the final RunReport."""
+    from simcore.search.driver import run_search
+
+    if selective:
+        raise BadInput(
+            "a search runs all its rounds: --index, --fresh and --live are for sweeps", field="spec.search"
+        )
+    found = _local_scenarios(simulation_run, manifest)
+    if not found:
+        raise BadInput(
+            "a search runs a local scenario file (not a ConfigMap or s3://)", field="spec.scenarios"
+        )
+    result = run_search(
+        simulation_run,
+        base_dir=manifest.parent.resolve(),
+        scenario_file=found[0][2],
+        output_url=output,
+        parallel=parallel,
+        on_round=lambda d: console.print(
+            f"round {d['rounds'][-1]['round']}: {d['runs']} runs, {d['failures']} failing", highlight=False
+        ),
+    )
+    document = result.document
+    best = document["best"]
+    out.print(
+        f"search: {document['runs']} runs in {len(document['rounds'])} rounds · {document['failures']} failing · "
+        f"best {document['objective']['metric']} "
+        f"{'n/a' if best is None else format(best['objective'], '.3g')}"
+        + (f" · failing points: {document['failingScenarios']}" if "failingScenarios" in document else ""),
+        highlight=False,
+        soft_wrap=True,
+    )
+    return result.run
 
 
 def _print_report(report: object) -> None:
@@ -473,10 +520,14 @@ def validate(
     if schema and _check_schemas(list(dict.fromkeys(paths))) != 0:
         raise typer.Exit(int(ExitCode.BAD_INPUT))
     plan = Plan(simulation_run.spec)
+    search = simulation_run.spec.search
     out.print(
         Text(
             f"{manifest}: valid · {len(plan)} runs "
             f"({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})"
+            if search is None
+            else f"{manifest}: valid · a {search.strategy} search of {search.budget} runs "
+            f"in rounds of {search.batch_size}"
         ),
         highlight=False,
         soft_wrap=True,

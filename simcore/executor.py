@@ -152,11 +152,13 @@ def execute(
     indexes: list[int] | None = None,
     events: Events | None = None,
     bus: Bus | None = None,
+    record: SimulationRun | None = None,
 ) -> RunReport:
     """Run every index (or `indexes`) of `run`; returns the run-level report. Resumes by default: an index
     whose summary.json is already in the output (from an interrupted invocation of the same spec) is kept
     when it passed or failed; one that ended in an error runs again.
-    With `bus` (a live view), the runs go one after another in this process and publish on it."""
+    With `bus` (a live view), the runs go one after another in this process and publish on it. `record` is
+    the spec kept as run.yaml and compared on resume (default `run`; a search runs derived runs of it)."""
     events = events or Events()
     spec = run.spec
     url = output_url or spec.output.url
@@ -175,7 +177,7 @@ def execute(
         if not 0 <= index < total:
             raise BadInput(f"index {index} is out of range 0..{total - 1}", field="--index")
     name = run.name
-    spec_bytes = _dump_spec(run)
+    spec_bytes = _dump_spec(record or run)
     previous: dict[int, dict[str, Any]] = {}
     if store.exists(f"{name}/run.yaml") and not fresh:
         if store.get_bytes(f"{name}/run.yaml") != spec_bytes:

@@ -205,6 +205,91 @@ class Sweep(Model):
         return matrix
 
 
+class SearchParameter(Model):
+    """One dimension of a search: a continuous or integer range, or categorical values."""
+
+    name: ParameterName = Field(description="The ParameterDeclaration searched over.")
+    min: float | None = Field(
+        None, description="Lowest value. Default: from the declaration's ValueConstraints/Range."
+    )
+    max: float | None = Field(
+        None, description="Highest value. Default: from the declaration's ValueConstraints/Range."
+    )
+    integer: bool = Field(False, description="Whole numbers only (min and max included). Default false.")
+    values: list[ParameterValue] | None = Field(
+        None,
+        description="Categorical: the values to choose from (instead of min/max). Default: none.",
+        min_length=1,
+        max_length=1000,
+    )
+
+    @model_validator(mode="after")
+    def _range(self) -> SearchParameter:
+        if self.values is not None and (self.min is not None or self.max is not None):
+            raise ValueError(f"{self.name}: set either 'values' or 'min'/'max', not both")
+        if self.min is not None and self.max is not None and not self.min < self.max:
+            raise ValueError(
+                f"{self.name}: the range [{self.min:g}, {self.max:g}] is empty: min must be below max"
+            )
+        if self.integer and self.values is not None:
+            raise ValueError(f"{self.name}: 'integer' applies to a min/max range, not to 'values'")
+        return self
+
+
+class SearchObjective(Model):
+    """What the search minimises or maximises."""
+
+    metric: str = Field(
+        "margin",
+        description=(
+            "A run metric (e.g. `minTimeToCollision`), or `margin`: the smallest margin of the run's required "
+            "criteria (threshold distance, negative when violated). Default margin."
+        ),
+        min_length=1,
+        max_length=200,
+    )
+    direction: Literal["minimize", "maximize"] = Field(
+        "minimize", description="Minimise (find failures) or maximise the metric. Default minimize."
+    )
+
+
+class Search(Model):
+    """An adaptive search over the scenario's parameters (falsification): runs in rounds of `batchSize`,
+    each round's points chosen by an optuna sampler from the results so far. Instead of `sweep`."""
+
+    parameters: list[SearchParameter] = Field(
+        default_factory=list,
+        description=(
+            "The dimensions. Default: every ParameterDeclaration of the scenario with a range "
+            "(ValueConstraints or Range)."
+        ),
+        max_length=64,
+    )
+    objective: SearchObjective = Field(
+        default_factory=SearchObjective, description="The objective. Default: minimise the criteria margin."
+    )
+    budget: int = Field(100, ge=1, le=10_000, description="Runs in total. Default 100.")
+    batch_size: int = Field(16, ge=1, le=1000, description="Runs per round. Default 16.")
+    strategy: Literal["random", "lhs", "tpe", "cmaes", "gp", "boundary"] = Field(
+        "tpe",
+        description=(
+            "`random` (uniform), `lhs` (scrambled Sobol quasi-random), `tpe`, `cmaes`, `gp` (needs PyTorch), "
+            "or `boundary` (TPE on the absolute criteria margin: samples the pass/fail boundary). Default tpe."
+        ),
+    )
+    seed: int | None = Field(
+        None, ge=0, le=2**31 - 1, description="Seed of the sampler. Default: simulation.seed."
+    )
+
+    @model_validator(mode="after")
+    def _unique(self) -> Search:
+        names = [p.name for p in self.parameters]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"parameters searched twice: {', '.join(twice)}")
+        return self
+
+
 class Simulation(Model):
     """Time stepping and randomness."""
 
@@ -791,6 +876,10 @@ class SimulationRunSpec(Model):
     sweep: Sweep = Field(
         default_factory=Sweep, description="The parameter sweep. Default: one run per scenario."
     )
+    search: Search | None = Field(
+        None,
+        description="Adaptive search over the scenario's parameters instead of a sweep. Default: none.",
+    )
     simulation: Simulation = Field(default_factory=Simulation, description="Time stepping and seed.")
     sensors: list[Sensor] = Field(
         default_factory=list,
@@ -845,6 +934,17 @@ class SimulationRunSpec(Model):
                     f"sensor {sensor.name!r} is defined twice on the same entity; names must be unique"
                 )
             sensors.add(key)
+        if self.search is not None:
+            if len(self.scenarios) != 1:
+                raise ValueError("search: a search explores one scenario; list exactly one in spec.scenarios")
+            if self.sweep != Sweep():
+                raise ValueError("search: set either spec.search or spec.sweep, not both")
+            needs_criteria = self.search.objective.metric == "margin" or self.search.strategy == "boundary"
+            if needs_criteria and not [*self.evaluation.criteria, *self.scenarios[0].criteria]:
+                raise ValueError(
+                    "search.objective: the criteria margin needs criteria: add evaluation.criteria, or "
+                    "set search.objective.metric to a run metric"
+                )
         detection = self.evaluation.detection
         if detection is not None:
             entity, _, name = detection.sensor.partition("/")

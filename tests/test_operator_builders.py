@@ -175,6 +175,11 @@ def test_output_and_cluster_checks() -> None:
     with pytest.raises(BadInput, match="100,000"):
         check_cluster_spec(load(manifest(sweep={"matrix": {"a": list(range(1000)), "b": list(range(101))}})))
     check_cluster_spec(load(manifest()))
+    search = {"parameters": [{"name": "a", "min": 0, "max": 1}], "objective": {"metric": "minDistance"}}
+    with pytest.raises(BadInput, match=r"spec\.search"):
+        check_cluster_spec(
+            load(manifest(search=search, sweep={}, scenarios=manifest()["spec"]["scenarios"][:1]))
+        )
 
 
 def test_job_names_are_deterministic_and_short() -> None:

@@ -297,6 +297,11 @@ def check_cluster_spec(run: SimulationRun) -> None:
             f"{sut.name!r} is the name of a CARLOS container: choose another name",
             field="spec.systemUnderTest.name",
         )
+    if run.spec.search is not None:
+        raise BadInput(
+            "spec.search runs locally only for now (carlos run): use spec.sweep on a cluster",
+            field="spec.search",
+        )
     total = len(Plan(run.spec))
     if total > MAX_COMPLETIONS:
         raise BadInput(
