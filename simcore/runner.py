@@ -162,6 +162,7 @@ def simulate(
     bus = bus if bus is not None else InProcessBus()
     recorder = None
     perception = None
+    v2x = None
     try:
         closed_loop = None
         control = spec.control
@@ -199,6 +200,17 @@ def simulate(
             perception = PerceptionLoop(
                 spec, bus, road=road, road_file=scenario.road_file, seed=point.seed, base_dir=base_dir
             )
+        if spec.v2x is not None:
+            from simcore.v2x.service import V2XService
+
+            v2x = V2XService(
+                spec,
+                bus,
+                road=road,
+                road_file=scenario.road_file,
+                parameters=scenario.parameters,
+                seed=point.seed,
+            )
         if closed_loop is not None:
             closed_loop.wait_for_nodes(b.name for b in engine.bodies.values() if b.external)
         frame = engine.frame()
@@ -208,6 +220,8 @@ def simulate(
         world.publish(frame)
         if perception is not None:
             perception.step(frame)
+        if v2x is not None:
+            v2x.step(frame)
         max_steps = round(spec.simulation.max_seconds / spec.simulation.step_seconds)
         reported = 0.0
         while not engine.ended and engine.step_index < max_steps:
@@ -220,6 +234,8 @@ def simulate(
             world.publish(frame)
             if perception is not None:
                 perception.step(frame)
+            if v2x is not None:
+                v2x.step(frame)
             if progress is not None and frame.time - reported >= 1.0:
                 reported = frame.time
                 progress(point.index, frame.time)
@@ -246,6 +262,8 @@ def simulate(
     end_reason = engine.ended_by or "maxSeconds"
     result["stopTriggered"] = 1.0 if end_reason == "stopTrigger" else 0.0
     log_lines = engine.log
+    if v2x is not None:
+        result.update(v2x.metrics())
     if perception is not None:
         result.update(perception.metrics())
         if perception.failure is not None:

@@ -183,7 +183,7 @@ def test_blocked_line_of_sight_costs_the_nlos_loss():
     tx = np.zeros((1, 3))
     rx = np.array([[100.0, 0.0, 0.0], [0.0, 100.0, 0.0]])
     clear = Channel(p, seed=0).transmit(0, 0.1, tx, rx)
-    blocked = Channel(p, seed=0, los=lambda a, b: b[:, 1] < 50.0).transmit(
+    blocked = Channel(p, seed=0, los=lambda rows, cols: rx[cols, 1] < 50.0).transmit(
         0, 0.1, tx, rx
     )  # the +y link is blocked
     assert blocked.rx_power_dbm[0, 0] == pytest.approx(clear.rx_power_dbm[0, 0])

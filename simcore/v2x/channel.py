@@ -76,7 +76,8 @@ class ChannelParameters:
         return self.reference_distance * 10.0 ** (excess / (10.0 * self.path_loss_exponent))
 
 
-#: los(tx positions (K, 3), rx positions (K, 3)) → True where the straight line between them is clear.
+#: los(rows (K,), cols (K,)) → True where the straight line from sender `tx[rows[k]]` to receiver
+#: `rx[cols[k]]` is clear.
 LineOfSight = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
@@ -123,7 +124,7 @@ class Channel:
         if self.los is not None and s and r:
             candidates = np.argwhere(link & (power >= p.sensitivity_dbm))
             if len(candidates):
-                clear = self.los(tx[candidates[:, 0]], rx[candidates[:, 1]])
+                clear = self.los(candidates[:, 0], candidates[:, 1])
                 blocked = candidates[~np.asarray(clear, dtype=bool)]
                 power[blocked[:, 0], blocked[:, 1]] -= p.nlos_loss_db
         lost = np.where(power >= p.sensitivity_dbm, DELIVERED, TOO_WEAK)

@@ -69,13 +69,18 @@ class GeoReference:
     def north_angle(self, x: float, y: float) -> float:
         """The map-frame angle (rad, counter-clockwise from +x) of true north at (x, y): ETSI headings are
         clockwise from north, so heading_etsi = north_angle - heading_map."""
-        lat0, lon0, _ = self.to_wgs84(x, y)
-        lat1, lon1, _ = self.to_wgs84(x, y + 1.0)
-        # direction of map +y in the geographic frame, then the inverse rotation
-        east = (float(lon1) - float(lon0)) * math.cos(math.radians(float(lat0)))
-        north = float(lat1) - float(lat0)
-        grid_convergence = math.atan2(east, north)  # map +y is this far clockwise from north
-        return math.pi / 2 + grid_convergence
+        return float(self.north_angles(np.array([x]), np.array([y]))[0])
+
+    def north_angles(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """`north_angle` of many points at once."""
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        lat, lon, _ = self.to_wgs84(np.concatenate([x, x]), np.concatenate([y, y + 1.0]))
+        n = len(x)
+        # the direction of map +y in the geographic frame: map +y is this far clockwise from north
+        east = (lon[n:] - lon[:n]) * np.cos(np.radians(lat[:n]))
+        north = lat[n:] - lat[:n]
+        return np.asarray(math.pi / 2 + np.arctan2(east, north))
 
 
 def geo_reference_of(road_file: Path) -> GeoReference | None:

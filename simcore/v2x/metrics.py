@@ -1,0 +1,135 @@
+"""The `v2x.*` metrics of one run, accumulated from link outcomes, receptions and the ego's view.
+
+- `v2x.packetDeliveryRatio`: delivered / sent over every link (sender → other station); per distance band
+  `.0-100m`, `.100-200m`, … and for the ranges criteria name (`… within 300 m`: `.0-300m`).
+- `v2x.ageOfInformation.mean` / `.max`: per (receiver, sender) pair, from the first reception on, the age of
+  the newest message received (now − its generation time), sampled every step; `v2x.ageOfInformation.<sender>`
+  is the mean over the sender's receivers.
+- `v2x.cpmObjectCoverage`: of the object-steps the ego's own sensors miss (not in line of sight within
+  `egoSensorRange`; objects within twice that range), the share the ego knows from a CPM received in the last
+  second; `v2x.cpmObjectsFromV2xOnly`: how many objects it knew that way at least once.
+- `v2x.hazardToFirstDenm`: the longest time from a hazard's detection (another station's hard braking,
+  stationary vehicle) to the ego's first DENM about it; `v2x.hazards`, `v2x.hazardsMissed` (never reached it).
+- `v2x.messages.cam|cpm|denm`: messages sent.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import defaultdict
+from collections.abc import Iterable
+
+import numpy as np
+
+BAND = 100.0
+MAX_BANDED = 1000.0
+#: A CPM object is known for this long after its CPM arrived (s).
+CPM_FRESH = 1.0
+
+_RANGE = re.compile(r"^v2x\.packetDeliveryRatio\.0-([0-9.]+)m$")
+
+
+def pdr_ranges(metric_names: Iterable[str]) -> list[float]:
+    """The distances r of `v2x.packetDeliveryRatio.0-<r>m` among metric names (criteria)."""
+    out = set()
+    for name in metric_names:
+        match = _RANGE.match(name)
+        if match:
+            try:
+                out.add(float(match.group(1)))
+            except ValueError:
+                continue
+    return sorted(out)
+
+
+def _edge(value: float) -> str:
+    return f"{value:g}"
+
+
+class V2XMetrics:
+    def __init__(self, ranges: Iterable[float] = ()) -> None:
+        self.ranges = sorted(set(ranges))
+        self.distances: list[np.ndarray] = []
+        self.outcomes: list[np.ndarray] = []
+        self.sent: dict[str, int] = defaultdict(int)
+        self.newest: dict[tuple[str, str], float] = {}
+        self.aoi_sum: dict[str, float] = defaultdict(float)
+        self.aoi_count: dict[str, int] = defaultdict(int)
+        self.aoi_max = 0.0
+        self.unseen_steps = 0
+        self.covered_steps = 0
+        self.covered_objects: set[str] = set()
+        self.hazards: dict[tuple[str, int, float], float | None] = {}
+
+    # --- inputs -----------------------------------------------------------------------------------------
+    def links(self, distance: np.ndarray, delivered: np.ndarray) -> None:
+        """Every link attempt of one step (flat arrays)."""
+        self.distances.append(np.asarray(distance, dtype=np.float64).ravel())
+        self.outcomes.append(np.asarray(delivered, dtype=bool).ravel())
+
+    def message_sent(self, kind: str) -> None:
+        self.sent[kind] += 1
+
+    def received(self, receiver: str, sender: str, generated: float) -> None:
+        key = (receiver, sender)
+        self.newest[key] = max(generated, self.newest.get(key, -np.inf))
+
+    def sample_age(self, time: float) -> None:
+        for (_, sender), generated in self.newest.items():
+            age = max(time - generated, 0.0)
+            self.aoi_sum[sender] += age
+            self.aoi_count[sender] += 1
+            self.aoi_max = max(self.aoi_max, age)
+
+    def ego_view(self, unseen: Iterable[str], known_from_cpm: Iterable[str]) -> None:
+        """One step of the ego: the objects its sensors miss, and those of them it knows from CPMs."""
+        unseen = set(unseen)
+        covered = unseen & set(known_from_cpm)
+        self.unseen_steps += len(unseen)
+        self.covered_steps += len(covered)
+        self.covered_objects |= covered
+
+    def hazard(self, key: tuple[str, int, float]) -> None:
+        """A hazard (station, cause, detection time) another station detected."""
+        self.hazards.setdefault(key, None)
+
+    def ego_denm(self, key: tuple[str, int, float], time: float) -> None:
+        if key in self.hazards and self.hazards[key] is None:
+            self.hazards[key] = time
+
+    # --- result -----------------------------------------------------------------------------------------
+    def result(self) -> dict[str, float]:
+        out: dict[str, float] = {
+            f"v2x.messages.{kind}": float(self.sent.get(kind, 0)) for kind in ("cam", "cpm", "denm")
+        }
+        if self.distances:
+            d = np.concatenate(self.distances)
+            ok = np.concatenate(self.outcomes)
+            if len(d):
+                out["v2x.packetDeliveryRatio"] = float(ok.mean())
+                lo = 0.0
+                while lo < min(MAX_BANDED, float(d.max()) + 1e-9):
+                    hi = lo + BAND
+                    band = (d >= lo) & (d < hi)
+                    if band.any():
+                        out[f"v2x.packetDeliveryRatio.{_edge(lo)}-{_edge(hi)}m"] = float(ok[band].mean())
+                    lo = hi
+                for reach in self.ranges:
+                    within = d < reach
+                    if within.any():
+                        out[f"v2x.packetDeliveryRatio.0-{_edge(reach)}m"] = float(ok[within].mean())
+        total = sum(self.aoi_count.values())
+        if total:
+            out["v2x.ageOfInformation.mean"] = sum(self.aoi_sum.values()) / total
+            out["v2x.ageOfInformation.max"] = self.aoi_max
+            for sender, count in self.aoi_count.items():
+                out[f"v2x.ageOfInformation.{sender}"] = self.aoi_sum[sender] / count
+        if self.unseen_steps:
+            out["v2x.cpmObjectCoverage"] = self.covered_steps / self.unseen_steps
+        out["v2x.cpmObjectsFromV2xOnly"] = float(len(self.covered_objects))
+        out["v2x.hazards"] = float(len(self.hazards))
+        warned = [first - key[2] for key, first in self.hazards.items() if first is not None]
+        out["v2x.hazardsMissed"] = float(len(self.hazards) - len(warned))
+        if warned:
+            out["v2x.hazardToFirstDenm"] = max(warned)
+        return out
