@@ -108,9 +108,10 @@ def test_receivers_get_other_stations_messages_and_every_link_is_recorded():
     cams = [m.obj() for m in got if m.topic == "/carlos/Ego/v2x/cam"]
     assert [c.header.station_id.value for c in cams] == [2]  # Near's; Far (5 km) is out of range
     assert all(m.time_s == pytest.approx(0.0 + 0.002, abs=0.0011) for m in got if m.topic.endswith("/cam"))
-    links = next(m for m in got if m.topic == "/carlos/v2x/transmissions").obj().transmissions
+    sent = next(m for m in got if m.topic == "/carlos/v2x/transmissions").obj().transmissions
+    links = [(t.sender, r, int(o)) for t in sent for r, o in zip(t.receivers, t.outcomes, strict=True)]
     assert len(links) == 6  # 3 CAMs × 2 other stations
-    far = [(t.sender, t.receiver, t.outcome) for t in links if "Far" in (t.sender, t.receiver)]
+    far = [link for link in links if "Far" in link[:2]]
     assert all(outcome == 1 for *_, outcome in far) and len(far) == 4
     metrics = service.metrics()
     assert metrics["v2x.messages.cam"] == 3
@@ -125,9 +126,9 @@ def test_a_truck_between_two_cars_costs_the_nlos_loss():
         service.step(
             _frame(0, _entity("Ego", 0.0), _entity("Truck", 20.0, box=TRUCK), _entity("Other", 60.0))
         )
-        links = next(m for m in got if m.topic == "/carlos/v2x/transmissions").obj().transmissions
-        ego_other = [t for t in links if (t.sender, t.receiver) == ("Other", "Ego")]
-        assert (ego_other[0].outcome == 0) is delivered
+        sent = next(m for m in got if m.topic == "/carlos/v2x/transmissions").obj().transmissions
+        other = next(t for t in sent if t.sender == "Other")
+        assert bool(other.outcomes[list(other.receivers).index("Ego")] == 0) == delivered
 
 
 def test_hazard_denm_reaches_the_ego_and_the_warning_time_is_measured():
@@ -152,10 +153,11 @@ def test_same_seed_same_outcomes():
                 _frame(step, *(_entity(f"V{i}", 60.0 * i + step, speed=10.0) for i in range(6)), ego="V0")
             )
         return [
-            (t.sender, t.receiver, t.outcome)
+            (t.sender, r, int(o))
             for m in got
             if m.topic == "/carlos/v2x/transmissions"
             for t in m.obj().transmissions
+            for r, o in zip(t.receivers, t.outcomes, strict=True)
         ]
 
     assert run(5) == run(5)

@@ -464,33 +464,34 @@ class V2XService:
             self.channel.los = None
         delivery = self.channel.transmit(frame.step, self.step_seconds, pos[senders], pos, same)
         link = ~same
-        self.metrics_acc.links(delivery.distance[link], delivery.delivered[link])
+        delivered = delivery.delivered & link
+        self.metrics_acc.links(delivery.distance[link], delivered[link])
         transmission = TYPESTORE.types["carlos_v2x_msgs/msg/Transmission"]
+        names = [s.name for s in self.stations]
         records = []
         sent = stamp(frame.time)
         for m, out in enumerate(outgoing):
             self.metrics_acc.message_sent(out.kind)
             sender = self.stations[out.sender]
-            for r in np.flatnonzero(link[m]):
-                receiver = self.stations[r]
-                records.append(
-                    transmission(
-                        sent=sent,
-                        sender=sender.name,
-                        receiver=receiver.name,
-                        message_type=out.kind,
-                        outcome=int(delivery.lost[m, r]),
-                        distance=float(delivery.distance[m, r]),
-                        rx_power_dbm=float(delivery.rx_power_dbm[m, r]),
-                        delay=float(delivery.delay[m, r]),
-                    )
+            cols = np.flatnonzero(link[m])
+            records.append(
+                transmission(
+                    sent=sent,
+                    sender=sender.name,
+                    station_id=sender.station_id,
+                    message_type=out.kind,
+                    receivers=[names[r] for r in cols],
+                    outcomes=delivery.lost[m, cols].astype(np.uint8),
+                    distances=delivery.distance[m, cols].astype(np.float32),
+                    rx_power_dbm=delivery.rx_power_dbm[m, cols].astype(np.float32),
+                    delays=delivery.delay[m, cols].astype(np.float32),
                 )
-                if delivery.delivered[m, r]:
-                    arrival = frame.time + float(delivery.delay[m, r])
-                    heapq.heappush(
-                        self._pending,
-                        (arrival, next(self._seq), int(r), out.kind, out, sender.name, frame.time),
-                    )
+            )
+            for r in np.flatnonzero(delivered[m]):
+                arrival = frame.time + float(delivery.delay[m, r])
+                heapq.heappush(
+                    self._pending, (arrival, next(self._seq), int(r), out.kind, out, sender.name, frame.time)
+                )
         header = TYPESTORE.types["std_msgs/msg/Header"](stamp=sent, frame_id="map")
         self._transmissions.publish(
             TYPESTORE.types["carlos_v2x_msgs/msg/TransmissionArray"](header=header, transmissions=records),

@@ -1,5 +1,9 @@
-"""Line of sight between points of one frame: blocked by entity boxes (slab test) and by the road scene
-(road surface and OpenDRIVE objects, open3d raycasting), each as the sensors see them."""
+"""Line of sight between points of one frame: blocked by entity boxes and by the road scene (road surface and
+OpenDRIVE objects, open3d raycasting), each as the sensors see them.
+
+Boxes: a broad phase keeps the (segment, box) pairs whose box's bounding sphere comes within reach of the
+segment, then one vectorised slab test runs on all of them (a segment starting inside a box is not blocked by
+it, as for the sensors' rays)."""
 
 from __future__ import annotations
 
@@ -7,13 +11,54 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simcore.sensors.scene import Boxes, intersect_box
+from simcore.sensors.scene import Boxes
 
 if TYPE_CHECKING:
     from simcore.sensors.scene import RoadScene
 
-#: A ray's end this close to an obstacle does not count as blocked (m).
+#: A segment's end this close to an obstacle does not count as blocked (m).
 _EPS = 0.05
+
+
+def _blocked_by_boxes(
+    a: np.ndarray,
+    dirs: np.ndarray,
+    length: np.ndarray,
+    boxes: Boxes,
+    ignore_a: np.ndarray,
+    ignore_b: np.ndarray,
+) -> np.ndarray:
+    k, n = len(a), len(boxes.names)
+    blocked = np.zeros(k, dtype=bool)
+    if n == 0:
+        return blocked
+    radius = np.linalg.norm(boxes.half, axis=1)  # (N,)
+    rel = boxes.centers[None, :, :] - a[:, None, :]  # (K, N, 3)
+    along = np.clip(np.einsum("knj,kj->kn", rel, dirs), 0.0, length[:, None])
+    gap = np.linalg.norm(rel - along[:, :, None] * dirs[:, None, :], axis=2)
+    near = gap <= radius[None, :]
+    near &= np.arange(n)[None, :] != ignore_a[:, None]
+    near &= np.arange(n)[None, :] != ignore_b[:, None]
+    rows, cols = np.nonzero(near)
+    if len(rows) == 0:
+        return blocked
+    rot = boxes.rotations[cols]  # (P, 3, 3), columns are the box axes
+    o = np.einsum("pi,pij->pj", a[rows] - boxes.centers[cols], rot)
+    d = np.einsum("pi,pij->pj", dirs[rows], rot)
+    half = boxes.half[cols]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        t1 = (-half - o) * inv
+        t2 = (half - o) * inv
+    lo = np.fmin(t1, t2)  # fmin/fmax: a NaN (parallel, in the face's plane) sets no constraint
+    hi = np.fmax(t1, t2)
+    lo = np.where(np.isnan(lo), -np.inf, lo)
+    hi = np.where(np.isnan(hi), np.inf, hi)
+    tmin = lo.max(axis=1)
+    tmax = hi.min(axis=1)
+    hit = (tmax >= tmin) & (tmin > 0.0) & (tmin < length[rows] - _EPS)
+    blocked[rows[hit]] = True
+    return blocked
 
 
 class Sight:
@@ -41,12 +86,7 @@ class Sight:
         delta = b - a
         length = np.linalg.norm(delta, axis=1)
         dirs = delta / np.maximum(length, 1e-12)[:, None]
-        blocked = np.zeros(k, dtype=bool)
-        boxes = self.boxes
-        for i in range(len(boxes.names)):
-            t, _ = intersect_box(a, dirs, boxes.centers[i], boxes.rotations[i], boxes.half[i])
-            hit = (t < length - _EPS) & (ignore_a != i) & (ignore_b != i)
-            blocked |= hit
+        blocked = _blocked_by_boxes(a, dirs, length, self.boxes, ignore_a, ignore_b)
         if self.scene is not None and self.scene.triangle_count:
             rays = np.concatenate([a, dirs], axis=1).astype(np.float32)
             t_hit, _, _ = self.scene.cast(rays)
