@@ -124,6 +124,7 @@ def run_service(frames_: list[WorldFrame], line_of_sight: bool, cdr: bool) -> tu
     wall = time.perf_counter() - started
     metrics = service.metrics()
     metrics["cdrBytes"] = float(size[0])
+    metrics.update({f"seconds.{k}": v for k, v in service.seconds.items()})
     return wall, metrics
 
 

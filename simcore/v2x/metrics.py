@@ -52,9 +52,10 @@ class V2XMetrics:
         self.distances: list[np.ndarray] = []
         self.outcomes: list[np.ndarray] = []
         self.sent: dict[str, int] = defaultdict(int)
-        self.newest: dict[tuple[str, str], float] = {}
-        self.aoi_sum: dict[str, float] = defaultdict(float)
-        self.aoi_count: dict[str, int] = defaultdict(int)
+        self.names: list[str] = []
+        self.newest = np.zeros((0, 0))  # (receiver, sender) → generation time of the newest message received
+        self.aoi_sum = np.zeros(0)
+        self.aoi_count = np.zeros(0, dtype=np.int64)
         self.aoi_max = 0.0
         self.unseen_steps = 0
         self.covered_steps = 0
@@ -70,16 +71,26 @@ class V2XMetrics:
     def message_sent(self, kind: str) -> None:
         self.sent[kind] += 1
 
-    def received(self, receiver: str, sender: str, generated: float) -> None:
-        key = (receiver, sender)
-        self.newest[key] = max(generated, self.newest.get(key, -np.inf))
+    def stations(self, names: list[str]) -> None:
+        """The stations, in the order `received` indexes them."""
+        n = len(names)
+        self.names = list(names)
+        self.newest = np.full((n, n), -np.inf)
+        self.aoi_sum = np.zeros(n)
+        self.aoi_count = np.zeros(n, dtype=np.int64)
+
+    def received(self, receiver: int, sender: int, generated: float) -> None:
+        if generated > self.newest[receiver, sender]:
+            self.newest[receiver, sender] = generated
 
     def sample_age(self, time: float) -> None:
-        for (_, sender), generated in self.newest.items():
-            age = max(time - generated, 0.0)
-            self.aoi_sum[sender] += age
-            self.aoi_count[sender] += 1
-            self.aoi_max = max(self.aoi_max, age)
+        known = np.isfinite(self.newest)
+        if not known.any():
+            return
+        age = np.where(known, np.maximum(time - self.newest, 0.0), 0.0)
+        self.aoi_sum += age.sum(axis=0)
+        self.aoi_count += known.sum(axis=0)
+        self.aoi_max = max(self.aoi_max, float(age.max()))
 
     def ego_view(self, unseen: Iterable[str], known_from_cpm: Iterable[str]) -> None:
         """One step of the ego: the objects its sensors miss, and those of them it knows from CPMs."""
@@ -118,12 +129,15 @@ class V2XMetrics:
                     within = d < reach
                     if within.any():
                         out[f"v2x.packetDeliveryRatio.0-{_edge(reach)}m"] = float(ok[within].mean())
-        total = sum(self.aoi_count.values())
+        total = int(self.aoi_count.sum())
         if total:
-            out["v2x.ageOfInformation.mean"] = sum(self.aoi_sum.values()) / total
+            out["v2x.ageOfInformation.mean"] = float(self.aoi_sum.sum()) / total
             out["v2x.ageOfInformation.max"] = self.aoi_max
-            for sender, count in self.aoi_count.items():
-                out[f"v2x.ageOfInformation.{sender}"] = self.aoi_sum[sender] / count
+            for sender, count in enumerate(self.aoi_count):
+                if count:
+                    out[f"v2x.ageOfInformation.{self.names[sender]}"] = float(self.aoi_sum[sender]) / int(
+                        count
+                    )
         if self.unseen_steps:
             out["v2x.cpmObjectCoverage"] = self.covered_steps / self.unseen_steps
         out["v2x.cpmObjectsFromV2xOnly"] = float(len(self.covered_objects))

@@ -23,6 +23,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -166,8 +167,10 @@ class V2XService:
         self._cam: CamTriggers | None = None
         self._hazards: HazardTriggers | None = None
         self._pending: list[
-            tuple[float, int, int, str, Any, str, float]
-        ] = []  # arrival, seq, receiver, kind, …
+            tuple[float, int, int, _Outgoing, float]
+        ] = []  # arrival, seq, receiver, message, sent
+        #: wall seconds spent so far in each phase of `step` (bench/v2x.py)
+        self.seconds = {"generate": 0.0, "channel": 0.0, "deliver": 0.0, "metrics": 0.0}
         self._seq = itertools.count()
         self._ego_name: str | None = None
         self._ego_cpm: dict[str, float] = {}  # object → arrival of the newest CPM about it at the ego
@@ -254,6 +257,7 @@ class V2XService:
         for station in self.stations:
             for kind, typename in (("cam", etsi.CAM_TYPE), ("cpm", etsi.CPM_TYPE), ("denm", etsi.DENM_TYPE)):
                 station.publishers[kind] = self.bus.advertise(f"{station.topic_prefix}/{kind}", typename)
+        self.metrics_acc.stations([s.name for s in self.stations])
         self._cam = CamTriggers(len(self.stations))
         self._hazards = HazardTriggers(len(self.stations), hard_braking=self.config.hard_braking)
 
@@ -266,6 +270,7 @@ class V2XService:
 
     # --- one step ---------------------------------------------------------------------------------------
     def step(self, frame: WorldFrame) -> None:
+        started = time.perf_counter()
         if self._cam is None:
             self._setup(frame)
         assert self._cam is not None and self._hazards is not None
@@ -286,37 +291,36 @@ class V2XService:
                 e = entities[station.name]
                 pos[i] = _antenna(e)
                 heading[i], speed[i], accel[i] = e.heading, e.speed, e.acceleration
-        sight = (
-            self._sight(frame)
-            if self.config.channel.line_of_sight or any(s.cpm for s in self.stations)
-            else None
-        )
+        sight = self._sight(frame)
         lat, lon, alt = self.geo.to_wgs84(pos[:, 0], pos[:, 1], pos[:, 2])
         north = self.geo.north_angles(pos[:, 0], pos[:, 1])
         outgoing: list[_Outgoing] = []
         cam_due = self._cam.step(t, pos[:, :2], heading, speed)
-        kin: list[etsi.Kinematics] = []
-        for i, station in enumerate(self.stations):
-            entity = entities.get(station.name) if not station.rsu else None
-            kin.append(
-                etsi.Kinematics(
-                    latitude=float(lat[i]),
-                    longitude=float(lon[i]),
-                    altitude=float(alt[i]),
-                    heading=etsi.etsi_heading(float(north[i]), float(heading[i])),
-                    speed=float(speed[i]),
-                    acceleration=float(accel[i]),
-                    yaw_rate=entity.yaw_rate if entity is not None else 0.0,
-                    length=entity.bbox.length if entity is not None else 0.0,
-                    width=entity.bbox.width if entity is not None else 0.0,
-                )
+        etsi_heading = np.degrees(north - heading) % 360.0
+
+        def kinematics(i: int) -> etsi.Kinematics:
+            entity = None if self.stations[i].rsu else entities.get(self.stations[i].name)
+            return etsi.Kinematics(
+                latitude=float(lat[i]),
+                longitude=float(lon[i]),
+                altitude=float(alt[i]),
+                heading=float(etsi_heading[i]),
+                speed=float(speed[i]),
+                acceleration=float(accel[i]),
+                yaw_rate=entity.yaw_rate if entity is not None else 0.0,
+                length=entity.bbox.length if entity is not None else 0.0,
+                width=entity.bbox.width if entity is not None else 0.0,
             )
-            if present[i] and station.cam and cam_due.send[i]:
+
+        for i in np.flatnonzero(cam_due.send & present):
+            station = self.stations[i]
+            entity = None if station.rsu else entities.get(station.name)
+            if station.cam:
                 msg = etsi.cam(
                     station.station_id,
                     self._station_type(station, entity),
                     t,
-                    kin[i],
+                    kinematics(i),
                     low_frequency=bool(cam_due.low_frequency[i]),
                     rsu=station.rsu,
                 )
@@ -336,21 +340,28 @@ class V2XService:
                 station.sequence,
                 t,
                 hazard.detection_time,
-                kin[hazard.station],
+                kinematics(hazard.station),
                 hazard.cause,
                 hazard.sub_cause,
             )
             outgoing.append(_Outgoing("denm", hazard.station, msg, hazard=key))
         for i, station in enumerate(self.stations):
             if station.cpm and present[i] and t - station.last_cpm >= T_GEN_CPM_MIN - _SLACK:
-                cpm = self._cpm(station, i, frame, pos[i], kin[i], sight)
+                cpm = self._cpm(station, i, frame, pos[i], kinematics(i), sight)
                 if cpm is not None:
                     outgoing.append(cpm)
+        clock = time.perf_counter()
+        self.seconds["generate"] += clock - started
         if outgoing:
             self._transmit(frame, outgoing, pos, present, sight)
+        self.seconds["channel"] += time.perf_counter() - clock
+        clock = time.perf_counter()
         self._deliver(t + self.step_seconds - _SLACK)
+        self.seconds["deliver"] += time.perf_counter() - clock
+        clock = time.perf_counter()
         self.metrics_acc.sample_age(t)
         self._ego_view(frame, sight)
+        self.seconds["metrics"] += time.perf_counter() - clock
 
     def _station_type(self, station: Station, entity: EntityState | None) -> int:
         if station.rsu:
@@ -363,30 +374,37 @@ class V2XService:
 
         return Sight(Boxes.of(frame), self._scene_for_sight())
 
-    def _visible(
-        self, sight: Any, origin: np.ndarray, own: int, frame: WorldFrame, reach: float
-    ) -> list[int]:
-        """Indexes of the frame's entities (other than `own`) within `reach` of `origin` whose box centre or
-        a ground-plane box corner at mid height is in line of sight."""
-        candidates = []
-        points = []
-        for j, e in enumerate(frame.entities):
-            if j == own:
-                continue
-            cx, cy, cz = e.box_center()
-            if math.hypot(cx - origin[0], cy - origin[1]) > reach:
-                continue
-            candidates.append(j)
-            shrink = [(cx + 0.9 * (x - cx), cy + 0.9 * (y - cy), cz) for x, y in e.corners()]
-            points.extend([(cx, cy, cz), *shrink])
-        if not candidates:
+    def _visible(self, sight: Any, origin: np.ndarray, own: int, reach: float) -> list[int]:
+        """Indexes of the frame's entities (other than `own`) whose box centre lies within `reach` of `origin`
+        (horizontally) and whose centre or a ground-plane box corner (at mid height, 10 % inside) is in line of
+        sight."""
+        boxes = sight.boxes
+        n = len(boxes.names)
+        if n == 0:
             return []
-        pts = np.array(points, dtype=np.float64)
-        targets = np.repeat(np.array(candidates), 5)
-        if sight is None:
-            return candidates
-        clear = sight.clear(np.broadcast_to(origin, pts.shape), pts, np.full(len(pts), own), targets)
-        return [j for k, j in enumerate(candidates) if clear[5 * k : 5 * k + 5].any()]
+        near = np.hypot(boxes.centers[:, 0] - origin[0], boxes.centers[:, 1] - origin[1]) <= reach
+        if 0 <= own < n:
+            near[own] = False
+        candidates = np.flatnonzero(near)
+        if len(candidates) == 0:
+            return []
+        points = self._sample_points(sight)[candidates].reshape(-1, 3)
+        targets = np.repeat(candidates, 5)
+        clear = sight.clear(np.broadcast_to(origin, points.shape), points, np.full(len(points), own), targets)
+        return [int(j) for j in candidates[clear.reshape(-1, 5).any(axis=1)]]
+
+    @staticmethod
+    def _sample_points(sight: Any) -> np.ndarray:
+        """(N, 5, 3): per box its centre and its four side corners at mid height, 10 % towards the centre."""
+        cached = getattr(sight, "sample_points", None)
+        if cached is None:
+            boxes = sight.boxes
+            signs = np.array(
+                [[0.0, 0.0, 0.0], [0.9, 0.9, 0.0], [-0.9, 0.9, 0.0], [-0.9, -0.9, 0.0], [0.9, -0.9, 0.0]]
+            )
+            offsets = np.einsum("kj,nj,nij->nki", signs, boxes.half, boxes.rotations)
+            cached = sight.sample_points = boxes.centers[:, None, :] + offsets
+        return np.asarray(cached)
 
     def _cpm(
         self,
@@ -399,7 +417,7 @@ class V2XService:
     ) -> _Outgoing | None:
         t = frame.time
         own = next((j for j, e in enumerate(frame.entities) if e.name == station.name), -1)
-        seen = self._visible(sight, origin, own, frame, station.perception_range)
+        seen = self._visible(sight, origin, own, station.perception_range)
         for j in seen:
             station.first_seen.setdefault(frame.entities[j].name, t)
         objs = [frame.entities[j] for j in seen]
@@ -489,9 +507,7 @@ class V2XService:
             )
             for r in np.flatnonzero(delivered[m]):
                 arrival = frame.time + float(delivery.delay[m, r])
-                heapq.heappush(
-                    self._pending, (arrival, next(self._seq), int(r), out.kind, out, sender.name, frame.time)
-                )
+                heapq.heappush(self._pending, (arrival, next(self._seq), int(r), out, frame.time))
         header = TYPESTORE.types["std_msgs/msg/Header"](stamp=sent, frame_id="map")
         self._transmissions.publish(
             TYPESTORE.types["carlos_v2x_msgs/msg/TransmissionArray"](header=header, transmissions=records),
@@ -505,10 +521,10 @@ class V2XService:
 
     def _deliver(self, until: float) -> None:
         while self._pending and self._pending[0][0] <= until:
-            arrival, _, r, kind, out, sender, generated = heapq.heappop(self._pending)
+            arrival, _, r, out, generated = heapq.heappop(self._pending)
             receiver = self.stations[r]
-            receiver.publishers[kind].publish(out.msg, arrival)
-            self.metrics_acc.received(receiver.name, sender, generated)
+            receiver.publishers[out.kind].publish(out.msg, arrival)
+            self.metrics_acc.received(r, out.sender, generated)
             if receiver.name == self._ego_name:
                 if out.kind == "cpm":
                     for name in out.objects:
@@ -526,7 +542,7 @@ class V2XService:
         own = next(j for j, e in enumerate(frame.entities) if e.name == frame.ego)
         reach = self.config.ego_sensor_range
         origin = np.array(_antenna(ego))
-        seen = {frame.entities[j].name for j in self._visible(sight, origin, own, frame, reach)}
+        seen = {frame.entities[j].name for j in self._visible(sight, origin, own, reach)}
         nearby = {
             e.name
             for e in frame.entities
