@@ -312,7 +312,7 @@ class V2XService:
                 width=entity.bbox.width if entity is not None else 0.0,
             )
 
-        for i in np.flatnonzero(cam_due.send & present):
+        for i in map(int, np.flatnonzero(cam_due.send & present)):
             station = self.stations[i]
             entity = None if station.rsu else entities.get(station.name)
             if station.cam:
