@@ -15,7 +15,6 @@
 
 from __future__ import annotations
 
-import re
 from collections import defaultdict
 from collections.abc import Iterable
 
@@ -25,21 +24,6 @@ BAND = 100.0
 MAX_BANDED = 1000.0
 #: A CPM object is known for this long after its CPM arrived (s).
 CPM_FRESH = 1.0
-
-_RANGE = re.compile(r"^v2x\.packetDeliveryRatio\.0-([0-9.]+)m$")
-
-
-def pdr_ranges(metric_names: Iterable[str]) -> list[float]:
-    """The distances r of `v2x.packetDeliveryRatio.0-<r>m` among metric names (criteria)."""
-    out = set()
-    for name in metric_names:
-        match = _RANGE.match(name)
-        if match:
-            try:
-                out.add(float(match.group(1)))
-            except ValueError:
-                continue
-    return sorted(out)
 
 
 def _edge(value: float) -> str:

@@ -32,13 +32,14 @@ from typing import Any
 import numpy as np
 
 from simcore.errors import BadInput
+from simcore.evaluation.criteria import ranges_of
 from simcore.spec import NumberOrParameter, SimulationRunSpec
 from simcore.transport.bus import Bus, Publisher
 from simcore.transport.messages import TYPESTORE, ros_name, stamp
 from simcore.v2x import etsi
 from simcore.v2x.channel import Channel, ChannelParameters
 from simcore.v2x.geo import GeoReference, geo_reference_of
-from simcore.v2x.metrics import V2XMetrics, pdr_ranges
+from simcore.v2x.metrics import V2XMetrics
 from simcore.v2x.triggers import T_GEN_CPM_MAX, T_GEN_CPM_MIN, CamTriggers, CpmObjectTriggers, HazardTriggers
 from simcore.world.opendrive import OpenDrive
 from simcore.world.state import EntityState, WorldFrame
@@ -161,7 +162,7 @@ class V2XService:
         self._scene: Any = None
         self.parameters = parameters
         criteria = [*spec.evaluation.criteria, *(c for s in spec.scenarios for c in s.criteria)]
-        self.metrics_acc = V2XMetrics(pdr_ranges(c.metric for c in criteria))
+        self.metrics_acc = V2XMetrics(ranges_of((c.metric for c in criteria), "v2x.packetDeliveryRatio"))
         self.stations: list[Station] = []
         self._rsus = self._rsu_stations()
         self._cam: CamTriggers | None = None
