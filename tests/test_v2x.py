@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -203,3 +204,24 @@ def test_a_station_does_not_receive_itself():
     pts[1, 0] = 10.0
     lost = Channel(ChannelParameters(), seed=0).transmit(0, 0.1, pts, pts, same=np.eye(2, dtype=bool)).lost
     assert lost.tolist() == [[-1, DELIVERED], [DELIVERED, -1]]
+
+
+def test_within_criterion_names_the_banded_delivery_ratio():
+    from pydantic import TypeAdapter
+
+    from simcore.evaluation.criteria import ranges_of
+    from simcore.spec import Criterion
+    from simcore.v2x.metrics import V2XMetrics
+
+    adapter: TypeAdapter[Any] = TypeAdapter(Criterion)
+    criterion = adapter.validate_python("v2x.packetDeliveryRatio >= 0.9 within 300 m")
+    assert criterion.metric == "v2x.packetDeliveryRatio.0-300m"
+    assert ranges_of([criterion.metric, "detection.recall.0-50m"], "v2x.packetDeliveryRatio") == [300.0]
+    metrics = V2XMetrics([300.0])
+    metrics.links(np.array([50.0, 150.0, 250.0, 350.0]), np.array([True, True, False, False]))
+    out = metrics.result()
+    assert out["v2x.packetDeliveryRatio.0-300m"] == pytest.approx(2 / 3)
+    assert out["v2x.packetDeliveryRatio.300-400m"] == 0.0
+    assert out["v2x.packetDeliveryRatio"] == 0.5
+    with pytest.raises(ValueError, match="applies to detection"):
+        adapter.validate_python("minDistance >= 2 within 50 m")
