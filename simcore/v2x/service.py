@@ -417,7 +417,11 @@ class V2XService:
         sight: Any,
     ) -> _Outgoing | None:
         t = frame.time
-        own = next((j for j, e in enumerate(frame.entities) if e.name == station.name), -1)
+        own = (
+            -1
+            if station.rsu
+            else next((j for j, e in enumerate(frame.entities) if e.name == station.name), -1)
+        )
         seen = self._visible(sight, origin, own, station.perception_range)
         for j in seen:
             station.first_seen.setdefault(frame.entities[j].name, t)
@@ -433,14 +437,14 @@ class V2XService:
         north = float(self.geo.north_angles(origin[:1], origin[1:2])[0])
         perceived = []
         names = []
-        for e, take in zip(objs, chosen, strict=True):
+        for j, e, take in zip(seen, objs, chosen, strict=True):
             if not take:
                 continue
             cx, cy, cz = e.box_center()
             vx, vy = e.velocity
             perceived.append(
                 etsi.PerceivedObject(
-                    object_id=1 + next(k for k, f in enumerate(frame.entities) if f.name == e.name),
+                    object_id=1 + j,  # the entity's position in the frame, as in the sensors' labels
                     dx=cx - float(origin[0]),
                     dy=cy - float(origin[1]),
                     dz=cz - float(origin[2]),
