@@ -67,6 +67,10 @@ class V2XMetrics:
         if generated > self.newest[receiver, sender]:
             self.newest[receiver, sender] = generated
 
+    def received_many(self, receivers: np.ndarray, senders: np.ndarray, generated: float) -> None:
+        """`received` for many copies generated at the same time."""
+        self.newest[receivers, senders] = np.maximum(self.newest[receivers, senders], generated)
+
     def sample_age(self, time: float) -> None:
         known = np.isfinite(self.newest)
         if not known.any():

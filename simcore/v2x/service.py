@@ -173,6 +173,7 @@ class V2XService:
         #: CPU seconds of this process spent so far in each phase of `step` (bench/v2x.py)
         self.seconds = {"generate": 0.0, "channel": 0.0, "deliver": 0.0, "metrics": 0.0}
         self._seq = itertools.count()
+        self._batch: tuple[list[_Outgoing], np.ndarray, np.ndarray, np.ndarray, float] | None = None
         self._ego_name: str | None = None
         self._ego_cpm: dict[str, float] = {}  # object → arrival of the newest CPM about it at the ego
         self._transmissions = bus.advertise(TRANSMISSIONS_TOPIC, "carlos_v2x_msgs/msg/TransmissionArray")
@@ -510,9 +511,8 @@ class V2XService:
                     delays=delivery.delay[m, cols].astype(np.float32),
                 )
             )
-            for r in np.flatnonzero(delivered[m]):
-                arrival = frame.time + float(delivery.delay[m, r])
-                heapq.heappush(self._pending, (arrival, next(self._seq), int(r), out, frame.time))
+        rows, cols = np.nonzero(delivered)
+        self._batch = (outgoing, rows, cols, frame.time + delivery.delay[rows, cols], frame.time)
         header = TYPESTORE.types["std_msgs/msg/Header"](stamp=sent, frame_id="map")
         self._transmissions.publish(
             TYPESTORE.types["carlos_v2x_msgs/msg/TransmissionArray"](header=header, transmissions=records),
@@ -525,11 +525,31 @@ class V2XService:
         return np.array([-1 if s.rsu else index.get(s.name, -1) for s in self.stations], dtype=np.int64)
 
     def _deliver(self, until: float) -> None:
+        """Publish every copy arriving before `until` on its receiver's topic, in order of arrival: this step's
+        (`_batch`) and earlier ones still under way (`_pending`); later ones wait in `_pending`."""
+        due: list[tuple[float, int, int, _Outgoing, float]] = []
         while self._pending and self._pending[0][0] <= until:
-            arrival, _, r, out, generated = heapq.heappop(self._pending)
+            item = heapq.heappop(self._pending)
+            self.metrics_acc.received(item[2], item[3].sender, item[4])
+            due.append(item)
+        late = bool(due)
+        if self._batch is not None:
+            outgoing, rows, cols, arrivals, generated = self._batch
+            self._batch = None
+            now = arrivals <= until
+            senders = np.array([outgoing[m].sender for m in rows], dtype=np.int64)
+            self.metrics_acc.received_many(cols[now], senders[now], generated)
+            for k in np.argsort(arrivals, kind="stable"):
+                item = (float(arrivals[k]), next(self._seq), int(cols[k]), outgoing[rows[k]], generated)
+                if now[k]:
+                    due.append(item)
+                else:
+                    heapq.heappush(self._pending, item)
+        if late:
+            due.sort(key=lambda item: (item[0], item[1]))
+        for arrival, _, r, out, _ in due:
             receiver = self.stations[r]
             receiver.publishers[out.kind].publish(out.msg, arrival)
-            self.metrics_acc.received(r, out.sender, generated)
             if receiver.name == self._ego_name:
                 if out.kind == "cpm":
                     for name in out.objects:
