@@ -411,7 +411,12 @@ def test_generate_reproduces_the_roads() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("manifest", "exit_code"),
-    [("automated-testing.yaml", 0), ("automated-testing-failing.yaml", 1), ("prototyping.yaml", 0)],
+    [
+        ("automated-testing.yaml", 0),
+        ("automated-testing-failing.yaml", 1),
+        ("prototyping.yaml", 0),
+        ("cooperative-perception.yaml", 0),
+    ],
 )
 def test_carlos_run_gives_the_documented_exit_code(manifest: str, exit_code: int, tmp_path: Path) -> None:
     carlos = Path(sys.executable).parent / "carlos"
