@@ -12,12 +12,18 @@ from simcore.spec import SimulationRunSpec
 
 #: metrics the runner adds besides `KNOWN_METRICS` (the perception loop's)
 _RUNNER_METRICS = frozenset({"systemUnderTest.failed"})
+#: V2X metrics measured per distance band
+_V2X_BANDED = "v2x.packetDeliveryRatio."
 
 
-def unknown_metric(metric: str, detection: bool) -> str | None:
+def unknown_metric(metric: str, detection: bool, v2x: bool = False) -> str | None:
     """Why `metric` can never be measured (None when it can), with the closest known names (pure)."""
+    if metric.startswith("v2x.") and not v2x:
+        return f"metric {metric!r} needs spec.v2x"
     if metric in KNOWN_METRICS or metric in _RUNNER_METRICS:
         return None
+    if metric.startswith(_V2X_BANDED):
+        return None  # per distance band (`v2x.packetDeliveryRatio.0-100m`): the bands depend on the spec
     if metric.startswith("detection."):
         if detection:
             return None  # per class and distance band: the names depend on the data
@@ -30,11 +36,12 @@ def unknown_metric(metric: str, detection: bool) -> str | None:
 def check_criteria_metrics(spec: SimulationRunSpec, file: str) -> None:
     """Every criterion names a metric that a run can measure."""
     detection = spec.evaluation.detection is not None
+    v2x = spec.v2x is not None
     named = [(f"spec.evaluation.criteria[{i}]", c) for i, c in enumerate(spec.evaluation.criteria)]
     for p, scenario in enumerate(spec.scenarios):
         named += [(f"spec.scenarios[{p}].criteria[{i}]", c) for i, c in enumerate(scenario.criteria)]
     for field, criterion in named:
-        problem = unknown_metric(criterion.metric, detection)
+        problem = unknown_metric(criterion.metric, detection, v2x)
         if problem is not None:
             raise BadInput(problem, file=file, field=field)
 

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from simcore.scenario.engine import ScenarioEngine
     from simcore.scenario.model import Scenario
     from simcore.sensors.loop import PerceptionLoop
+    from simcore.v2x.service import V2XService
     from simcore.world.opendrive import OpenDrive
     from simcore.world.sumo import SumoWorld
 
@@ -67,6 +68,7 @@ class Assembly:
     closed_loop: ClosedLoop | None = None
     recorder: McapRecorder | None = None
     perception: PerceptionLoop | None = None
+    v2x: V2XService | None = None
     _closed: bool = field(default=False, repr=False)
 
     @property
@@ -75,6 +77,7 @@ class Assembly:
         return (
             self.metrics is not None
             or self.perception is not None
+            or self.v2x is not None
             or self.closed_loop is not None
             or self.world.has_consumers()
         )
@@ -252,6 +255,17 @@ def assemble(
             parts.perception = PerceptionLoop(
                 spec, bus, road=road, road_file=scenario.road_file, seed=point.seed, base_dir=base_dir
             )
+        if spec.v2x is not None:
+            from simcore.v2x.service import V2XService
+
+            parts.v2x = V2XService(
+                spec,
+                bus,
+                road=road,
+                road_file=scenario.road_file,
+                parameters=scenario.parameters,
+                seed=point.seed,
+            )
         return parts
     except BaseException:
         if parts is not None:
@@ -287,6 +301,7 @@ def drive(
     """Step the run until the scenario ends or `simulation.maxSeconds`; publishes and measures every frame
     that anything reads."""
     spec = parts.run.spec
+    v2x = parts.v2x
     engine, closed_loop, perception, metrics, world = (
         parts.engine,
         parts.closed_loop,
@@ -309,6 +324,8 @@ def drive(
         world.publish(frame)
         if perception is not None:
             perception.step(frame)
+        if v2x is not None:
+            v2x.step(frame)
 
     if frame is not None:
         consume()
@@ -346,6 +363,8 @@ def outcome(parts: Assembly) -> Outcome:
     end_reason = engine.ended_by or "maxSeconds"
     result["stopTriggered"] = 1.0 if end_reason == "stopTrigger" else 0.0
     log_lines = list(engine.log)
+    if parts.v2x is not None:
+        result.update(parts.v2x.metrics())
     if parts.perception is not None:
         result.update(parts.perception.metrics())
         if parts.perception.failure is not None:

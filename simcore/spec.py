@@ -327,9 +327,12 @@ def _criterion_from_string(value: Any) -> Any:
             )
         metric, op, raw, within = match.groups()
         if within is not None:
-            # `detection.recall >= 0.9 within 50 m` is the metric over objects closer than 50 m
-            if not metric.startswith("detection."):
-                raise ValueError(f"{value!r}: 'within N m' applies to detection.* metrics only")
+            # `detection.recall >= 0.9 within 50 m` is the metric over objects closer than 50 m,
+            # `v2x.packetDeliveryRatio >= 0.9 within 300 m` the one over links shorter than 300 m
+            if not metric.startswith(("detection.", "v2x.packetDeliveryRatio")):
+                raise ValueError(
+                    f"{value!r}: 'within N m' applies to detection.* and v2x.packetDeliveryRatio metrics only"
+                )
             try:
                 reach = float(within)
             except ValueError as exc:
@@ -358,9 +361,9 @@ class CriterionModel(Model):
     metric: str = Field(
         description=(
             "Metric name: collision, minDistance, minTimeHeadway, minTimeToCollision, maxDeceleration, "
-            "maxSpeed, stopTriggered, simSeconds, detection.recall, … (see README). As a string, "
-            "`detection.recall >= 0.9 within 50 m` is the metric `detection.recall.0-50m` (objects closer "
-            "than 50 m)."
+            "maxSpeed, stopTriggered, simSeconds, detection.recall, v2x.packetDeliveryRatio, … (see README). As a "
+            "string, `detection.recall >= 0.9 within 50 m` is the metric `detection.recall.0-50m` (objects "
+            "closer than 50 m)."
         ),
         min_length=1,
         max_length=200,
@@ -735,6 +738,162 @@ class CameraSensor(_SensorBase):
 Sensor = Annotated[LidarSensor | CameraSensor, Field(discriminator="type")]
 
 
+#: A number, or `$name`: the value of the scenario parameter `name` in each run (so a sweep can vary it).
+NumberOrParameter = StrictFloat | StrictInt | Annotated[str, Field(pattern=r"^\$[A-Za-z_][A-Za-z0-9_]*$")]
+
+
+class GeoOrigin(Model):
+    """The WGS84 position of the map origin (the map frame is the local east/north plane there)."""
+
+    latitude: float = Field(ge=-90, le=90, description="Latitude of the map origin, degrees.")
+    longitude: float = Field(ge=-180, le=180, description="Longitude of the map origin, degrees.")
+    altitude: float = Field(0.0, ge=-1000, le=10000, description="Altitude of z = 0, m. Default 0.")
+
+
+class V2XChannel(Model):
+    """The radio channel: log-distance path loss from a free-space reference, shadowing, fading, blocked
+    line of sight, latency, jitter and a channel-busy limit. Numbers may be `$parameters`."""
+
+    frequency_hz: float = Field(5.9e9, gt=1e6, le=1e11, description="Carrier frequency, Hz. Default 5.9e9.")
+    tx_power_dbm: NumberOrParameter = Field(23.0, description="Transmit power, dBm. Default 23.")
+    antenna_gain_db: float = Field(
+        0.0, ge=-30, le=30, description="Antenna gain of each side (transmit and receive), dB. Default 0."
+    )
+    sensitivity_dbm: NumberOrParameter = Field(-90.0, description="Receiver sensitivity, dBm. Default -90.")
+    path_loss_exponent: NumberOrParameter = Field(
+        2.7, description="Path-loss exponent (2 free space, 2.7-3.5 urban). Default 2.7."
+    )
+    reference_distance: float = Field(
+        1.0, gt=0, le=1000, description="Free-space reference distance d0, m. Default 1."
+    )
+    shadowing_sigma_db: NumberOrParameter = Field(
+        4.0, description="Log-normal shadowing standard deviation, dB (0: none). Default 4."
+    )
+    fading_m: float | None = Field(
+        None,
+        gt=0,
+        le=100,
+        description="Nakagami-m fading of the received power (1: Rayleigh). Default: none.",
+    )
+    line_of_sight: bool = Field(
+        True,
+        description=(
+            "Links whose straight line crosses an entity box or the road scene (surface, OpenDRIVE objects) "
+            "lose `nlosLossDb`. Default true."
+        ),
+    )
+    nlos_loss_db: NumberOrParameter = Field(
+        20.0, description="Extra loss without line of sight, dB. Default 20."
+    )
+    latency_seconds: float = Field(0.002, ge=0, le=10, description="Delivery latency, s. Default 0.002.")
+    jitter_seconds: float = Field(
+        0.001, ge=0, le=10, description="Extra uniform random delay up to this, s. Default 0.001."
+    )
+    max_messages_per_second: float | None = Field(
+        None,
+        gt=0,
+        le=1e6,
+        description="Channel busy: a receiver takes at most this many messages per second (the strongest). Default: no limit.",
+    )
+
+
+class V2XStation(Model):
+    """A scenario entity that takes part in V2X."""
+
+    entity: str = Field(description="Scenario entity name.", min_length=1, max_length=256)
+    cam: bool = Field(True, description="Send CAMs (ETSI EN 302 637-2 generation rules). Default true.")
+    denm: bool = Field(
+        True, description="Send DENMs on its hazards (hard braking, stationary). Default true."
+    )
+    cpm: bool = Field(
+        False,
+        description="Send CPMs of the objects it perceives (ground truth in line of sight). Default false.",
+    )
+    perception_range: float = Field(
+        50.0, gt=0, le=1000, description="Range of its perception for CPMs, m. Default 50."
+    )
+
+
+class V2X(Model):
+    """V2X: stations, message generation and the radio channel."""
+
+    stations: list[V2XStation] | None = Field(
+        None,
+        description="Entities that take part. Default: every vehicle (CAM and DENM).",
+        max_length=1000,
+    )
+    channel: V2XChannel = Field(default_factory=V2XChannel, description="The radio channel.")
+    origin: GeoOrigin | None = Field(
+        None,
+        description=(
+            "WGS84 position of the map origin. Default: the OpenDRIVE header's geoReference, else "
+            "latitude 0, longitude 0."
+        ),
+    )
+    hard_braking: float = Field(
+        4.0, gt=0, le=20, description="Deceleration that raises a hard-braking DENM, m/s². Default 4."
+    )
+    ego_sensor_range: float = Field(
+        50.0,
+        gt=0,
+        le=1000,
+        description=(
+            "Range of the ego's own sensors for the CPM coverage metric (objects in line of sight within it "
+            "count as seen). Default 50."
+        ),
+    )
+
+
+class RoadPose(Model):
+    """A position on the OpenDRIVE road: road id, s along the reference line, t to the left of it."""
+
+    road_id: str = Field(description="OpenDRIVE road id.", min_length=1, max_length=256)
+    s: NumberOrParameter = Field(description="Distance along the road's reference line, m.")
+    t: NumberOrParameter = Field(0.0, description="Lateral offset, m (positive: left). Default 0.")
+
+
+class WorldPosition(Model):
+    """A position in the map frame (ENU)."""
+
+    x: NumberOrParameter = Field(description="East, m.")
+    y: NumberOrParameter = Field(description="North, m.")
+    z: NumberOrParameter = Field(0.0, description="Ground height, m. Default 0.")
+
+
+class RsuV2X(Model):
+    """The V2X station of a roadside unit."""
+
+    cam: bool = Field(True, description="Send CAMs (every second). Default true.")
+    cpm: bool = Field(True, description="Send CPMs of the objects it perceives. Default true.")
+    perception_range: float = Field(
+        80.0,
+        gt=0,
+        le=1000,
+        description="Range of its perception (ground truth in line of sight from its mast), m. Default 80.",
+    )
+
+
+class Infrastructure(Model):
+    """A roadside unit: a fixed pose and an optional V2X station."""
+
+    name: DnsLabel = Field(description="Name (topics `/carlos/infrastructure/<name>/…`).")
+    position: WorldPosition | None = Field(None, description="Where it stands (map frame); or `road`.")
+    road: RoadPose | None = Field(None, description="Where it stands on the road; or `position`.")
+    height: NumberOrParameter = Field(
+        6.0, description="Height of the mast (antenna, sensors) above ground, m. Default 6."
+    )
+    yaw: NumberOrParameter = Field(
+        0.0, description="Orientation, degrees counter-clockwise from east. Default 0."
+    )
+    v2x: RsuV2X | None = Field(None, description="Its V2X station. Default: none.")
+
+    @model_validator(mode="after")
+    def _one_pose(self) -> Infrastructure:
+        if (self.position is None) == (self.road is None):
+            raise ValueError(f"infrastructure {self.name!r}: give exactly one of position and road")
+        return self
+
+
 #: Environment variables CARLOS sets in a run pod's containers for their wiring (transport, discovery):
 #: a system under test may not set them (any `CARLOS_…` name is reserved too).
 RESERVED_ENV = frozenset(
@@ -907,6 +1066,18 @@ class SimulationRunSpec(Model):
             "`carlos run --live`. Local runs of one index only. Default false."
         ),
     )
+    v2x: V2X | None = Field(
+        None,
+        description=(
+            "V2X: CAMs, CPMs and DENMs over a radio channel model, received per station on "
+            "`/carlos/<entity>/v2x/{cam,cpm,denm}`, and the `v2x.*` metrics. Default: off."
+        ),
+    )
+    infrastructure: list[Infrastructure] = Field(
+        default_factory=list,
+        description="Roadside units (fixed poses, optional V2X station). Default: none.",
+        max_length=100,
+    )
     evaluation: Evaluation = Field(default_factory=Evaluation, description="Verdict criteria.")
     recording: Recording = Field(default_factory=Recording, description="MCAP recording.")
     output: Output = Field(default_factory=Output, description="Where results go.")
@@ -944,6 +1115,15 @@ class SimulationRunSpec(Model):
                 raise ValueError(
                     "search.objective: the criteria margin needs criteria: add evaluation.criteria, or "
                     "set search.objective.metric to a run metric"
+                )
+        rsus: set[str] = set()
+        for rsu in self.infrastructure:
+            if rsu.name in rsus:
+                raise ValueError(f"infrastructure name {rsu.name!r} is used twice; names must be unique")
+            rsus.add(rsu.name)
+            if rsu.v2x is not None and self.v2x is None:
+                raise ValueError(
+                    f"infrastructure {rsu.name!r} has a V2X station but V2X is off: add spec.v2x (e.g. `v2x: {{}}`)"
                 )
         detection = self.evaluation.detection
         if detection is not None:

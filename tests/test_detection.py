@@ -121,7 +121,7 @@ def test_undefined_metrics_are_absent() -> None:
 def test_within_ranges_and_per_class_bands() -> None:
     from pydantic import TypeAdapter
 
-    from simcore.evaluation.detection import ranges_of
+    from simcore.evaluation.criteria import ranges_of
     from simcore.spec import Criterion
 
     criterion = TypeAdapter(Criterion).validate_python("detection.recall >= 0.9 within 50 m")

@@ -1,7 +1,7 @@
 """Writes examples/live/foxglove-layout.json, the Foxglove layout for `carlos run --live` and recordings.
 
 3D view following the ego (TF, ground-truth boxes, lidar points, a detector's boxes), the ego's speed and
-the gap metrics as plots, and the run status. Built with foxglove-sdk's typed layout API, so it stays valid;
+the gap metrics as plots, the run status, and the V2X messages the ego receives (CPMs, DENMs; `spec.v2x`). Built with foxglove-sdk's typed layout API, so it stays valid;
 `python examples/live/make_layout.py` regenerates it (a test fails when the file drifts).
 """
 
@@ -38,6 +38,12 @@ def layout() -> fl.Layout:
         ),
     )
     status = fl.RawMessagesPanel(title="Run status", config=fl.RawMessagesConfig(topic_path="/carlos/status"))
+    cpm = fl.RawMessagesPanel(
+        title="Ego V2X: CPMs received", config=fl.RawMessagesConfig(topic_path=f"/carlos/{EGO}/v2x/cpm")
+    )
+    denm = fl.RawMessagesPanel(
+        title="Ego V2X: DENMs received", config=fl.RawMessagesConfig(topic_path=f"/carlos/{EGO}/v2x/denm")
+    )
     return fl.Layout(
         content=fl.SplitContainer(
             direction="row",
@@ -50,6 +56,8 @@ def layout() -> fl.Layout:
                         items=[
                             fl.SplitItem(proportion=2, content=speed),
                             fl.SplitItem(proportion=1, content=status),
+                            fl.SplitItem(proportion=1, content=cpm),
+                            fl.SplitItem(proportion=1, content=denm),
                         ],
                     ),
                 ),

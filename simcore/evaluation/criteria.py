@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import operator
+import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -92,6 +93,20 @@ def _evaluate_one(criterion: CriterionModel, metrics: Mapping[str, float]) -> Cr
         optional=criterion.optional,
         message=message,
     )
+
+
+def ranges_of(metrics: Iterable[str], prefix: str = "detection") -> list[float]:
+    """The distances r of the metric names `<prefix>[.…].0-<r>m` (criteria such as `… within 50 m`)."""
+    pattern = re.compile(rf"^{re.escape(prefix)}(?:\.[A-Za-z0-9_.]*?)?\.0-([0-9.]+)m$")
+    out = set()
+    for name in metrics:
+        match = pattern.match(name)
+        if match:
+            try:
+                out.add(float(match.group(1)))
+            except ValueError:
+                continue
+    return sorted(out)
 
 
 def evaluate(criteria: Iterable[CriterionModel], metrics: Mapping[str, float]) -> list[CriterionResult]:

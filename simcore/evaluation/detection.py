@@ -18,16 +18,15 @@ sensor frame) with `…/objects/info` (lidar points per object); the detections 
   per class `detection.recall.<class>` (object class), `detection.precision.<class>` (detected class);
   the class metrics per band too (`detection.recall.car.0-30m`). Ranges from 0 that criteria name
   (`detection.recall >= 0.9 within 50 m`, i.e. `detection.recall.0-50m`) are computed as well
-  (`ranges_of`).
+  (`simcore.evaluation.criteria.ranges_of`).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-import re
 from collections import defaultdict
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -415,19 +414,3 @@ class DetectionEvaluator:
             if label and counts.tp + counts.fp:
                 out[f"detection.precision.{label}{suffix}"] = counts.tp / (counts.tp + counts.fp)
         return out
-
-
-_RANGE = re.compile(r"^detection\.[A-Za-z0-9_.]*?\.0-([0-9.]+)m$")
-
-
-def ranges_of(metrics: Iterable[str]) -> list[float]:
-    """The distances r of the metric names ending in `.0-<r>m` (criteria such as `… within 50 m`)."""
-    out = set()
-    for name in metrics:
-        match = _RANGE.match(name)
-        if match:
-            try:
-                out.add(float(match.group(1)))
-            except ValueError:
-                continue
-    return sorted(out)

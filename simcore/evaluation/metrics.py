@@ -77,6 +77,18 @@ METRICS: dict[str, str] = {
     "egoDistance": "no frame with an ego was recorded",
     "simSeconds": "no frame was recorded",
     "stopTriggered": "the runner did not report how the run ended",
+    # spec.v2x (simcore/v2x/metrics.py)
+    "v2x.packetDeliveryRatio": "V2X is off (spec.v2x) or no message went between two stations",
+    "v2x.ageOfInformation.mean": "V2X is off or no station received a message",
+    "v2x.ageOfInformation.max": "V2X is off or no station received a message",
+    "v2x.cpmObjectCoverage": "V2X is off, there is no ego, or its own sensors never missed a nearby object",
+    "v2x.cpmObjectsFromV2xOnly": "V2X is off",
+    "v2x.hazardToFirstDenm": "V2X is off, no other station had a hazard, or no hazard DENM reached the ego",
+    "v2x.hazards": "V2X is off",
+    "v2x.hazardsMissed": "V2X is off",
+    "v2x.messages.cam": "V2X is off",
+    "v2x.messages.cpm": "V2X is off",
+    "v2x.messages.denm": "V2X is off",
 }
 KNOWN_METRICS = frozenset(METRICS)
 

@@ -193,7 +193,8 @@ class PerceptionLoop:
 
             self.rig = SensorRig(spec.sensors, road, bus, seed, road_file=road_file)
         if spec.evaluation.detection is not None:
-            from simcore.evaluation.detection import DetectionEvaluator, ranges_of
+            from simcore.evaluation.criteria import ranges_of
+            from simcore.evaluation.detection import DetectionEvaluator
 
             criteria = [*spec.evaluation.criteria, *(c for s in spec.scenarios for c in s.criteria)]
             self.evaluator = DetectionEvaluator(

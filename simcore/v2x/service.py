@@ -1,0 +1,581 @@
+"""V2X in a run: stations (entities, roadside units) send CAMs, CPMs and DENMs through the channel model;
+each receiver gets what the channel delivers on its own topics, and the `v2x.*` metrics accumulate.
+
+The runner creates one `V2XService` after its recorder subscribed to the bus and calls `step(frame)` after
+publishing each frame; `metrics()` gives the `v2x.*` metrics.
+
+Topics (recorded): `/carlos/<entity>/v2x/cam|cpm|denm` per receiving entity station,
+`/carlos/infrastructure/<rsu>/v2x/cam|cpm|denm` per receiving RSU, `/carlos/v2x/transmissions` (every link
+of every message of a step and its outcome, `carlos_v2x_msgs/msg/TransmissionArray`). A message sent at
+frame time t and delayed by d is published with time t + d in the step it is sent (latency and jitter are
+well below a step; a longer delay is published in the step it arrives).
+
+Stations: `spec.v2x.stations` or every vehicle of the first frame, in frame order (station ids 1, 2, …), then
+the RSUs with a `v2x` station (ids 1001, 1002, …). An entity station absent from a frame neither sends nor
+receives in it. Antennas sit 0.1 m above the entity's box, RSU antennas at the mast height. RSU and vehicle
+CPMs contain the other entities within the station's perception range whose box centre or a box corner (at
+mid height) is in line of sight; a CPM goes out at most every 100 ms, with the objects the TS 103 324
+inclusion rules select, or every second without any.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from simcore.errors import BadInput
+from simcore.evaluation.criteria import ranges_of
+from simcore.spec import NumberOrParameter, SimulationRunSpec
+from simcore.transport.bus import Bus, Publisher
+from simcore.transport.messages import TYPESTORE, ros_name, stamp
+from simcore.v2x import etsi
+from simcore.v2x.channel import Channel, ChannelParameters
+from simcore.v2x.geo import GeoReference, geo_reference_of
+from simcore.v2x.metrics import V2XMetrics
+from simcore.v2x.triggers import T_GEN_CPM_MAX, T_GEN_CPM_MIN, CamTriggers, CpmObjectTriggers, HazardTriggers
+from simcore.world.opendrive import OpenDrive
+from simcore.world.state import EntityState, WorldFrame
+
+TRANSMISSIONS_TOPIC = "/carlos/v2x/transmissions"
+RSU_STATION_BASE = 1000
+ANTENNA_ABOVE_ROOF = 0.1
+_SLACK = 1e-6
+
+
+def resolve_number(value: NumberOrParameter, parameters: Mapping[str, Any], field: str) -> float:
+    """A spec number, or the value of the scenario parameter `$name` it names."""
+    if isinstance(value, str):
+        name = value[1:]
+        if name not in parameters:
+            raise BadInput(
+                f"{value} names no parameter of the scenario (declare it or set it in spec.parameters or the sweep)",
+                field=field,
+            )
+        raw = parameters[name]
+        try:
+            number = float(raw)
+        except (TypeError, ValueError):
+            raise BadInput(f"{value} = {raw!r} is not a number", field=field) from None
+    else:
+        number = float(value)
+    if not math.isfinite(number):
+        raise BadInput(f"{value} is not a finite number", field=field)
+    return number
+
+
+def channel_parameters(spec: SimulationRunSpec, parameters: Mapping[str, Any]) -> ChannelParameters:
+    assert spec.v2x is not None
+    c = spec.v2x.channel
+
+    def number(name: str, value: NumberOrParameter) -> float:
+        return resolve_number(value, parameters, f"spec.v2x.channel.{name}")
+
+    sigma = number("shadowingSigmaDb", c.shadowing_sigma_db)
+    if not 0 <= sigma <= 30:
+        raise BadInput(f"shadowing of {sigma} dB is outside 0..30", field="spec.v2x.channel.shadowingSigmaDb")
+    exponent = number("pathLossExponent", c.path_loss_exponent)
+    if not 1 <= exponent <= 8:
+        raise BadInput(
+            f"path-loss exponent {exponent} is outside 1..8", field="spec.v2x.channel.pathLossExponent"
+        )
+    return ChannelParameters(
+        frequency_hz=c.frequency_hz,
+        tx_power_dbm=number("txPowerDbm", c.tx_power_dbm),
+        tx_gain_db=c.antenna_gain_db,
+        rx_gain_db=c.antenna_gain_db,
+        sensitivity_dbm=number("sensitivityDbm", c.sensitivity_dbm),
+        path_loss_exponent=exponent,
+        reference_distance=c.reference_distance,
+        shadowing_sigma_db=sigma,
+        fading_m=c.fading_m,
+        nlos_loss_db=number("nlosLossDb", c.nlos_loss_db),
+        latency=c.latency_seconds,
+        jitter=c.jitter_seconds,
+        max_messages_per_second=c.max_messages_per_second,
+    )
+
+
+@dataclass
+class Station:
+    name: str  # entity name, or the RSU's name
+    station_id: int
+    cam: bool
+    denm: bool
+    cpm: bool
+    perception_range: float
+    rsu_pose: tuple[float, float, float, float] | None = None  # x, y, antenna z, yaw (rad)
+    topic_prefix: str = ""
+    publishers: dict[str, Publisher] = field(default_factory=dict)
+    cpm_triggers: CpmObjectTriggers = field(default_factory=CpmObjectTriggers)
+    last_cpm: float = -math.inf
+    first_seen: dict[str, float] = field(default_factory=dict)
+    sequence: int = 0
+
+    @property
+    def rsu(self) -> bool:
+        return self.rsu_pose is not None
+
+
+@dataclass(frozen=True)
+class _Outgoing:
+    kind: str
+    sender: int
+    msg: Any
+    objects: tuple[str, ...] = ()  # CPM: the entities it describes
+    hazard: tuple[str, int, float] | None = None  # DENM: (station, cause, detection time)
+
+
+def _antenna(entity: EntityState) -> tuple[float, float, float]:
+    top = entity.z + entity.bbox.center_z + entity.bbox.height / 2
+    return entity.x, entity.y, top + ANTENNA_ABOVE_ROOF
+
+
+class V2XService:
+    def __init__(
+        self,
+        spec: SimulationRunSpec,
+        bus: Bus,
+        *,
+        road: OpenDrive | None,
+        road_file: Path | None,
+        parameters: Mapping[str, Any],
+        seed: int,
+    ) -> None:
+        if spec.v2x is None:
+            raise ValueError("V2XService needs spec.v2x")
+        self.spec = spec
+        self.config = spec.v2x
+        self.bus = bus
+        self.step_seconds = spec.simulation.step_seconds
+        self.channel = Channel(channel_parameters(spec, parameters), seed)
+        self.geo = self._geo_reference(road_file)
+        self.road = road
+        self.road_file = road_file
+        self._scene: Any = None
+        self.parameters = parameters
+        criteria = [*spec.evaluation.criteria, *(c for s in spec.scenarios for c in s.criteria)]
+        self.metrics_acc = V2XMetrics(ranges_of((c.metric for c in criteria), "v2x.packetDeliveryRatio"))
+        self.stations: list[Station] = []
+        self._rsus = self._rsu_stations()
+        self._cam: CamTriggers | None = None
+        self._hazards: HazardTriggers | None = None
+        self._pending: list[
+            tuple[float, int, int, _Outgoing, float]
+        ] = []  # arrival, seq, receiver, message, sent
+        #: CPU seconds of this process spent so far in each phase of `step` (bench/v2x.py)
+        self.seconds = {"generate": 0.0, "channel": 0.0, "deliver": 0.0, "metrics": 0.0}
+        self._seq = itertools.count()
+        self._batch: tuple[list[_Outgoing], np.ndarray, np.ndarray, np.ndarray, float] | None = None
+        self._ego_name: str | None = None
+        self._ego_cpm: dict[str, float] = {}  # object → arrival of the newest CPM about it at the ego
+        self._transmissions = bus.advertise(TRANSMISSIONS_TOPIC, "carlos_v2x_msgs/msg/TransmissionArray")
+
+    # --- set-up -----------------------------------------------------------------------------------------
+    def _geo_reference(self, road_file: Path | None) -> GeoReference:
+        origin = self.config.origin
+        if origin is not None:
+            return GeoReference.at_origin(origin.latitude, origin.longitude, origin.altitude)
+        if road_file is not None and road_file.suffix == ".xodr":
+            reference = geo_reference_of(road_file)
+            if reference is not None:
+                return reference
+        return GeoReference.at_origin(0.0, 0.0)
+
+    def _rsu_stations(self) -> list[Station]:
+        out: list[Station] = []
+        for index, rsu in enumerate(self.spec.infrastructure):
+            where = f"spec.infrastructure[{index}]"
+
+            def number(name: str, value: NumberOrParameter, where: str = where) -> float:
+                return resolve_number(value, self.parameters, f"{where}.{name}")
+
+            if rsu.position is not None:
+                x = number("position.x", rsu.position.x)
+                y = number("position.y", rsu.position.y)
+                z = number("position.z", rsu.position.z)
+            else:
+                assert rsu.road is not None
+                if self.road is None:
+                    raise BadInput(
+                        "a road position needs the scenario's OpenDRIVE road", field=f"{where}.road"
+                    )
+                if rsu.road.road_id not in self.road.roads:
+                    raise BadInput(f"the road has no road {rsu.road.road_id!r}", field=f"{where}.road.roadId")
+                s = number("road.s", rsu.road.s)
+                t = number("road.t", rsu.road.t)
+                if not 0 <= s <= self.road.road_length(rsu.road.road_id):
+                    raise BadInput(f"s = {s} lies outside road {rsu.road.road_id!r}", field=f"{where}.road.s")
+                pose = self.road.road_to_world(rsu.road.road_id, s, t)
+                x, y, z = pose.x, pose.y, pose.z
+            height = number("height", rsu.height)
+            yaw = math.radians(number("yaw", rsu.yaw))
+            if rsu.v2x is None:
+                continue
+            out.append(
+                Station(
+                    name=rsu.name,
+                    station_id=RSU_STATION_BASE + 1 + len(out),
+                    cam=rsu.v2x.cam,
+                    denm=False,
+                    cpm=rsu.v2x.cpm,
+                    perception_range=rsu.v2x.perception_range,
+                    rsu_pose=(x, y, z + height, yaw),
+                    topic_prefix=f"/carlos/infrastructure/{ros_name(rsu.name)}/v2x",
+                )
+            )
+        return out
+
+    def _setup(self, frame: WorldFrame) -> None:
+        names = {e.name for e in frame.entities}
+        if self.config.stations is None:
+            entity_stations = [
+                Station(e.name, 0, True, True, False, 50.0)
+                for e in frame.entities
+                if e.object_type == "vehicle"
+            ]
+        else:
+            entity_stations = []
+            for index, cfg in enumerate(self.config.stations):
+                if cfg.entity not in names:
+                    raise BadInput(
+                        f"no entity {cfg.entity!r} in the scenario (entities: {', '.join(sorted(names))})",
+                        field=f"spec.v2x.stations[{index}].entity",
+                    )
+                entity_stations.append(
+                    Station(cfg.entity, 0, cfg.cam, cfg.denm, cfg.cpm, cfg.perception_range)
+                )
+        for number, station in enumerate(entity_stations, start=1):
+            station.station_id = number
+            station.topic_prefix = f"/carlos/{ros_name(station.name)}/v2x"
+        self.stations = [*entity_stations, *self._rsus]
+        for station in self.stations:
+            for kind, typename in (("cam", etsi.CAM_TYPE), ("cpm", etsi.CPM_TYPE), ("denm", etsi.DENM_TYPE)):
+                station.publishers[kind] = self.bus.advertise(f"{station.topic_prefix}/{kind}", typename)
+        self.metrics_acc.stations([s.name for s in self.stations])
+        self._cam = CamTriggers(len(self.stations))
+        self._hazards = HazardTriggers(len(self.stations), hard_braking=self.config.hard_braking)
+
+    def _scene_for_sight(self) -> Any:
+        if self._scene is None and self.road is not None:
+            from simcore.sensors.rig import road_scene
+
+            self._scene = road_scene(self.road, self.road_file)
+        return self._scene
+
+    # --- one step ---------------------------------------------------------------------------------------
+    def step(self, frame: WorldFrame) -> None:
+        started = time.process_time()
+        if self._cam is None:
+            self._setup(frame)
+        assert self._cam is not None and self._hazards is not None
+        t = frame.time
+        self._ego_name = frame.ego
+        entities = {e.name: e for e in frame.entities}
+        present = np.array([s.rsu or s.name in entities for s in self.stations], dtype=bool)
+        n = len(self.stations)
+        pos = np.zeros((n, 3))
+        heading = np.zeros(n)
+        speed = np.zeros(n)
+        accel = np.zeros(n)
+        for i, station in enumerate(self.stations):
+            if station.rsu_pose is not None:
+                pos[i] = station.rsu_pose[:3]
+                heading[i] = station.rsu_pose[3]
+            elif station.name in entities:
+                e = entities[station.name]
+                pos[i] = _antenna(e)
+                heading[i], speed[i], accel[i] = e.heading, e.speed, e.acceleration
+        sight = self._sight(frame)
+        lat, lon, alt = self.geo.to_wgs84(pos[:, 0], pos[:, 1], pos[:, 2])
+        north = self.geo.north_angles(pos[:, 0], pos[:, 1])
+        outgoing: list[_Outgoing] = []
+        cam_due = self._cam.step(t, pos[:, :2], heading, speed)
+        etsi_heading = np.degrees(north - heading) % 360.0
+
+        def kinematics(i: int) -> etsi.Kinematics:
+            entity = None if self.stations[i].rsu else entities.get(self.stations[i].name)
+            return etsi.Kinematics(
+                latitude=float(lat[i]),
+                longitude=float(lon[i]),
+                altitude=float(alt[i]),
+                heading=float(etsi_heading[i]),
+                speed=float(speed[i]),
+                acceleration=float(accel[i]),
+                yaw_rate=entity.yaw_rate if entity is not None else 0.0,
+                length=entity.bbox.length if entity is not None else 0.0,
+                width=entity.bbox.width if entity is not None else 0.0,
+            )
+
+        for i in map(int, np.flatnonzero(cam_due.send & present)):
+            station = self.stations[i]
+            entity = None if station.rsu else entities.get(station.name)
+            if station.cam:
+                msg = etsi.cam(
+                    station.station_id,
+                    self._station_type(station, entity),
+                    t,
+                    kinematics(i),
+                    low_frequency=bool(cam_due.low_frequency[i]),
+                    rsu=station.rsu,
+                )
+                outgoing.append(_Outgoing("cam", i, msg))
+        for hazard in self._hazards.step(t, np.where(present, speed, 0.0), np.where(present, accel, 0.0)):
+            station = self.stations[hazard.station]
+            if station.rsu or not station.denm or not present[hazard.station]:
+                continue
+            if hazard.new:
+                station.sequence += 1
+            key = (station.name, hazard.cause, hazard.detection_time)
+            if frame.ego is not None and station.name != frame.ego:
+                self.metrics_acc.hazard(key)
+            msg = etsi.denm(
+                station.station_id,
+                self._station_type(station, entities.get(station.name)),
+                station.sequence,
+                t,
+                hazard.detection_time,
+                kinematics(hazard.station),
+                hazard.cause,
+                hazard.sub_cause,
+            )
+            outgoing.append(_Outgoing("denm", hazard.station, msg, hazard=key))
+        for i, station in enumerate(self.stations):
+            if station.cpm and present[i] and t - station.last_cpm >= T_GEN_CPM_MIN - _SLACK:
+                cpm = self._cpm(station, i, frame, pos[i], kinematics(i), sight)
+                if cpm is not None:
+                    outgoing.append(cpm)
+        clock = time.process_time()
+        self.seconds["generate"] += clock - started
+        if outgoing:
+            self._transmit(frame, outgoing, pos, present, sight)
+        self.seconds["channel"] += time.process_time() - clock
+        clock = time.process_time()
+        self._deliver(t + self.step_seconds - _SLACK)
+        self.seconds["deliver"] += time.process_time() - clock
+        clock = time.process_time()
+        self.metrics_acc.sample_age(t)
+        self._ego_view(frame, sight)
+        self.seconds["metrics"] += time.process_time() - clock
+
+    def _station_type(self, station: Station, entity: EntityState | None) -> int:
+        if station.rsu:
+            return etsi.STATION_TYPE_RSU
+        return etsi.STATION_TYPES.get(entity.category, 0) if entity is not None else 0
+
+    def _sight(self, frame: WorldFrame) -> Any:
+        from simcore.sensors.scene import Boxes
+        from simcore.v2x.sight import Sight
+
+        return Sight(Boxes.of(frame), self._scene_for_sight())
+
+    def _visible(self, sight: Any, origin: np.ndarray, own: int, reach: float) -> list[int]:
+        """Indexes of the frame's entities (other than `own`) whose box centre lies within `reach` of `origin`
+        (horizontally) and whose centre or a ground-plane box corner (at mid height, 10 % inside) is in line of
+        sight."""
+        boxes = sight.boxes
+        n = len(boxes.names)
+        if n == 0:
+            return []
+        near = np.hypot(boxes.centers[:, 0] - origin[0], boxes.centers[:, 1] - origin[1]) <= reach
+        if 0 <= own < n:
+            near[own] = False
+        candidates = np.flatnonzero(near)
+        if len(candidates) == 0:
+            return []
+        points = self._sample_points(sight)[candidates].reshape(-1, 3)
+        targets = np.repeat(candidates, 5)
+        clear = sight.clear(np.broadcast_to(origin, points.shape), points, np.full(len(points), own), targets)
+        return [int(j) for j in candidates[clear.reshape(-1, 5).any(axis=1)]]
+
+    @staticmethod
+    def _sample_points(sight: Any) -> np.ndarray:
+        """(N, 5, 3): per box its centre and its four side corners at mid height, 10 % towards the centre."""
+        cached = getattr(sight, "sample_points", None)
+        if cached is None:
+            boxes = sight.boxes
+            signs = np.array(
+                [[0.0, 0.0, 0.0], [0.9, 0.9, 0.0], [-0.9, 0.9, 0.0], [-0.9, -0.9, 0.0], [0.9, -0.9, 0.0]]
+            )
+            offsets = np.einsum("kj,nj,nij->nki", signs, boxes.half, boxes.rotations)
+            cached = sight.sample_points = boxes.centers[:, None, :] + offsets
+        return np.asarray(cached)
+
+    def _cpm(
+        self,
+        station: Station,
+        index: int,
+        frame: WorldFrame,
+        origin: np.ndarray,
+        ref: etsi.Kinematics,
+        sight: Any,
+    ) -> _Outgoing | None:
+        t = frame.time
+        own = (
+            -1
+            if station.rsu
+            else next((j for j, e in enumerate(frame.entities) if e.name == station.name), -1)
+        )
+        seen = self._visible(sight, origin, own, station.perception_range)
+        for j in seen:
+            station.first_seen.setdefault(frame.entities[j].name, t)
+        objs = [frame.entities[j] for j in seen]
+        ids = [e.name for e in objs]
+        xy = np.array([[e.x, e.y] for e in objs]).reshape(-1, 2)
+        chosen = station.cpm_triggers.select(
+            t, ids, xy, np.array([e.speed for e in objs]), np.array([e.heading for e in objs])
+        )
+        if not chosen.any() and t - station.last_cpm < T_GEN_CPM_MAX - _SLACK:
+            return None
+        station.last_cpm = t
+        north = float(self.geo.north_angles(origin[:1], origin[1:2])[0])
+        perceived = []
+        names = []
+        for j, e, take in zip(seen, objs, chosen, strict=True):
+            if not take:
+                continue
+            cx, cy, cz = e.box_center()
+            vx, vy = e.velocity
+            perceived.append(
+                etsi.PerceivedObject(
+                    object_id=1 + j,  # the entity's position in the frame, as in the sensors' labels
+                    dx=cx - float(origin[0]),
+                    dy=cy - float(origin[1]),
+                    dz=cz - float(origin[2]),
+                    vx=vx,
+                    vy=vy,
+                    heading=etsi.etsi_heading(north, e.heading),
+                    length=e.bbox.length,
+                    width=e.bbox.width,
+                    height=e.bbox.height,
+                    age=t - station.first_seen[e.name],
+                    classification=etsi.STATION_TYPES.get(e.category, 0),
+                )
+            )
+            names.append(e.name)
+        msg = etsi.cpm(
+            station.station_id,
+            self._station_type(station, None if station.rsu else frame.entities[own] if own >= 0 else None),
+            t,
+            ref,
+            perceived,
+        )
+        return _Outgoing("cpm", index, msg, objects=tuple(names))
+
+    def _transmit(
+        self, frame: WorldFrame, outgoing: list[_Outgoing], pos: np.ndarray, present: np.ndarray, sight: Any
+    ) -> None:
+        senders = np.array([o.sender for o in outgoing])
+        n = len(self.stations)
+        same = senders[:, None] == np.arange(n)[None, :]
+        same |= ~present[None, :]  # an absent station receives nothing
+        if sight is not None and self.config.channel.line_of_sight:
+            own = self._entity_index(frame)
+
+            def los(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+                a, b = senders[rows], cols
+                return np.asarray(sight.clear(pos[a], pos[b], own[a], own[b]))
+
+            self.channel.los = los
+        else:
+            self.channel.los = None
+        delivery = self.channel.transmit(frame.step, self.step_seconds, pos[senders], pos, same)
+        link = ~same
+        delivered = delivery.delivered & link
+        self.metrics_acc.links(delivery.distance[link], delivered[link])
+        transmission = TYPESTORE.types["carlos_v2x_msgs/msg/Transmission"]
+        names = [s.name for s in self.stations]
+        records = []
+        sent = stamp(frame.time)
+        for m, out in enumerate(outgoing):
+            self.metrics_acc.message_sent(out.kind)
+            sender = self.stations[out.sender]
+            cols = np.flatnonzero(link[m])
+            records.append(
+                transmission(
+                    sent=sent,
+                    sender=sender.name,
+                    station_id=sender.station_id,
+                    message_type=out.kind,
+                    receivers=[names[r] for r in cols],
+                    outcomes=delivery.lost[m, cols].astype(np.uint8),
+                    distances=delivery.distance[m, cols].astype(np.float32),
+                    rx_power_dbm=delivery.rx_power_dbm[m, cols].astype(np.float32),
+                    delays=delivery.delay[m, cols].astype(np.float32),
+                )
+            )
+        rows, cols = np.nonzero(delivered)
+        self._batch = (outgoing, rows, cols, frame.time + delivery.delay[rows, cols], frame.time)
+        header = TYPESTORE.types["std_msgs/msg/Header"](stamp=sent, frame_id="map")
+        self._transmissions.publish(
+            TYPESTORE.types["carlos_v2x_msgs/msg/TransmissionArray"](header=header, transmissions=records),
+            frame.time,
+        )
+
+    def _entity_index(self, frame: WorldFrame) -> np.ndarray:
+        """Per station, the index of its entity's box in the frame (−1: an RSU or absent)."""
+        index = {e.name: j for j, e in enumerate(frame.entities)}
+        return np.array([-1 if s.rsu else index.get(s.name, -1) for s in self.stations], dtype=np.int64)
+
+    def _deliver(self, until: float) -> None:
+        """Publish every copy arriving before `until` on its receiver's topic, in order of arrival: this step's
+        (`_batch`) and earlier ones still under way (`_pending`); later ones wait in `_pending`."""
+        due: list[tuple[float, int, int, _Outgoing, float]] = []
+        while self._pending and self._pending[0][0] <= until:
+            item = heapq.heappop(self._pending)
+            self.metrics_acc.received(item[2], item[3].sender, item[4])
+            due.append(item)
+        late = bool(due)
+        if self._batch is not None:
+            outgoing, rows, cols, arrivals, generated = self._batch
+            self._batch = None
+            now = arrivals <= until
+            senders = np.array([outgoing[m].sender for m in rows], dtype=np.int64)
+            self.metrics_acc.received_many(cols[now], senders[now], generated)
+            for k in np.argsort(arrivals, kind="stable"):
+                item = (float(arrivals[k]), next(self._seq), int(cols[k]), outgoing[rows[k]], generated)
+                if now[k]:
+                    due.append(item)
+                else:
+                    heapq.heappush(self._pending, item)
+        if late:
+            due.sort(key=lambda item: (item[0], item[1]))
+        for arrival, _, r, out, _ in due:
+            receiver = self.stations[r]
+            receiver.publishers[out.kind].publish(out.msg, arrival)
+            if receiver.name == self._ego_name:
+                if out.kind == "cpm":
+                    for name in out.objects:
+                        self._ego_cpm[name] = arrival
+                elif out.kind == "denm" and out.hazard is not None:
+                    self.metrics_acc.ego_denm(out.hazard, arrival)
+
+    def _ego_view(self, frame: WorldFrame, sight: Any) -> None:
+        if frame.ego is None:
+            return
+        try:
+            ego = frame.entity(frame.ego)
+        except KeyError:
+            return
+        own = next(j for j, e in enumerate(frame.entities) if e.name == frame.ego)
+        reach = self.config.ego_sensor_range
+        origin = np.array(_antenna(ego))
+        seen = {frame.entities[j].name for j in self._visible(sight, origin, own, reach)}
+        nearby = {
+            e.name
+            for e in frame.entities
+            if e.name != frame.ego and math.hypot(e.x - ego.x, e.y - ego.y) <= 2 * reach
+        }
+        unseen = nearby - seen
+        known = {name for name, arrival in self._ego_cpm.items() if frame.time - arrival <= 1.0 + _SLACK}
+        self.metrics_acc.ego_view(unseen, known)
+
+    def metrics(self) -> dict[str, float]:
+        return self.metrics_acc.result()

@@ -1,0 +1,108 @@
+"""ETSI messages: field values in the standard's units, CDR round trip through the recorder, the MCAP
+ROS 2 decoder (schemas embedded in the file) and rosbags' AnyReader."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+
+from simcore.recorder import McapRecorder
+from simcore.transport import messages
+from simcore.v2x import etsi
+
+K = etsi.Kinematics(
+    latitude=50.7833,
+    longitude=6.0466,
+    altitude=173.2,
+    heading=271.5,
+    speed=13.89,
+    acceleration=-4.2,
+    yaw_rate=0.1,
+    length=4.6,
+    width=1.86,
+)
+
+
+def _messages() -> list[tuple[str, str, object]]:
+    obj = etsi.PerceivedObject(3, 12.5, -4.0, 0.8, 1.2, 0.0, 90.0, 0.6, 0.6, 1.8, 0.5, 1)
+    return [
+        ("/carlos/ego/v2x/cam", etsi.CAM_TYPE, etsi.cam(7, 5, 1.25, K, low_frequency=True)),
+        ("/carlos/ego/v2x/denm", etsi.DENM_TYPE, etsi.denm(7, 5, 3, 1.3, 1.2, K, 99, 1)),
+        ("/carlos/ego/v2x/cpm", etsi.CPM_TYPE, etsi.cpm(1001, 15, 1.3, K, [obj])),
+    ]
+
+
+def test_cam_fields_in_etsi_units():
+    msg = etsi.cam(7, 5, 1.25, K, low_frequency=True)
+    assert msg.header.message_id == 2 and msg.header.station_id.value == 7
+    assert msg.cam.generation_delta_time.value == (etsi.SIM_EPOCH_ITS_MS + 1250) % 65536
+    basic = msg.cam.cam_parameters.basic_container
+    assert basic.reference_position.latitude.value == 507833000
+    assert basic.reference_position.longitude.value == 60466000
+    assert basic.reference_position.altitude.altitude_value.value == 17320
+    hf = msg.cam.cam_parameters.high_frequency_container.basic_vehicle_container_high_frequency
+    assert hf.heading.heading_value.value == 2715
+    assert hf.speed.speed_value.value == 1389
+    assert hf.longitudinal_acceleration.longitudinal_acceleration_value.value == -42
+    assert hf.yaw_rate.yaw_rate_value.value == -573  # 0.1 rad/s to the left = 5.73 °/s anticlockwise
+    assert hf.vehicle_length.vehicle_length_value.value == 46 and hf.vehicle_width.value == 19
+    assert msg.cam.cam_parameters.low_frequency_container_is_present
+    assert not etsi.cam(
+        7, 5, 1.35, K, low_frequency=False
+    ).cam.cam_parameters.low_frequency_container_is_present
+    rsu = etsi.cam(1001, 15, 0.0, K, low_frequency=False, rsu=True)
+    assert rsu.cam.cam_parameters.high_frequency_container.choice == 1
+
+
+def test_saturation_at_the_largest_valid_value():
+    fast = etsi.Kinematics(0.0, 0.0, 0.0, 0.0, speed=500.0, acceleration=-100.0, length=120.0, width=9.0)
+    hf = etsi.cam(1, 5, 0.0, fast, low_frequency=False).cam.cam_parameters.high_frequency_container
+    vehicle = hf.basic_vehicle_container_high_frequency
+    assert vehicle.speed.speed_value.value == 16382
+    assert vehicle.longitudinal_acceleration.longitudinal_acceleration_value.value == -160
+    assert vehicle.vehicle_length.vehicle_length_value.value == 1022 and vehicle.vehicle_width.value == 61
+
+
+def test_etsi_heading_is_clockwise_from_north():
+    assert etsi.etsi_heading(1.5707963267948966, 0.0) == pytest.approx(90.0)  # map +x = east
+    assert etsi.etsi_heading(1.5707963267948966, 1.5707963267948966) == pytest.approx(0.0)
+    assert etsi.etsi_heading(1.5707963267948966, 3.141592653589793) == pytest.approx(270.0)
+
+
+@pytest.mark.parametrize("topic,typename,msg", _messages(), ids=["cam", "denm", "cpm"])
+def test_cdr_round_trip(topic, typename, msg):
+    data = messages.serialize(msg)
+    assert messages.serialize(messages.deserialize(data, typename)) == data
+
+
+def test_recorded_messages_decode_with_the_embedded_schemas(tmp_path: Path):
+    path = tmp_path / "v2x.mcap"
+    with McapRecorder(path, metadata={}) as rec:
+        for topic, typename, msg in _messages():
+            rec.write(topic, typename, msg, 1.3)
+    decoded = {}
+    with path.open("rb") as f:
+        for schema, channel, _, value in make_reader(
+            f, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
+            decoded[channel.topic] = (schema.name, value)
+    name, cam = decoded["/carlos/ego/v2x/cam"]
+    assert name == "etsi_its_cam_msgs/msg/CAM"
+    assert cam.cam.cam_parameters.basic_container.reference_position.latitude.value == 507833000
+    name, denm = decoded["/carlos/ego/v2x/denm"]
+    assert name == "etsi_its_denm_msgs/msg/DENM"
+    assert denm.denm.situation.event_type.cause_code.value == 99
+    assert denm.denm.management.action_id.sequence_number.value == 3
+    name, cpm = decoded["/carlos/ego/v2x/cpm"]
+    assert name == "carlos_v2x_msgs/msg/CollectivePerceptionMessage"
+    assert cpm.perceived_objects[0].x_distance == 1250 and cpm.perceived_objects[0].classification == 1
+    with AnyReader([path], default_typestore=messages.TYPESTORE) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        assert types["/carlos/ego/v2x/denm"] == etsi.DENM_TYPE
+        for conn, _, raw in reader.messages():
+            embedded = reader.deserialize(raw, conn.msgtype)
+            assert messages.serialize(embedded) == messages.serialize(messages.deserialize(raw, conn.msgtype))
