@@ -1,4 +1,4 @@
-"""A mutation fuzzer: the example manifests and scenarios (and the esmini corpus when ../shared has it),
+"""A mutation fuzzer: the example manifests and scenarios (and the esmini corpus when it is here),
 mutated the way a careless or hostile user would, through `carlos validate` in this process.
 
 Invariants for every case: no exception escapes (a traceback for a user), no hang (each case has a time
@@ -22,9 +22,11 @@ from pathlib import Path
 import pytest
 
 from tests.inprocess import carlos_in_process
+from tests.tooling import esmini_corpus
 
 ROOT = Path(__file__).resolve().parents[1]
-CORPUS = ROOT.parent / "shared" / "corpus" / "esmini" / "resources"
+_CORPUS_ROOT = esmini_corpus()
+CORPUS = (_CORPUS_ROOT / "resources") if _CORPUS_ROOT is not None else ROOT / "no-corpus"
 CASES = int(os.environ.get("CARLOS_FUZZ_CASES", "120"))
 SEED = int(os.environ.get("CARLOS_FUZZ_SEED", "15"))
 CASE_SECONDS = float(os.environ.get("CARLOS_FUZZ_CASE_SECONDS", "20"))

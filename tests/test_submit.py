@@ -30,7 +30,9 @@ from tests.s3server import S3Server
 from tests.test_cli import ROOT, RUNS, carlos
 from tests.test_operator import env, terminal  # noqa: F401 - env: the emulator fixture, reused
 
-EXAMPLES = sorted(RUNS.glob("*.yaml"))
+#: every example a cluster runs (a search runs locally only: submit refuses it, tested below)
+SEARCHES = sorted(p for p in RUNS.glob("*.yaml") if "\n  search:" in p.read_text())
+EXAMPLES = sorted(set(RUNS.glob("*.yaml")) - set(SEARCHES))
 
 
 def _objects(text: str) -> tuple[dict[str, Any] | None, dict[str, Any]]:
@@ -39,6 +41,13 @@ def _objects(text: str) -> tuple[dict[str, Any] | None, dict[str, Any]]:
     runs = [d for d in docs if d["kind"] == "SimulationRun"]
     assert len(runs) == 1 and len(configmaps) <= 1
     return (configmaps[0] if configmaps else None), runs[0]
+
+
+@pytest.mark.parametrize("example", SEARCHES, ids=lambda p: p.stem)
+def test_submit_refuses_a_search_in_one_line(example: Path) -> None:
+    result = carlos("submit", example, "--dry-run", "-o", "yaml", "--namespace", "sims")
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert "spec.search" in result.stderr and "Traceback" not in result.stderr
 
 
 @pytest.mark.parametrize("example", EXAMPLES, ids=lambda p: p.stem)

@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 
 from simcore.evaluation.metrics import Box, box_distance
-from simcore.transport.messages import OBJECTS_TOPIC, deserialize
 
 
 @dataclass
@@ -65,6 +64,8 @@ def read_recording(data: bytes, ego: str | None = None, *, max_collisions: int =
     """Trajectories, the closest approach to the ego and the collision moments (first frame of each
     contact) from an MCAP recording's bytes. The ego is `ego`, else the first entity of each frame."""
     from mcap.reader import make_reader
+
+    from simcore.transport.messages import OBJECTS_TOPIC, deserialize  # rosbags: only with a recording
 
     reader = make_reader(io.BytesIO(data))
     scenario_file = None
