@@ -38,7 +38,7 @@ import yaml
 
 from simcore.errors import BadInput, ExitCode
 from simcore.plan import Plan
-from simcore.spec import API_GROUP, API_VERSION, KIND, SimulationRun
+from simcore.spec import API_GROUP, API_VERSION, KIND, EnvVar, SimulationRun
 from simcore.transport.dds_config import loopback_config
 
 SPEC_DIR = "/etc/carlos/spec"
@@ -441,6 +441,13 @@ def scenario_configmaps(run: SimulationRun) -> list[str]:
     return list(names)
 
 
+def _env_var(var: EnvVar) -> dict[str, Any]:
+    """A container env entry from a systemUnderTest.env item: a value, or a Secret key reference."""
+    if var.secret_key_ref is None:
+        return {"name": var.name, "value": var.value}
+    return {"name": var.name, "valueFrom": {"secretKeyRef": var.secret_key_ref.model_dump()}}
+
+
 def build_job(
     run: SimulationRun, body: dict[str, Any], settings: OperatorSettings, output: Output
 ) -> dict[str, Any]:
@@ -506,12 +513,7 @@ def build_job(
             *node["env"],
             {"name": "CARLOS_ROLE", "value": "system-under-test"},
             {"name": "RMW_IMPLEMENTATION", "value": SUT_RMW},
-            *(
-                {"name": var.name, "value": var.value}
-                if var.value is not None
-                else {"name": var.name, "valueFrom": {"secretKeyRef": var.secret_key_ref.model_dump()}}
-                for var in sut.env
-            ),
+            *(_env_var(var) for var in sut.env),
         ]
         sidecars.append(node)
     pod_spec: dict[str, Any] = {
