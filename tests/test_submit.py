@@ -159,8 +159,10 @@ def test_submitted_example_runs_to_succeeded_with_results_in_s3(
     assert configmap["data"] == planned["data"]
     for key, value in s3_server.env().items():
         monkeypatch.setenv(key, value)
+    # on a cluster results go under the run's namespace: <output>/<namespace>/<run>/
+    assert st["resultsURL"].rstrip("/").endswith("/submitted/default/prototyping"), st
     store = open_store(
-        f"s3://{s3_server.bucket}/submitted", endpoint=s3_server.endpoint, region=s3_server.region
+        f"s3://{s3_server.bucket}/submitted/default", endpoint=s3_server.endpoint, region=s3_server.region
     )
     summary = json.loads(store.get_bytes("prototyping/summary.json"))
     assert summary["status"] == "passed" and summary["counts"]["total"] == 1
