@@ -5,15 +5,17 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
+# for the tests only: the report page is loaded in headless Chromium (tests/test_report.py; skipped without it)
+TEST_SYSTEM_PACKAGES := chromium
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages demo test test-slow fuzz lint typecheck wheel wheel-check bench conformance crds helm lint-chart images clean
+.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck wheel wheel-check bench conformance crds helm lint-chart images clean
 
 
 install: $(STAMP)
 
 system-packages:
-	@missing=""; for p in $(SYSTEM_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	@missing=""; for p in $(PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ]; then echo "installing system packages:$$missing"; \
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; \
@@ -21,7 +23,7 @@ system-packages:
 	fi
 
 $(STAMP): pyproject.toml
-	@$(MAKE) --no-print-directory system-packages
+	@$(MAKE) --no-print-directory system-packages PACKAGES="$(SYSTEM_PACKAGES)"
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[dev]'
@@ -30,7 +32,13 @@ $(STAMP): pyproject.toml
 demo: install
 	$(VENV)/bin/carlos run examples/runs/data-generation.yaml --output file://./results
 
-test: install
+# as root it installs Debian's chromium for the report's browser test; as another user that test skips
+test-system-packages:
+	@if [ "$$(id -u)" = 0 ]; then $(MAKE) --no-print-directory system-packages PACKAGES="$(TEST_SYSTEM_PACKAGES)" \
+	  || echo "note: could not install $(TEST_SYSTEM_PACKAGES): its tests skip"; \
+	else for p in $(TEST_SYSTEM_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo "note: $$p is not installed: its tests skip"; done; fi
+
+test: install test-system-packages
 	$(PY) -m pytest -n $(NPROC) -m "not slow and not e2e" tests
 
 test-slow: install
