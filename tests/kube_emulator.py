@@ -125,6 +125,10 @@ class CarlosEmulator(kmock.KubernetesEmulator):
         self.validate = True
         self.calls: collections.Counter[tuple[str, str]] = collections.Counter()  # (action, plural) → count
         self.selectors: list[tuple[str, str]] = []  # (plural, labelSelector) of every list and watch
+        # injected failures: (action, plural, subresource or "", HTTP status, labelSelector the request must
+        # carry or "" for any), each answered once, in order
+        self.faults: list[tuple[str, str, str, int, str]] = []
+        self.injected: list[tuple[str, str, str, int, str]] = []  # the faults answered so far
 
     async def _serve_list(self, request: rendering.Request) -> Any:
         """kmock's list, then the label selector applied (the API server selects, kmock does not)."""
@@ -138,6 +142,21 @@ class CarlosEmulator(kmock.KubernetesEmulator):
         return result
 
     async def _serve_watch(self, request: rendering.Request) -> Any:
+        assert request.resource is not None
+        status = self._fault(request)
+        if status is not None:  # as the API server ends a watch whose resourceVersion is too old: 200 + ERROR
+            yield {
+                "type": "ERROR",
+                "object": {
+                    "kind": "Status",
+                    "apiVersion": "v1",
+                    "status": "Failure",
+                    "code": status,
+                    "reason": "Expired" if status == 410 else "InternalError",
+                    "message": "injected fault",
+                },
+            }
+            return
         selector = request.params.get("labelSelector")
         async for event in super()._serve_watch(request):
             if (
@@ -179,12 +198,33 @@ class CarlosEmulator(kmock.KubernetesEmulator):
             self.refused.append(str(exc))
             raise k8s.KubernetesError(status=422, reason="Invalid", message=str(exc)) from None
 
+    def _fault(self, request: rendering.Request) -> int | None:
+        """The status of the first injected fault this request matches (removed: each is answered once)."""
+        assert request.resource is not None
+        action = str(request.action.value if request.action else request.method)
+        call = (action, request.resource.plural or "", request.subresource or "")
+        selector = request.params.get("labelSelector", "")
+        for position, fault in enumerate(self.faults):
+            if fault[:3] == call and fault[4] in ("", selector):
+                del self.faults[position]
+                self.injected.append(fault)
+                return fault[3]
+        return None
+
     async def _handle(self, request: rendering.Request) -> aiohttp.web.StreamResponse:
         if len(self._requests) > 2 * self.HISTORY:
             del self._requests[: -self.HISTORY]
         if request.resource is not None:
             action = str(request.action.value if request.action else request.method)
             self.calls[(action, request.resource.plural or "")] += 1
+            watch = request.action == enums.action.WATCH  # a watch's fault is an ERROR event (_serve_watch)
+            status = None if watch else self._fault(request)
+            if status is not None:
+                reasons = {409: "Conflict", 410: "Expired", 429: "TooManyRequests", 500: "InternalError"}
+                error = k8s.KubernetesError(
+                    status=status, reason=reasons.get(status, "ServiceUnavailable"), message="injected fault"
+                )
+                return await self._render_error(error)
             if request.action in (enums.action.LIST, enums.action.WATCH):
                 self.selectors.append(
                     (request.resource.plural or "", request.params.get("labelSelector", ""))

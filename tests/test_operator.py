@@ -299,3 +299,36 @@ def test_carlos_operator_command_serves_liveness_and_metrics(
         proc.terminate()
         proc.wait(30)
         log.close()
+
+
+def test_api_server_errors_are_retried_to_the_same_end(
+    env: tuple[Cluster, Kube], s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The API server throttles (429), fails (500/503) and expires watches (410) once on each kind of call the
+    operator makes; the run still ends Succeeded with one ConfigMap and one Job."""
+    c, kube = env
+    assert c.emulator is not None
+    ours = "carlos.dev/run"  # the operator's Job list and watch (the test kubelet lists every Job)
+    faults = [
+        ("WATCH", "simulationruns", "", 410, ""),
+        ("LIST", "jobs", "", 429, ours),
+        ("WATCH", "jobs", "", 410, ours),
+        ("CREATE", "configmaps", "", 503, ""),
+        ("CREATE", "jobs", "", 429, ""),
+        ("UPDATE", "simulationruns", "status", 500, ""),
+    ]
+    c.emulator.faults.extend(faults)
+    c.start_operator()
+    jobs = runner(kube, s3_server, tmp_path)
+    try:
+        create(kube, manifest("e2e-faults", s3_server.bucket, [], [10.0, 15.0]))
+        st = wait_for(lambda: terminal(kube, "e2e-faults"), 180, "a terminal phase")
+    finally:
+        jobs.stop()
+    assert sorted(c.emulator.injected) == sorted(faults)  # every fault was met
+    assert jobs.errors == []
+    assert st["phase"] == "Succeeded" and st["passed"] == 2, st
+    assert [j["metadata"]["name"] for j in c.objects("jobs")] == [job_name("e2e-faults")]
+    assert len(c.objects("configmaps")) == 1
+    store = results(s3_server, monkeypatch)
+    assert json.loads(store.get_bytes("e2e-faults/summary.json"))["counts"]["passed"] == 2
