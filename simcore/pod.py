@@ -31,6 +31,10 @@ transport `CARLOS_TRANSPORT` names:
   publishes the verdict, waits for the recorder's report and exits with DESIGN.md's code: 0 passed,
   1 test failure, 2 bad input, 3 infrastructure error (also when the results could not be uploaded).
 
+A search's round (the operator's Job `carlos-<run>-r<N>`) mounts a spec that runs the round's points as a
+sweep (`points.xosc` beside it) and sets `CARLOS_INDEX_OFFSET` to the round's first index: the pod of Job
+index k runs point k of the round as the run's index offset+k (its results under `<run>/<offset+k>/`).
+
 An infrastructure error on an attempt that Kubernetes will retry (`CARLOS_INDEX_FAILURES`, from the pod's
 `batch.kubernetes.io/job-index-failure-count` annotation, below `execution.retries`) uploads the log but
 no summary, so the index does not look complete.

@@ -22,6 +22,9 @@ While a run's pods are active, its pods are read by label (at most `POD_SAMPLE`,
 seconds): a container waiting for a reason that does not pass by itself (ImagePullBackOff,
 CreateContainerConfigError…) is shown as the `PodsStuck` condition and a Warning event.
 
+A search (`spec.search`) gets no ConfigMap and Job here: searching.py creates one of each per round and
+tells the study each round's results (the stored state is the truth after a restart).
+
 Runs are re-queued when their Job changes (watch events) and every `resync` seconds while not finished.
 """
 
@@ -48,6 +51,7 @@ from carlos_operator.builders import (
     job_name,
     manifest_yaml,
     resolve_output,
+    round_job_name,
     scenario_configmaps,
     secret_references,
 )
@@ -408,7 +412,11 @@ class Controller:
         status = {
             "phase": "Suspended",
             "total": state.tally.total if state.tally else None,
-            "jobName": job_name(state.run.name) if state.run else None,
+            "jobName": (
+                (round_job_name(state.run.name, 0) if state.search is not None else job_name(state.run.name))
+                if state.run
+                else None
+            ),
             "conditions": [
                 condition(
                     {c.get("type"): c for c in state.last_status.get("conditions") or []},
