@@ -670,3 +670,26 @@ def test_a_stored_search_of_another_spec_is_not_resumed() -> None:
     drain(c)
     assert kube.jobs == {}
     assert kube.status_patches[-1]["conditions"][0]["reason"] == "SearchStateMismatch"
+
+
+def test_a_rounds_job_that_fails_before_every_index_finished_ends_the_search() -> None:
+    kube, store = search_kube(), FakeStore()
+    c = controller(kube, store)
+    c.observe_run("ADDED", search_body("s", "uid-1"))
+    drain(c)
+    job = kube.jobs[round_job_name("s", 0)]
+    job["status"] = {
+        "startTime": "2026-11-25T00:00:00Z",
+        "failedIndexes": "0",
+        "conditions": [
+            {"type": "Failed", "status": "True", "reason": "PodFailurePolicy", "message": "exit code 2"}
+        ],
+    }
+    c.observe_job("MODIFIED", job)
+    drain(c)
+    final = kube.status_patches[-1]
+    failed = {x["type"]: x for x in final["conditions"]}["Failed"]
+    assert final["phase"] == "Failed" and failed["reason"] == "PodFailurePolicy"
+    assert kube.job_creates == 1 and not store.exists("s/search/state.json")  # never told, no round 1
+    assert final["search"]["rounds"] == "0/2" and final["search"]["round"] is None
+    assert json.loads(store.objects["s/search.json"])["runs"] == 0 and "s/summary.json" in store.objects

@@ -327,8 +327,8 @@ class SearchRuns:
             break
         finished = round_of(search, len(progress.points)) is None
         search_url = None
-        if finished or progress.stopped:
-            search_url = self._finish(state, progress) if finished else None
+        if finished or progress.stopped:  # stopped: the points told so far, and the round's summaries
+            search_url = self._finish(state, progress)
         status = search_status(
             search=search,
             points=progress.points,
