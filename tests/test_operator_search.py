@@ -138,3 +138,14 @@ def test_search_runs_in_rounds_survives_restarts_and_succeeds(
     assert store.get_bytes(f"{name}/junit.xml").decode().count("<testcase") == 6
     reasons = [e.get("reason") for e in c.objects("events")]
     assert reasons.count("JobCreated") == 2 and "Succeeded" in reasons
+    # `carlos get` / `carlos watch` show the rounds
+    from simcore.workflow.status import state_of_object
+
+    obj = kube.custom.get_namespaced_custom_object(
+        "carlos.dev", "v1alpha1", "default", "simulationruns", name
+    )
+    line = state_of_object(obj).line()
+    assert (
+        f"{name}: Succeeded 6/6 · passed 6" in line
+        and f"rounds 2/2 · best {search['bestObjective']:.3g}" in line
+    )
