@@ -658,6 +658,11 @@ def test_a_search_whose_scenario_the_operator_cannot_read_is_not_accepted() -> N
     assert len(rejected) == 2 and kube.jobs == {}
     messages = " ".join(p["conditions"][0]["message"] for p in rejected)
     assert "configMapRef" in messages and "s3://" in messages and "'other.xosc'" in messages
+    # from s3:// (the fake store answers every bucket): the space is read, round 0 starts
+    store.put_bytes("inputs/cut-in.xosc", CUT_IN.read_bytes())
+    c.observe_run("ADDED", search_body("u", "uid-3", openscenario="s3://bucket/inputs/cut-in.xosc"))
+    drain(c)
+    assert list(kube.jobs) == [round_job_name("u", 0)]
 
 
 def test_a_stored_search_of_another_spec_is_not_resumed() -> None:

@@ -18,6 +18,7 @@ seed and the round); a round's Job that finished while the operator was down is 
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import os
@@ -261,23 +262,25 @@ class SearchRuns:
         else:
             source = ref.openscenario or ""
             name = source.rsplit("/", 1)[-1] or "scenario.xosc"
-            text = self._read_source(state, namespace, output, source)
+            text = self._read_source(namespace, output, source)
         folder = self._scratch / namespace / run.name
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / name
         path.write_bytes(text)
         return SearchProgress(scenario_name=name, space=driver.search_space(run, path))
 
-    def _read_source(self, state: RunState, namespace: str, output: Output, source: str) -> bytes:
+    def _read_source(self, namespace: str, output: Output, source: str) -> bytes:
         if source.startswith("s3://"):
             from simcore.store import NotFoundError
 
             bucket, _, key = source.removeprefix("s3://").partition("/")
-            import dataclasses
-
-            store = self.c.store_factory(
-                self.c.kube, namespace, dataclasses.replace(output, url=f"s3://{bucket}")
+            # the run's credentials where its namespace may name Secrets, else the operator's own (as for
+            # its results)
+            allowed = namespace in self.c.settings.secret_namespaces
+            scenarios = dataclasses.replace(
+                output, url=f"s3://{bucket}", secret=output.secret if allowed else None
             )
+            store = self.c.store_factory(self.c.kube, namespace, scenarios)
             try:
                 return bytes(store.get_bytes(key))
             except NotFoundError:
