@@ -397,10 +397,21 @@ def test_every_object_built_for_an_example_is_accepted_by_the_strict_stand_in(pa
         if not str(output.get("url", "s3://")).startswith("s3://"):
             output["url"] = "s3://results/runs"  # a local example's file:// output, as on a cluster
         run = load(body)
-        for obj in (
+        objects = [
             build_configmap(run, body, SETTINGS),
             build_job(run, body, SETTINGS, resolve_output(run, SETTINGS)),
-        ):
+        ]
+        search = run.spec.search
+        if search is not None:  # on a cluster a search's pods are its rounds'
+            from simcore.search.export import distribution_xml
+
+            last = SearchRound(number=3, start=3 * search.batch_size, count=search.batch_size)
+            points = distribution_xml(Path("s.xosc"), [{"a": 1.5}] * last.count, "round 3")
+            objects += [
+                build_round_configmap(run, body, SETTINGS, last, points),
+                build_job(run, body, SETTINGS, resolve_output(run, SETTINGS), search_round=last),
+            ]
+        for obj in objects:
             try:
                 admit(obj)
             except Invalid as exc:
