@@ -31,6 +31,10 @@ transport `CARLOS_TRANSPORT` names:
   publishes the verdict, waits for the recorder's report and exits with DESIGN.md's code: 0 passed,
   1 test failure, 2 bad input, 3 infrastructure error (also when the results could not be uploaded).
 
+A search's round (the operator's Job `carlos-<run>-r<N>`) mounts a spec that runs the round's points as a
+sweep (`points.xosc` beside it) and sets `CARLOS_INDEX_OFFSET` to the round's first index: the pod of Job
+index k runs point k of the round as the run's index offset+k (its results under `<run>/<offset+k>/`).
+
 An infrastructure error on an attempt that Kubernetes will retry (`CARLOS_INDEX_FAILURES`, from the pod's
 `batch.kubernetes.io/job-index-failure-count` annotation, below `execution.retries`) uploads the log but
 no summary, so the index does not look complete.
@@ -69,7 +73,7 @@ TRANSPORTS = ("loopback", "dds")
 class PodEnv:
     """The environment every role reads (set by the Job's pod template)."""
 
-    index: int
+    index: int  # the run's index: JOB_COMPLETION_INDEX + CARLOS_INDEX_OFFSET
     spec_path: Path
     output_url: str
     failures: int  # earlier failed attempts of this index
@@ -80,6 +84,14 @@ class PodEnv:
     upload_timeout: float
     transport: str = "loopback"  # CARLOS_TRANSPORT: loopback | dds
     domain_id: int = 0  # ROS_DOMAIN_ID (dds)
+    #: CARLOS_INDEX_OFFSET: the run's index of the Job's index 0 (a search round's Job runs indexes
+    #: offset…offset+completions-1 of the run; its spec lists only that round's points)
+    offset: int = 0
+
+    @property
+    def position(self) -> int:
+        """The index in the mounted spec's plan."""
+        return self.index - self.offset
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> PodEnv:
@@ -117,8 +129,10 @@ class PodEnv:
             from simcore.transport.dds_config import domain_id_from_env  # no cyclonedds import to read env
 
             domain_id = domain_id_from_env(env)
+        offset = number("CARLOS_INDEX_OFFSET", 0)
         return cls(
-            index=number("JOB_COMPLETION_INDEX"),
+            index=number("JOB_COMPLETION_INDEX") + offset,
+            offset=offset,
             spec_path=Path(spec),
             output_url=output,
             failures=number("CARLOS_INDEX_FAILURES", 0),
@@ -138,9 +152,10 @@ def _load(env: PodEnv) -> Any:
 
     run = load_manifest(env.spec_path)
     total = len(Plan(run.spec))
-    if env.index >= total:
+    if env.position >= total:
         raise BadInput(
-            f"JOB_COMPLETION_INDEX={env.index} is out of range 0..{total - 1}", field="JOB_COMPLETION_INDEX"
+            f"JOB_COMPLETION_INDEX={env.position} is out of range 0..{total - 1}",
+            field="JOB_COMPLETION_INDEX",
         )
     return run
 
@@ -270,7 +285,7 @@ def run_simcore(env: PodEnv) -> int:
     started = time.monotonic()
     run = _load(env)
     spec = run.spec
-    point = Plan(spec)[env.index]
+    point = Plan(spec)[env.position]
     attempt = env.failures + 1
     final_attempt = attempt > spec.execution.retries
     try:
@@ -422,7 +437,7 @@ def run_recorder(env: PodEnv) -> int:
     spec = run.spec
     from simcore.plan import Plan
 
-    point = Plan(spec)[env.index]
+    point = Plan(spec)[env.position]
     store = _store(env, run)
     prefix = f"{run.name}/{env.index}"
     env.scratch.mkdir(parents=True, exist_ok=True)

@@ -1164,6 +1164,26 @@ class IndexFailure(Model):
     reason: str = Field("", description="The failing criteria or the error message.")
 
 
+class SearchStatus(Model):
+    """Progress of a search (`spec.search`) on a cluster: one Indexed Job per round."""
+
+    rounds: str | None = Field(
+        None, description="Rounds whose results the study has / rounds in all, e.g. `2/4`."
+    )
+    rounds_done: int | None = Field(None, description="Rounds whose results the study has.")
+    rounds_total: int | None = Field(None, description="Rounds in all: ceil(budget / batchSize).")
+    round: int | None = Field(None, description="The round running now (0-based), while one runs.")
+    evaluated: int | None = Field(None, description="Points whose results the study has.")
+    best_objective: float | None = Field(
+        None, description="The best objective value so far (the direction of spec.search.objective)."
+    )
+    best_index: int | None = Field(None, description="The index of the best point so far.")
+    failures_found: int | None = Field(None, description="Evaluated points whose required criteria failed.")
+    search_url: str | None = Field(
+        None, alias="searchURL", description="Where search.json is, once the budget is spent."
+    )
+
+
 class SimulationRunStatus(Model):
     """Observed state, written by the operator (or by `carlos run` into the run-level summary)."""
 
@@ -1198,6 +1218,7 @@ class SimulationRunStatus(Model):
     failures: list[IndexFailure] = Field(
         default_factory=list, description="The first failing indexes (at most 20) with their reason."
     )
+    search: SearchStatus | None = Field(None, description="A search's rounds (spec.search).")
     conditions: list[Condition] = Field(default_factory=list, description="Status conditions.")
 
 

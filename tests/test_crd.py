@@ -99,7 +99,12 @@ def test_crd_resource_shape() -> None:
         "Passed": ".status.passed",
         "Failed": ".status.failed",
         "Age": ".metadata.creationTimestamp",
+        "Rounds": ".status.search.rounds",  # a search's, with -o wide
+        "Best": ".status.search.bestObjective",
+        "Found": ".status.search.failuresFound",
     }
+    wide = {c["name"] for c in version["additionalPrinterColumns"] if c.get("priority") == 1}
+    assert wide == {"Rounds", "Best", "Found"}
     schema = version["schema"]["openAPIV3Schema"]
     execution = schema["properties"]["spec"]["properties"]["execution"]["properties"]
     assert execution["retries"]["default"] == 1

@@ -95,7 +95,11 @@ def results(s3: S3Server, monkeypatch: pytest.MonkeyPatch) -> Any:
 
 
 def runner(kube: Kube, s3: S3Server, tmp_path: Path, **kw: Any) -> JobRunner:
-    return JobRunner(kube=kube, workdir=tmp_path, extra_env={"AWS_REGION": s3.region}, **kw).start()
+    # the pods run the code under test (a PYTHONPATH that points at a work tree reaches them too)
+    python_path = {"PYTHONPATH": os.environ["PYTHONPATH"]} if os.environ.get("PYTHONPATH") else {}
+    return JobRunner(
+        kube=kube, workdir=tmp_path, extra_env={"AWS_REGION": s3.region, **python_path}, **kw
+    ).start()
 
 
 def test_run_succeeds_end_to_end(

@@ -12,13 +12,19 @@ from carlos_operator.builders import (
     BUS_PORT,
     QUEUE_LABEL,
     RECORDER_READY_PORT,
+    ROUND_LABEL,
+    SPEC_FILE,
     OperatorSettings,
+    SearchRound,
     build_configmap,
     build_job,
+    build_round_configmap,
     check_cluster_spec,
     job_name,
     resolve_output,
+    round_job_name,
 )
+from carlos_operator.searching import round_of, round_step, search_status
 from carlos_operator.status import (
     Tally,
     aggregate,
@@ -175,11 +181,7 @@ def test_output_and_cluster_checks() -> None:
     with pytest.raises(BadInput, match="100,000"):
         check_cluster_spec(load(manifest(sweep={"matrix": {"a": list(range(1000)), "b": list(range(101))}})))
     check_cluster_spec(load(manifest()))
-    search = {"parameters": [{"name": "a", "min": 0, "max": 1}], "objective": {"metric": "minDistance"}}
-    with pytest.raises(BadInput, match=r"spec\.search"):
-        check_cluster_spec(
-            load(manifest(search=search, sweep={}, scenarios=manifest()["spec"]["scenarios"][:1]))
-        )
+    check_cluster_spec(load(search_manifest()))  # a search runs on the cluster (in rounds)
 
 
 def test_job_names_are_deterministic_and_short() -> None:
@@ -395,10 +397,21 @@ def test_every_object_built_for_an_example_is_accepted_by_the_strict_stand_in(pa
         if not str(output.get("url", "s3://")).startswith("s3://"):
             output["url"] = "s3://results/runs"  # a local example's file:// output, as on a cluster
         run = load(body)
-        for obj in (
+        objects = [
             build_configmap(run, body, SETTINGS),
             build_job(run, body, SETTINGS, resolve_output(run, SETTINGS)),
-        ):
+        ]
+        search = run.spec.search
+        if search is not None:  # on a cluster a search's pods are its rounds'
+            from simcore.search.export import distribution_xml
+
+            last = SearchRound(number=3, start=3 * search.batch_size, count=search.batch_size)
+            points = distribution_xml(Path("s.xosc"), [{"a": 1.5}] * last.count, "round 3")
+            objects += [
+                build_round_configmap(run, body, SETTINGS, last, points),
+                build_job(run, body, SETTINGS, resolve_output(run, SETTINGS), search_round=last),
+            ]
+        for obj in objects:
             try:
                 admit(obj)
             except Invalid as exc:
@@ -482,3 +495,150 @@ def test_same_named_runs_of_two_namespaces_never_share_object_keys() -> None:
     job = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS, namespace="sims"))
     env = {e["name"]: e.get("value") for e in job["spec"]["template"]["spec"]["containers"][0]["env"]}
     assert env["CARLOS_OUTPUT_URL"] == "s3://results/runs/sims"  # pods write <url>/<namespace>/<run>/<index>/
+
+
+def search_manifest(**search: Any) -> dict[str, Any]:
+    body = manifest(
+        search={
+            "parameters": [{"name": "speed", "min": 5, "max": 30}],
+            "objective": {"metric": "minDistance"},
+            "budget": 10,
+            "batchSize": 4,
+            **search,
+        },
+        sweep={},
+        scenarios=manifest()["spec"]["scenarios"][1:],
+    )
+    body["metadata"]["name"] = "falsify"
+    return body
+
+
+def test_round_names_are_deterministic_short_and_distinct() -> None:
+    assert round_job_name("run", 0) == "carlos-run-r0" and round_job_name("run", 12) == "carlos-run-r12"
+    long = "a" * 63
+    names = {round_job_name(long, n) for n in range(1000)}
+    assert len(names) == 1000 and all(len(n) <= 48 for n in names)
+    assert round_job_name(long, 7).endswith("-r7") and round_job_name(long, 7) == round_job_name(long, 7)
+    assert round_job_name(long, 7) != round_job_name("a" * 62 + "b", 7)
+    assert job_name("run") not in {round_job_name("run", n) for n in range(3)}
+
+
+def test_a_search_round_is_a_configmap_with_its_points_and_an_indexed_job_offset_to_its_indexes(
+    tmp_path: Path,
+) -> None:
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan
+    from simcore.pod import PodEnv
+    from simcore.search.export import distribution_xml
+
+    body = search_manifest()
+    run = load(body)
+    current = SearchRound(number=2, start=8, count=2)  # the last round of 10 in rounds of 4
+    points = [{"speed": 7.5}, {"speed": 22.25}]
+    xml = distribution_xml(Path("b.xosc"), points, "round 2")
+    cm = build_round_configmap(run, body, SETTINGS, current, xml)
+    job = build_job(
+        run, body, SETTINGS, resolve_output(run, SETTINGS, namespace="sims"), search_round=current
+    )
+    for obj in (cm, job):
+        admit(obj)  # the strict stand-in of the API server
+        assert obj["metadata"]["name"] == round_job_name("falsify", 2)
+        assert obj["metadata"]["ownerReferences"][0]["uid"] == "uid-1"
+        assert obj["metadata"]["labels"][ROUND_LABEL] == "2"
+    spec = job["spec"]
+    assert (spec["completionMode"], spec["completions"], spec["parallelism"]) == ("Indexed", 2, 2)
+    pod = spec["template"]["spec"]
+    assert {"name": "spec", "configMap": {"name": round_job_name("falsify", 2)}} in pod["volumes"]
+    for container in [*pod["initContainers"], *pod["containers"]]:
+        env = {e["name"]: e.get("value") for e in container["env"]}
+        assert env["CARLOS_INDEX_OFFSET"] == "8", container["name"]
+    # what a pod mounts runs the round's points as a sweep, pod k as the run's index 8 + k
+    folder = tmp_path / "spec"
+    folder.mkdir()
+    for key, text in cm["data"].items():
+        (folder / key).write_text(text)
+    mounted = load_manifest(folder / SPEC_FILE)
+    assert mounted.spec.search is None and mounted.name == "falsify"
+    plan = Plan(mounted.spec)
+    assert len(plan) == 2 and [float(plan[k].parameters["speed"]) for k in range(2)] == [7.5, 22.25]
+    env = PodEnv.from_env(
+        {
+            "CARLOS_SPEC": str(folder / SPEC_FILE),
+            "CARLOS_OUTPUT_URL": "s3://b/o",
+            "JOB_COMPLETION_INDEX": "1",
+            "CARLOS_INDEX_OFFSET": "8",
+        }
+    )
+    assert (env.index, env.position) == (9, 1)
+
+
+def test_round_steps_and_search_status() -> None:
+    from simcore.spec import Search
+
+    search = Search.model_validate({"budget": 10, "batchSize": 4})
+    assert round_of(search, 0) == SearchRound(0, 0, 4) and round_of(search, 8) == SearchRound(2, 8, 2)
+    assert round_of(search, 10) is None
+    running = {"status": {"active": 2, "completedIndexes": "0-1"}}
+    complete = {
+        "status": {
+            "completedIndexes": "0,2-3",
+            "failedIndexes": "1",
+            "conditions": [{"type": "Failed", "status": "True", "reason": "FailedIndexes"}],
+        }
+    }
+    aborted = {
+        "status": {
+            "completedIndexes": "0",
+            "conditions": [
+                {"type": "Failed", "status": "True", "reason": "PodFailurePolicy", "message": "exit code 2"}
+            ],
+        }
+    }
+    assert round_step(search, 4, None) == "create"
+    assert round_step(search, 4, running) == "wait"
+    assert round_step(search, 4, complete) == "tell"  # a failing index is a finding, not the end
+    assert round_step(search, 4, aborted) == "stopped"
+    assert round_step(search, 10, complete) == "finish"
+    points = [
+        {"index": i, "round": i // 4, "status": "failed" if i == 2 else "passed", "objective": 5.0 - i}
+        for i in range(4)
+    ]
+    tally = Tally(10)
+    for p in points:
+        tally.record({"index": p["index"], "status": p["status"]})
+    st = search_status(
+        search=search, points=points, job=running, tally=tally, results_url="s3://b/r", now="T"
+    )
+    assert st["phase"] == "Running" and (st["progress"], st["total"], st["active"]) == ("6/10", 10, 2)
+    assert st["search"] == {
+        "rounds": "1/3",
+        "roundsDone": 1,
+        "roundsTotal": 3,
+        "round": 1,
+        "evaluated": 4,
+        "failuresFound": 1,
+        "bestObjective": 2.0,
+        "bestIndex": 3,
+    }
+    stopped = search_status(
+        search=search, points=points, job=aborted, tally=tally, results_url="s3://b/r", now="T", stopped=True
+    )
+    failed = {c["type"]: c for c in stopped["conditions"]}["Failed"]
+    assert stopped["phase"] == "Failed" and failed["reason"] == "PodFailurePolicy"
+    every = [
+        *points,
+        *({"index": i, "round": i // 4, "status": "passed", "objective": 9.0} for i in range(4, 10)),
+    ]
+    done = search_status(
+        search=search,
+        points=every,
+        job=None,
+        tally=tally,
+        results_url="s3://b/r",
+        now="T",
+        finished=True,
+        search_url="s3://b/r/search.json",
+    )
+    assert done["phase"] == "Failed"  # a required criterion failed at index 2: as `carlos run` exits 1
+    assert done["search"]["rounds"] == "3/3" and done["search"]["round"] is None
+    assert done["search"]["searchURL"] == "s3://b/r/search.json" and done["completionTime"] == "T"

@@ -6,11 +6,13 @@ that cannot start, Kueue holds, observedGeneration."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
-from carlos_operator.builders import OperatorSettings, job_name
+from carlos_operator.builders import OperatorSettings, job_name, round_job_name
 from carlos_operator.controller import Controller, _store_for
 from carlos_operator.kube import Conflict, NotFound
+from carlos_operator.status import format_intervals
 
 from simcore.store import NotFoundError
 
@@ -482,3 +484,219 @@ def test_secret_references_are_opt_in_per_namespace() -> None:
     c.observe_run("ADDED", plain)
     drain(c)
     assert job_name("r3") in kube.jobs and kube.secret_reads == 0
+
+
+# --- a search: one Job per round --------------------------------------------------------------------------
+
+CUT_IN = Path(__file__).resolve().parent.parent / "examples/scenarios/cut-in.xosc"
+
+
+def search_body(name: str, uid: str, status: dict[str, Any] | None = None, **scenario: Any) -> dict[str, Any]:
+    return {
+        "apiVersion": "carlos.dev/v1alpha1",
+        "kind": "SimulationRun",
+        "metadata": {"name": name, "namespace": "default", "uid": uid},
+        "spec": {
+            "scenarios": [
+                {"name": "cut-in", **(scenario or {"configMapRef": {"name": "inputs", "key": "cut-in.xosc"}})}
+            ],
+            "search": {
+                "parameters": [
+                    {"name": "CutInGap", "min": 5.0, "max": 20.0},
+                    {"name": "EgoSpeed", "min": 20.0, "max": 30.0},
+                ],
+                "objective": {"metric": "minDistance"},
+                "budget": 6,
+                "batchSize": 3,
+                "seed": 4,
+            },
+            "evaluation": {"criteria": ["minDistance >= 10"]},
+            "output": {"url": "s3://bucket/out", "credentialsSecretRef": {"name": "s3"}},
+        },
+        "status": status or {},
+    }
+
+
+def search_kube() -> FakeKube:
+    kube = FakeKube()
+    kube.configmaps["inputs"] = {"metadata": {"name": "inputs"}, "data": {"cut-in.xosc": CUT_IN.read_text()}}
+    return kube
+
+
+def play_round(kube: FakeKube, store: FakeStore, name: str, number: int, tmp_path: Path) -> list[float]:
+    """The round's pods as the test kubelet runs them: index start+k runs point k of the round's ConfigMap
+    (minDistance = its CutInGap: a gap under 10 m fails), then the Job completes."""
+    from simcore.evaluation.criteria import evaluate
+    from simcore.evaluation.report import index_summary
+    from simcore.manifest import parse_manifest
+    from simcore.scenario.distribution import load_distribution
+
+    job = kube.jobs[round_job_name(name, number)]
+    env = {e["name"]: e.get("value") for e in job["spec"]["template"]["spec"]["containers"][0]["env"]}
+    offset = int(env["CARLOS_INDEX_OFFSET"])
+    points = tmp_path / f"points-{number}.xosc"
+    points.write_text(kube.configmaps[round_job_name(name, number)]["data"]["points.xosc"])
+    distribution = load_distribution(points)
+    criteria = parse_manifest(search_body(name, "u"), source="t").spec.evaluation.criteria
+    gaps = []
+    failed = []
+    for k in range(job["spec"]["completions"]):
+        parameters = distribution[k]
+        gap = float(parameters["CutInGap"])
+        gaps.append(gap)
+        summary = index_summary(
+            index=offset + k,
+            scenario="cut-in",
+            parameters=parameters,
+            seed=0,
+            optional=False,
+            sim_seconds=1.0,
+            wall_seconds=1.0,
+            metrics={"minDistance": gap},
+            results=evaluate(criteria, {"minDistance": gap}),
+            error=None,
+            end_reason="stopTrigger",
+        )
+        if summary["status"] == "failed":
+            failed.append(k)
+        store.put_bytes(f"{name}/{offset + k}/summary.json", json.dumps(summary).encode())
+    completions = job["spec"]["completions"]
+    job["status"] = {
+        "startTime": "2026-11-25T00:00:00Z",
+        "completedIndexes": format_intervals([k for k in range(completions) if k not in failed]),
+        "failedIndexes": format_intervals(failed),
+        "conditions": [{"type": "Failed" if failed else "Complete", "status": "True"}],
+    }
+    return gaps
+
+
+def test_a_search_makes_one_job_per_round_and_restarts_never_duplicate_one(tmp_path: Path) -> None:
+    kube, store = search_kube(), FakeStore()
+    r0, r1 = round_job_name("s", 0), round_job_name("s", 1)
+    c = controller(kube, store)
+    c.observe_run("ADDED", search_body("s", "uid-1"))
+    drain(c)
+    assert list(kube.jobs) == [r0] and kube.job_creates == 1
+    assert kube.jobs[r0]["spec"]["completions"] == 3 and r0 in kube.configmaps
+    st = kube.status_patches[-1]
+    assert (st["phase"], st["jobName"], st["search"]["rounds"], st["search"]["round"]) == (
+        "Pending",
+        r0,
+        "0/2",
+        0,
+    )
+    assert not store.exists("s/search/state.json")  # nothing told yet
+    # a restart in the middle of round 0: the Job is adopted, nothing created
+    c2 = controller(kube, store)
+    c2.observe_run("ADDED", search_body("s", "uid-1", st))
+    drain(c2)
+    assert kube.job_creates == 1 and list(kube.jobs) == [r0]
+    # round 0 finishes while the operator is down; the next one tells the study and starts round 1
+    gaps0 = play_round(kube, store, "s", 0, tmp_path)
+    c3 = controller(kube, store)
+    c3.observe_run("ADDED", search_body("s", "uid-1", kube.status_patches[-1]))
+    drain(c3)
+    assert sorted(kube.jobs) == [r0, r1] and kube.job_creates == 2
+    assert kube.jobs[r1]["spec"]["template"]["spec"]["containers"][0]["env"][-1] == {
+        "name": "CARLOS_INDEX_OFFSET",
+        "value": "3",
+    }
+    state = json.loads(store.objects["s/search/state.json"])
+    assert [p["index"] for p in state["points"]] == [0, 1, 2] and state["study"]
+    assert [p["parameters"]["CutInGap"] for p in state["points"]] == gaps0
+    st = kube.status_patches[-1]
+    assert (st["phase"], st["jobName"], st["search"]["rounds"], st["search"]["evaluated"]) == (
+        "Running",
+        r1,
+        "1/2",
+        3,
+    )
+    assert st["search"]["bestObjective"] == min(gaps0)
+    c3.enqueue(("default", "s"))
+    drain(c3)
+    assert kube.job_creates == 2
+    # a restart after round 1 finished: the last round is told, the results written, nothing created
+    gaps1 = play_round(kube, store, "s", 1, tmp_path)
+    c4 = controller(kube, store)
+    c4.observe_run("ADDED", search_body("s", "uid-1", kube.status_patches[-1]))
+    drain(c4)
+    assert kube.job_creates == 2
+    final = kube.status_patches[-1]
+    gaps = gaps0 + gaps1
+    failing = [i for i, gap in enumerate(gaps) if gap < 10]
+    assert final["phase"] == ("Failed" if failing else "Succeeded")
+    assert final["search"]["rounds"] == "2/2" and final["search"]["round"] is None
+    assert final["search"]["failuresFound"] == len(failing) == final["testFailures"]
+    assert final["passed"] == 6 - len(failing) and [f["index"] for f in final["failures"]] == failing
+    document = json.loads(store.objects["s/search.json"])
+    assert [p["parameters"]["CutInGap"] for p in document["points"]] == gaps
+    assert document["failing"] == failing and ("s/search/failing.xosc" in store.objects) == bool(failing)
+    assert json.loads(store.objects["s/summary.json"])["counts"]["total"] == 6
+    assert store.objects["s/junit.xml"].count(b"<testcase") == 6
+
+
+def test_a_rounds_job_that_disappears_leaves_the_search_unknown(tmp_path: Path) -> None:
+    kube, store = search_kube(), FakeStore()
+    c = controller(kube, store)
+    c.observe_run("ADDED", search_body("s", "uid-1"))
+    drain(c)
+    c.observe_job("DELETED", kube.jobs.pop(round_job_name("s", 0)))  # the watch tells
+    drain(c)
+    assert kube.status_patches[-1]["phase"] == "Unknown" and kube.job_creates == 1
+    # a restarted operator sees from the status that round 0's Job existed: no second one either
+    c2 = controller(kube, store)
+    c2.observe_run("ADDED", search_body("s", "uid-1", {**kube.status_patches[-2], "phase": "Running"}))
+    drain(c2)
+    assert kube.status_patches[-1]["phase"] == "Unknown" and kube.job_creates == 1
+
+
+def test_a_search_whose_scenario_the_operator_cannot_read_is_not_accepted() -> None:
+    kube, store = search_kube(), FakeStore()
+    c = controller(kube, store)
+    c.observe_run("ADDED", search_body("s", "uid-1", openscenario="file:///inside/the/image.xosc"))
+    c.observe_run("ADDED", search_body("t", "uid-2", configMapRef={"name": "inputs", "key": "other.xosc"}))
+    drain(c)
+    rejected = [p for p in kube.status_patches if p.get("phase") == "Failed"]
+    assert len(rejected) == 2 and kube.jobs == {}
+    messages = " ".join(p["conditions"][0]["message"] for p in rejected)
+    assert "configMapRef" in messages and "s3://" in messages and "'other.xosc'" in messages
+    # from s3:// (the fake store answers every bucket): the space is read, round 0 starts
+    store.put_bytes("inputs/cut-in.xosc", CUT_IN.read_bytes())
+    c.observe_run("ADDED", search_body("u", "uid-3", openscenario="s3://bucket/inputs/cut-in.xosc"))
+    drain(c)
+    assert list(kube.jobs) == [round_job_name("u", 0)]
+
+
+def test_a_stored_search_of_another_spec_is_not_resumed() -> None:
+    kube, store = search_kube(), FakeStore()
+    store.put_bytes(
+        "s/search/state.json", json.dumps({"version": 1, "spec": "other", "study": [], "points": []}).encode()
+    )
+    c = controller(kube, store)
+    c.observe_run("ADDED", search_body("s", "uid-1"))
+    drain(c)
+    assert kube.jobs == {}
+    assert kube.status_patches[-1]["conditions"][0]["reason"] == "SearchStateMismatch"
+
+
+def test_a_rounds_job_that_fails_before_every_index_finished_ends_the_search() -> None:
+    kube, store = search_kube(), FakeStore()
+    c = controller(kube, store)
+    c.observe_run("ADDED", search_body("s", "uid-1"))
+    drain(c)
+    job = kube.jobs[round_job_name("s", 0)]
+    job["status"] = {
+        "startTime": "2026-11-25T00:00:00Z",
+        "failedIndexes": "0",
+        "conditions": [
+            {"type": "Failed", "status": "True", "reason": "PodFailurePolicy", "message": "exit code 2"}
+        ],
+    }
+    c.observe_job("MODIFIED", job)
+    drain(c)
+    final = kube.status_patches[-1]
+    failed = {x["type"]: x for x in final["conditions"]}["Failed"]
+    assert final["phase"] == "Failed" and failed["reason"] == "PodFailurePolicy"
+    assert kube.job_creates == 1 and not store.exists("s/search/state.json")  # never told, no round 1
+    assert final["search"]["rounds"] == "0/2" and final["search"]["round"] is None
+    assert json.loads(store.objects["s/search.json"])["runs"] == 0 and "s/summary.json" in store.objects

@@ -15,6 +15,7 @@ import pytest
 import yaml
 from carlos_operator.builders import (
     OperatorSettings,
+    SearchRound,
     build_configmap,
     build_job,
     check_cluster_spec,
@@ -30,9 +31,8 @@ from tests.s3server import S3Server
 from tests.test_cli import ROOT, RUNS, carlos
 from tests.test_operator import env, terminal  # noqa: F401 - env: the emulator fixture, reused
 
-#: every example a cluster runs (a search runs locally only: submit refuses it, tested below)
-SEARCHES = sorted(p for p in RUNS.glob("*.yaml") if "\n  search:" in p.read_text())
-EXAMPLES = sorted(set(RUNS.glob("*.yaml")) - set(SEARCHES))
+#: every example (a search runs on the cluster in rounds: one Job per round)
+EXAMPLES = sorted(RUNS.glob("*.yaml"))
 
 
 def _objects(text: str) -> tuple[dict[str, Any] | None, dict[str, Any]]:
@@ -41,13 +41,6 @@ def _objects(text: str) -> tuple[dict[str, Any] | None, dict[str, Any]]:
     runs = [d for d in docs if d["kind"] == "SimulationRun"]
     assert len(runs) == 1 and len(configmaps) <= 1
     return (configmaps[0] if configmaps else None), runs[0]
-
-
-@pytest.mark.parametrize("example", SEARCHES, ids=lambda p: p.stem)
-def test_submit_refuses_a_search_in_one_line(example: Path) -> None:
-    result = carlos("submit", example, "--dry-run", "-o", "yaml", "--namespace", "sims")
-    assert result.returncode == 2, result.stdout + result.stderr
-    assert "spec.search" in result.stderr and "Traceback" not in result.stderr
 
 
 @pytest.mark.parametrize("example", EXAMPLES, ids=lambda p: p.stem)
@@ -66,7 +59,10 @@ def test_dry_run_objects_are_accepted_by_the_operator(example: Path) -> None:
         "apiVersion": "carlos.dev/v1alpha1",
     }
     build_configmap(run, owner, settings)
-    job = build_job(run, owner, settings, output)
+    search = run.spec.search
+    # a search's pods are its rounds' (the first one here), a sweep's the run's Job's
+    first = SearchRound(0, 0, min(search.batch_size, search.budget)) if search is not None else None
+    job = build_job(run, owner, settings, output, search_round=first)
     assert configmap is not None and configmap["metadata"]["name"] == inputs_name(run.name)
     mounted = {v["configMap"]["name"] for v in job["spec"]["template"]["spec"]["volumes"] if "configMap" in v}
     assert configmap["metadata"]["name"] in mounted

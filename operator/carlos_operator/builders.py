@@ -38,7 +38,7 @@ import yaml
 
 from simcore.errors import BadInput, ExitCode
 from simcore.plan import Plan
-from simcore.spec import API_GROUP, API_VERSION, KIND, EnvVar, SimulationRun
+from simcore.spec import API_GROUP, API_VERSION, KIND, EnvVar, SimulationRun, Sweep
 from simcore.transport.dds_config import loopback_config
 
 SPEC_DIR = "/etc/carlos/spec"
@@ -229,6 +229,52 @@ def job_name(run_name: str) -> str:
     return f"{name[:39].rstrip('-')}-{digest}"
 
 
+def round_job_name(run_name: str, number: int) -> str:
+    """The Job (and ConfigMap) of a search's round `number`: `carlos-<run>-r<number>`, at most 48
+    characters as `job_name` (shortened with a hash of the run's name, the round number kept)."""
+    suffix = f"-r{number}"
+    name = f"carlos-{run_name}{suffix}"
+    if len(name) <= 48:
+        return name
+    digest = hashlib.sha256(run_name.encode()).hexdigest()[:8]
+    return f"{f'carlos-{run_name}'[: 39 - len(suffix)].rstrip('-')}-{digest}{suffix}"
+
+
+@dataclass(frozen=True)
+class SearchRound:
+    """One round of a search on the cluster: its Job runs the run's indexes start…start+count-1."""
+
+    number: int
+    start: int
+    count: int
+
+
+POINTS_FILE = "points.xosc"
+ROUND_LABEL = f"{API_GROUP}/search-round"
+
+
+def round_manifest(run: SimulationRun) -> SimulationRun:
+    """What a round's pods run: the run as a sweep over the round's points (`points.xosc` beside the spec
+    in the round's ConfigMap; a relative distribution is read beside the manifest)."""
+    spec = run.spec.model_copy(update={"search": None, "sweep": Sweep(distribution=POINTS_FILE)})
+    return run.model_copy(update={"spec": spec})
+
+
+def build_round_configmap(
+    run: SimulationRun,
+    body: dict[str, Any],
+    settings: OperatorSettings,
+    search_round: SearchRound,
+    points_xml: bytes,
+) -> dict[str, Any]:
+    """A round's ConfigMap: the round's sweep (`simulationrun.yaml`) and its points (`points.xosc`)."""
+    cm = build_configmap(round_manifest(run), body, settings)
+    cm["metadata"]["name"] = round_job_name(run.name, search_round.number)
+    cm["metadata"]["labels"][ROUND_LABEL] = str(search_round.number)
+    cm["data"][POINTS_FILE] = points_xml.decode()
+    return cm
+
+
 def owner_reference(body: dict[str, Any]) -> dict[str, Any]:
     meta = body["metadata"]
     return {
@@ -297,10 +343,11 @@ def check_cluster_spec(run: SimulationRun) -> None:
             f"{sut.name!r} is the name of a CARLOS container: choose another name",
             field="spec.systemUnderTest.name",
         )
-    if run.spec.search is not None:
-        raise BadInput(
-            "spec.search runs locally only for now (carlos run): use spec.sweep on a cluster",
-            field="spec.search",
+    search = run.spec.search
+    if search is not None and search.batch_size > MAX_COMPLETIONS:
+        raise BadInput(  # never: the spec allows at most 1000 (kept beside the sweep's check)
+            f"batchSize {search.batch_size}: a round's Job has at most {MAX_COMPLETIONS:,} runs",
+            field="spec.search.batchSize",
         )
     total = len(Plan(run.spec))
     if total > MAX_COMPLETIONS:
@@ -449,17 +496,29 @@ def _env_var(var: EnvVar) -> dict[str, Any]:
 
 
 def build_job(
-    run: SimulationRun, body: dict[str, Any], settings: OperatorSettings, output: Output
+    run: SimulationRun,
+    body: dict[str, Any],
+    settings: OperatorSettings,
+    output: Output,
+    search_round: SearchRound | None = None,
 ) -> dict[str, Any]:
-    """The run's Indexed Job: one completion per index, Kubernetes doing retries and parallelism."""
+    """The run's Indexed Job: one completion per index, Kubernetes doing retries and parallelism. A
+    search's round (`search_round`) gets its own Job over the round's ConfigMap, its pods' indexes offset
+    by the round's start (CARLOS_INDEX_OFFSET)."""
     spec = run.spec
-    total = len(Plan(spec))
-    name = job_name(run.name)
+    if search_round is None:
+        total = len(Plan(spec))
+        name = job_name(run.name)
+    else:
+        total = search_round.count
+        name = round_job_name(run.name, search_round.number)
     parallelism = min(spec.execution.parallelism or DEFAULT_PARALLELISM, total)
     attempts = spec.execution.retries + 1
     pod_deadline = spec.execution.timeout_seconds + POD_DEADLINE_GRACE_S
     waves = math.ceil(total / parallelism)
     labels = _labels(run, settings)
+    if search_round is not None:
+        labels[ROUND_LABEL] = str(search_round.number)
     job_labels = dict(labels)
     if spec.execution.queue_name:
         job_labels[QUEUE_LABEL] = spec.execution.queue_name
@@ -492,6 +551,9 @@ def build_job(
     bridge["resources"] = sidecar_resources
     recorder = _sidecar(_container("recorder", settings, run, output, mounts), RECORDER_READY_PORT)
     recorder["resources"] = copy.deepcopy(sidecar_resources)
+    if search_round is not None:
+        for container in (simcore, bridge, recorder):
+            container["env"].append({"name": "CARLOS_INDEX_OFFSET", "value": str(search_round.start)})
     sidecars = [bridge, recorder]
     sut = spec.system_under_test
     if sut is not None and sut.image:

@@ -22,6 +22,9 @@ While a run's pods are active, its pods are read by label (at most `POD_SAMPLE`,
 seconds): a container waiting for a reason that does not pass by itself (ImagePullBackOff,
 CreateContainerConfigError…) is shown as the `PodsStuck` condition and a Warning event.
 
+A search (`spec.search`) gets no ConfigMap and Job here: searching.py creates one of each per round and
+tells the study each round's results (the stored state is the truth after a restart).
+
 Runs are re-queued when their Job changes (watch events) and every `resync` seconds while not finished.
 """
 
@@ -48,10 +51,12 @@ from carlos_operator.builders import (
     job_name,
     manifest_yaml,
     resolve_output,
+    round_job_name,
     scenario_configmaps,
     secret_references,
 )
 from carlos_operator.kube import Conflict, Kube, NotFound, now_rfc3339
+from carlos_operator.searching import SearchProgress, SearchRuns
 from carlos_operator.status import TERMINAL_PHASES, Tally, aggregate, condition, job_finished
 from simcore.errors import BadInput, CarlosError
 from simcore.evaluation.report import junit_xml, run_summary
@@ -114,6 +119,7 @@ class RunState:
     waits: int = 0  # consecutive waits for a prerequisite (the backoff exponent)
     pods_checked: float = 0.0  # monotonic time of the last pod check
     stuck: tuple[str, str] | None = None  # (reason, message) of a pod that cannot start
+    search: SearchProgress | None = None  # a search's rounds (searching.py)
 
 
 def _store_for(kube: Kube, namespace: str, output: Output) -> Any:
@@ -220,6 +226,7 @@ class Controller:
         self._threads: list[threading.Thread] = []
         self._fetch = ThreadPoolExecutor(max_workers=16, thread_name_prefix="carlos-s3")
         self.workers = workers
+        self.searches = SearchRuns(self)
 
     # --- events (from kopf's watch streams) ------------------------------------------------------------
 
@@ -351,6 +358,12 @@ class Controller:
         if state.held:
             self._hold(state)
             return
+        if state.search is not None:
+            try:
+                self.searches.update(key, state)
+            except CarlosError as exc:  # the stored study does not fit the run (another spec, optuna)
+                self._reject(state, "SearchStateMismatch", str(exc))
+            return
         self._update_status(key, state)
 
     def _observe_generation(self, state: RunState) -> None:
@@ -399,7 +412,11 @@ class Controller:
         status = {
             "phase": "Suspended",
             "total": state.tally.total if state.tally else None,
-            "jobName": job_name(state.run.name) if state.run else None,
+            "jobName": (
+                (round_job_name(state.run.name, 0) if state.search is not None else job_name(state.run.name))
+                if state.run
+                else None
+            ),
             "conditions": [
                 condition(
                     {c.get("type"): c for c in state.last_status.get("conditions") or []},
@@ -468,7 +485,7 @@ class Controller:
                 "administrator allows it per namespace: Helm value secretReferences.namespaces)",
             )
         state.run, state.output = run, output
-        total = len(Plan(run.spec))
+        total = run.spec.search.budget if run.spec.search is not None else len(Plan(run.spec))
         if state.tally is None or state.tally.total != total:
             state.tally = Tally(total)
         for position, name in enumerate(scenario_configmaps(run)):
@@ -484,6 +501,11 @@ class Controller:
         state.store = self.store_factory(
             self.kube, namespace, output if allowed else dataclasses.replace(output, secret=None)
         )
+        if run.spec.search is not None and state.search is None:
+            try:
+                state.search = self.searches.prepare(state, namespace)
+            except CarlosError as exc:
+                raise Rejected("InvalidSpec", str(exc)) from None
         started = bool(state.last_status.get("startTime")) or state.last_status.get("phase") == "Running"
         if started:
             state.job_seen = True  # its Job ran: adopt it if it is still there, never create another
@@ -504,6 +526,9 @@ class Controller:
                 )
         else:
             state.store.put_bytes(run_yaml, spec_bytes)
+        if state.search is not None:
+            state.ensured = True  # a search creates one Job per round (searching.py)
+            return
         cm = build_configmap(run, body, self.settings)
         try:
             self.kube.create_configmap(namespace, cm)
@@ -619,13 +644,13 @@ class Controller:
             self._transition(state, before, status)
         metrics.set_phase(state.uid, status["phase"])
 
-    def _job_gone(self, state: RunState) -> None:
-        """The run's Job disappeared before the run finished: the results read so far stay, the run is
-        `Unknown` (never `Pending` again, never a second Job)."""
+    def _job_gone(self, state: RunState, name: str | None = None) -> None:
+        """The run's Job (`name`: a search's round) disappeared before the run finished: the results read
+        so far stay, the run is `Unknown` (never `Pending` again, never a second Job)."""
         assert state.run is not None and state.tally is not None
         tally = state.tally
         previous = state.last_status
-        name = job_name(state.run.name)
+        name = name or job_name(state.run.name)
         message = (
             f"the Job {name} is gone with {tally.known_count} of {tally.total} results read; the run cannot "
             "finish: create it again under a new name"

@@ -242,6 +242,28 @@ def crd() -> dict[str, Any]:
             "description": "Runs that failed (test failures and errors).",
         },
         {"name": "Age", "type": "date", "jsonPath": ".metadata.creationTimestamp"},
+        # a search's (spec.search), with -o wide
+        {
+            "name": "Rounds",
+            "type": "string",
+            "jsonPath": ".status.search.rounds",
+            "description": "A search's rounds done / in all.",
+            "priority": 1,
+        },
+        {
+            "name": "Best",
+            "type": "number",
+            "jsonPath": ".status.search.bestObjective",
+            "description": "A search's best objective so far.",
+            "priority": 1,
+        },
+        {
+            "name": "Found",
+            "type": "integer",
+            "jsonPath": ".status.search.failuresFound",
+            "description": "A search's failing points so far.",
+            "priority": 1,
+        },
     ]
     return {
         "apiVersion": "apiextensions.k8s.io/v1",

@@ -23,6 +23,7 @@ class RunState:
     elapsed: float | None = None
     failures: list[str] = field(default_factory=list)
     results_url: str | None = None
+    search: str | None = None  # a search on a cluster: "rounds 1/4 · best 0.31"
 
     @property
     def finished(self) -> bool:
@@ -38,6 +39,8 @@ class RunState:
             f"{self.name}: {self.phase} {self.done}/{self.total} · passed {self.passed} failed {self.failed} "
             f"errors {self.errors}"
         )
+        if self.search:
+            text += f" · {self.search}"
         return text + ("" if eta is None else f" · ETA {duration(eta)}")
 
 
@@ -91,7 +94,13 @@ def state_of_object(obj: dict[str, Any], now: dt.datetime | None = None) -> RunS
         detail = f.get("message") or f.get("error") or f.get("status") or ""
         failures.append(f"{f.get('status', 'failed')} {f.get('scenario', '')}[{f.get('index')}]: {detail}")
     done = int(st.get("succeeded", 0)) + int(st.get("failed", 0))
+    search = st.get("search") or {}
+    rounds = None
+    if search.get("rounds"):
+        best = search.get("bestObjective")
+        rounds = f"rounds {search['rounds']}" + ("" if best is None else f" · best {float(best):.3g}")
     return RunState(
+        search=rounds,
         name=obj["metadata"]["name"],
         phase=str(st.get("phase") or "Pending"),
         done=done,

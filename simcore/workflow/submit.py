@@ -139,12 +139,6 @@ def pack(
     Results go to `results_url` when given, else to the manifest's `output.url` when it is `s3://`, else to
     the operator's default output (a `file://` URL means nothing in a pod)."""
     base_dir = manifest.parent.resolve()
-    if simulation_run.spec.search is not None:
-        raise BadInput(
-            "a search runs locally only for now (carlos run): use spec.sweep on a cluster",
-            file=str(manifest),
-            field="spec.search",
-        )
     sut = simulation_run.spec.system_under_test
     if sut is not None and not sut.image:
         raise BadInput(
