@@ -189,6 +189,7 @@ def run_search(
             timings.append((optimizer_seconds, time.perf_counter() - started))
             log = round_log
             store.put_bytes(f"{prefix}/state.json", _state_bytes(run, log, points))
+            store.sync()
             on_round(search_document(run.name, search, seed, space, points))
         document = search_document(run.name, search, seed, space, points)
         document["outputUrl"] = store.url_for(run.name)
