@@ -2,7 +2,7 @@
 
 (a) single run: one scenario (the corpus' cut-in, 22 s simulated, recording off) through `carlos run` as a
     fresh process (the installed console script next to this Python) vs the esmini player as a fresh process
-    on the same file; median of BENCH_REPEAT (default 3) runs each.
+    on the same file; median of BENCH_REPEAT (default 3) runs each, interleaved.
 (b) sweep: a BENCH_SWEEP-run (default 200) sweep of examples/scenarios/cut-in.xosc (EgoSpeed × CutInGap ×
     AdversarySpeed, recording off) through `carlos run --parallel 2` vs as many esmini processes two at a
     time, each on a copy of the file with that run's parameter values (esmini drives Ego by its script where
@@ -10,6 +10,13 @@
 (c) simulated seconds per wall second per core, warm, in this process: the run pipeline
     (`simcore.runner.simulate`, what `carlos run` workers and the simcore pod call) vs the bare engine
     (`ScenarioEngine.advance` in a loop) on the corpus cut-in.
+
+Wall seconds and CPU seconds (user + system of the processes started) are both reported: on a shared
+machine the CPU seconds are the steadier figure. `carlos run` runs this checkout's code (PYTHONPATH is set
+to it). BENCH_BEFORE=DIR (a checkout of an earlier revision, e.g. `git worktree add /tmp/before REV`)
+measures (a) and (b) for that code too, interleaved with this checkout's, as the "before" figures.
+Python's bytecode cache should be writable (PYTHONDONTWRITEBYTECODE unset), as in an installed package;
+one untimed run per checkout warms it.
 
 esmini: the player binary at $ESMINI; its rows are skipped when it is not set. The corpus:
 $CARLOS_ESMINI_CORPUS (esmini's corpus directory with resources/xosc). Prints a table; the last line is one JSON
@@ -23,12 +30,14 @@ import itertools
 import json
 import os
 import re
+import resource
 import shutil
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -38,6 +47,7 @@ sys.path.insert(0, str(ROOT))
 REPEAT = int(os.environ.get("BENCH_REPEAT", "3"))
 SWEEP = int(os.environ.get("BENCH_SWEEP", "200"))
 PASSES = int(os.environ.get("BENCH_PASSES", "10"))
+BEFORE = Path(os.environ["BENCH_BEFORE"]).resolve() if os.environ.get("BENCH_BEFORE") else None
 CORPUS = Path(os.environ.get("CARLOS_ESMINI_CORPUS", ""))
 CARLOS = Path(sys.executable).parent / "carlos"
 EXAMPLE = ROOT / "examples" / "scenarios" / "cut-in.xosc"
@@ -68,13 +78,33 @@ def manifest(directory: Path, name: str, scenario: Path, sweep: dict[str, list[f
     return path
 
 
-def timed(command: list[str], cwd: Path) -> float:
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def timed(command: list[str], cwd: Path, env: dict[str, str] | None = None) -> float:
     started = time.perf_counter()
-    done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, check=False)
+    done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, check=False, env=env)
     wall = time.perf_counter() - started
     if done.returncode not in (0, 1):
         raise SystemExit(f"{' '.join(command)} exited {done.returncode}: {done.stderr.strip()[-400:]}")
     return wall
+
+
+def measured(job: Callable[[], object]) -> tuple[float, float]:
+    """(wall s, CPU s of the child processes) of `job`."""
+    cpu = _children_cpu()
+    started = time.perf_counter()
+    job()
+    return time.perf_counter() - started, _children_cpu() - cpu
+
+
+def tree_env(tree: Path) -> dict[str, str]:
+    """The environment that makes `carlos` run the code of the checkout `tree`."""
+    env = {**os.environ, "PYTHONPATH": f"{tree}{os.pathsep}{tree / 'operator'}"}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
 
 
 def esmini_command(binary: Path, scenario: Path) -> list[str]:
@@ -147,67 +177,102 @@ def pipeline_vs_engine(scenario: Path, work: Path) -> tuple[float, float, float]
     return sim / PASSES, rates[0], rates[1]
 
 
+def _median(pairs: list[tuple[float, float]]) -> tuple[float, float]:
+    return statistics.median(p[0] for p in pairs), statistics.median(p[1] for p in pairs)
+
+
 def main() -> None:
     binary = esmini_binary()
     cut_in = CORPUS / "resources" / "xosc" / "cut-in.xosc"
     if not cut_in.is_file():
         raise SystemExit(f"corpus cut-in not found at {cut_in} (set CARLOS_ESMINI_CORPUS)")
+    trees = {"after": ROOT, **({"before": BEFORE} if BEFORE is not None else {})}
     figures: dict[str, float | int | None] = {"sweep_runs": SWEEP}
     with tempfile.TemporaryDirectory(prefix="carlos-bench-") as name:
         work = Path(name)
         single = manifest(work, "single", cut_in)
-        carlos_single = statistics.median(
-            timed([str(CARLOS), "run", str(single), "--fresh"], work) for _ in range(REPEAT)
-        )
-        figures["single_carlos_s"] = round(carlos_single, 3)
-        if binary is not None:
-            esmini_single = statistics.median(
-                timed(esmini_command(binary, cut_in), work) for _ in range(REPEAT)
-            )
-            figures["single_esmini_s"] = round(esmini_single, 3)
-            figures["single_ratio_carlos_over_esmini"] = round(carlos_single / esmini_single, 2)
+        envs = {label: tree_env(tree) for label, tree in trees.items()}
+        for env in envs.values():  # warm-up: bytecode cache, road network cache
+            timed([str(CARLOS), "run", str(single), "--fresh"], work, env)
+        singles: dict[str, list[tuple[float, float]]] = {label: [] for label in [*trees, "esmini"]}
+        for _ in range(REPEAT):
+            for label, env in envs.items():
+                singles[label].append(
+                    measured(lambda env=env: timed([str(CARLOS), "run", str(single), "--fresh"], work, env))
+                )
+            if binary is not None:
+                singles["esmini"].append(measured(lambda: timed(esmini_command(binary, cut_in), work)))
+        single_wall: dict[str, float] = {}
+        for label in [*trees, "esmini"]:
+            if singles[label]:
+                single_wall[label], cpu = _median(singles[label])
+                figures[f"single_{label}_s"] = round(single_wall[label], 3)
+                figures[f"single_{label}_cpu_s"] = round(cpu, 3)
+        if "esmini" in single_wall:
+            for label in trees:
+                figures[f"single_{label}_over_esmini"] = round(single_wall[label] / single_wall["esmini"], 2)
         matrix = sweep_matrix(SWEEP)
         sweep = manifest(work, "sweep", EXAMPLE, matrix)
         runs = len(list(itertools.product(*matrix.values())))
         figures["sweep_runs"] = runs
-        carlos_sweep = timed([str(CARLOS), "run", str(sweep), "--fresh", "--parallel", "2"], work)
-        figures["sweep_carlos_s"] = round(carlos_sweep, 2)
-        figures["sweep_carlos_runs_per_s"] = round(runs / carlos_sweep, 2)
+        variants: list[Path] = []
+        esmini_dir = work / "esmini"
         if binary is not None:
-            esmini_dir = work / "esmini"
             esmini_dir.mkdir()
             variants = esmini_variants(esmini_dir, matrix)
-            started = time.perf_counter()
+
+        def esmini_sweep() -> None:
+            assert binary is not None
             with ThreadPoolExecutor(max_workers=2) as pool:
                 list(pool.map(lambda p: timed(esmini_command(binary, p), esmini_dir), variants))
-            esmini_sweep = time.perf_counter() - started
-            figures["sweep_esmini_s"] = round(esmini_sweep, 2)
-            figures["sweep_throughput_carlos_over_esmini"] = round(esmini_sweep / carlos_sweep, 2)
+
+        for label, env in envs.items():
+            wall, cpu = measured(
+                lambda env=env: timed(
+                    [str(CARLOS), "run", str(sweep), "--fresh", "--parallel", "2"], work, env
+                )
+            )
+            figures[f"sweep_{label}_s"] = round(wall, 2)
+            figures[f"sweep_{label}_cpu_s"] = round(cpu, 2)
+            figures[f"sweep_{label}_runs_per_s"] = round(runs / wall, 2)
+            if binary is not None:  # esmini right after each, on the same load
+                e_wall, e_cpu = measured(esmini_sweep)
+                figures[f"sweep_esmini_next_to_{label}_s"] = round(e_wall, 2)
+                figures[f"sweep_esmini_next_to_{label}_cpu_s"] = round(e_cpu, 2)
+                figures[f"sweep_{label}_throughput_over_esmini"] = round(e_wall / wall, 2)
         sim, pipeline_rate, engine_rate = pipeline_vs_engine(cut_in, work)
         figures["pipeline_sim_s_per_wall_s"] = round(pipeline_rate, 1)
         figures["engine_sim_s_per_wall_s"] = round(engine_rate, 1)
         figures["pipeline_over_engine"] = round(pipeline_rate / engine_rate, 3)
         shutil.rmtree(work / "results", ignore_errors=True)
 
-    def row(what: str, carlos: object, esmini: object, ratio: object) -> None:
-        print(f"{what:46} {carlos!s:>12} {esmini!s:>12} {ratio!s:>10}")
+    def row(what: str, *cells: object) -> None:
+        print(f"{what:44}" + "".join(f" {cell!s:>16}" for cell in cells))
 
-    print(f"{'measure':46} {'carlos':>12} {'esmini':>12} {'ratio':>10}")
+    def pair(key: str) -> str:
+        wall, cpu = figures.get(f"{key}_s"), figures.get(f"{key}_cpu_s")
+        return "—" if wall is None else f"{wall} ({cpu} cpu)"
+
+    labels = list(trees)
+    row(
+        "measure", *[f"carlos {label}" for label in labels], "esmini", *[f"ratio {label}" for label in labels]
+    )
     row(
         "single run, fresh process (s)",
-        figures["single_carlos_s"],
-        figures.get("single_esmini_s", "—"),
-        figures.get("single_ratio_carlos_over_esmini", "—"),
+        *[pair(f"single_{label}") for label in labels],
+        pair("single_esmini"),
+        *[figures.get(f"single_{label}_over_esmini", "—") for label in labels],
     )
     row(
         f"{runs}-run sweep, 2 at a time (s; ratio=throughput)",
-        figures["sweep_carlos_s"],
-        figures.get("sweep_esmini_s", "—"),
-        figures.get("sweep_throughput_carlos_over_esmini", "—"),
+        *[pair(f"sweep_{label}") for label in labels],
+        pair(f"sweep_esmini_next_to_{labels[0]}"),
+        *[figures.get(f"sweep_{label}_throughput_over_esmini", "—") for label in labels],
     )
     row(
         f"sim-s per wall-s, cut-in {sim:.0f} s (pipeline/engine)",
         figures["pipeline_sim_s_per_wall_s"],
+        *([""] * (len(labels) - 1)),
         figures["engine_sim_s_per_wall_s"],
         figures["pipeline_over_engine"],
     )

@@ -48,11 +48,11 @@ def check_criteria_metrics(spec: SimulationRunSpec, file: str) -> None:
 
 def check_system_under_test(spec: SimulationRunSpec, base_dir: Path, file: str) -> None:
     """A local system under test (`module`) can be imported and has its class (it is not constructed)."""
-    from simcore.sensors.loop import system_under_test_class
-
     sut = spec.system_under_test
     if sut is None or sut.module is None:
         return
+    from simcore.sensors.loop import system_under_test_class  # numpy and the sensors: only for a system
+
     try:
         system_under_test_class(sut, base_dir)
     except BadInput as exc:

@@ -5,7 +5,9 @@ index after index (a warm worker keeps its imports and network cache).
 A worker that crashes (e.g. a segfault in a native library) breaks the pool: the pool is rebuilt, the
 indexes that were in flight are retried (each counts an attempt, since which one crashed is unknown), and
 an index that used up its attempts is reported as an error. Nothing already written is lost: every index's
-files are final when written, `run.yaml` first and the run-level summary and `junit.xml` last.
+files are final when written, `run.yaml` first and the run-level summary and `junit.xml` last; the store is
+flushed to disk (`Store.sync`) after `run.yaml` and after the run-level summary. An index whose summary
+cannot be read (a power cut before the flush) counts as not run.
 """
 
 from __future__ import annotations
@@ -132,6 +134,18 @@ def kept_on_resume(summary: dict[str, Any]) -> bool:
     return summary.get("status") in ("passed", "failed")
 
 
+def _written_summary(store: Store, key: str) -> dict[str, Any] | None:
+    """An index's summary in the store; None when there is none or it cannot be read (cut short by a power
+    cut before the store was flushed): such an index runs again."""
+    if not store.exists(key):
+        return None
+    try:
+        summary = json.loads(store.get_bytes(key))
+    except ValueError:  # not JSON (UnicodeDecodeError is a ValueError too)
+        return None
+    return summary if isinstance(summary, dict) else None
+
+
 def _exit_code_of(summary: dict[str, Any]) -> ExitCode:
     return ExitCode.PASSED if summary.get("status") == "passed" else ExitCode.FAILED
 
@@ -187,12 +201,11 @@ def execute(
                 field="metadata.name",
             )
         for index in wanted:
-            key = f"{name}/{index}/summary.json"
-            if store.exists(key):
-                kept = json.loads(store.get_bytes(key))
-                if kept_on_resume(kept):
-                    previous[index] = kept
+            kept = _written_summary(store, f"{name}/{index}/summary.json")
+            if kept is not None and kept_on_resume(kept):
+                previous[index] = kept
     store.put_bytes(f"{name}/run.yaml", spec_bytes)
+    store.sync()
     todo = [i for i in wanted if i not in previous]
     events.on_start(len(wanted), len(previous))
     started = time.monotonic()
@@ -217,6 +230,7 @@ def execute(
     summary["outputUrl"] = store.url_for(name)
     store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
     store.put_bytes(f"{name}/summary.json", summary_bytes(summary))
+    store.sync()
     report_url, report_error = _html_report(store, run, summary, [outcomes[i] for i in sorted(outcomes)])
     return RunReport(
         run_name=name,
@@ -348,14 +362,12 @@ def _drain(progress: Any, events: Events) -> None:
 
 def _crashed(sweep: _Sweep, index: int) -> None:
     """An index whose worker process died: retry it, or record it as an error when out of attempts."""
-    key = f"{sweep.settings.run.name}/{index}/summary.json"
-    if sweep.store.exists(key):
-        written = json.loads(sweep.store.get_bytes(key))
-        if kept_on_resume(written) and written.get("attempts") == sweep.attempts[index]:
-            # the worker finished this attempt (its summary is written last) and died before reporting it
-            sweep.outcomes[index] = written
-            sweep.events.on_done(RunOutcome(index=index, summary=written, exit_code=_exit_code_of(written)))
-            return
+    written = _written_summary(sweep.store, f"{sweep.settings.run.name}/{index}/summary.json")
+    if written is not None and kept_on_resume(written) and written.get("attempts") == sweep.attempts[index]:
+        # the worker finished this attempt (its summary is written last) and died before reporting it
+        sweep.outcomes[index] = written
+        sweep.events.on_done(RunOutcome(index=index, summary=written, exit_code=_exit_code_of(written)))
+        return
     reason = "the worker process died (crash in the simulator)"
     if sweep.attempts[index] < sweep.max_attempts:
         sweep.events.on_retry(index, sweep.attempts[index], reason)

@@ -115,7 +115,7 @@ def load_road(scenario: Scenario) -> OpenDrive | None:
     from simcore.world.opendrive import OpenDrive, OpenDriveError
 
     try:
-        return OpenDrive.from_file(scenario.road_file)
+        return OpenDrive.shared(scenario.road_file)
     except OpenDriveError as exc:
         raise BadInput(str(exc), file=str(scenario.road_file)) from None
     except FileNotFoundError:

@@ -518,6 +518,7 @@ def run_recorder(env: PodEnv) -> int:
                 f"{prefix}/log.txt",
                 f"recorder: terminated before the end of the run (attempt {env.failures + 1})\n".encode(),
             )
+        store.sync()
     except Exception as exc:  # the object store failed: simcore turns this into exit code 3
         state, error = "error", f"{type(exc).__name__}: {exc}"
         print(f"recorder: upload failed: {error}", flush=True)

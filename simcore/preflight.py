@@ -58,7 +58,7 @@ def check_road_file(road_file: Path, *, scenario_file: str) -> None:
         raise BadInput(f"road network {str(road_file)!r} not found", file=scenario_file, field=field)
     if road_file.suffix == ".xodr":
         try:
-            OpenDrive.from_file(road_file)
+            OpenDrive.shared(road_file)
         except OpenDriveError as exc:
             raise BadInput(str(exc)) from None  # the message starts with the road file's name
     else:

@@ -109,5 +109,8 @@ class PrefixedStore:
     def list(self, prefix: str = "") -> list[str]:
         return [key[len(self.prefix) :] for key in self.store.list(self.prefix + prefix)]
 
+    def sync(self) -> None:
+        self.store.sync()
+
     def url_for(self, key: str) -> str:
         return self.store.url_for(self.prefix + key)

@@ -194,6 +194,11 @@ def test_an_index_that_errors_does_not_stop_the_sweep_and_resume_keeps_results(t
     assert "1 of 2 runs already complete" in again.stderr + again.stdout
     assert (out / "t" / "0" / "recording.mcap").stat().st_mtime_ns == before
     assert json.loads((out / "t" / "1" / "summary.json").read_text())["status"] == "error"
+    # a summary cut short (a power cut before the store was flushed) counts as not run: the index runs again
+    (out / "t" / "0" / "summary.json").write_bytes(b"")
+    carlos("run", manifest, "--output", f"file://{out}")
+    assert json.loads((out / "t" / "0" / "summary.json").read_text())["status"] == "passed"
+    assert (out / "t" / "0" / "recording.mcap").stat().st_mtime_ns != before
     # a changed spec under the same name is refused instead of mixing results
     manifest.write_text(manifest.read_text().replace("maxSeconds: 8", "maxSeconds: 9"))
     changed = carlos("run", manifest, "--output", f"file://{out}")

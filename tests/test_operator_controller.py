@@ -38,6 +38,9 @@ class FakeStore:
     def url_for(self, key: str) -> str:
         return f"s3://bucket/out/{key}"
 
+    def sync(self) -> None:
+        """Nothing to do: an object S3 acknowledged is durable."""
+
 
 class FakeKube:
     def __init__(self) -> None:

@@ -26,14 +26,14 @@ CORPUS = (_CORPUS_ROOT or ROOT) / "resources" / "xosc"
 needs_corpus = pytest.mark.skipif(_CORPUS_ROOT is None, reason=NO_CORPUS)
 
 
-def _manifest(directory: Path, scenario: Path, *, name: str = "pipeline") -> Path:
+def _manifest(directory: Path, scenario: Path, *, name: str = "pipeline", max_seconds: float = 300) -> Path:
     path = directory / f"{name}.yaml"
     path.write_text(
         "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\n"
         f"metadata: {{name: {name}}}\n"
         "spec:\n"
         f"  scenarios: [{{name: s, openscenario: {json.dumps(str(scenario))}}}]\n"
-        "  simulation: {stepSeconds: 0.05, maxSeconds: 300, seed: 1}\n"
+        f"  simulation: {{stepSeconds: 0.05, maxSeconds: {max_seconds}, seed: 1}}\n"
         "  recording: {enabled: false}\n"
         f"  output: {{url: {json.dumps((directory / 'results').as_uri())}}}\n"
     )
@@ -41,11 +41,11 @@ def _manifest(directory: Path, scenario: Path, *, name: str = "pipeline") -> Pat
 
 
 def _carlos_run_tracks(
-    directory: Path, scenario: Path
+    directory: Path, scenario: Path, max_seconds: float = 300
 ) -> tuple[dict[str, object], dict[str, dict[int, tuple]]]:
     """Run `scenario` as `carlos run` does (executor → runner → pipeline), listening to every odometry
     topic: (index summary, ROS name → {step: (x, y)})."""
-    run = load_manifest(_manifest(directory, scenario))
+    run = load_manifest(_manifest(directory, scenario, max_seconds=max_seconds))
     bus = InProcessBus()
     tracks: dict[str, dict[int, tuple]] = {}
 
@@ -65,9 +65,40 @@ def _carlos_run_tracks(
 )
 def test_carlos_run_and_conformance_run_the_same_trajectories(tmp_path: Path, name: str) -> None:
     scenario = CORPUS / f"{name}.xosc"
-    summary, tracks = _carlos_run_tracks(tmp_path, scenario)
     result, trace = conformance.run_scenario(scenario)
     assert result.status == "ended", result.message
+    assert _same_trajectories(tmp_path, scenario, trace, 300) > 50
+
+
+def _corpus_files() -> list[Path]:
+    return sorted((_CORPUS_ROOT / "resources").rglob("*.xosc")) if _CORPUS_ROOT is not None else []
+
+
+@pytest.mark.slow
+@needs_corpus
+@pytest.mark.parametrize(
+    "scenario",
+    _corpus_files() or [None],
+    ids=lambda p: str(p.relative_to(_CORPUS_ROOT / "resources")) if _CORPUS_ROOT and p else "no-corpus",
+)
+def test_every_corpus_scenario_conformance_runs_to_its_end_runs_the_same_through_carlos_run(
+    tmp_path: Path, scenario: Path
+) -> None:
+    from simcore.scenario.xosc import load_scenario
+
+    result, trace = conformance.run_scenario(scenario)
+    if result.status != "ended":
+        pytest.skip(f"conformance does not run it to its end ({result.status}: {result.message})")
+    external = [e.name for e in load_scenario(scenario).entities if e.driver == "external"]
+    if external:  # headless, as the reference player; `carlos run` lets them drive freely without a system
+        pytest.skip(f"conformance holds the externally driven {', '.join(external)} still (headless)")
+    assert _same_trajectories(tmp_path, scenario, trace, conformance.DEFAULT_CAP_SECONDS) > 0
+
+
+def _same_trajectories(tmp_path: Path, scenario: Path, trace: conformance.Trace, max_seconds: float) -> int:
+    """Run `scenario` through `carlos run` and compare every traced sample of conformance's run with what
+    it published; returns how many samples were compared."""
+    summary, tracks = _carlos_run_tracks(tmp_path, scenario, max_seconds)
     assert summary["status"] != "error", summary.get("error")
     assert summary["endReason"] == "stopTrigger"
     offset = min(t for samples in trace.tracks.values() for t, _, _ in samples)  # a ghost's headstart
@@ -81,7 +112,7 @@ def test_carlos_run_and_conformance_run_the_same_trajectories(tmp_path: Path, na
             assert position is not None, f"{entity} at t={t}: not published by carlos run"
             assert position == pytest.approx((x, y), abs=1e-6), f"{entity} at t={t}"
             compared += 1
-    assert compared > 50
+    return compared
 
 
 @needs_corpus

@@ -80,14 +80,24 @@ def test_file_store_rejects_bad_keys(tmp_path: Path, key: str) -> None:
         FileStore(tmp_path).put_bytes(key, b"x")
 
 
+def test_file_store_sync_flushes_the_file_system(tmp_path: Path) -> None:
+    store = FileStore(tmp_path / "store")
+    store.sync()  # before anything is written (the root does not exist yet)
+    store.put_bytes("run/0/summary.json", b"{}")
+    store.sync()
+    assert store.get_bytes("run/0/summary.json") == b"{}"
+    with pytest.raises(StoreError, match="cannot flush"):
+        FileStore(tmp_path / "no" / "such" / "store").sync()
+
+
 def test_file_store_failed_write_leaves_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     store = FileStore(tmp_path / "store")
     store.put_bytes("run/0/summary.json", b"old")
 
-    def broken_fsync(fd: int) -> None:
+    def broken_replace(src: str, dst: str) -> None:
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(os, "fsync", broken_fsync)
+    monkeypatch.setattr(os, "replace", broken_replace)
     with pytest.raises(StoreError, match="No space left"):
         store.put_bytes("run/0/summary.json", b"new and longer")
     with pytest.raises(StoreError, match="No space left"):

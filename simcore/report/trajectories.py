@@ -133,7 +133,7 @@ def road_outline(scenario_file: str | Path | None, *, step: float = 2.0) -> Road
         road_file = load_scenario(scenario_file).road_file
         if road_file is None or road_file.suffix != ".xodr" or not road_file.is_file():
             return None
-        network = OpenDrive.from_file(road_file)
+        network = OpenDrive.shared(road_file)
     except (CarlosError, OpenDriveError, OSError, ValueError):
         return None
     edges: list[tuple[np.ndarray, np.ndarray]] = []

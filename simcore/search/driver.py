@@ -109,6 +109,7 @@ def save_state(
 ) -> None:
     """The study and every evaluated point, in one write (the truth a resumed search starts from)."""
     store.put_bytes(state_key(run), state_bytes(run, log, points))
+    store.sync()  # the round's results and the state that counts them are durable before the next round
 
 
 def load_state(run: SimulationRun, store: Store) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:

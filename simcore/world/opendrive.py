@@ -26,6 +26,7 @@ problem in the input is reported as :class:`OpenDriveError` naming the file and 
 from __future__ import annotations
 
 import bisect
+import hashlib
 import itertools
 import math
 from collections.abc import Sequence
@@ -57,6 +58,10 @@ __all__ = [
 
 MAX_FILE_BYTES = 64 * 1024 * 1024
 """Files (and strings) larger than this are refused."""
+
+#: networks `OpenDrive.shared` keeps per process, by file name and content (the most recently used ones)
+_SHARED_MAX = 4
+_SHARED: dict[tuple[str, bytes], OpenDrive] = {}
 
 MAX_GEOMETRIES = 100_000
 """planView geometry records per file; more are refused before parsing (netconvert would take minutes and
@@ -157,7 +162,7 @@ def _poly_at(polys: Sequence[Poly3], starts: Sequence[float], s: float) -> Poly3
     if not polys:
         return None
     i = bisect.bisect_right(starts, s + 1e-12) - 1
-    return polys[max(i, 0)]
+    return polys[i if i > 0 else 0]
 
 
 # --------------------------------------------------------------------------------------------------- geometry
@@ -424,8 +429,16 @@ class Lane:
 
     def width_at(self, ds: float) -> float:
         """The width at ``ds`` from the section start (0 for the centre lane and lanes without widths)."""
-        p = _poly_at(self.widths, self._wstarts, ds)
-        return 0.0 if p is None else p.value(ds)
+        widths = self.widths
+        if not widths:
+            return 0.0
+        if len(widths) == 1:  # the common case: one record, in effect before its start too
+            p = widths[0]
+        else:
+            i = bisect.bisect_right(self._wstarts, ds + 1e-12) - 1
+            p = widths[i if i > 0 else 0]
+        d = ds - p.s0  # Poly3.value, inline (a hot path of every step)
+        return p.a + d * (p.b + d * (p.c + d * p.d))
 
     def border_at(self, ds: float) -> float | None:
         """The ``border`` record value at ``ds`` (only used for lanes without widths)."""
@@ -492,17 +505,20 @@ class Road:
     def geometry_at(self, s: float) -> Geometry:
         """The planView record containing ``s``."""
         i = bisect.bisect_right(self._gstarts, s) - 1
-        return self.geometries[min(max(i, 0), len(self.geometries) - 1)]
+        geometries = self.geometries
+        return geometries[0 if i < 0 else i if i < len(geometries) else len(geometries) - 1]
 
     def reference_xyh(self, s: float) -> tuple[float, float, float]:
         """``(x, y, heading)`` of the reference line at ``s``."""
         g = self.geometry_at(s)
-        return g.local(max(s - g.s, 0.0))
+        ds = s - g.s
+        return g.local(ds if ds >= 0.0 else 0.0)
 
     def curvature(self, s: float) -> float:
         """Reference-line curvature at ``s``."""
         g = self.geometry_at(s)
-        return g.curvature(max(s - g.s, 0.0))
+        ds = s - g.s
+        return g.curvature(ds if ds >= 0.0 else 0.0)
 
     def elevation(self, s: float) -> float:
         """``z`` of the reference line at ``s`` (0 without an elevationProfile)."""
@@ -534,9 +550,9 @@ class Road:
     # -- lanes
     def section_at(self, s: float, side: int = -1) -> LaneSection:
         """The lane section in effect at ``s`` for the lanes of ``side`` (+1 left, -1 right)."""
-        secs = self._side_sections[1 if side > 0 else -1]
-        i = bisect.bisect_right(self._side_starts[1 if side > 0 else -1], s + 1e-9) - 1
-        return secs[max(i, 0)]
+        key = 1 if side > 0 else -1
+        i = bisect.bisect_right(self._side_starts[key], s + 1e-9) - 1
+        return self._side_sections[key][i if i > 0 else 0]
 
     def side_borders(self, s: float, side: int) -> list[tuple[Lane, float, float]]:
         """``(lane, t_inner, t_outer)`` for the lanes of ``side`` at ``s``, innermost first (memoised: the
@@ -907,6 +923,31 @@ class OpenDrive:
         if len(data) > MAX_FILE_BYTES:
             raise OpenDriveError(f"{p}: file is larger than the {MAX_FILE_BYTES} byte limit")
         return cls._from_bytes(data, str(path))
+
+    @classmethod
+    def shared(cls, path: str | Path) -> OpenDrive:
+        """:meth:`from_file`, parsed once per process for the same file content: a worker running run after
+        run on one road (a sweep) parses it and builds its spatial index once. Callers treat the network as
+        read-only (its lazily built index and memos are pure functions of the file)."""
+        p = Path(path)
+        try:
+            size = p.stat().st_size
+        except OSError as e:
+            raise OpenDriveError(f"{p}: cannot read: {e.strerror or e}") from None
+        if size > MAX_FILE_BYTES:
+            raise OpenDriveError(f"{p}: file is {size} bytes, larger than the {MAX_FILE_BYTES} byte limit")
+        with p.open("rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
+        key = (str(path), hashlib.sha256(data).digest())
+        network = _SHARED.pop(key, None)
+        if network is None:
+            if len(data) > MAX_FILE_BYTES:
+                raise OpenDriveError(f"{p}: file is larger than the {MAX_FILE_BYTES} byte limit")
+            network = cls._from_bytes(data, str(path))
+        _SHARED[key] = network  # most recently used last
+        while len(_SHARED) > _SHARED_MAX:
+            del _SHARED[next(iter(_SHARED))]
+        return network
 
     @classmethod
     def from_string(cls, text: str, name: str = "<string>") -> OpenDrive:
