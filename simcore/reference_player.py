@@ -43,6 +43,14 @@ def _on_period(t: float, period: float) -> bool:
     return abs(t / period - round(t / period)) < 1e-6
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def parse_csv(text: str, period: float = 0.1) -> tuple[Tracks, float | None]:
     """esmini's --csv_logger text → (entity name → [(time, x, y)] at every `period` s, last time stamp)."""
     lines = text.splitlines()
@@ -64,7 +72,11 @@ def parse_csv(text: str, period: float = 0.1) -> tuple[Tracks, float | None]:
     end: float | None = None
     for line in lines[header_at + 1 :]:
         cells = [c.strip() for c in line.split(",")]
-        if len(cells) < start + at_y + 1:
+        if len(cells) < 3:
+            continue
+        if _is_number(cells[2]):
+            # no entity in the world: esmini writes only (index, time) pairs, all on one line
+            end = float(cells[-2] if cells[-1] == "" else cells[-1])
             continue
         t = float(cells[1])
         end = t

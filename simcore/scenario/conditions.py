@@ -73,7 +73,9 @@ def holds(cond: m.Condition, world: ScenarioWorld, triggering: list[str]) -> boo
 
 
 def simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> bool:
-    return compare(c.rule, world.time, c.value)
+    # to a nanosecond: step 3 of 0.05 s is at 0.15000000000000002 s, which is not "greater than 0.15" (esmini
+    # holds a condition "t > k·dt" from step k + 1 on, for every k)
+    return compare(c.rule, round(world.time, 9), round(c.value, 9))
 
 
 def storyboard_element_state(c: m.StoryboardElementStateCondition, world: ScenarioWorld) -> bool:
