@@ -417,7 +417,7 @@ def _lat_distance(rng: random.Random) -> str:
     s.target_s = s.ego_s + r1(rng.uniform(-5, 5))
     s.target_speed = s.ego_speed
     constraints = (
-        f'<DynamicConstraints maxLateralAcc="{r1(rng.uniform(0.5, 3))}" maxSpeed="{r1(rng.uniform(1, 4))}"/>'
+        f'<DynamicConstraints maxAcceleration="{r1(rng.uniform(0.5, 3))}" maxSpeed="{r1(rng.uniform(1, 4))}"/>'
         if rng.random() < 0.6
         else ""
     )

@@ -245,12 +245,12 @@ class LaneOffsetRuntime(Runtime):
 
 
 class LateralDistanceRuntime(Runtime):
-    """Keeps a lateral distance (in road t) to another entity on the same road. Without dynamic constraints
-    the distance is taken at once; with maxSpeed the lateral speed is limited; with maxAcceleration a
+    """Keeps a lateral distance (in road t) to another entity on the same road. Without maxAcceleration the
+    distance is taken at once (as esmini, whatever maxSpeed says); with maxAcceleration a
     critically damped spring (stiffness scaled by the limit) pulls the entity there, damped on the lateral
     speed relative to the other entity's (its velocity across its own heading, as esmini's
     LateralDistanceAction takes it). The lateral speed stays below maxSpeed and the entity's own speed. The
-    action's first step moves nothing (as esmini, which steps it with the time elapsed since its start)."""
+    spring's first step moves nothing (as esmini, which steps it with the time elapsed since its start)."""
 
     domain = "lateral"
     SPRING = 0.4
@@ -284,9 +284,9 @@ class LateralDistanceRuntime(Runtime):
         error = target - t_me
         if not self.action.continuous and abs(error) < self.THRESHOLD:
             self.done = True
-        if self.world.step_index == self.first_step:
-            return
         c = self.action.constraints or m.DynamicConstraints()
+        if self.world.step_index == self.first_step and c.max_acceleration is not None:
+            return
         max_speed = c.max_speed if c.max_speed is not None else _BIG
         if c.max_speed is not None or c.max_acceleration is not None:
             # moving with dynamics, the lateral speed takes a share of the entity's speed, never all of it
@@ -300,7 +300,7 @@ class LateralDistanceRuntime(Runtime):
             self.velocity = min(max(self.velocity + acc * dt, -max_speed), max_speed)
             move = self.velocity * dt
         else:
-            move = min(max(error, -max_speed * dt), max_speed * dt)
+            move = error  # no acceleration limit: put at the distance at once, maxSpeed or not (as esmini)
         a.offset += move
         a.lateral_velocity = move / dt
 

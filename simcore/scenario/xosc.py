@@ -814,7 +814,8 @@ def _private(reader: _Reader, element: ET.Element) -> m.PrivateAction:
                 distance=reader.num(action, "distance", 0.0),
                 freespace=_freespace(reader, action),
                 continuous=reader.boolean(action, "continuous", False),
-                displacement=reader.attr(action, "displacement", "any"),
+                # without the attribute the entity goes to the left of the other (esmini's default)
+                displacement=reader.attr(action, "displacement", "leftToReferencedEntity"),
                 constraints=_constraints(reader, action.find("DynamicConstraints")),
             )
         raise reader.fail(f"LateralAction/{action.tag} is not supported", action)
