@@ -232,9 +232,11 @@ def test_lateral_distance_without_displacement_goes_to_the_left_of_the_other(
     tmp_path: Path, road: OpenDrive
 ) -> None:
     # Ego in lane -3 (right of Lead in lane -1): with no displacement attribute esmini puts it 4 m to the
-    # LEFT of Lead (t = -1.75 + 4), at once (no maxAcceleration)
+    # LEFT of Lead (t = -1.75 + 4), at once: in entity coordinates (the default) maxSpeed alone brings no
+    # dynamics
     action = """<PrivateAction><LateralAction><LateralDistanceAction entityRef="Lead" distance="4"
-      freespace="false" continuous="false"/></LateralAction></PrivateAction>"""
+      freespace="false" continuous="false"><DynamicConstraints maxSpeed="1"/></LateralDistanceAction>
+      </LateralAction></PrivateAction>"""
     init = place("Ego", 50, lane=-3, speed=10) + place("Lead", 60, lane=-1, speed=10)
     engine = engine_for(
         tmp_path, event("L", action, sim_time("greaterOrEqual", 0.0)), init, road, ("Ego", "Lead")

@@ -529,14 +529,13 @@ def test_an_event_waiting_for_a_trajectory_to_end_starts_at_the_next_step(
 def lateral_distance(constraints: str, *, continuous: bool = True, distance: float = 4.0) -> str:
     return f"""<PrivateAction><LateralAction>
       <LateralDistanceAction entityRef="Lead" distance="{distance}" freespace="false" continuous="{str(continuous).lower()}"
-        displacement="leftToReferencedEntity">{constraints}</LateralDistanceAction></LateralAction></PrivateAction>"""
+        displacement="leftToReferencedEntity" coordinateSystem="road">{constraints}</LateralDistanceAction>
+      </LateralAction></PrivateAction>"""
 
 
-def test_lateral_distance_without_acceleration_limit_is_taken_at_once(
-    tmp_path: Path, road: OpenDrive
-) -> None:
-    # Lead in lane -2, Ego in lane -2 too: 4 m to the left of the Lead in the step the action starts in;
-    # maxSpeed alone does not limit it (as esmini: only maxAcceleration makes it move with dynamics)
+def test_lateral_distance_at_limited_lateral_speed_then_kept(tmp_path: Path, road: OpenDrive) -> None:
+    # Lead in lane -2, Ego in lane -2 too: 4 m to the left of the Lead at 2 m/s lateral (0.1 m a step);
+    # the step the action starts in moves nothing
     path = scenario(
         tmp_path,
         event("Side", lateral_distance('<DynamicConstraints maxSpeed="2"/>'), sim_time("greaterThan", 1.0)),
@@ -544,9 +543,10 @@ def test_lateral_distance_without_acceleration_limit_is_taken_at_once(
         init=place("Ego", 100.0) + place("Lead", 130.0),
     )
     engine, trace = run(path, road, 5.0)
+    t0 = trace[1.0]["y"]
+    assert trace[1.1]["y"] == pytest.approx(t0)  # started at 1.05: that step moves nothing
+    assert trace[1.6]["y"] - t0 == pytest.approx(1.0, abs=1e-6)  # 10 steps × 0.1 m, to the left (+y)
     lead = engine.bodies["Lead"]
-    assert trace[1.05]["y"] == pytest.approx(lead.y)  # "t > 1" holds at 1.05: the action starts in the next
-    assert trace[1.1]["y"] - lead.y == pytest.approx(4.0, abs=1e-6)
     assert trace[5.0]["y"] - lead.y == pytest.approx(4.0, abs=1e-6)
 
 

@@ -246,7 +246,7 @@ class LaneOffsetRuntime(Runtime):
 
 class LateralDistanceRuntime(Runtime):
     """Keeps a lateral distance (in road t) to another entity on the same road. Without maxAcceleration the
-    distance is taken at once (as esmini, whatever maxSpeed says); with maxAcceleration a
+    distance is taken at once, or in road coordinates at no more than maxSpeed; with maxAcceleration a
     critically damped spring (stiffness scaled by the limit) pulls the entity there, damped on the lateral
     speed relative to the other entity's (its velocity across its own heading, as esmini's
     LateralDistanceAction takes it). The lateral speed stays below maxSpeed and the entity's own speed. The
@@ -285,7 +285,11 @@ class LateralDistanceRuntime(Runtime):
         if not self.action.continuous and abs(error) < self.THRESHOLD:
             self.done = True
         c = self.action.constraints or m.DynamicConstraints()
-        if self.world.step_index == self.first_step and c.max_acceleration is not None:
+        # in road coordinates maxSpeed alone limits the lateral speed; in entity coordinates (the default)
+        # only maxAcceleration brings dynamics, else the distance is taken at once in the first step (as esmini)
+        road_system = self.action.coordinate_system == "road"
+        dynamic = c.max_acceleration is not None or (road_system and c.max_speed is not None)
+        if self.world.step_index == self.first_step and dynamic:
             return
         max_speed = c.max_speed if c.max_speed is not None else _BIG
         if c.max_speed is not None or c.max_acceleration is not None:
@@ -299,8 +303,10 @@ class LateralDistanceRuntime(Runtime):
             acc = min(max(acc, -c.max_acceleration), c.max_acceleration)
             self.velocity = min(max(self.velocity + acc * dt, -max_speed), max_speed)
             move = self.velocity * dt
+        elif road_system:
+            move = min(max(error, -max_speed * dt), max_speed * dt)
         else:
-            move = error  # no acceleration limit: put at the distance at once, maxSpeed or not (as esmini)
+            move = error
         a.offset += move
         a.lateral_velocity = move / dt
 

@@ -817,6 +817,7 @@ def _private(reader: _Reader, element: ET.Element) -> m.PrivateAction:
                 # without the attribute the entity goes to the left of the other (esmini's default)
                 displacement=reader.attr(action, "displacement", "leftToReferencedEntity"),
                 constraints=_constraints(reader, action.find("DynamicConstraints")),
+                coordinate_system=reader.attr(action, "coordinateSystem", "entity"),
             )
         raise reader.fail(f"LateralAction/{action.tag} is not supported", action)
     if tag == "RoutingAction":
