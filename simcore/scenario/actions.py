@@ -105,12 +105,13 @@ class FollowTrajectoryRuntime(Runtime):
             t_traj = self._trajectory_time(now)
             s_new = self.path.s_at_time(t_traj)
             end = t_traj >= self.path.t[-1] - 1e-9
-            if end:
-                # the speed it had is kept (not the part of a step left to the end), and the time left over
-                # after the last vertex is driven on at it along the final heading (as esmini)
-                over_time = max(t_traj - self.path.t[-1], 0.0)
-            else:
+            if t_traj < self.path.t[-1] + 1e-9:
                 a.speed = (s_new - self.s) / dt
+            else:
+                # past the last vertex within this step: the speed it had is kept (not the part of the step
+                # left to the end), and the time left over is driven on at it along the final heading (as
+                # esmini)
+                over_time = t_traj - self.path.t[-1]
         else:
             speed = a.speed if self.step_speed is None else self.step_speed
             self.step_speed = None
