@@ -819,3 +819,117 @@ def generate(
             path.write_text(GENERATORS[name](rng))
             out[path] = name
     return out
+
+
+# --- loading: files other tools write that must load and run as esmini runs them ----------------------------
+
+
+def _simple(rng: random.Random, names: tuple[str, ...] = ("Ego", "Target"), **kwargs: str) -> str:
+    road = rng.choice(ROADS)
+    init = kwargs.pop("init", None)
+    if init is None:
+        init = "".join(
+            private(
+                n,
+                teleport(lane_position(rng.uniform(20, 200), rng.choice(road.lanes))),
+                speed_to(r1(rng.uniform(5, 25))),
+            )
+            for n in names
+        )
+    return openscenario(
+        entities="".join(scenario_object(n) for n in names),
+        init=init,
+        stories=kwargs.pop("stories", ""),
+        stop=kwargs.pop("stop", stop_at(rng.uniform(3, 8))),
+        road=f'<RoadNetwork><LogicFile filepath="{road.path}"/></RoadNetwork>',
+        parameters=kwargs.pop("parameters", ""),
+        minor=int(kwargs.pop("minor", "2")),
+    )
+
+
+@feature("loading.ParameterDeclaration.dollar_name")
+def _l_dollar(rng: random.Random) -> str:
+    speed = r1(rng.uniform(5, 25))
+    declarations = f'<ParameterDeclarations><ParameterDeclaration name="$Speed" parameterType="double" value="{speed}"/></ParameterDeclarations>'
+    ev = event(
+        "S",
+        longitudinal(
+            '<SpeedAction><SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>'
+            '<SpeedActionTarget><AbsoluteTargetSpeed value="$Speed"/></SpeedActionTarget></SpeedAction>'
+        ),
+        at(rng.uniform(0.5, 2)),
+    )
+    return _simple(rng, stories=one_story(ev), parameters=declarations)
+
+
+@feature("loading.Vehicle.ParameterDeclarations")
+def _l_vehicle_parameters(rng: random.Random) -> str:
+    text = _simple(rng)
+    return text.replace(
+        '<Vehicle name="car" vehicleCategory="car">',
+        '<Vehicle name="car" vehicleCategory="car"><ParameterDeclarations><ParameterDeclaration name="Top"'
+        f' parameterType="double" value="{r1(rng.uniform(30, 60))}"/></ParameterDeclarations>',
+    ).replace('maxSpeed="70"', 'maxSpeed="$Top"')
+
+
+@feature("loading.entity_names")
+def _l_names(rng: random.Random) -> str:
+    names = ("Ego car", rng.choice(["car-2", "car_2", "Car.2"]), rng.choice(["car+3", "car 3", "car#3"]))
+    ev = event("S", speed_to(r1(rng.uniform(0, 25)), "linear", "rate", 2), at(rng.uniform(0.5, 2)))
+    return _simple(rng, names, stories=one_story(ev, actor=names[1]))
+
+
+@feature("loading.empty_Action")
+def _l_empty(rng: random.Random) -> str:
+    empty = (
+        '<Event name="E" priority="override"><Action name="A"/><StartTrigger><ConditionGroup>'
+        f"{at(rng.uniform(0.5, 2))}</ConditionGroup></StartTrigger></Event>"
+    )
+    ev = event(
+        "S",
+        speed_to(r1(rng.uniform(0, 25)), "linear", "rate", 2),
+        event_ended("E", 0.5).replace("endTransition", "completeState"),
+    )
+    return _simple(rng, stories=one_story(empty, ev))
+
+
+@feature("loading.no_entities")
+def _l_no_entities(rng: random.Random) -> str:
+    return openscenario(
+        entities="",
+        init="",
+        stop=stop_at(rng.uniform(1, 5)),
+        road=f'<RoadNetwork><LogicFile filepath="{HIGHWAY.path}"/></RoadNetwork>',
+    )
+
+
+@feature("loading.Init_refers_to_later_entity")
+def _l_init_order(rng: random.Random) -> str:
+    road = rng.choice(ROADS)
+    lane = rng.choice(road.lanes)
+    init = private(
+        "Ego",
+        teleport(
+            f'<Position><RelativeLanePosition entityRef="Target" dLane="0" ds="{r1(-rng.uniform(10, 40))}" offset="0"/></Position>'
+        ),
+        speed_to(r1(rng.uniform(5, 25))),
+    ) + private(
+        "Target", teleport(lane_position(rng.uniform(60, 200), lane)), speed_to(r1(rng.uniform(5, 25)))
+    )
+    return _simple(rng, init=init)
+
+
+@feature("loading.AngleCondition.world")
+def _l_angle_world(rng: random.Random) -> str:
+    cond = by_entity(
+        "Ego",
+        f'<AngleCondition angleType="heading" angle="0" angleTolerance="{r2(rng.uniform(0.05, 0.3))}" coordinateSystem="world"/>',
+    )
+    ev = event("S", speed_to(r1(rng.uniform(0, 25)), "linear", "rate", 2), cond)
+    return _simple(rng, stories=one_story(ev), minor="3")
+
+
+@feature("loading.RandomRouteAction")
+def _l_random_route(rng: random.Random) -> str:
+    ev = event("R", routing("<RandomRouteAction/>"), at(rng.uniform(0.5, 2)))
+    return _simple(rng, stories=one_story(ev), minor="3")

@@ -244,3 +244,16 @@ def test_lateral_distance_without_displacement_goes_to_the_left_of_the_other(
     while engine.time < 1.0 - 1e-9:
         engine.advance()
     assert engine.bodies["Ego"].y == pytest.approx(-1.75 + 4.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("kind", sorted(k for k in gen.GENERATORS if k.startswith("loading.")))
+def test_files_other_tools_write_load_and_run_to_their_end(tmp_path: Path, kind: str) -> None:
+    # "$Speed" declarations, parameters of an inline Vehicle, names with spaces and signs, an empty <Action/>,
+    # no entities, Init positions relative to an entity placed later in Init, AngleCondition in world
+    # coordinates, RandomRouteAction: each loads and runs (as esmini runs them), none is bad input
+    path = write_scenario(tmp_path, gen.GENERATORS[kind](random.Random(5)))
+    result, trace = conformance.run_scenario(path, 30.0)
+    assert result.status == "ended", result.message
+    if kind == "loading.Init_refers_to_later_entity":
+        (_, ego_x, _), (_, target_x, _) = trace.tracks["Ego"][0], trace.tracks["Target"][0]
+        assert ego_x != target_x  # Ego placed relative to where Target is, not to an unplaced entity

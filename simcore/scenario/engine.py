@@ -85,7 +85,7 @@ class ScenarioEngine:
             for e in scenario.entities
         }
         self.ego = ego or _default_ego(scenario)
-        if self.ego not in self.bodies:
+        if self.ego is not None and self.ego not in self.bodies:
             raise BadInput(f"ego entity {self.ego!r} is not in the scenario", field="spec.simulation.ego")
         for entity in scenario.entities:
             if entity.driver == "sumo" and sumo is None:
@@ -151,8 +151,9 @@ class ScenarioEngine:
     # --- set-up ---------------------------------------------------------------------------------------
 
     def _init(self) -> None:
-        # teleports first (other init actions may refer to positions of entities placed here)
-        ordered = sorted(self.scenario.init, key=lambda i: not isinstance(i.action, m.TeleportAction))
+        # teleports first (other init actions may refer to positions of entities placed here), each after the
+        # teleport of the entity its position refers to, wherever that is in Init (as esmini)
+        ordered = _placement_order(self.scenario.init)
         self.init_runtimes: list[Runtime] = []
         for item in ordered:
             if not item.entity:
@@ -605,14 +606,41 @@ def _added_later(scenario: m.Scenario) -> set[str]:
     return out
 
 
-def _default_ego(scenario: m.Scenario) -> str:
+def _placement_order(init: tuple[m.InitAction, ...] | list[m.InitAction]) -> list[m.InitAction]:
+    """Init actions with the teleports first, a teleport relative to an entity after that entity's own
+    teleport (in Init order otherwise; a cycle keeps the file's order)."""
+    teleports = [i for i in init if isinstance(i.action, m.TeleportAction)]
+    others = [i for i in init if not isinstance(i.action, m.TeleportAction)]
+    placed_by_init = {i.entity for i in teleports}
+    done: set[str] = set()
+    ordered: list[m.InitAction] = []
+    pending = list(teleports)
+    while pending:
+        ready = [
+            i
+            for i in pending
+            if (ref := getattr(i.action.position, "entity", None)) is None  # type: ignore[union-attr]
+            or ref in done
+            or ref not in placed_by_init
+            or ref == i.entity
+        ]
+        if not ready:
+            ready = pending[:1]  # a cycle: the file's order decides (and the position fails to resolve)
+        for item in ready:
+            ordered.append(item)
+            done.add(item.entity)
+            pending.remove(item)
+    return ordered + others
+
+
+def _default_ego(scenario: m.Scenario) -> str | None:
+    """The ego: Ego/ego/hero/Hero, else the first entity; None for a scenario without entities (it runs
+    its storyboard all the same, as esmini does)."""
     names = [e.name for e in scenario.entities]
     for candidate in ("Ego", "ego", "hero", "Hero"):
         if candidate in names:
             return candidate
-    if not names:
-        raise BadInput("the scenario declares no entities", file=str(scenario.path), field="Entities")
-    return names[0]
+    return names[0] if names else None
 
 
 __all__ = ["ScenarioEngine", "SimulationError", "update_pose_from_road"]
