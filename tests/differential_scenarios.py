@@ -933,3 +933,28 @@ def _l_angle_world(rng: random.Random) -> str:
 def _l_random_route(rng: random.Random) -> str:
     ev = event("R", routing("<RandomRouteAction/>"), at(rng.uniform(0.5, 2)))
     return _simple(rng, stories=one_story(ev), minor="3")
+
+
+# --- controllers: entities another tool's controller drives, in a headless run ----------------------------
+
+
+def _controlled(kind: str) -> Generator:
+    def generate(rng: random.Random) -> str:
+        text = _simple(rng)
+        controller = (
+            '<ObjectController><Controller name="C"><Properties>'
+            f'<Property name="esminiController" value="{kind}"/></Properties></Controller></ObjectController>'
+        )
+        text = text.replace("</Vehicle></ScenarioObject>", "</Vehicle>" + controller + "</ScenarioObject>", 1)
+        lateral, longitudinal = rng.choice([("true", "true"), ("false", "true")])
+        activate = (
+            f'<PrivateAction><ActivateControllerAction lateral="{lateral}" longitudinal="{longitudinal}"/>'
+            "</PrivateAction>"
+        )
+        return text.replace("</Private>", activate + "</Private>", 1)
+
+    return generate
+
+
+for _kind in ("InteractiveController", "ExternalController"):
+    GENERATORS[f"controller.{_kind}"] = _controlled(_kind)

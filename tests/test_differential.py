@@ -257,3 +257,23 @@ def test_files_other_tools_write_load_and_run_to_their_end(tmp_path: Path, kind:
     if kind == "loading.Init_refers_to_later_entity":
         (_, ego_x, _), (_, target_x, _) = trace.tracks["Ego"][0], trace.tracks["Target"][0]
         assert ego_x != target_x  # Ego placed relative to where Target is, not to an unplaced entity
+
+
+def test_interactive_controller_without_input_rolls_on_as_esmini(tmp_path: Path, road: OpenDrive) -> None:
+    # no key pressed in a headless run: esmini's vehicle model keeps going, 0.1 % slower every frame (the
+    # first, zero-length frame included); an ExternalController's entity stands still instead
+    text = gen._controlled("InteractiveController")(random.Random(2))
+    path = write_scenario(tmp_path, text.replace('lateral="false"', 'lateral="true"'))
+    scenario = load_scenario(path)
+    engine = ScenarioEngine(
+        scenario, road=OpenDrive.from_file(scenario.road_file), sumo=None, step_seconds=0.05
+    )
+    ego = engine.bodies["Ego"]
+    v0 = next(i.action for i in scenario.init if i.entity == "Ego" and not hasattr(i.action, "position"))
+    x0 = ego.x
+    for _ in range(20):
+        engine.advance()
+    target = v0.target.value  # type: ignore[union-attr]
+    assert ego.speed == pytest.approx(target * 0.999**21, rel=1e-9)
+    assert ego.x > x0 + 0.9 * target  # it moved on, about its speed × 1 s
+    assert "Ego" not in conformance.uncompared_entities(scenario)

@@ -169,6 +169,9 @@ class ScenarioEngine:
             # esmini's first frame steps the controllers activated in Init with a zero time step
             driver.step(0.0)
             self._start_lane_change(driver)
+        for body in self.bodies.values():
+            if body.external and self.external is None and not body.gone:
+                self._move_external(body, 0.0)  # that first frame rolls an interactive vehicle's speed down
         if self.trailer_of:
             self.align_trailers()
         for body in self.bodies.values():
@@ -535,12 +538,31 @@ class ScenarioEngine:
         """An entity its external controller drives: moved by the control input; without one (no system
         under test attached, as in a headless conformance run) it stands still, as in esmini."""
         if self.external is None:
-            body.speed = 0.0
+            if m.controller_type(body.entity.controller) == "InteractiveController":
+                self._coast(body, dt)
+            else:
+                body.speed = 0.0
             return
         x, y, heading, speed = self.external.move(body.entity, body.x, body.y, body.heading, body.speed, dt)
         body.odometer += math.hypot(x - body.x, y - body.y)
         body.x, body.y, body.heading, body.speed = x, y, heading, speed
         self.locate(body)
+
+    def _coast(self, body: Body, dt: float) -> None:
+        """esmini's InteractiveController with no key pressed (a headless run): its vehicle model rolls on,
+        the speed declining by 0.1 % a step and held within 1.2 × the default speed limit, wheels straight:
+        along its heading when it steers too, along the road when it controls the speed only."""
+        limit = drivers.speed_limit(self, body)
+        body.speed = min(max(body.speed * (1.0 - 0.001), -1.2 * limit), 1.2 * limit)
+        distance = body.speed * dt
+        _, _, lateral = self.controllers[body.name]
+        if lateral or self.road is None or body.road_id is None:
+            body.x += distance * math.cos(body.heading)
+            body.y += distance * math.sin(body.heading)
+            body.odometer += abs(distance)
+            self.locate(body)
+        else:
+            advance_on_road(self.road, body, distance, self.time)
 
     def moved(self) -> None:
         """Bodies moved: the per-step caches of their states and of condition measurements are stale."""
