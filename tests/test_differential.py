@@ -277,3 +277,8 @@ def test_interactive_controller_without_input_rolls_on_as_esmini(tmp_path: Path,
     assert ego.speed == pytest.approx(target * 0.999**21, rel=1e-9)
     assert ego.x > x0 + 0.9 * target  # it moved on, about its speed × 1 s
     assert "Ego" not in conformance.uncompared_entities(scenario)
+
+
+def test_road_type_speed_records_are_the_speed_limit() -> None:
+    rural = OpenDrive.from_file(gen.RURAL.path)  # <type s="0" type="rural"><speed max="100" unit="km/h"/>
+    assert rural.speed_limit("1", 500.0) == pytest.approx(100 / 3.6)
