@@ -958,3 +958,32 @@ def _controlled(kind: str) -> Generator:
 
 for _kind in ("InteractiveController", "ExternalController"):
     GENERATORS[f"controller.{_kind}"] = _controlled(_kind)
+
+
+@feature("controller.FollowGhostController")
+def _follow_ghost(rng: random.Random) -> str:
+    s = setup(rng, road=HIGHWAY)
+    s.target_s = s.ego_s + 80
+    mode = rng.choice(["time", "position"])
+    properties = {
+        "esminiController": "FollowGhostController",
+        "headstartTime": str(r1(rng.uniform(1, 3))),
+        "followMode": mode,
+    }
+    controller = (
+        '<ObjectController><Controller name="G"><Properties>'
+        + "".join(f'<Property name="{k}" value="{v}"/>' for k, v in properties.items())
+        + "</Properties></Controller></ObjectController>"
+    )
+    activate = '<PrivateAction><ActivateControllerAction lateral="true" longitudinal="true"/></PrivateAction>'
+    goal = rng.choice([lane for lane in HIGHWAY.lanes if lane != s.ego_lane])
+    change = lateral(
+        '<LaneChangeAction><LaneChangeActionDynamics dynamicsShape="sinusoidal" dynamicsDimension="time"'
+        f' value="{r1(rng.uniform(3, 6))}"/><LaneChangeTarget><AbsoluteTargetLane value="{goal}"/>'
+        "</LaneChangeTarget></LaneChangeAction>"
+    )
+    events = event("Speed", speed_to(r1(rng.uniform(10, 30)), "linear", "rate", 2), at(rng.uniform(1, 3)))
+    events += event("LC", change, at(rng.uniform(4, 7)))
+    text = s.file(one_story(events), stop_at(rng.uniform(12, 16)))
+    text = text.replace("</Vehicle></ScenarioObject>", "</Vehicle>" + controller + "</ScenarioObject>", 1)
+    return text.replace("</Private>", activate + "</Private>", 1)
