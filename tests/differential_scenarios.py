@@ -987,3 +987,89 @@ def _follow_ghost(rng: random.Random) -> str:
     text = s.file(one_story(events), stop_at(rng.uniform(12, 16)))
     text = text.replace("</Vehicle></ScenarioObject>", "</Vehicle>" + controller + "</ScenarioObject>", 1)
     return text.replace("</Private>", activate + "</Private>", 1)
+
+
+# --- routes through a junction (a four-way crossing written with scenariogeneration, a dev dependency) --------
+
+
+def crossing() -> Road:
+    """Four 150 m roads (ids 0–3, one lane each way, their ends at the junction) and the connecting roads of
+    a four-way junction, written once per machine into the temporary directory."""
+    import os
+    import tempfile
+
+    path = Path(tempfile.gettempdir()) / "carlos-differential-crossing.xodr"
+    if not path.is_file():
+        import numpy as np
+        from scenariogeneration import xodr
+
+        roads = [xodr.create_road(xodr.Line(150), id=i, left_lanes=1, right_lanes=1) for i in range(4)]
+        junction = xodr.CommonJunctionCreator(id=100, name="crossing", startnum=100)
+        for i, angle in enumerate((0.0, np.pi / 2, np.pi, 3 * np.pi / 2)):
+            junction.add_incoming_road_circular_geometry(
+                road=roads[i], radius=15, angle=angle, road_connection="successor"
+            )
+        for a in range(4):
+            for b in range(a + 1, 4):
+                junction.add_connection(road_one_id=a, road_two_id=b)
+        network = xodr.OpenDrive("crossing")
+        for road in roads:
+            network.add_road(road)
+        network.add_junction_creator(junction)
+        network.adjust_roads_and_lanes()
+        partial = path.with_suffix(f".{os.getpid()}.tmp")
+        network.write_xml(str(partial))
+        partial.replace(path)
+    return Road("crossing", path, (-1,), 150.0, True)
+
+
+def _through_junction(rng: random.Random, routing_action: str | None) -> str:
+    road = crossing()
+    start_road = rng.randrange(4)
+    s0 = r1(rng.uniform(60, 120))
+    speed = r1(rng.uniform(6, 14))
+    init = private("Ego", teleport(lane_position(s0, -1, road=start_road)), speed_to(speed)) + private(
+        "Target",
+        teleport(lane_position(r1(rng.uniform(20, 60)), -1, road=(start_road + 2) % 4)),
+        speed_to(speed),
+    )
+    events = ""
+    if routing_action is not None:
+        exit_road = rng.choice([r for r in range(4) if r != start_road])
+        events = event("Route", routing_action.format(exit=exit_road, s=r1(rng.uniform(40, 120))), at(0.5))
+    seconds = (150 - s0 + 30 + 40) / speed
+    return openscenario(
+        entities=scenario_object("Ego") + scenario_object("Target"),
+        init=init,
+        stories=one_story(events) if events else "",
+        stop=stop_at(min(seconds, 20)),
+        road=f'<RoadNetwork><LogicFile filepath="{road.path}"/></RoadNetwork>',
+    )
+
+
+@feature("route.junction_without_route")
+def _r_default(rng: random.Random) -> str:
+    return _through_junction(rng, None)
+
+
+@feature("route.AssignRouteAction.junction")
+def _r_assign(rng: random.Random) -> str:
+    strategy = rng.choice(["shortest", "fastest", "leastIntersections", "random"])
+    action = routing(
+        '<AssignRouteAction><Route name="R" closed="false">'
+        f'<Waypoint routeStrategy="{strategy}"><Position><LanePosition roadId="{{start}}" laneId="-1" s="140"/></Position></Waypoint>'
+        f'<Waypoint routeStrategy="{strategy}"><Position><LanePosition roadId="{{exit}}" laneId="1" s="{{s}}"/></Position></Waypoint>'
+        "</Route></AssignRouteAction>"
+    )
+    text = _through_junction(rng, action.replace("{start}", "START"))
+    start = text.split('<LanePosition roadId="', 1)[1].split('"', 1)[0]
+    return text.replace("START", start)
+
+
+@feature("route.AcquirePositionAction.junction")
+def _r_acquire(rng: random.Random) -> str:
+    action = routing(
+        '<AcquirePositionAction><Position><LanePosition roadId="{exit}" laneId="1" s="{s}"/></Position>'
+        "</AcquirePositionAction>"
+    )
+    return _through_junction(rng, action)

@@ -4,6 +4,7 @@ there ($ESMINI) — a sample of generated scenarios of every feature type run by
 
 from __future__ import annotations
 
+import math
 import random
 import subprocess
 import sys
@@ -282,3 +283,26 @@ def test_interactive_controller_without_input_rolls_on_as_esmini(tmp_path: Path,
 def test_road_type_speed_records_are_the_speed_limit() -> None:
     rural = OpenDrive.from_file(gen.RURAL.path)  # <type s="0" type="rural"><speed max="100" unit="km/h"/>
     assert rural.speed_limit("1", 500.0) == pytest.approx(100 / 3.6)
+
+
+def test_without_a_route_the_straightest_way_through_a_junction_is_taken(tmp_path: Path) -> None:
+    # a four-way crossing: from every arm, an entity with no route drives straight across (esmini's
+    # default controller takes the connection that turns least at its first junction)
+    crossing = gen.crossing()
+    road = OpenDrive.from_file(crossing.path)
+    for arm in range(4):
+        text = openscenario(
+            entities=scenario_object("Ego"),
+            init=gen.private("Ego", gen.teleport(gen.lane_position(130, -1, road=arm)), gen.speed_to(10)),
+            stop=sim_time("greaterThan", 6, name="stop"),
+            road=f'<RoadNetwork><LogicFile filepath="{crossing.path}"/></RoadNetwork>',
+        )
+        engine = ScenarioEngine(
+            load_scenario(write_scenario(tmp_path, text)), road=road, sumo=None, step_seconds=0.05
+        )
+        ego = engine.bodies["Ego"]
+        h0 = ego.heading
+        while engine.time < 6.0 - 1e-9:
+            engine.advance()
+        assert ego.road_id in {str(r) for r in range(4)} and ego.road_id != str(arm)  # across, on another arm
+        assert abs(math.remainder(ego.heading - h0, 2 * math.pi)) < 0.05  # heading as before: straight on

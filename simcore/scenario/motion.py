@@ -215,7 +215,27 @@ def next_road(road: OpenDrive, body: Body) -> tuple[str, int, int] | None:
             body.route.pop(0)
             return chosen[0]
         body.route.clear()
+    options = road.connections(body.road_id, body.lane_id, body.direction)
+    if len(options) > 1:
+        return straightest(road, body, options)
     return road.successor(body.road_id, body.lane_id, body.direction)
+
+
+def straightest(road: OpenDrive, body: Body, options: list[tuple[str, int, int]]) -> tuple[str, int, int]:
+    """Without a route, the way through a junction that turns least: the connecting road whose far end
+    heads closest to where the body heads at the end of its road (esmini's junction selector angle 0, what
+    its default controller takes at the first junction)."""
+    assert body.road_id is not None
+    edge = road.road_length(body.road_id) if body.direction > 0 else 0.0
+    here = road.road_to_world(body.road_id, edge, 0.0).heading + (0.0 if body.direction > 0 else math.pi)
+
+    def turn(option: tuple[str, int, int]) -> float:
+        road_id, _, direction = option
+        far = road.road_length(road_id) if direction > 0 else 0.0
+        there = road.road_to_world(road_id, far, 0.0).heading + (0.0 if direction > 0 else math.pi)
+        return abs(wrap_angle(there - here))
+
+    return min(options, key=turn)
 
 
 def update_pose_from_road(road: OpenDrive, body: Body) -> None:
