@@ -1073,3 +1073,54 @@ def _r_acquire(rng: random.Random) -> str:
         "</AcquirePositionAction>"
     )
     return _through_junction(rng, action)
+
+
+def _on_crossing(rng: random.Random, target_position: str, ego_events: str = "") -> str:
+    road = crossing()
+    arm = rng.randrange(4)
+    speed = r1(rng.uniform(5, 12))
+    init = private("Ego", teleport(lane_position(r1(rng.uniform(90, 140)), -1, road=arm)), speed_to(speed))
+    init += private(
+        "Target", teleport(f"<Position>{target_position}</Position>"), speed_to(r1(rng.uniform(3, 10)))
+    )
+    return openscenario(
+        entities=scenario_object("Ego") + scenario_object("Target"),
+        init=init,
+        stories=one_story(ego_events) if ego_events else "",
+        stop=stop_at(rng.uniform(4, 9)),
+        road=f'<RoadNetwork><LogicFile filepath="{road.path}"/></RoadNetwork>',
+    )
+
+
+@feature("position.RelativeLanePosition.past_road_end")
+def _p_rel_lane_across(rng: random.Random) -> str:
+    ds = r1(rng.uniform(20, 90))  # from s 90–140 of a 150 m arm: often beyond its end, into the junction
+    return _on_crossing(rng, f'<RelativeLanePosition entityRef="Ego" dLane="0" ds="{ds}" offset="0"/>')
+
+
+@feature("position.RelativeRoadPosition.past_road_end")
+def _p_rel_road_across(rng: random.Random) -> str:
+    ds = r1(rng.uniform(20, 90))
+    return _on_crossing(rng, f'<RelativeRoadPosition entityRef="Ego" ds="{ds}" dt="-1.5"/>')
+
+
+@feature("action.LaneChangeAction.across_junction")
+def _lc_across(rng: random.Random) -> str:
+    change = lateral(
+        '<LaneChangeAction><LaneChangeActionDynamics dynamicsShape="sinusoidal" dynamicsDimension="time"'
+        f' value="{r1(rng.uniform(2, 5))}"/><LaneChangeTarget><RelativeTargetLane entityRef="Ego" value="1"/>'
+        "</LaneChangeTarget></LaneChangeAction>"
+    )
+    target = f'<LanePosition roadId="{rng.randrange(4)}" laneId="1" s="{r1(rng.uniform(20, 120))}"/>'
+    return _on_crossing(rng, target, event("LC", change, at(rng.uniform(0.5, 3))))
+
+
+@feature("action.LaneOffsetAction.across_junction")
+def _lo_across(rng: random.Random) -> str:
+    offset = lateral(
+        '<LaneOffsetAction continuous="false"><LaneOffsetActionDynamics maxLateralAcc="1" dynamicsShape="cubic"/>'
+        f'<LaneOffsetTarget><AbsoluteTargetLaneOffset value="{r2(rng.uniform(-1, 1))}"/></LaneOffsetTarget>'
+        "</LaneOffsetAction>"
+    )
+    target = f'<LanePosition roadId="{rng.randrange(4)}" laneId="1" s="{r1(rng.uniform(20, 120))}"/>'
+    return _on_crossing(rng, target, event("LO", offset, at(rng.uniform(0.5, 3))))

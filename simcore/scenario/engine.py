@@ -225,7 +225,9 @@ class ScenarioEngine:
         body.mover = None
         body.road_id = None
         if self.road is not None:
-            hint = getattr(position, "road_id", None)
+            # the road the position is on (a relative position resolved across roads says which: connecting
+            # roads of a junction overlap)
+            hint = getattr(position, "road_id", None) or self.memo.get(("road_hint", id(position)))
             rc = self.road.world_to_road(x, y, None, road_hint=hint)
             if rc is not None:
                 body.road_id, body.lane_id, body.s = rc.road_id, rc.lane_id, rc.s

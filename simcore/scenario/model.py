@@ -86,8 +86,6 @@ MODELLED_CONTROLLERS = (
     | FOLLOW_GHOST_CONTROLLERS
     | VEHICLE_CONTROLLERS
     | NATURAL_DRIVER_CONTROLLERS
-    # headless (no control input): ExternalController stands still, InteractiveController rolls on (as esmini)
-    | EXTERNAL_CONTROLLERS
     | {"", "DefaultController"}
 )
 
