@@ -1124,3 +1124,51 @@ def _lo_across(rng: random.Random) -> str:
     )
     target = f'<LanePosition roadId="{rng.randrange(4)}" laneId="1" s="{r1(rng.uniform(20, 120))}"/>'
     return _on_crossing(rng, target, event("LO", offset, at(rng.uniform(0.5, 3))))
+
+
+@feature("action.SynchronizeAction.trajectory_position")
+def _sync_trajectory(rng: random.Random) -> str:
+    s = setup(rng, road=HIGHWAY)
+    lane_y = {-1: -1.75, -2: -5.25, -3: -8.75}
+    x0 = r1(s.ego_s + rng.uniform(150, 250))
+    trajectory = (
+        '<TrajectoryRef><Trajectory name="T" closed="false"><Shape><Polyline>'
+        f'<Vertex><Position><WorldPosition x="{x0 - 100}" y="{lane_y[s.ego_lane]}"/></Position></Vertex>'
+        f'<Vertex><Position><WorldPosition x="{x0 + 100}" y="{lane_y[s.ego_lane]}"/></Position></Vertex>'
+        "</Polyline></Shape></Trajectory></TrajectoryRef>"
+    )
+    master = lane_position(s.target_s + rng.uniform(150, 250), s.target_lane)
+    action = (
+        f'<PrivateAction><SynchronizeAction masterEntityRef="Target"><TargetPositionMaster>{master[10:-11]}'
+        f'</TargetPositionMaster><TargetPosition><TrajectoryPosition s="100">{trajectory}</TrajectoryPosition>'
+        f'</TargetPosition><FinalSpeed><AbsoluteSpeed value="{r1(rng.uniform(5, 25))}"/></FinalSpeed>'
+        "</SynchronizeAction></PrivateAction>"
+    )
+    ev = event("Sync", action, at(rng.uniform(0.2, 1)))
+    return s.file(one_story(ev), stop_at(rng.uniform(8, 12)))
+
+
+@feature("position.RoutePosition.obstacle")
+def _p_route_obstacle(rng: random.Random) -> str:
+    # a parked obstacle placed by a route position along Ego's route: which way does it face
+    s = setup(rng)
+    s.target_speed = 0.0
+    wps = "".join(
+        f'<Waypoint routeStrategy="shortest">{lane_position(d, s.ego_lane)}</Waypoint>'
+        for d in (s.ego_s, s.ego_s + 300)
+    )
+    position = (
+        f'<RoutePosition><RouteRef><Route name="R" closed="false">{wps}</Route></RouteRef>'
+        f'<InRoutePosition><FromLaneCoordinates pathS="{r1(rng.uniform(60, 200))}" laneId="{s.ego_lane}"/>'
+        "</InRoutePosition></RoutePosition>"
+    )
+    ev = event("Go", speed_to(r1(rng.uniform(3, 8)), "linear", "rate", 2), at(rng.uniform(1, 3)))
+    init = private("Ego", teleport(lane_position(s.ego_s, s.ego_lane)), speed_to(s.ego_speed))
+    init += private("Target", teleport(f"<Position>{position}</Position>"), speed_to(0))
+    return openscenario(
+        entities=scenario_object("Ego") + scenario_object("Target"),
+        init=init,
+        stories=two_stories("", ev),
+        stop=stop_at(rng.uniform(5, 9)),
+        road=f'<RoadNetwork><LogicFile filepath="{s.road.path}"/></RoadNetwork>',
+    )
