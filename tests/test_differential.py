@@ -332,3 +332,24 @@ def test_relative_lane_position_past_the_road_end_goes_on_to_the_next_road(tmp_p
     target, ego = engine.bodies["Target"], engine.bodies["Ego"]
     assert target.road_id not in {"0", "1", "2", "3"}  # on a connecting road of the junction
     assert math.hypot(target.x - ego.x, target.y - ego.y) == pytest.approx(32.0, abs=3.5)
+
+
+def test_lane_offset_takes_effect_from_the_step_after_its_start(tmp_path: Path, road: OpenDrive) -> None:
+    # esmini evaluates the offset's transition before advancing it: the step the action starts in keeps
+    # the start offset (cut-in_cr and lane_change of the corpus agree to ~0.01 m instead of 0.03–0.09 m)
+    action = """<PrivateAction><LateralAction><LaneOffsetAction continuous="false">
+      <LaneOffsetActionDynamics maxLateralAcc="1.5" dynamicsShape="linear"/>
+      <LaneOffsetTarget><AbsoluteTargetLaneOffset value="1.0"/></LaneOffsetTarget>
+      </LaneOffsetAction></LateralAction></PrivateAction>"""
+    engine = engine_for(
+        tmp_path, event("O", action, sim_time("greaterThan", 0.5)), place("Ego", 50, speed=10), road
+    )
+    ego = engine.bodies["Ego"]
+    offsets = {}
+    while engine.time < 4.0 - 1e-9:
+        engine.advance()
+        offsets[round(engine.time, 2)] = ego.offset
+    duration = (6 * 1.0 / 1.5) ** 0.5  # 2 s
+    assert offsets[0.6] == 0.0  # the action starts in the step ending at 0.6 s: no movement yet
+    assert offsets[0.65] == pytest.approx(1.0 * 0.05 / duration, abs=1e-9)
+    assert offsets[2.55] < 1.0 and offsets[2.6] == pytest.approx(1.0)

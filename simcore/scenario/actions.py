@@ -231,8 +231,10 @@ class LaneOffsetRuntime(Runtime):
         if self.duration <= 0:
             self.actor.offset = self._target()
             return
-        self.elapsed += dt
+        # esmini evaluates the transition before advancing it: the first step keeps the start offset, and
+        # the target is reached one step after the duration
         p = self.elapsed / self.duration
+        self.elapsed += dt
         new = self.offset0 + (self.offset1 - self.offset0) * shape_value(self.action.shape, p)
         # a lane offset shifts the path sideways: the speed along the road is kept (as esmini does)
         self.actor.offset = new
