@@ -824,8 +824,10 @@ def generate(
 # --- loading: files other tools write that must load and run as esmini runs them ----------------------------
 
 
-def _simple(rng: random.Random, names: tuple[str, ...] = ("Ego", "Target"), **kwargs: str) -> str:
-    road = rng.choice(ROADS)
+def _simple(
+    rng: random.Random, names: tuple[str, ...] = ("Ego", "Target"), road: Road | None = None, **kwargs: str
+) -> str:
+    road = road or rng.choice(ROADS)
     init = kwargs.pop("init", None)
     if init is None:
         init = "".join(
@@ -916,7 +918,7 @@ def _l_init_order(rng: random.Random) -> str:
     ) + private(
         "Target", teleport(lane_position(rng.uniform(60, 200), lane)), speed_to(r1(rng.uniform(5, 25)))
     )
-    return _simple(rng, init=init)
+    return _simple(rng, road=road, init=init)
 
 
 @feature("loading.AngleCondition.world")
