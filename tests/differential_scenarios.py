@@ -1174,3 +1174,42 @@ def _p_route_obstacle(rng: random.Random) -> str:
         stop=stop_at(rng.uniform(5, 9)),
         road=f'<RoadNetwork><LogicFile filepath="{s.road.path}"/></RoadNetwork>',
     )
+
+
+@feature("action.FollowTrajectoryAction.follow_mode")
+def _traj_follow(rng: random.Random) -> str:
+    s = setup(rng)
+    t0 = r1(rng.uniform(0.5, 2))
+    points = _vertices(rng, s, rng.randint(2, 5), t0, s.ego_speed)
+    shape = "<Polyline>" + "".join(f'<Vertex time="{r2(t)}">{p}</Vertex>' for t, p in points) + "</Polyline>"
+    timing = rng.choice(["<None/>", '<Timing domainAbsoluteRelative="absolute" scale="1" offset="0"/>'])
+    action = _trajectory_action(shape, timing).replace('followingMode="position"', 'followingMode="follow"')
+    ev = event("Traj", action, at(t0))
+    return s.file(one_story(ev), stop_at(rng.uniform(8, 14)))
+
+
+@feature("action.FollowTrajectoryAction.initialDistanceOffset")
+def _traj_offset(rng: random.Random) -> str:
+    s = setup(rng)
+    t0 = r1(rng.uniform(0.5, 2))
+    points = _vertices(rng, s, rng.randint(3, 5), t0, s.ego_speed)
+    shape = "<Polyline>" + "".join(f'<Vertex time="{r2(t)}">{p}</Vertex>' for t, p in points) + "</Polyline>"
+    action = _trajectory_action(shape, "<None/>").replace(
+        "<FollowTrajectoryAction>",
+        f'<FollowTrajectoryAction initialDistanceOffset="{r1(rng.uniform(0, 25))}">',
+    )
+    ev = event("Traj", action, at(t0))
+    return s.file(one_story(ev), stop_at(rng.uniform(8, 12)))
+
+
+@feature("condition.ReachPositionCondition.orientation")
+def _c_reach_orientation(rng: random.Random) -> str:
+    s = setup(rng)
+    h = r2(rng.uniform(-0.3, 0.3))
+    where = lane_position(s.ego_s + rng.uniform(20, 80), s.ego_lane).replace(
+        "/></Position>", f'><Orientation type="relative" h="{h}"/></LanePosition></Position>'
+    )
+    cond = by_entity(
+        "Ego", f'<ReachPositionCondition tolerance="{r1(rng.uniform(1, 4))}">{where}</ReachPositionCondition>'
+    )
+    return _reacting(s, rng, cond)

@@ -353,3 +353,20 @@ def test_lane_offset_takes_effect_from_the_step_after_its_start(tmp_path: Path, 
     assert offsets[0.6] == 0.0  # the action starts in the step ending at 0.6 s: no movement yet
     assert offsets[0.65] == pytest.approx(1.0 * 0.05 / duration, abs=1e-9)
     assert offsets[2.55] < 1.0 and offsets[2.6] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize(
+    ("orientation", "fires"), [("", True), ('<Orientation type="relative" h="0.1"/>', False)]
+)
+def test_reach_position_with_an_orientation_needs_that_heading(
+    tmp_path: Path, road: OpenDrive, orientation: str, fires: bool
+) -> None:
+    # esmini checks the heading of a position that has an Orientation (to within a hair): driving straight
+    # along the lane, Ego never reaches a position turned 0.1 rad from it
+    where = f'<Position><LanePosition roadId="1" laneId="-2" s="80" offset="0">{orientation}</LanePosition></Position>'
+    condition = gen.by_entity(
+        "Ego", f'<ReachPositionCondition tolerance="2">{where}</ReachPositionCondition>'
+    )
+    engine = engine_for(tmp_path, event("R", gen.speed_to(0.0), condition), place("Ego", 50, speed=10), road)
+    trace = speeds(engine, 5.0)
+    assert (trace[5.0] == 0.0) is fires

@@ -173,9 +173,17 @@ def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool
     return any(boxes_overlap(mine, Box.of(world.state_of(o))) for o in others)
 
 
+REACH_ANGLE_TOLERANCE = 1e-6  # rad: esmini's ReachPosition with an Orientation wants the heading itself
+
+
 def reach_position(c: m.ReachPositionCondition, world: ScenarioWorld, body: Body) -> bool:
-    x, y, _, _ = fixed_point(world, c.position)
-    return math.hypot(body.x - x, body.y - y) < c.tolerance
+    x, y, _, h = fixed_point(world, c.position)
+    if math.hypot(body.x - x, body.y - y) >= c.tolerance:
+        return False
+    if getattr(c.position, "orientation", None) is not None:
+        # a position with an Orientation is reached with that heading only (as esmini checks it)
+        return abs(wrap_angle(body.heading - h)) < REACH_ANGLE_TOLERANCE
+    return True
 
 
 def distance(c: m.DistanceCondition, world: ScenarioWorld, body: Body) -> bool:
