@@ -9,7 +9,7 @@ SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 TEST_SYSTEM_PACKAGES := chromium
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck wheel wheel-check bench conformance crds helm lint-chart images clean
+.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck wheel wheel-check bench conformance differential crds helm lint-chart images clean
 
 
 install: $(STAMP)
@@ -80,6 +80,13 @@ conformance: install
 	@test -d $(CORPUS)/resources || { echo "no esmini corpus at $(CORPUS): make conformance CORPUS=DIR"; exit 2; }
 	$(VENV)/bin/carlos conformance $(CORPUS)/resources --reference $(CORPUS)/reference --out results/conformance.csv -j $(NPROC)
 	$(PY) bench/conformance.py $(CORPUS)
+
+# Development only (esmini is not part of the project): generated scenarios of every feature type run by
+# CARLOS and by the esmini player ($ESMINI), agreement per type; PER_TYPE scenarios of each type
+PER_TYPE ?= 10
+differential: install
+	@test -n "$$ESMINI" || { echo "no esmini player: make differential ESMINI=/path/to/esmini"; exit 2; }
+	$(PY) bench/differential.py --per-type $(PER_TYPE) -j $(NPROC)
 
 # the SimulationRun CRD from simcore/spec.py, for kubectl and for the Helm chart (tests/test_crd.py checks drift)
 crds: install

@@ -634,13 +634,24 @@ def pod(
 
 @app.command()
 def conformance(
-    directory: Annotated[Path, typer.Argument(help="Directory searched recursively for .xosc scenarios.")],
+    paths: Annotated[
+        list[Path],
+        typer.Argument(help="Scenario files, or directories searched recursively for .xosc scenarios."),
+    ],
     reference: Annotated[
         Path | None,
         typer.Option(
             help="Reference trajectories (<folder>__<name>.csv.gz, e.g. the esmini corpus' reference/)."
         ),
     ] = None,
+    against: Annotated[
+        str | None,
+        typer.Option(
+            help="Compare with what a reference player makes of each same file (differential testing): "
+            "esmini (found by --esmini, $ESMINI or PATH)."
+        ),
+    ] = None,
+    esmini: Annotated[Path | None, typer.Option(help="The esmini binary for --against esmini.")] = None,
     out_file: Annotated[
         Path | None, typer.Option("--out", help="Write the table here: .csv or .json (by suffix).")
     ] = None,
@@ -653,14 +664,30 @@ def conformance(
         ),
     ] = None,
 ) -> None:
-    """Run every scenario under DIRECTORY headless (0.05 s steps) and compare with reference trajectories."""
+    """Run every scenario under PATHS headless (0.05 s steps) and compare with reference trajectories: the
+    corpus' CSVs (--reference) or the esmini player run on the same files (--against esmini)."""
     from simcore import conformance as conf
+    from simcore.reference_player import find_esmini
 
-    if not directory.is_dir():
-        raise _fail(BadInput("not a directory", file=str(directory)))
+    files: list[Path] = []
+    for path in paths:
+        if path.is_dir():
+            files.extend(conf.scenario_files(path, include))
+        elif path.is_file():
+            files.append(path)
+        else:
+            raise _fail(BadInput("no such file or directory", file=str(path)))
+    directory = paths[0] if len(paths) == 1 and paths[0].is_dir() else _common_parent(files)
     if reference is not None and not reference.is_dir():
         raise _fail(BadInput("reference is not a directory", file=str(reference)))
-    results = conf.run_directory(directory, reference, cap_seconds=cap, jobs=jobs, include=include)
+    player: Path | None = None
+    if against is not None:
+        if against != "esmini":
+            raise _fail(BadInput(f"unknown reference player {against!r} (known: esmini)", field="--against"))
+        player = find_esmini(esmini)
+        if player is None:
+            raise _fail(CarlosError("no esmini binary: give --esmini PATH or set ESMINI=/path/to/esmini"))
+    results = conf.run_files(files, reference, cap_seconds=cap, jobs=jobs, esmini=player)
     table = Table(title=f"conformance: {directory}", show_edge=False)
     for column in ("scenario", "status", "end s", "ref end s", "max RMSE m", "agreed", "message"):
         table.add_column(column, overflow="fold")
@@ -681,6 +708,12 @@ def conformance(
         conf.write_results(results, out_file, directory)
         if out_file.suffix != ".json":
             conf.write_results(results, out_file.with_suffix(".json"), directory)
+
+
+def _common_parent(files: list[Path]) -> Path:
+    if not files:
+        return Path(".")
+    return Path(os.path.commonpath([str(f.resolve().parent) for f in files]))
 
 
 for _command in (

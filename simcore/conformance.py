@@ -58,6 +58,8 @@ class ScenarioResult:
     worst_entity: str | None = None
     agreed: bool = False
     message: str = ""
+    reference_message: str = ""  # why the reference player gave no reference (differential runs)
+    final_error: float | None = None  # largest distance between final positions of a compared entity, m
     warnings: list[str] = field(default_factory=list)
     entities: list[EntityResult] = field(default_factory=list)
 
@@ -256,14 +258,17 @@ def compare(
             result.entities.append(EntityResult(name, scripted, None, 0))
             continue
         by_time = {round(t / REFERENCE_PERIOD): (x, y) for t, x, y in ours}
-        total, count = 0.0, 0
+        total, count, last = 0.0, 0, 0.0
         for t, x, y in theirs:
             mine = by_time.get(round(t / REFERENCE_PERIOD))
             if mine is None:
                 continue
-            total += (mine[0] - x) ** 2 + (mine[1] - y) ** 2
+            last = (mine[0] - x) ** 2 + (mine[1] - y) ** 2
+            total += last
             count += 1
         rmse = math.sqrt(total / count) if count else None
+        if scripted and count:
+            result.final_error = max(result.final_error or 0.0, math.sqrt(last))
         result.entities.append(EntityResult(name, scripted, rmse, count))
         if scripted and rmse is not None and (worst is None or rmse > worst[0]):
             worst = (rmse, name)
@@ -282,15 +287,26 @@ def compare(
 # --- the whole directory -----------------------------------------------------------------------------------
 
 
-def _one(args: tuple[str, str | None, float, float | None]) -> ScenarioResult:
-    file, reference_dir, cap, reference_end = args
+def _one(args: tuple[str, str | None, float, float | None, str | None]) -> ScenarioResult:
+    file, reference_dir, cap, reference_end, esmini = args
     path = Path(file)
     result, trace = run_scenario(path, cap)
-    if reference_dir is not None and result.kind == "scenario":
+    if result.kind != "scenario":
+        return result
+    controlled = trace.controlled if trace.controlled is not None else set()
+    if esmini is not None:
+        from simcore.reference_player import run_esmini
+
+        played = run_esmini(Path(esmini), path, step=STEP_SECONDS)
+        if played.ok:
+            result.reference = "esmini"
+            compare(result, trace, played.tracks, played.end, controlled)
+        else:
+            result.reference_message = played.message
+    elif reference_dir is not None:
         ref_path = Path(reference_dir) / reference_name(path)
         if ref_path.is_file():
             result.reference = ref_path.name
-            controlled = trace.controlled if trace.controlled is not None else set()
             compare(result, trace, read_reference(ref_path), reference_end, controlled)
     return result
 
@@ -303,11 +319,38 @@ def run_directory(
     jobs: int = 1,
     include: list[str] | None = None,
     on_result: Callable[[ScenarioResult], None] | None = None,
+    esmini: Path | None = None,
 ) -> list[ScenarioResult]:
-    files = scenario_files(directory, include)
+    return run_files(
+        scenario_files(directory, include),
+        reference_dir,
+        cap_seconds=cap_seconds,
+        jobs=jobs,
+        on_result=on_result,
+        esmini=esmini,
+    )
+
+
+def run_files(
+    files: list[Path],
+    reference_dir: Path | None = None,
+    *,
+    cap_seconds: float = DEFAULT_CAP_SECONDS,
+    jobs: int = 1,
+    on_result: Callable[[ScenarioResult], None] | None = None,
+    esmini: Path | None = None,
+) -> list[ScenarioResult]:
+    """Run `files` and compare each with its reference: the CSV in `reference_dir`, or — with `esmini` — what
+    the esmini player makes of the same file (differential testing)."""
     ends = reference_end_times(reference_dir) if reference_dir is not None else {}
     tasks = [
-        (str(f), str(reference_dir) if reference_dir else None, cap_seconds, ends.get(reference_name(f)))
+        (
+            str(f),
+            str(reference_dir) if reference_dir else None,
+            cap_seconds,
+            ends.get(reference_name(f)),
+            str(esmini) if esmini else None,
+        )
         for f in files
     ]
     results: list[ScenarioResult] = []
@@ -458,5 +501,9 @@ def iter_rows(results: list[ScenarioResult], base: Path) -> Iterator[list[str]]:
             "" if r.reference_end is None else f"{r.reference_end:.2f}",
             "" if r.max_rmse is None else f"{r.max_rmse:.2f}",
             "yes" if r.agreed else ("" if r.reference is None else "no"),
-            (r.message[:90] + "…") if len(r.message) > 90 else r.message,
+            _short(r.message or r.reference_message),
         ]
+
+
+def _short(message: str) -> str:
+    return (message[:90] + "…") if len(message) > 90 else message

@@ -529,7 +529,8 @@ def test_an_event_waiting_for_a_trajectory_to_end_starts_at_the_next_step(
 def lateral_distance(constraints: str, *, continuous: bool = True, distance: float = 4.0) -> str:
     return f"""<PrivateAction><LateralAction>
       <LateralDistanceAction entityRef="Lead" distance="{distance}" freespace="false" continuous="{str(continuous).lower()}"
-        displacement="leftToReferencedEntity">{constraints}</LateralDistanceAction></LateralAction></PrivateAction>"""
+        displacement="leftToReferencedEntity" coordinateSystem="road">{constraints}</LateralDistanceAction>
+      </LateralAction></PrivateAction>"""
 
 
 def test_lateral_distance_at_limited_lateral_speed_then_kept(tmp_path: Path, road: OpenDrive) -> None:
@@ -572,7 +573,7 @@ def test_lateral_distance_with_acceleration_limit_is_a_damped_spring(tmp_path: P
 def test_lateral_distance_spring_is_damped_on_the_lateral_speed_relative_to_the_other_entity(
     tmp_path: Path, road: OpenDrive
 ) -> None:
-    # the Lead drifts right at a constant rate (a linear lane offset of 3 m: ~0.19 m/s from 3 s to ~18 s,
+    # the Lead drifts right at a constant rate (a linear lane offset of 3 m: ~0.16 m/s from 3 s to ~22 s,
     # its heading kept along the road): damped on the relative lateral speed, the spring follows the ramp
     # with no lag (damped on its own speed it would lag 2·sqrt(k)·v/k ≈ 0.27 m behind)
     offset = """<PrivateAction><LateralAction><LaneOffsetAction continuous="false">
@@ -596,7 +597,7 @@ def test_lateral_distance_spring_is_damped_on_the_lateral_speed_relative_to_the_
         if engine.time > 7.0:
             gaps.append(ego.y - lead.y)
             lead_moves.append(lead.y - y)
-    assert all(move < -0.009 for move in lead_moves)  # the Lead is moving sideways all along
+    assert all(move < -0.007 for move in lead_moves)  # the Lead is moving sideways all along
     assert all(gap == pytest.approx(4.0, abs=0.002) for gap in gaps)
 
 

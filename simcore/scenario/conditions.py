@@ -73,7 +73,9 @@ def holds(cond: m.Condition, world: ScenarioWorld, triggering: list[str]) -> boo
 
 
 def simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> bool:
-    return compare(c.rule, world.time, c.value)
+    # to a nanosecond: step 3 of 0.05 s is at 0.15000000000000002 s, which is not "greater than 0.15" (esmini
+    # holds a condition "t > k·dt" from step k + 1 on, for every k)
+    return compare(c.rule, round(world.time, 9), round(c.value, 9))
 
 
 def storyboard_element_state(c: m.StoryboardElementStateCondition, world: ScenarioWorld) -> bool:
@@ -171,9 +173,17 @@ def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool
     return any(boxes_overlap(mine, Box.of(world.state_of(o))) for o in others)
 
 
+REACH_ANGLE_TOLERANCE = 1e-6  # rad: esmini's ReachPosition with an Orientation wants the heading itself
+
+
 def reach_position(c: m.ReachPositionCondition, world: ScenarioWorld, body: Body) -> bool:
-    x, y, _, _ = fixed_point(world, c.position)
-    return math.hypot(body.x - x, body.y - y) < c.tolerance
+    x, y, _, h = fixed_point(world, c.position)
+    if math.hypot(body.x - x, body.y - y) >= c.tolerance:
+        return False
+    if getattr(c.position, "orientation", None) is not None:
+        # a position with an Orientation is reached with that heading only (as esmini checks it)
+        return abs(wrap_angle(body.heading - h)) < REACH_ANGLE_TOLERANCE
+    return True
 
 
 def distance(c: m.DistanceCondition, world: ScenarioWorld, body: Body) -> bool:

@@ -100,11 +100,14 @@ def put(world: ScenarioWorld, body: Body, vehicle: Vehicle) -> None:
 
 
 def speed_limit(world: ScenarioWorld, body: Body) -> float:
-    """esmini's Position::GetSpeedLimit without the road's speed records (CARLOS does not read them): off
-    every road 70 km/h; on a road 120 km/h with more than one driving lane on the entity's side, else 60."""
+    """esmini's Position::GetSpeedLimit: the road type's speed record where there is one; else off every
+    road 70 km/h, on a road 120 km/h with more than one driving lane on the entity's side, else 60."""
     road = world.road
     if road is None or body.road_id is None:
         return NO_ROAD_SPEED_LIMIT
+    recorded = road.speed_limit(body.road_id, body.s)
+    if recorded is not None and recorded > 0:
+        return recorded
     side = 1 if body.lane_id > 0 else -1
     lanes = [lane for lane in road.lane_ids(body.road_id, body.s, driving_only=True) if lane * side > 0]
     return 120 / 3.6 if len(lanes) > 1 else 60 / 3.6

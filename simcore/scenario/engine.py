@@ -85,7 +85,7 @@ class ScenarioEngine:
             for e in scenario.entities
         }
         self.ego = ego or _default_ego(scenario)
-        if self.ego not in self.bodies:
+        if self.ego is not None and self.ego not in self.bodies:
             raise BadInput(f"ego entity {self.ego!r} is not in the scenario", field="spec.simulation.ego")
         for entity in scenario.entities:
             if entity.driver == "sumo" and sumo is None:
@@ -151,8 +151,9 @@ class ScenarioEngine:
     # --- set-up ---------------------------------------------------------------------------------------
 
     def _init(self) -> None:
-        # teleports first (other init actions may refer to positions of entities placed here)
-        ordered = sorted(self.scenario.init, key=lambda i: not isinstance(i.action, m.TeleportAction))
+        # teleports first (other init actions may refer to positions of entities placed here), each after the
+        # teleport of the entity its position refers to, wherever that is in Init (as esmini)
+        ordered = _placement_order(self.scenario.init)
         self.init_runtimes: list[Runtime] = []
         for item in ordered:
             if not item.entity:
@@ -168,6 +169,9 @@ class ScenarioEngine:
             # esmini's first frame steps the controllers activated in Init with a zero time step
             driver.step(0.0)
             self._start_lane_change(driver)
+        for body in self.bodies.values():
+            if body.external and self.external is None and not body.gone:
+                self._move_external(body, 0.0)  # that first frame rolls an interactive vehicle's speed down
         if self.trailer_of:
             self.align_trailers()
         for body in self.bodies.values():
@@ -221,7 +225,9 @@ class ScenarioEngine:
         body.mover = None
         body.road_id = None
         if self.road is not None:
-            hint = getattr(position, "road_id", None)
+            # the road the position is on (a relative position resolved across roads says which: connecting
+            # roads of a junction overlap)
+            hint = getattr(position, "road_id", None) or self.memo.get(("road_hint", id(position)))
             rc = self.road.world_to_road(x, y, None, road_hint=hint)
             if rc is not None:
                 body.road_id, body.lane_id, body.s = rc.road_id, rc.lane_id, rc.s
@@ -534,12 +540,31 @@ class ScenarioEngine:
         """An entity its external controller drives: moved by the control input; without one (no system
         under test attached, as in a headless conformance run) it stands still, as in esmini."""
         if self.external is None:
-            body.speed = 0.0
+            if m.controller_type(body.entity.controller) == "InteractiveController":
+                self._coast(body, dt)
+            else:
+                body.speed = 0.0
             return
         x, y, heading, speed = self.external.move(body.entity, body.x, body.y, body.heading, body.speed, dt)
         body.odometer += math.hypot(x - body.x, y - body.y)
         body.x, body.y, body.heading, body.speed = x, y, heading, speed
         self.locate(body)
+
+    def _coast(self, body: Body, dt: float) -> None:
+        """esmini's InteractiveController with no key pressed (a headless run): its vehicle model rolls on,
+        the speed declining by 0.1 % a step and held within 1.2 × the default speed limit, wheels straight:
+        along its heading when it steers too, along the road when it controls the speed only."""
+        limit = drivers.speed_limit(self, body)
+        body.speed = min(max(body.speed * (1.0 - 0.001), -1.2 * limit), 1.2 * limit)
+        distance = body.speed * dt
+        _, _, lateral = self.controllers[body.name]
+        if lateral or self.road is None or body.road_id is None:
+            body.x += distance * math.cos(body.heading)
+            body.y += distance * math.sin(body.heading)
+            body.odometer += abs(distance)
+            self.locate(body)
+        else:
+            advance_on_road(self.road, body, distance, self.time)
 
     def moved(self) -> None:
         """Bodies moved: the per-step caches of their states and of condition measurements are stale."""
@@ -605,14 +630,41 @@ def _added_later(scenario: m.Scenario) -> set[str]:
     return out
 
 
-def _default_ego(scenario: m.Scenario) -> str:
+def _placement_order(init: tuple[m.InitAction, ...] | list[m.InitAction]) -> list[m.InitAction]:
+    """Init actions with the teleports first, a teleport relative to an entity after that entity's own
+    teleport (in Init order otherwise; a cycle keeps the file's order)."""
+    teleports = [i for i in init if isinstance(i.action, m.TeleportAction)]
+    others = [i for i in init if not isinstance(i.action, m.TeleportAction)]
+    placed_by_init = {i.entity for i in teleports}
+    done: set[str] = set()
+    ordered: list[m.InitAction] = []
+    pending = list(teleports)
+    while pending:
+        ready = [
+            i
+            for i in pending
+            if (ref := getattr(i.action.position, "entity", None)) is None  # type: ignore[union-attr]
+            or ref in done
+            or ref not in placed_by_init
+            or ref == i.entity
+        ]
+        if not ready:
+            ready = pending[:1]  # a cycle: the file's order decides (and the position fails to resolve)
+        for item in ready:
+            ordered.append(item)
+            done.add(item.entity)
+            pending.remove(item)
+    return ordered + others
+
+
+def _default_ego(scenario: m.Scenario) -> str | None:
+    """The ego: Ego/ego/hero/Hero, else the first entity; None for a scenario without entities (it runs
+    its storyboard all the same, as esmini does)."""
     names = [e.name for e in scenario.entities]
     for candidate in ("Ego", "ego", "hero", "Hero"):
         if candidate in names:
             return candidate
-    if not names:
-        raise BadInput("the scenario declares no entities", file=str(scenario.path), field="Entities")
-    return names[0]
+    return names[0] if names else None
 
 
 __all__ = ["ScenarioEngine", "SimulationError", "update_pose_from_road"]

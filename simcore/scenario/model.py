@@ -374,6 +374,7 @@ class LateralDistanceAction:
     continuous: bool
     displacement: str  # leftToReferencedEntity | rightToReferencedEntity | any
     constraints: DynamicConstraints | None
+    coordinate_system: str = "entity"  # entity | road (1.1)
     domain = "lateral"
 
 

@@ -215,7 +215,57 @@ def next_road(road: OpenDrive, body: Body) -> tuple[str, int, int] | None:
             body.route.pop(0)
             return chosen[0]
         body.route.clear()
-    return road.successor(body.road_id, body.lane_id, body.direction)
+    return onward(road, body.road_id, body.lane_id, body.direction)
+
+
+def onward(road: OpenDrive, road_id: str, lane_id: int, direction: int) -> tuple[str, int, int] | None:
+    """Where a lane goes on at the end of its road (travelling in `direction`) without a route: the one
+    successor, or through a junction the connection that turns least."""
+    options = road.connections(road_id, lane_id, direction)
+    if len(options) > 1:
+        return straightest(road, road_id, direction, options)
+    return road.successor(road_id, lane_id, direction)
+
+
+def straightest(
+    road: OpenDrive, road_id: str, direction: int, options: list[tuple[str, int, int]]
+) -> tuple[str, int, int]:
+    """Without a route, the way through a junction that turns least: the connecting road whose far end
+    heads closest to where the body heads at the end of its road (esmini's junction selector angle 0, what
+    its default controller takes at the first junction)."""
+    edge = road.road_length(road_id) if direction > 0 else 0.0
+    here = road.road_to_world(road_id, edge, 0.0).heading + (0.0 if direction > 0 else math.pi)
+
+    def turn(option: tuple[str, int, int]) -> float:
+        road_id, _, direction = option
+        far = road.road_length(road_id) if direction > 0 else 0.0
+        there = road.road_to_world(road_id, far, 0.0).heading + (0.0 if direction > 0 else math.pi)
+        return abs(wrap_angle(there - here))
+
+    return min(options, key=turn)
+
+
+def along_lane(
+    road: OpenDrive, road_id: str, lane_id: int, s: float, direction: int, distance: float
+) -> tuple[str, int, float, int]:
+    """(road, lane, s, direction) `distance` metres of s further along a lane in `direction` (negative:
+    back), across road ends by the lane's links (the straightest way through junctions); it stops at a dead
+    end. The direction returned is the travel direction on the road reached."""
+    moving = direction if distance >= 0 else -direction
+    remaining = abs(distance)
+    for _ in range(32):
+        length = road.road_length(road_id)
+        target = s + moving * remaining
+        if 0.0 <= target <= length:
+            return road_id, lane_id, target, moving if distance >= 0 else -moving
+        nxt = onward(road, road_id, lane_id, moving)
+        edge = length if target > length else 0.0
+        if nxt is None:
+            return road_id, lane_id, edge, moving if distance >= 0 else -moving
+        remaining -= abs(edge - s)
+        road_id, lane_id, moving = nxt
+        s = 0.0 if moving > 0 else road.road_length(road_id)
+    return road_id, lane_id, s, moving if distance >= 0 else -moving
 
 
 def update_pose_from_road(road: OpenDrive, body: Body) -> None:

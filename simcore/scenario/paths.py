@@ -56,6 +56,18 @@ class SampledPath:
             self.h[i] + f * dh,
         )
 
+    def time_at_s(self, s: float) -> float:
+        """Trajectory time at arc length `s` (linear between the samples; clamped)."""
+        assert self.t is not None
+        if s <= self.s[0]:
+            return self.t[0]
+        if s >= self.s[-1]:
+            return self.t[-1]
+        i = bisect.bisect_right(self.s, s) - 1
+        seg = self.s[i + 1] - self.s[i]
+        f = (s - self.s[i]) / seg if seg > 0 else 0.0
+        return self.t[i] + f * (self.t[i + 1] - self.t[i])
+
     def s_at_time(self, time: float) -> float:
         """Arc length where the path is at trajectory time `time` (times must be non-decreasing)."""
         assert self.t is not None

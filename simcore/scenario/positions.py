@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from simcore.errors import BadInput
 from simcore.scenario import model as m
 from simcore.scenario import paths
-from simcore.scenario.motion import lane_shift, wrap_angle
+from simcore.scenario.motion import along_lane, lane_shift, wrap_angle
 from simcore.scenario.world import Pose
 
 if TYPE_CHECKING:
@@ -110,13 +110,32 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
                 f"{type(position).__name__}: entity {ref.name!r} is not on a road", file=world.source
             )
         if isinstance(position, m.RelativeLanePosition):
-            s_new = ref.s + position.ds * ref.direction
-            lane = lane_shift(r, ref.road_id, s_new, ref.lane_id, position.d_lane, ref.direction)
-            pose = r.lane_to_world(ref.road_id, lane, s_new, position.offset * ref.direction)
-            base = pose.heading + (math.pi if ref.direction < 0 else 0.0)
+            # ds beyond the end of the road goes on along the lane onto the next road (as esmini)
+            road_id, lane_id, s_new, direction = along_lane(
+                r, ref.road_id, ref.lane_id, ref.s, ref.direction, position.ds
+            )
+            if direction != ref.direction:
+                # onto a road that runs the other way: esmini keeps the lane id and the s direction of the
+                # road it started on (the mirrored lane, facing the other way)
+                lane_id, direction = -lane_id, -direction
+            world.memo[("road_hint", id(position))] = (
+                road_id  # where it is, for a teleport (junctions overlap)
+            )
+            lane = lane_shift(r, road_id, s_new, lane_id, position.d_lane, direction)
+            pose = r.lane_to_world(road_id, lane, s_new, position.offset * direction)
+            base = pose.heading + (math.pi if direction < 0 else 0.0)
             return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
         if isinstance(position, m.RelativeRoadPosition):
             t_ref = r.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
+            road_id, lane_id, s_new, direction = along_lane(
+                r, ref.road_id, ref.lane_id, ref.s, 1, position.ds
+            )
+            world.memo[("road_hint", id(position))] = road_id
+            if road_id != ref.road_id:
+                # onto another road: t keeps its distance from the lane's centre (t flips with s direction)
+                t_ref = r.lane_center_t(road_id, lane_id, s_new) + ref.offset * direction
+                pose = r.road_to_world(road_id, s_new, t_ref + position.dt)
+                return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
             pose = r.road_to_world(ref.road_id, ref.s + position.ds, t_ref + position.dt)
             return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
     except (KeyError, ValueError) as exc:

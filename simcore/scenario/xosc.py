@@ -142,7 +142,7 @@ class _Reader:
         block = element.find("ParameterDeclarations")
         if block is not None:
             for item in block.findall("ParameterDeclaration"):
-                name = item.get("name")
+                name = (item.get("name") or "").lstrip("$")  # "$Speed" declares Speed (as esmini reads it)
                 if not name:
                     raise self.fail("ParameterDeclaration without a name", item)
                 kind = item.get("parameterType", "string")
@@ -509,6 +509,10 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         reader.push_declarations(entry, assignments)
         pushed = True
         body = entry
+    elif body.find("ParameterDeclarations") is not None:
+        # an inline Vehicle (Pedestrian, MiscObject) may declare parameters of its own, as a catalog entry does
+        reader.push_declarations(body)
+        pushed = True
     try:
         object_type = {"Vehicle": "vehicle", "Pedestrian": "pedestrian", "MiscObject": "miscObject"}[body.tag]
         category = reader.attr(
@@ -754,6 +758,11 @@ def _event(reader: _Reader, event: ET.Element) -> m.Event:
                 m.Action(name=name, private=reader.within(action, name, _private, reader, private))
             )
             continue
+        if not any(isinstance(c.tag, str) for c in action):
+            # an empty <Action/>: nothing to do, it ends at once (as esmini runs it)
+            reader.within(action, name, reader.warn, "an empty Action does nothing", action)
+            actions.append(m.Action(name=name, private=None))
+            continue
         inner = reader.only_child(action)
         if inner.tag == "GlobalAction":
             g = reader.within(action, name, _global, reader, inner)
@@ -814,12 +823,19 @@ def _private(reader: _Reader, element: ET.Element) -> m.PrivateAction:
                 distance=reader.num(action, "distance", 0.0),
                 freespace=_freespace(reader, action),
                 continuous=reader.boolean(action, "continuous", False),
-                displacement=reader.attr(action, "displacement", "any"),
+                # without the attribute the entity goes to the left of the other (esmini's default)
+                displacement=reader.attr(action, "displacement", "leftToReferencedEntity"),
                 constraints=_constraints(reader, action.find("DynamicConstraints")),
+                coordinate_system=reader.attr(action, "coordinateSystem", "entity"),
             )
         raise reader.fail(f"LateralAction/{action.tag} is not supported", action)
     if tag == "RoutingAction":
         action = reader.only_child(inner)
+        if action.tag == "RandomRouteAction":
+            # 1.3: a random route from where the entity is; it follows its lane and takes the default way at
+            # junctions (as it does without a route; esmini's choice there is random too)
+            reader.warn("RandomRouteAction: no route is drawn; the entity follows its lane", action)
+            return m.NoMotionAction("RandomRouteAction")
         if action.tag == "AssignRouteAction":
             return m.AssignRouteAction(route=_route_or_ref(reader, action))
         if action.tag == "FollowTrajectoryAction":
@@ -1242,7 +1258,7 @@ def _variables(reader: _Reader, root: ET.Element) -> None:
     if block is None:
         return
     for item in block.findall("VariableDeclaration"):
-        name = item.get("name")
+        name = (item.get("name") or "").lstrip("$")
         if not name:
             raise reader.fail("VariableDeclaration without a name", item)
         try:
@@ -1684,8 +1700,11 @@ def _entity_condition(reader: _Reader, c: ET.Element) -> m.EntityCondition:
                 tolerance=tolerance,
             )
         system = reader.attr(c, "coordinateSystem", "entity")
+        if system == "world":
+            system = "entity"  # the heading in the world frame, as "entity" (esmini reads "world" so)
         if system not in _SYSTEMS:
-            raise reader.fail(f"coordinateSystem={system!r}: expected one of {', '.join(_SYSTEMS)}", c)
+            known = ", ".join((*_SYSTEMS, "world"))
+            raise reader.fail(f"coordinateSystem={system!r}: expected one of {known}", c)
         return m.AngleCondition(
             angle_type=angle_type,  # type: ignore[arg-type]
             angle=reader.num(c, "angle"),

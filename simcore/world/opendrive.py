@@ -484,6 +484,15 @@ class Road:
     successor: RoadLink | None = None
     superelevations: list[Poly3] = field(default_factory=list)
     rule: str = "RHT"  # traffic rule: RHT (right-hand traffic) or LHT
+    speeds: list[tuple[float, float]] = field(default_factory=list)  # (s, max m/s) of <type><speed>
+
+    def speed_limit(self, s: float) -> float | None:
+        """The road type's speed limit at ``s`` (m/s), None where no <type> record gives one."""
+        value = None
+        for start, limit in self.speeds:
+            if start <= s + 1e-9:
+                value = limit
+        return value
 
     def __post_init__(self) -> None:
         self._gstarts = [g.s for g in self.geometries]
@@ -847,7 +856,17 @@ def _parse_road(ctx: _Ctx, el: Element) -> Road:
         ctx.parts.pop()
     ctx.parts.pop()
     rule = (el.get("rule") or "RHT").strip().upper()
-    return Road(
+    speeds = []
+    for kind in el.findall("type"):
+        record = kind.find("speed")
+        if record is None or record.get("max") in (None, "", "no limit", "undefined"):
+            continue
+        scale = _SPEED_UNITS.get((record.get("unit") or "m/s").strip(), 1.0)
+        try:
+            speeds.append((ctx.num(kind, "s", 0.0), float(record.get("max", "")) * scale))
+        except ValueError:
+            continue  # a speed record that is not a number: no limit from it
+    road = Road(
         rid,
         el.get("name") or "",
         length,
@@ -861,6 +880,11 @@ def _parse_road(ctx: _Ctx, el: Element) -> Road:
         supers,
         "LHT" if rule == "LHT" else "RHT",
     )
+    road.speeds = sorted(speeds)
+    return road
+
+
+_SPEED_UNITS = {"m/s": 1.0, "km/h": 1 / 3.6, "mph": 0.44704}
 
 
 def _parse_junction(ctx: _Ctx, el: Element) -> Junction:
@@ -1122,6 +1146,10 @@ class OpenDrive:
         off = t - 0.5 * (ic + oc)
         dt = ((0.5 * (i1 + o1) + off) * c1 - (0.5 * (i0 + o0) + off) * c0) / (hi_q - lo)
         return math.atan2(dt, 1.0 - road.curvature(s) * t * c)
+
+    def speed_limit(self, road_id: str, s: float) -> float | None:
+        """The speed limit (m/s) of the road's type at ``s``; None without a speed record."""
+        return self.road(road_id).speed_limit(s)
 
     def lane_ids(self, road_id: str, s: float, driving_only: bool = False) -> list[int]:
         """Ids of the lanes (not 0) with positive width at ``s``, right to left; optionally drivable ones only."""
