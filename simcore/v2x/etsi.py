@@ -14,9 +14,12 @@ The builders are pure functions. Containers a message does not use are one share
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
+
+import numpy as np
 
 from simcore.transport.messages import TYPESTORE, stamp
 
@@ -80,7 +83,6 @@ def zero(typename: str) -> Any:
 
 
 def _zero_field(desc: Any) -> Any:
-    import numpy as np
 
     kind = desc[0]
     if kind == 1:  # base type
@@ -158,6 +160,221 @@ def _speed(pkg: str, speed: float) -> Any:
 _CAM = "etsi_its_cam_msgs"
 
 
+def clip_ints(values: Any, lo: int, hi: int) -> list[int]:
+    """`_clip` of every value (rounded half to even like `round`, non-finite → `hi`), as Python ints."""
+    v = np.asarray(values, dtype=np.float64)
+    out = np.where(np.isfinite(v), np.clip(np.rint(np.where(np.isfinite(v), v, 0.0)), lo, hi), hi)
+    return [int(x) for x in out.astype(np.int64).tolist()]
+
+
+def clip_rows(values: np.ndarray, limits: np.ndarray) -> list[list[int]]:
+    """`clip_ints` of each row of `values` (F, M) to its row of `limits` (F, 2), in one numpy pass."""
+    finite = np.isfinite(values)
+    lo, hi = limits[:, 0:1], limits[:, 1:2]
+    out = np.where(finite, np.clip(np.rint(np.where(finite, values, 0.0)), lo, hi), hi)
+    rows: list[list[int]] = out.astype(np.int64).tolist()
+    return rows
+
+
+#: the CAM's integer fields in `cams` order: latitude, longitude, altitude, heading, speed, length, width,
+#: longitudinal acceleration, curvature, yaw rate (ranges of ETSI TS 102 894-2, largest valid values)
+_CAM_LIMITS = np.array(
+    [
+        [-900000000, 900000000],
+        [-1800000000, 1800000000],
+        [-100000, 800000],
+        [0, 3600],
+        [0, 16382],
+        [1, 1022],
+        [1, 61],
+        [-160, 160],
+        [-1022, 1022],
+        [-32766, 32766],
+    ],
+    dtype=np.float64,
+)
+
+
+class _Memo:
+    """Immutable message parts by their integer content (shared between messages: never mutate them). A
+    part's content has a small domain (a heading in 0.1°, a speed in 0.01 m/s, a station id of the run), so
+    most messages of a run reuse them; the memo is emptied when it exceeds `limit` entries."""
+
+    __slots__ = ("build", "cache", "limit")
+
+    def __init__(self, build: Callable[[int], Any], limit: int = 200_000) -> None:
+        self.build = build
+        self.cache: dict[int, Any] = {}
+        self.limit = limit
+
+    def __call__(self, value: int) -> Any:
+        part = self.cache.get(value)
+        if part is None:
+            if len(self.cache) >= self.limit:
+                self.cache.clear()
+            part = self.cache[value] = self.build(value)
+        return part
+
+
+@dataclass(frozen=True, slots=True)
+class KinematicsArrays:
+    """`Kinematics` of M stations as arrays (M,) of the same units."""
+
+    latitude: np.ndarray
+    longitude: np.ndarray
+    altitude: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    acceleration: np.ndarray
+    yaw_rate: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+
+    @classmethod
+    def of(cls, ks: Sequence[Kinematics]) -> KinematicsArrays:
+        return cls(*(np.array([getattr(k, f) for k in ks], dtype=np.float64) for f in _KINEMATICS_FIELDS))
+
+
+_KINEMATICS_FIELDS = (
+    "latitude",
+    "longitude",
+    "altitude",
+    "heading",
+    "speed",
+    "acceleration",
+    "yaw_rate",
+    "length",
+    "width",
+)
+
+
+class _CamParts:
+    """The CAM's message types and memoised parts, built once per process."""
+
+    def __init__(self) -> None:
+        c = f"{_CAM}/msg/"
+        t = {name: _t(c + name) for name in _CAM_TYPE_NAMES}
+        self.t = t
+        self.cam = _t(CAM_TYPE)
+        one = t["SemiAxisLength"](value=1)  # simulated: exact (1 cm)
+        self.confidence_ellipse = t["PosConfidenceEllipse"](
+            semi_major_confidence=one,
+            semi_minor_confidence=one,
+            semi_major_orientation=t["HeadingValue"](value=0),
+        )
+        self.altitude = _Memo(
+            lambda v: t["Altitude"](
+                altitude_value=t["AltitudeValue"](value=v),
+                altitude_confidence=t["AltitudeConfidence"](value=0),  # alt-000-01
+            )
+        )
+        self.header = _Memo(
+            lambda v: t["ItsPduHeader"](
+                protocol_version=PROTOCOL_VERSION_CAM,
+                message_id=MESSAGE_ID_CAM,
+                station_id=t["StationID"](value=v),
+            )
+        )
+        self.station_type = _Memo(lambda v: t["StationType"](value=v))
+        self.generation_delta_time = _Memo(lambda v: t["GenerationDeltaTime"](value=v), limit=1024)
+        heading_confidence = t["HeadingConfidence"](value=1)
+        self.heading = _Memo(
+            lambda v: t["Heading"](
+                heading_value=t["HeadingValue"](value=v), heading_confidence=heading_confidence
+            )
+        )
+        speed_confidence = t["SpeedConfidence"](value=1)
+        self.speed = _Memo(
+            lambda v: t["Speed"](speed_value=t["SpeedValue"](value=v), speed_confidence=speed_confidence)
+        )
+        self.drive_direction = (t["DriveDirection"](value=0), t["DriveDirection"](value=1))
+        length_confidence = t["VehicleLengthConfidenceIndication"](value=0)
+        self.vehicle_length = _Memo(
+            lambda v: t["VehicleLength"](
+                vehicle_length_value=t["VehicleLengthValue"](value=v),
+                vehicle_length_confidence_indication=length_confidence,
+            )
+        )
+        self.vehicle_width = _Memo(lambda v: t["VehicleWidth"](value=v))
+        acceleration_confidence = t["AccelerationConfidence"](value=1)
+        self.acceleration = _Memo(
+            lambda v: t["LongitudinalAcceleration"](
+                longitudinal_acceleration_value=t["LongitudinalAccelerationValue"](value=v),
+                longitudinal_acceleration_confidence=acceleration_confidence,
+            )
+        )
+        curvature_confidence = t["CurvatureConfidence"](value=0)
+        self.curvature = _Memo(
+            lambda v: t["Curvature"](
+                curvature_value=t["CurvatureValue"](value=v), curvature_confidence=curvature_confidence
+            )
+        )
+        self.curvature_mode = t["CurvatureCalculationMode"](value=0)
+        yaw_rate_confidence = t["YawRateConfidence"](value=0)
+        self.yaw_rate = _Memo(
+            lambda v: t["YawRate"](
+                yaw_rate_value=t["YawRateValue"](value=v), yaw_rate_confidence=yaw_rate_confidence
+            )
+        )
+        self.bvc_zero = zero(f"{c}BasicVehicleContainerHighFrequency")
+        self.rsu_zero = zero(f"{c}RSUContainerHighFrequency")
+        self.lf_zero = zero(f"{c}LowFrequencyContainer")
+        self.special_zero = zero(f"{c}SpecialVehicleContainer")
+        hf = t["HighFrequencyContainer"]
+        self.rsu_hf = hf(
+            choice=hf.CHOICE_RSU_CONTAINER_HIGH_FREQUENCY,
+            basic_vehicle_container_high_frequency=self.bvc_zero,
+            rsu_container_high_frequency=self.rsu_zero,
+        )
+
+
+_CAM_TYPE_NAMES = (
+    "AccelerationConfidence",
+    "Altitude",
+    "AltitudeConfidence",
+    "AltitudeValue",
+    "BasicContainer",
+    "BasicVehicleContainerHighFrequency",
+    "CamParameters",
+    "CoopAwareness",
+    "Curvature",
+    "CurvatureCalculationMode",
+    "CurvatureConfidence",
+    "CurvatureValue",
+    "DriveDirection",
+    "GenerationDeltaTime",
+    "Heading",
+    "HeadingConfidence",
+    "HeadingValue",
+    "HighFrequencyContainer",
+    "ItsPduHeader",
+    "Latitude",
+    "Longitude",
+    "LongitudinalAcceleration",
+    "LongitudinalAccelerationValue",
+    "PosConfidenceEllipse",
+    "ReferencePosition",
+    "SemiAxisLength",
+    "Speed",
+    "SpeedConfidence",
+    "SpeedValue",
+    "StationID",
+    "StationType",
+    "VehicleLength",
+    "VehicleLengthConfidenceIndication",
+    "VehicleLengthValue",
+    "VehicleWidth",
+    "YawRate",
+    "YawRateConfidence",
+    "YawRateValue",
+)
+
+
+@cache
+def _cam_parts() -> _CamParts:
+    return _CamParts()
+
+
 def cam(
     station_id: int,
     station_type: int,
@@ -169,95 +386,111 @@ def cam(
 ) -> Any:
     """An `etsi_its_cam_msgs/msg/CAM`: basic container, the vehicle high-frequency container (an RSU: the RSU
     container) and, when `low_frequency`, the low-frequency container (role default, no lights, empty path)."""
-    hf_type = _t(f"{_CAM}/msg/HighFrequencyContainer")
-    if rsu:
-        hf = hf_type(
-            choice=hf_type.CHOICE_RSU_CONTAINER_HIGH_FREQUENCY,
-            basic_vehicle_container_high_frequency=zero(f"{_CAM}/msg/BasicVehicleContainerHighFrequency"),
-            rsu_container_high_frequency=zero(f"{_CAM}/msg/RSUContainerHighFrequency"),
-        )
-    else:
-        curvature = k.yaw_rate / k.speed if abs(k.speed) > 0.1 else 0.0  # 1/m
-        bvc = zero(f"{_CAM}/msg/BasicVehicleContainerHighFrequency")
-        hf = hf_type(
-            choice=hf_type.CHOICE_BASIC_VEHICLE_CONTAINER_HIGH_FREQUENCY,
-            basic_vehicle_container_high_frequency=_t(f"{_CAM}/msg/BasicVehicleContainerHighFrequency")(
-                heading=_heading(_CAM, k.heading),
-                speed=_speed(_CAM, k.speed),
-                drive_direction=_t(f"{_CAM}/msg/DriveDirection")(value=0 if k.speed >= 0 else 1),
-                vehicle_length=_t(f"{_CAM}/msg/VehicleLength")(
-                    vehicle_length_value=_t(f"{_CAM}/msg/VehicleLengthValue")(
-                        value=_clip(k.length * 10, 1, 1022)
-                    ),
-                    vehicle_length_confidence_indication=_t(f"{_CAM}/msg/VehicleLengthConfidenceIndication")(
-                        value=0
-                    ),
-                ),
-                vehicle_width=_t(f"{_CAM}/msg/VehicleWidth")(value=_clip(k.width * 10, 1, 61)),
-                longitudinal_acceleration=_t(f"{_CAM}/msg/LongitudinalAcceleration")(
-                    longitudinal_acceleration_value=_t(f"{_CAM}/msg/LongitudinalAccelerationValue")(
-                        value=_clip(k.acceleration * 10, -160, 160)
-                    ),
-                    longitudinal_acceleration_confidence=_t(f"{_CAM}/msg/AccelerationConfidence")(value=1),
-                ),
-                curvature=_t(f"{_CAM}/msg/Curvature")(
-                    curvature_value=_t(f"{_CAM}/msg/CurvatureValue")(
-                        value=_clip(curvature * 10000, -1022, 1022)
-                    ),
-                    curvature_confidence=_t(f"{_CAM}/msg/CurvatureConfidence")(value=0),
-                ),
-                curvature_calculation_mode=_t(f"{_CAM}/msg/CurvatureCalculationMode")(value=0),
-                yaw_rate=_t(f"{_CAM}/msg/YawRate")(
-                    yaw_rate_value=_t(f"{_CAM}/msg/YawRateValue")(
-                        value=_clip(
-                            -math.degrees(k.yaw_rate) * 100, -32766, 32766
-                        )  # ETSI: clockwise positive
-                    ),
-                    yaw_rate_confidence=_t(f"{_CAM}/msg/YawRateConfidence")(value=0),
-                ),
-                acceleration_control=bvc.acceleration_control,
-                acceleration_control_is_present=False,
-                lane_position=bvc.lane_position,
-                lane_position_is_present=False,
-                steering_wheel_angle=bvc.steering_wheel_angle,
-                steering_wheel_angle_is_present=False,
-                lateral_acceleration=bvc.lateral_acceleration,
-                lateral_acceleration_is_present=False,
-                vertical_acceleration=bvc.vertical_acceleration,
-                vertical_acceleration_is_present=False,
-                performance_class=bvc.performance_class,
-                performance_class_is_present=False,
-                cen_dsrc_tolling_zone=bvc.cen_dsrc_tolling_zone,
-                cen_dsrc_tolling_zone_is_present=False,
-            ),
-            rsu_container_high_frequency=zero(f"{_CAM}/msg/RSUContainerHighFrequency"),
-        )
-    lf = zero(f"{_CAM}/msg/LowFrequencyContainer")
-    if low_frequency and not rsu:
-        lf = _low_frequency_container()
-    return _t(CAM_TYPE)(
-        header=_header(_CAM, MESSAGE_ID_CAM, PROTOCOL_VERSION_CAM, station_id),
-        cam=_t(f"{_CAM}/msg/CoopAwareness")(
-            generation_delta_time=_t(f"{_CAM}/msg/GenerationDeltaTime")(value=generation_delta_time(time_s)),
-            cam_parameters=_t(f"{_CAM}/msg/CamParameters")(
-                basic_container=_t(f"{_CAM}/msg/BasicContainer")(
-                    station_type=_t(f"{_CAM}/msg/StationType")(value=station_type),
-                    reference_position=_reference_position(_CAM, k),
-                ),
-                high_frequency_container=hf,
-                low_frequency_container=lf,
-                low_frequency_container_is_present=bool(low_frequency and not rsu),
-                special_vehicle_container=zero(f"{_CAM}/msg/SpecialVehicleContainer"),
-                special_vehicle_container_is_present=False,
-            ),
-        ),
+    return cams([station_id], [station_type], time_s, KinematicsArrays.of([k]), [low_frequency], [rsu])[0]
+
+
+def cams(
+    station_ids: Sequence[int],
+    station_types: Sequence[int],
+    time_s: float,
+    k: KinematicsArrays,
+    low_frequency: Sequence[bool],
+    rsu: Sequence[bool],
+) -> list[Any]:
+    """The CAMs of M stations at `time_s` (`cam` of each): every field's value computed for all of them in one
+    numpy pass; parts with the same content are shared between the messages (never mutate them)."""
+    p = _cam_parts()
+    t = p.t
+    moving = np.abs(k.speed) > 0.1
+    curvature = np.where(moving, k.yaw_rate / np.where(moving, k.speed, 1.0), 0.0)  # 1/m
+    values = np.stack(
+        [
+            k.latitude * 1e7,
+            k.longitude * 1e7,
+            k.altitude * 100,
+            k.heading * 10,
+            np.abs(k.speed) * 100,
+            k.length * 10,
+            k.width * 10,
+            k.acceleration * 10,
+            curvature * 10000,
+            -np.degrees(k.yaw_rate) * 100,  # ETSI: clockwise positive
+        ]
     )
+    lat, lon, alt, heading, speed, length, width, acceleration, curvature_, yaw_rate = clip_rows(
+        values, _CAM_LIMITS
+    )
+    heading = [v % 3600 for v in heading]
+    backwards = (k.speed < 0).tolist()
+    gdt = p.generation_delta_time(generation_delta_time(time_s))
+    bvc_type, hf_type = t["BasicVehicleContainerHighFrequency"], t["HighFrequencyContainer"]
+    ref_type, lat_type, lon_type = t["ReferencePosition"], t["Latitude"], t["Longitude"]
+    basic_type, params_type, coop_type = t["BasicContainer"], t["CamParameters"], t["CoopAwareness"]
+    z = p.bvc_zero
+    out = []
+    for m, station_id in enumerate(station_ids):
+        if rsu[m]:
+            hf = p.rsu_hf
+        else:
+            hf = hf_type(
+                choice=hf_type.CHOICE_BASIC_VEHICLE_CONTAINER_HIGH_FREQUENCY,
+                basic_vehicle_container_high_frequency=bvc_type(
+                    heading=p.heading(heading[m]),
+                    speed=p.speed(speed[m]),
+                    drive_direction=p.drive_direction[backwards[m]],
+                    vehicle_length=p.vehicle_length(length[m]),
+                    vehicle_width=p.vehicle_width(width[m]),
+                    longitudinal_acceleration=p.acceleration(acceleration[m]),
+                    curvature=p.curvature(curvature_[m]),
+                    curvature_calculation_mode=p.curvature_mode,
+                    yaw_rate=p.yaw_rate(yaw_rate[m]),
+                    acceleration_control=z.acceleration_control,
+                    acceleration_control_is_present=False,
+                    lane_position=z.lane_position,
+                    lane_position_is_present=False,
+                    steering_wheel_angle=z.steering_wheel_angle,
+                    steering_wheel_angle_is_present=False,
+                    lateral_acceleration=z.lateral_acceleration,
+                    lateral_acceleration_is_present=False,
+                    vertical_acceleration=z.vertical_acceleration,
+                    vertical_acceleration_is_present=False,
+                    performance_class=z.performance_class,
+                    performance_class_is_present=False,
+                    cen_dsrc_tolling_zone=z.cen_dsrc_tolling_zone,
+                    cen_dsrc_tolling_zone_is_present=False,
+                ),
+                rsu_container_high_frequency=p.rsu_zero,
+            )
+        with_lf = bool(low_frequency[m] and not rsu[m])
+        out.append(
+            p.cam(
+                header=p.header(int(station_id)),
+                cam=coop_type(
+                    generation_delta_time=gdt,
+                    cam_parameters=params_type(
+                        basic_container=basic_type(
+                            station_type=p.station_type(int(station_types[m])),
+                            reference_position=ref_type(
+                                latitude=lat_type(value=lat[m]),
+                                longitude=lon_type(value=lon[m]),
+                                position_confidence_ellipse=p.confidence_ellipse,
+                                altitude=p.altitude(alt[m]),
+                            ),
+                        ),
+                        high_frequency_container=hf,
+                        low_frequency_container=_low_frequency_container() if with_lf else p.lf_zero,
+                        low_frequency_container_is_present=with_lf,
+                        special_vehicle_container=p.special_zero,
+                        special_vehicle_container_is_present=False,
+                    ),
+                ),
+            )
+        )
+    return out
 
 
 @cache
 def _low_frequency_container() -> Any:
-    import numpy as np
-
     return _t(f"{_CAM}/msg/LowFrequencyContainer")(
         choice=0,
         basic_vehicle_container_low_frequency=_t(f"{_CAM}/msg/BasicVehicleContainerLowFrequency")(

@@ -157,6 +157,7 @@ class V2XService:
         self.step_seconds = spec.simulation.step_seconds
         self.channel = Channel(channel_parameters(spec, parameters), seed)
         self.geo = self._geo_reference(road_file)
+        self.geo.to_wgs84(0.0, 0.0)  # set up PROJ's transformation now, not in the first step
         self.road = road
         self.road_file = road_file
         self._scene: Any = None
@@ -260,6 +261,15 @@ class V2XService:
             for kind, typename in (("cam", etsi.CAM_TYPE), ("cpm", etsi.CPM_TYPE), ("denm", etsi.DENM_TYPE)):
                 station.publishers[kind] = self.bus.advertise(f"{station.topic_prefix}/{kind}", typename)
         self.metrics_acc.stations([s.name for s in self.stations])
+        self._rsu_mask = np.array([s.rsu for s in self.stations], dtype=bool)
+        self._cam_mask = np.array([s.cam for s in self.stations], dtype=bool)
+        self._cpm_mask = np.array([s.cpm for s in self.stations], dtype=bool)
+        self._station_ids = np.array([s.station_id for s in self.stations], dtype=np.int64)
+        poses = np.array([s.rsu_pose for s in self.stations if s.rsu_pose is not None]).reshape(-1, 4)
+        self._rsu_xyz, self._rsu_yaw = poses[:, 0:3], poses[:, 3]
+        self._names = [s.name for s in self.stations]
+        #: per station, the other stations' names (its message's receivers when every station is present)
+        self._others = [self._names[:i] + self._names[i + 1 :] for i in range(len(self.stations))]
         self._cam = CamTriggers(len(self.stations))
         self._hazards = HazardTriggers(len(self.stations), hard_braking=self.config.hard_braking)
 
@@ -278,30 +288,47 @@ class V2XService:
         assert self._cam is not None and self._hazards is not None
         t = frame.time
         self._ego_name = frame.ego
-        entities = {e.name: e for e in frame.entities}
-        present = np.array([s.rsu or s.name in entities for s in self.stations], dtype=bool)
+        own = self._entity_index(frame)  # per station its entity's index in the frame, −1: RSU or absent
+        rsu = self._rsu_mask
+        present = rsu | (own >= 0)
         n = len(self.stations)
-        pos = np.zeros((n, 3))
-        heading = np.zeros(n)
-        speed = np.zeros(n)
-        accel = np.zeros(n)
-        for i, station in enumerate(self.stations):
-            if station.rsu_pose is not None:
-                pos[i] = station.rsu_pose[:3]
-                heading[i] = station.rsu_pose[3]
-            elif station.name in entities:
-                e = entities[station.name]
-                pos[i] = _antenna(e)
-                heading[i], speed[i], accel[i] = e.heading, e.speed, e.acceleration
+        ents = frame.entities
+        # per entity: antenna x, y, z, heading, speed, acceleration, yaw rate, length, width
+        table = np.array(
+            [
+                (
+                    e.x,
+                    e.y,
+                    e.z + e.bbox.center_z + e.bbox.height / 2 + ANTENNA_ABOVE_ROOF,
+                    e.heading,
+                    e.speed,
+                    e.acceleration,
+                    e.yaw_rate,
+                    e.bbox.length,
+                    e.bbox.width,
+                )
+                for e in ents
+            ],
+            dtype=np.float64,
+        ).reshape(-1, 9)
+        rows = np.zeros((n, 9))
+        has = own >= 0
+        rows[has] = table[own[has]]
+        rows[rsu, 0:3] = self._rsu_xyz
+        rows[rsu, 3] = self._rsu_yaw
+        pos = rows[:, 0:3]
+        heading, speed, accel = rows[:, 3], rows[:, 4], rows[:, 5]
         sight = self._sight(frame)
-        lat, lon, alt = self.geo.to_wgs84(pos[:, 0], pos[:, 1], pos[:, 2])
-        north = self.geo.north_angles(pos[:, 0], pos[:, 1])
+        lat, lon, alt, north = self.geo.wgs84_and_north(pos[:, 0], pos[:, 1], pos[:, 2])
+        etsi_heading = np.degrees(north - heading) % 360.0
+        station_type = np.full(n, etsi.STATION_TYPE_RSU, dtype=np.int64)
+        station_type[~rsu] = [
+            etsi.STATION_TYPES.get(ents[j].category, 0) if j >= 0 else 0 for j in own[~rsu].tolist()
+        ]
         outgoing: list[_Outgoing] = []
         cam_due = self._cam.step(t, pos[:, :2], heading, speed)
-        etsi_heading = np.degrees(north - heading) % 360.0
 
         def kinematics(i: int) -> etsi.Kinematics:
-            entity = None if self.stations[i].rsu else entities.get(self.stations[i].name)
             return etsi.Kinematics(
                 latitude=float(lat[i]),
                 longitude=float(lon[i]),
@@ -309,24 +336,33 @@ class V2XService:
                 heading=float(etsi_heading[i]),
                 speed=float(speed[i]),
                 acceleration=float(accel[i]),
-                yaw_rate=entity.yaw_rate if entity is not None else 0.0,
-                length=entity.bbox.length if entity is not None else 0.0,
-                width=entity.bbox.width if entity is not None else 0.0,
+                yaw_rate=float(rows[i, 6]),
+                length=float(rows[i, 7]),
+                width=float(rows[i, 8]),
             )
 
-        for i in map(int, np.flatnonzero(cam_due.send & present)):
-            station = self.stations[i]
-            entity = None if station.rsu else entities.get(station.name)
-            if station.cam:
-                msg = etsi.cam(
-                    station.station_id,
-                    self._station_type(station, entity),
-                    t,
-                    kinematics(i),
-                    low_frequency=bool(cam_due.low_frequency[i]),
-                    rsu=station.rsu,
-                )
-                outgoing.append(_Outgoing("cam", i, msg))
+        senders = np.flatnonzero(cam_due.send & present & self._cam_mask)
+        if len(senders):
+            k = etsi.KinematicsArrays(
+                lat[senders],
+                lon[senders],
+                alt[senders],
+                etsi_heading[senders],
+                speed[senders],
+                accel[senders],
+                rows[senders, 6],
+                rows[senders, 7],
+                rows[senders, 8],
+            )
+            msgs = etsi.cams(
+                self._station_ids[senders].tolist(),
+                station_type[senders].tolist(),
+                t,
+                k,
+                cam_due.low_frequency[senders].tolist(),
+                rsu[senders].tolist(),
+            )
+            outgoing.extend(_Outgoing("cam", i, msg) for i, msg in zip(senders.tolist(), msgs, strict=True))
         for hazard in self._hazards.step(t, np.where(present, speed, 0.0), np.where(present, accel, 0.0)):
             station = self.stations[hazard.station]
             if station.rsu or not station.denm or not present[hazard.station]:
@@ -338,7 +374,7 @@ class V2XService:
                 self.metrics_acc.hazard(key)
             msg = etsi.denm(
                 station.station_id,
-                self._station_type(station, entities.get(station.name)),
+                int(station_type[hazard.station]),
                 station.sequence,
                 t,
                 hazard.detection_time,
@@ -347,15 +383,32 @@ class V2XService:
                 hazard.sub_cause,
             )
             outgoing.append(_Outgoing("denm", hazard.station, msg, hazard=key))
-        for i, station in enumerate(self.stations):
-            if station.cpm and present[i] and t - station.last_cpm >= T_GEN_CPM_MIN - _SLACK:
-                cpm = self._cpm(station, i, frame, pos[i], kinematics(i), sight)
+        due = [
+            i
+            for i in np.flatnonzero(self._cpm_mask & present).tolist()
+            if t - self.stations[i].last_cpm >= T_GEN_CPM_MIN - _SLACK
+        ]
+        if due:
+            reach = np.array([self.stations[i].perception_range for i in due])
+            seen = self._visible_many(sight, pos[due], own[due], reach)
+            for i, visible in zip(due, seen, strict=True):
+                cpm = self._cpm(
+                    self.stations[i],
+                    i,
+                    frame,
+                    table,
+                    pos[i],
+                    float(north[i]),
+                    kinematics(i),
+                    int(station_type[i]),
+                    visible,
+                )
                 if cpm is not None:
                     outgoing.append(cpm)
         clock = time.process_time()
         self.seconds["generate"] += clock - started
         if outgoing:
-            self._transmit(frame, outgoing, pos, present, sight)
+            self._transmit(frame, outgoing, pos, present, sight, own)
         self.seconds["channel"] += time.process_time() - clock
         clock = time.process_time()
         self._deliver(t + self.step_seconds - _SLACK)
@@ -364,11 +417,6 @@ class V2XService:
         self.metrics_acc.sample_age(t)
         self._ego_view(frame, sight)
         self.seconds["metrics"] += time.process_time() - clock
-
-    def _station_type(self, station: Station, entity: EntityState | None) -> int:
-        if station.rsu:
-            return etsi.STATION_TYPE_RSU
-        return etsi.STATION_TYPES.get(entity.category, 0) if entity is not None else 0
 
     def _sight(self, frame: WorldFrame) -> Any:
         from simcore.sensors.scene import Boxes
@@ -380,20 +428,35 @@ class V2XService:
         """Indexes of the frame's entities (other than `own`) whose box centre lies within `reach` of `origin`
         (horizontally) and whose centre or a ground-plane box corner (at mid height, 10 % inside) is in line of
         sight."""
+        seen = self._visible_many(sight, np.asarray(origin)[None, :], np.array([own]), np.array([reach]))
+        return [int(j) for j in seen[0]]
+
+    def _visible_many(
+        self, sight: Any, origins: np.ndarray, owns: np.ndarray, reaches: np.ndarray
+    ) -> list[np.ndarray]:
+        """`_visible` for M observers at once (one line-of-sight pass): per observer the ascending indexes."""
         boxes = sight.boxes
-        n = len(boxes.names)
+        n, m = len(boxes.names), len(origins)
+        empty = np.zeros(0, dtype=np.int64)
         if n == 0:
-            return []
-        near = np.hypot(boxes.centers[:, 0] - origin[0], boxes.centers[:, 1] - origin[1]) <= reach
-        if 0 <= own < n:
-            near[own] = False
-        candidates = np.flatnonzero(near)
-        if len(candidates) == 0:
-            return []
-        points = self._sample_points(sight)[candidates].reshape(-1, 3)
-        targets = np.repeat(candidates, 5)
-        clear = sight.clear(np.broadcast_to(origin, points.shape), points, np.full(len(points), own), targets)
-        return [int(j) for j in candidates[clear.reshape(-1, 5).any(axis=1)]]
+            return [empty] * m
+        near = (
+            np.hypot(boxes.centers[None, :, 0] - origins[:, 0:1], boxes.centers[None, :, 1] - origins[:, 1:2])
+            <= reaches[:, None]
+        )
+        mine = owns >= 0
+        near[np.flatnonzero(mine), owns[mine]] = False
+        rows, cols = np.nonzero(near)
+        if len(rows) == 0:
+            return [empty] * m
+        points = self._sample_points(sight)[cols].reshape(-1, 3)
+        clear = sight.clear(
+            np.repeat(origins[rows], 5, axis=0), points, np.repeat(owns[rows], 5), np.repeat(cols, 5)
+        )
+        visible = clear.reshape(-1, 5).any(axis=1)
+        rows, cols = rows[visible], cols[visible]
+        bounds = np.searchsorted(rows, np.arange(m + 1))
+        return [cols[bounds[i] : bounds[i + 1]] for i in range(m)]
 
     @staticmethod
     def _sample_points(sight: Any) -> np.ndarray:
@@ -413,32 +476,25 @@ class V2XService:
         station: Station,
         index: int,
         frame: WorldFrame,
+        table: np.ndarray,
         origin: np.ndarray,
+        north: float,
         ref: etsi.Kinematics,
-        sight: Any,
+        station_type: int,
+        seen: np.ndarray,
     ) -> _Outgoing | None:
         t = frame.time
-        own = (
-            -1
-            if station.rsu
-            else next((j for j, e in enumerate(frame.entities) if e.name == station.name), -1)
-        )
-        seen = self._visible(sight, origin, own, station.perception_range)
-        for j in seen:
-            station.first_seen.setdefault(frame.entities[j].name, t)
-        objs = [frame.entities[j] for j in seen]
+        objs = [frame.entities[j] for j in seen.tolist()]
         ids = [e.name for e in objs]
-        xy = np.array([[e.x, e.y] for e in objs]).reshape(-1, 2)
-        chosen = station.cpm_triggers.select(
-            t, ids, xy, np.array([e.speed for e in objs]), np.array([e.heading for e in objs])
-        )
+        for name in ids:
+            station.first_seen.setdefault(name, t)
+        chosen = station.cpm_triggers.select(t, ids, table[seen, 0:2], table[seen, 4], table[seen, 3])
         if not chosen.any() and t - station.last_cpm < T_GEN_CPM_MAX - _SLACK:
             return None
         station.last_cpm = t
-        north = float(self.geo.north_angles(origin[:1], origin[1:2])[0])
         perceived = []
         names = []
-        for j, e, take in zip(seen, objs, chosen, strict=True):
+        for j, e, take in zip(seen.tolist(), objs, chosen.tolist(), strict=True):
             if not take:
                 continue
             cx, cy, cz = e.box_center()
@@ -460,24 +516,23 @@ class V2XService:
                 )
             )
             names.append(e.name)
-        msg = etsi.cpm(
-            station.station_id,
-            self._station_type(station, None if station.rsu else frame.entities[own] if own >= 0 else None),
-            t,
-            ref,
-            perceived,
-        )
+        msg = etsi.cpm(station.station_id, station_type, t, ref, perceived)
         return _Outgoing("cpm", index, msg, objects=tuple(names))
 
     def _transmit(
-        self, frame: WorldFrame, outgoing: list[_Outgoing], pos: np.ndarray, present: np.ndarray, sight: Any
+        self,
+        frame: WorldFrame,
+        outgoing: list[_Outgoing],
+        pos: np.ndarray,
+        present: np.ndarray,
+        sight: Any,
+        own: np.ndarray,
     ) -> None:
         senders = np.array([o.sender for o in outgoing])
         n = len(self.stations)
         same = senders[:, None] == np.arange(n)[None, :]
         same |= ~present[None, :]  # an absent station receives nothing
         if sight is not None and self.config.channel.line_of_sight:
-            own = self._entity_index(frame)
 
             def los(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
                 a, b = senders[rows], cols
@@ -491,24 +546,33 @@ class V2XService:
         delivered = delivery.delivered & link
         self.metrics_acc.links(delivery.distance[link], delivered[link])
         transmission = TYPESTORE.types["carlos_v2x_msgs/msg/Transmission"]
-        names = [s.name for s in self.stations]
-        records = []
+        # every sender is present, so each row links the same number of receivers: the other present stations
+        width = int(present.sum()) - 1
+        outcomes = delivery.lost[link].astype(np.uint8).reshape(-1, width)
+        distances = delivery.distance[link].astype(np.float32).reshape(-1, width)
+        power = delivery.rx_power_dbm[link].astype(np.float32).reshape(-1, width)
+        delays = delivery.delay[link].astype(np.float32).reshape(-1, width)
+        everyone = width == n - 1
         sent = stamp(frame.time)
+        records = []
         for m, out in enumerate(outgoing):
             self.metrics_acc.message_sent(out.kind)
             sender = self.stations[out.sender]
-            cols = np.flatnonzero(link[m])
+            if everyone:
+                receivers = self._others[out.sender]
+            else:
+                receivers = [self._names[r] for r in np.flatnonzero(link[m]).tolist()]
             records.append(
                 transmission(
                     sent=sent,
                     sender=sender.name,
                     station_id=sender.station_id,
                     message_type=out.kind,
-                    receivers=[names[r] for r in cols],
-                    outcomes=delivery.lost[m, cols].astype(np.uint8),
-                    distances=delivery.distance[m, cols].astype(np.float32),
-                    rx_power_dbm=delivery.rx_power_dbm[m, cols].astype(np.float32),
-                    delays=delivery.delay[m, cols].astype(np.float32),
+                    receivers=receivers,
+                    outcomes=outcomes[m],
+                    distances=distances[m],
+                    rx_power_dbm=power[m],
+                    delays=delays[m],
                 )
             )
         rows, cols = np.nonzero(delivered)
