@@ -41,6 +41,7 @@ from simcore.v2x.channel import Channel, ChannelParameters
 from simcore.v2x.geo import GeoReference, geo_reference_of
 from simcore.v2x.metrics import V2XMetrics
 from simcore.v2x.triggers import T_GEN_CPM_MAX, T_GEN_CPM_MIN, CamTriggers, CpmObjectTriggers, HazardTriggers
+from simcore.world.infrastructure import resolve_number, unit_pose
 from simcore.world.opendrive import OpenDrive
 from simcore.world.state import EntityState, WorldFrame
 
@@ -48,27 +49,6 @@ TRANSMISSIONS_TOPIC = "/carlos/v2x/transmissions"
 RSU_STATION_BASE = 1000
 ANTENNA_ABOVE_ROOF = 0.1
 _SLACK = 1e-6
-
-
-def resolve_number(value: NumberOrParameter, parameters: Mapping[str, Any], field: str) -> float:
-    """A spec number, or the value of the scenario parameter `$name` it names."""
-    if isinstance(value, str):
-        name = value[1:]
-        if name not in parameters:
-            raise BadInput(
-                f"{value} names no parameter of the scenario (declare it or set it in spec.parameters or the sweep)",
-                field=field,
-            )
-        raw = parameters[name]
-        try:
-            number = float(raw)
-        except (TypeError, ValueError):
-            raise BadInput(f"{value} = {raw!r} is not a number", field=field) from None
-    else:
-        number = float(value)
-    if not math.isfinite(number):
-        raise BadInput(f"{value} is not a finite number", field=field)
-    return number
 
 
 def channel_parameters(spec: SimulationRunSpec, parameters: Mapping[str, Any]) -> ChannelParameters:
@@ -193,31 +173,7 @@ class V2XService:
     def _rsu_stations(self) -> list[Station]:
         out: list[Station] = []
         for index, rsu in enumerate(self.spec.infrastructure):
-            where = f"spec.infrastructure[{index}]"
-
-            def number(name: str, value: NumberOrParameter, where: str = where) -> float:
-                return resolve_number(value, self.parameters, f"{where}.{name}")
-
-            if rsu.position is not None:
-                x = number("position.x", rsu.position.x)
-                y = number("position.y", rsu.position.y)
-                z = number("position.z", rsu.position.z)
-            else:
-                assert rsu.road is not None
-                if self.road is None:
-                    raise BadInput(
-                        "a road position needs the scenario's OpenDRIVE road", field=f"{where}.road"
-                    )
-                if rsu.road.road_id not in self.road.roads:
-                    raise BadInput(f"the road has no road {rsu.road.road_id!r}", field=f"{where}.road.roadId")
-                s = number("road.s", rsu.road.s)
-                t = number("road.t", rsu.road.t)
-                if not 0 <= s <= self.road.road_length(rsu.road.road_id):
-                    raise BadInput(f"s = {s} lies outside road {rsu.road.road_id!r}", field=f"{where}.road.s")
-                pose = self.road.road_to_world(rsu.road.road_id, s, t)
-                x, y, z = pose.x, pose.y, pose.z
-            height = number("height", rsu.height)
-            yaw = math.radians(number("yaw", rsu.yaw))
+            pose = unit_pose(rsu, index, self.road, self.parameters)
             if rsu.v2x is None:
                 continue
             out.append(
@@ -228,7 +184,7 @@ class V2XService:
                     denm=False,
                     cpm=rsu.v2x.cpm,
                     perception_range=rsu.v2x.perception_range,
-                    rsu_pose=(x, y, z + height, yaw),
+                    rsu_pose=(pose.x, pose.y, pose.z + pose.height, pose.yaw),
                     topic_prefix=f"/carlos/infrastructure/{ros_name(rsu.name)}/v2x",
                 )
             )
