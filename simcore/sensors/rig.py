@@ -159,7 +159,9 @@ class SensorRig:
             else:
                 transforms.insert(
                     0,
-                    ros.transform(base_link(s.entity), frame_id, model.mount_pos, model.mount_rot, frame.time),
+                    ros.transform(
+                        base_link(s.entity), frame_id, model.mount_pos, model.mount_rot, frame.time
+                    ),
                 )
         if transforms:
             self.bus.advertise(ros.TF_STATIC_TOPIC, ros.TF).publish(ros.tf_message(transforms), frame.time)
