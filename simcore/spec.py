@@ -871,6 +871,19 @@ class RsuV2X(Model):
         le=1000,
         description="Range of its perception (ground truth in line of sight from its mast), m. Default 80.",
     )
+    perception_sensor: str | None = Field(
+        None,
+        pattern=_SENSOR_NAME,
+        max_length=63,
+        description=(
+            "One of the unit's lidars (with ground truth): its CPMs then describe the objects with at least "
+            "`perceptionMinPoints` points in that lidar's latest sweep (within `perceptionRange`). Default: "
+            "ground truth in line of sight from the mast."
+        ),
+    )
+    perception_min_points: int = Field(
+        3, ge=1, le=100_000, description="Lidar points an object needs to be perceived. Default 3."
+    )
 
 
 class Infrastructure(Model):
@@ -910,6 +923,14 @@ class Infrastructure(Model):
             if sensor.name in names:
                 raise ValueError(f"infrastructure {self.name!r}: sensor name {sensor.name!r} is used twice")
             names.add(sensor.name)
+        wanted = self.v2x.perception_sensor if self.v2x is not None else None
+        if wanted is not None and not any(
+            isinstance(s, LidarSensor) and s.name == wanted and s.ground_truth for s in self.sensors
+        ):
+            raise ValueError(
+                f"infrastructure {self.name!r}: v2x.perceptionSensor {wanted!r} names no lidar with ground "
+                "truth among its sensors"
+            )
         return self
 
 

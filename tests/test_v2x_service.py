@@ -219,3 +219,51 @@ def test_carlos_run_records_v2x_topics_and_metrics(tmp_path: Path):
     assert schemas["/carlos/Ego/v2x/cpm"] == "carlos_v2x_msgs/msg/CollectivePerceptionMessage"
     assert schemas["/carlos/infrastructure/rsu/v2x/cam"] == "etsi_its_cam_msgs/msg/CAM"
     assert schemas["/carlos/v2x/transmissions"] == "carlos_v2x_msgs/msg/TransmissionArray"
+
+
+def test_rsu_cpms_describe_what_its_lidar_saw():
+    """With `v2x.perceptionSensor`, a unit's CPMs carry the objects with enough points in its lidar's latest
+    sweep: a lidar looking north (90° field of view) sees the walker, not the truck west of the mast that
+    the line of sight would give; before its first sweep the unit perceives nothing."""
+    from simcore.sensors.rig import SensorRig
+    from simcore.world.infrastructure import unit_pose
+
+    spec = _spec(
+        stations=[{"entity": "Ego", "cam": False}], channel={"shadowingSigmaDb": 0, "lineOfSight": False}
+    )
+    lidar = {
+        "type": "lidar",
+        "name": "top",
+        "channels": 16,
+        "horizontalResolution": 360,
+        "horizontalFov": 90,
+        "verticalFov": [-20, 5],
+        "mount": {"z": 1.0, "yaw": 90},
+    }
+    spec["infrastructure"] = [
+        {
+            "name": "mast",
+            "position": {"x": 100.0, "y": 0.0},
+            "height": 1.0,
+            "sensors": [lidar],
+            "v2x": {"cam": False, "perceptionSensor": "top", "perceptionMinPoints": 3},
+        }
+    ]
+    service, got = _service(spec)
+    rsu = service.spec.infrastructure[0]
+    rig = SensorRig([], None, service.bus, seed=0, units=[(unit_pose(rsu, 0, None, {}), rsu.sensors)])
+    entities = (
+        _entity("Ego", 30.0),
+        _entity("Truck", 85.0, box=TRUCK),
+        _entity("Walker", 100.0, 20.0, box=PERSON),
+    )
+    service.step(_frame(0, *entities))  # the lidar has not swept yet
+    rig.step(_frame(1, *entities))
+    service.step(_frame(1, *entities))
+    cpms = [m.obj() for m in got if m.topic == "/carlos/Ego/v2x/cpm"]
+    assert [len(c.perceived_objects) for c in cpms] == [0, 1]
+    assert [o.classification for o in cpms[1].perceived_objects] == [1]  # the walker
+    with pytest.raises(ValueError, match="perceptionSensor 'side' names no lidar"):
+        SimulationRunSpec.model_validate(
+            {**spec, "infrastructure": [{**spec["infrastructure"][0], "v2x": {"perceptionSensor": "side"}}]}
+        )

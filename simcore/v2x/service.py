@@ -24,7 +24,7 @@ import heapq
 import itertools
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,7 +34,7 @@ import numpy as np
 from simcore.errors import BadInput
 from simcore.evaluation.criteria import ranges_of
 from simcore.spec import NumberOrParameter, SimulationRunSpec
-from simcore.transport.bus import Bus, Publisher
+from simcore.transport.bus import Bus, Message, Publisher
 from simcore.transport.messages import TYPESTORE, ros_name, stamp
 from simcore.v2x import etsi
 from simcore.v2x.channel import Channel, ChannelParameters
@@ -98,6 +98,8 @@ class Station:
     last_cpm: float = -math.inf
     first_seen: dict[str, float] = field(default_factory=dict)
     sequence: int = 0
+    #: with a perception lidar: the entities with enough points in its latest sweep (None: line of sight)
+    lidar_objects: set[str] | None = None
 
     @property
     def rsu(self) -> bool:
@@ -111,6 +113,20 @@ class _Outgoing:
     msg: Any
     objects: tuple[str, ...] = ()  # CPM: the entities it describes
     hazard: tuple[str, int, float] | None = None  # DENM: (station, cause, detection time)
+
+
+def _lidar_perception(station: Station, min_points: int) -> Callable[[Message], None]:
+    """A subscriber of a lidar's `…/objects/info`: the station perceives the objects with enough points."""
+
+    def perceive(message: Message) -> None:
+        objects = set()
+        for status in message.obj().status:
+            values = {kv.key: kv.value for kv in status.values}
+            if int(values.get("points", "0")) >= min_points:
+                objects.add(status.name)
+        station.lidar_objects = objects
+
+    return perceive
 
 
 def _antenna(entity: EntityState) -> tuple[float, float, float]:
@@ -176,18 +192,23 @@ class V2XService:
             pose = unit_pose(rsu, index, self.road, self.parameters)
             if rsu.v2x is None:
                 continue
-            out.append(
-                Station(
-                    name=rsu.name,
-                    station_id=RSU_STATION_BASE + 1 + len(out),
-                    cam=rsu.v2x.cam,
-                    denm=False,
-                    cpm=rsu.v2x.cpm,
-                    perception_range=rsu.v2x.perception_range,
-                    rsu_pose=(pose.x, pose.y, pose.z + pose.height, pose.yaw),
-                    topic_prefix=f"/carlos/infrastructure/{ros_name(rsu.name)}/v2x",
-                )
+            station = Station(
+                name=rsu.name,
+                station_id=RSU_STATION_BASE + 1 + len(out),
+                cam=rsu.v2x.cam,
+                denm=False,
+                cpm=rsu.v2x.cpm,
+                perception_range=rsu.v2x.perception_range,
+                rsu_pose=(pose.x, pose.y, pose.z + pose.height, pose.yaw),
+                topic_prefix=f"/carlos/infrastructure/{ros_name(rsu.name)}/v2x",
             )
+            if rsu.v2x.perception_sensor is not None:
+                station.lidar_objects = set()
+                topic = (
+                    f"/carlos/infrastructure/{ros_name(rsu.name)}/{rsu.v2x.perception_sensor}/objects/info"
+                )
+                self.bus.subscribe(topic, _lidar_perception(station, rsu.v2x.perception_min_points))
+            out.append(station)
         return out
 
     def _setup(self, frame: WorldFrame) -> None:
@@ -345,9 +366,13 @@ class V2XService:
             if t - self.stations[i].last_cpm >= T_GEN_CPM_MIN - _SLACK
         ]
         if due:
-            reach = np.array([self.stations[i].perception_range for i in due])
-            seen = self._visible_many(sight, pos[due], own[due], reach)
-            for i, visible in zip(due, seen, strict=True):
+            by_sight = [i for i in due if self.stations[i].lidar_objects is None]
+            reach = np.array([self.stations[i].perception_range for i in by_sight])
+            seen = dict(
+                zip(by_sight, self._visible_many(sight, pos[by_sight], own[by_sight], reach), strict=True)
+            )
+            for i in due:
+                visible = seen[i] if i in seen else self._lidar_seen(self.stations[i], sight, pos[i])
                 cpm = self._cpm(
                     self.stations[i],
                     i,
@@ -413,6 +438,18 @@ class V2XService:
         rows, cols = rows[visible], cols[visible]
         bounds = np.searchsorted(rows, np.arange(m + 1))
         return [cols[bounds[i] : bounds[i + 1]] for i in range(m)]
+
+    @staticmethod
+    def _lidar_seen(station: Station, sight: Any, origin: np.ndarray) -> np.ndarray:
+        """Indexes of the frame's entities the station's perception lidar saw in its latest sweep, within its
+        perception range (box centre, horizontally)."""
+        boxes = sight.boxes
+        names = station.lidar_objects or set()
+        index = np.array([j for j, name in enumerate(boxes.names) if name in names], dtype=np.int64)
+        if not len(index):
+            return index
+        gap = np.hypot(boxes.centers[index, 0] - origin[0], boxes.centers[index, 1] - origin[1])
+        return index[gap <= station.perception_range]
 
     @staticmethod
     def _sample_points(sight: Any) -> np.ndarray:
