@@ -219,6 +219,8 @@ def test_carlos_run_records_v2x_topics_and_metrics(tmp_path: Path):
     assert schemas["/carlos/Ego/v2x/cpm"] == "carlos_v2x_msgs/msg/CollectivePerceptionMessage"
     assert schemas["/carlos/infrastructure/rsu/v2x/cam"] == "etsi_its_cam_msgs/msg/CAM"
     assert schemas["/carlos/v2x/transmissions"] == "carlos_v2x_msgs/msg/TransmissionArray"
+    assert schemas["/carlos/infrastructure/rsu/lidar/points"] == "sensor_msgs/msg/PointCloud2"
+    assert schemas["/carlos/infrastructure/rsu/lidar/objects"] == "vision_msgs/msg/Detection3DArray"
 
 
 def test_rsu_cpms_describe_what_its_lidar_saw():
