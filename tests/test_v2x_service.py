@@ -59,6 +59,14 @@ def _service(spec: dict[str, Any], seed: int = 0) -> tuple[V2XService, list[Mess
     return service, got
 
 
+def _perceived(cpm: Any) -> list[Any]:
+    """The perceived objects of an etsi_its_cpm_ts_msgs CPM."""
+    for container in cpm.payload.cpm_containers.value.array:
+        if container.container_id.value == 5:
+            return list(container.container_data_perceived_object_container.perceived_objects.array)
+    return []
+
+
 def _frame(step: int, *entities: EntityState, ego: str | None = "Ego") -> WorldFrame:
     return WorldFrame(step=step, time=round(step * 0.1, 6), entities=tuple(entities), ego=ego)
 
@@ -88,13 +96,22 @@ def test_rsu_perceives_ground_truth_from_its_fixed_pose_in_line_of_sight():
     service.step(frame)
     cpms = [m for m in got if m.topic == "/carlos/Ego/v2x/cpm"]
     assert len(cpms) == 1
-    objects = cpms[0].obj().perceived_objects
+    objects = _perceived(cpms[0].obj())
     truck_x = 85.0 + 5.0
-    by_x = sorted((o.x_distance, o.y_distance, o.classification) for o in objects)
-    assert by_x == sorted([(round((truck_x - 100.0) * 100), 0, 8), (0, 2000, 1)])
-    assert cpms[0].obj().station_id == 1001 and cpms[0].obj().station_type == 15
-    dims = {o.classification: (o.x_dimension, o.y_dimension, o.z_dimension) for o in objects}
-    assert dims[8] == (120, 26, 38)
+    by_x = sorted((o.position.x_coordinate.value.value, o.position.y_coordinate.value.value) for o in objects)
+    # the origin's map frame is east/north: x east, y north from the mast
+    assert by_x == sorted([(round((truck_x - 100.0) * 100), 0), (0, 2000)])
+    assert cpms[0].obj().header.station_id.value == 1001
+    assert cpms[0].obj().payload.cpm_containers.value.array[0].container_id.value == 2  # originating RSU
+    dims = {
+        o.classification.array[0].object_class.choice: (
+            o.object_dimension_x.value.value,
+            o.object_dimension_y.value.value,
+            o.object_dimension_z.value.value,
+        )
+        for o in objects
+    }
+    assert dims[0] == (120, 26, 38)  # the truck: a vehicle class
 
 
 def test_receivers_get_other_stations_messages_and_every_link_is_recorded():
@@ -216,7 +233,7 @@ def test_carlos_run_records_v2x_topics_and_metrics(tmp_path: Path):
             schemas[channel.topic] = schema.name
     assert schemas["/carlos/Ego/v2x/cam"] == "etsi_its_cam_msgs/msg/CAM"
     assert schemas["/carlos/Ego/v2x/denm"] == "etsi_its_denm_msgs/msg/DENM"
-    assert schemas["/carlos/Ego/v2x/cpm"] == "carlos_v2x_msgs/msg/CollectivePerceptionMessage"
+    assert schemas["/carlos/Ego/v2x/cpm"] == "etsi_its_cpm_ts_msgs/msg/CollectivePerceptionMessage"
     assert schemas["/carlos/infrastructure/rsu/v2x/cam"] == "etsi_its_cam_msgs/msg/CAM"
     assert schemas["/carlos/v2x/transmissions"] == "carlos_v2x_msgs/msg/TransmissionArray"
     assert schemas["/carlos/infrastructure/rsu/lidar/points"] == "sensor_msgs/msg/PointCloud2"
@@ -263,8 +280,9 @@ def test_rsu_cpms_describe_what_its_lidar_saw():
     rig.step(_frame(1, *entities))
     service.step(_frame(1, *entities))
     cpms = [m.obj() for m in got if m.topic == "/carlos/Ego/v2x/cpm"]
-    assert [len(c.perceived_objects) for c in cpms] == [0, 1]
-    assert [o.classification for o in cpms[1].perceived_objects] == [1]  # the walker
+    assert [len(_perceived(c)) for c in cpms] == [0, 1]
+    walker = _perceived(cpms[1])[0].classification.array[0].object_class
+    assert walker.choice == 1 and walker.vru_sub_class.choice == 0  # a pedestrian
     with pytest.raises(ValueError, match="perceptionSensor 'side' names no lidar"):
         SimulationRunSpec.model_validate(
             {**spec, "infrastructure": [{**spec["infrastructure"][0], "v2x": {"perceptionSensor": "side"}}]}

@@ -383,6 +383,7 @@ class V2XService:
                     kinematics(i),
                     int(station_type[i]),
                     visible,
+                    sight,
                 )
                 if cpm is not None:
                     outgoing.append(cpm)
@@ -475,6 +476,7 @@ class V2XService:
         ref: etsi.Kinematics,
         station_type: int,
         seen: np.ndarray,
+        sight: Any,
     ) -> _Outgoing | None:
         t = frame.time
         objs = [frame.entities[j] for j in seen.tolist()]
@@ -485,31 +487,39 @@ class V2XService:
         if not chosen.any() and t - station.last_cpm < T_GEN_CPM_MAX - _SLACK:
             return None
         station.last_cpm = t
-        perceived = []
-        names = []
-        for j, e, take in zip(seen.tolist(), objs, chosen.tolist(), strict=True):
-            if not take:
-                continue
-            cx, cy, cz = e.box_center()
-            vx, vy = e.velocity
-            perceived.append(
-                etsi.PerceivedObject(
-                    object_id=1 + j,  # the entity's position in the frame, as in the sensors' labels
-                    dx=cx - float(origin[0]),
-                    dy=cy - float(origin[1]),
-                    dz=cz - float(origin[2]),
-                    vx=vx,
-                    vy=vy,
-                    heading=etsi.etsi_heading(north, e.heading),
-                    length=e.bbox.length,
-                    width=e.bbox.width,
-                    height=e.bbox.height,
-                    age=t - station.first_seen[e.name],
-                    classification=etsi.STATION_TYPES.get(e.category, 0),
-                )
-            )
-            names.append(e.name)
-        msg = etsi.cpm(station.station_id, station_type, t, ref, perceived)
+        take = seen[chosen]
+        names = [frame.entities[j].name for j in take.tolist()]
+        boxes = sight.boxes
+        # the CPM's frame: x east, y north (the map's axes turned by the north angle at the station)
+        ex, ey = math.sin(north), -math.cos(north)
+        nx, ny = math.cos(north), math.sin(north)
+        d = boxes.centers[take] - origin
+        v = boxes.velocities[take]
+        first = np.array([station.first_seen[name] for name in names], dtype=np.float64)
+        values = np.stack(
+            [
+                d[:, 0] * ex + d[:, 1] * ey,
+                d[:, 0] * nx + d[:, 1] * ny,
+                d[:, 2],
+                v[:, 0] * ex + v[:, 1] * ey,
+                v[:, 0] * nx + v[:, 1] * ny,
+                np.degrees(boxes.yaws[take] - (north - math.pi / 2)),  # counter-clockwise from east
+                boxes.half[take, 0] * 2,
+                boxes.half[take, 1] * 2,
+                boxes.half[take, 2] * 2,
+                t - first,
+            ]
+        ).reshape(10, -1)
+        classes = np.array(
+            [
+                etsi.STATION_TYPES.get(e.category, 0 if e.object_type == "vehicle" else -1)
+                for e in (frame.entities[j] for j in take.tolist())
+            ],
+            dtype=np.int64,
+        )
+        # object ids: the entity's position in the frame + 1, as in the sensors' labels
+        perceived = etsi.PerceivedObjects(take + 1, values, classes)
+        msg = etsi.cpm(station.station_id, station_type, t, ref, perceived, rsu=station.rsu)
         return _Outgoing("cpm", index, msg, objects=tuple(names))
 
     def _transmit(
