@@ -292,10 +292,7 @@ def _subscribe(bus: Bus, pattern: str, callback: Callable[[Message], None], *, w
 
 
 def _record_into(recorder: McapRecorder) -> Callable[[Message], None]:
-    def record(message: Message) -> None:
-        recorder.write(message.topic, message.typename, message.obj(), message.time_s)
-
-    return record
+    return recorder.write_message
 
 
 def drive(

@@ -106,13 +106,16 @@ class Station:
         return self.rsu_pose is not None
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True, eq=False)
 class _Outgoing:
     kind: str
     sender: int
     msg: Any
     objects: tuple[str, ...] = ()  # CPM: the entities it describes
     hazard: tuple[str, int, float] | None = None  # DENM: (station, cause, detection time)
+    cdr: bytes | None = (
+        None  # its CDR bytes, once a receiver's subscriber asked for them (shared by all copies)
+    )
 
 
 def _lidar_perception(station: Station, min_points: int) -> Callable[[Message], None]:
@@ -174,6 +177,10 @@ class V2XService:
         self._ego_name: str | None = None
         self._ego_cpm: dict[str, float] = {}  # object → arrival of the newest CPM about it at the ego
         self._transmissions = bus.advertise(TRANSMISSIONS_TOPIC, "carlos_v2x_msgs/msg/TransmissionArray")
+        #: how a received copy goes out as a `Message` (so that its CDR bytes are made once per message)
+        self._send: Callable[[Message], None] | None = getattr(bus, "publish_message", None) or getattr(
+            bus, "dispatch", None
+        )
 
     # --- set-up -----------------------------------------------------------------------------------------
     def _geo_reference(self, road_file: Path | None) -> GeoReference:
@@ -614,9 +621,16 @@ class V2XService:
                     heapq.heappush(self._pending, item)
         if late:
             due.sort(key=lambda item: (item[0], item[1]))
+        send = self._send
         for arrival, _, r, out, _ in due:
             receiver = self.stations[r]
-            receiver.publishers[out.kind].publish(out.msg, arrival)
+            publisher = receiver.publishers[out.kind]
+            if send is None:
+                publisher.publish(out.msg, arrival)
+            else:  # every copy carries the CDR bytes the first copy's subscribers made
+                message = Message(publisher.topic, publisher.typename, arrival, msg=out.msg, data=out.cdr)
+                send(message)
+                out.cdr = message.data
             if receiver.name == self._ego_name:
                 if out.kind == "cpm":
                     for name in out.objects:
