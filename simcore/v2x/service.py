@@ -378,19 +378,28 @@ class V2XService:
             seen = dict(
                 zip(by_sight, self._visible_many(sight, pos[by_sight], own[by_sight], reach), strict=True)
             )
-            for i in due:
-                visible = seen[i] if i in seen else self._lidar_seen(self.stations[i], sight, pos[i])
+            visible = [
+                seen[i] if i in seen else self._lidar_seen(self.stations[i], sight, pos[i]) for i in due
+            ]
+            # every (station, object) pair of this step in one pass: the CPM's values of each object
+            objects = np.concatenate(visible).astype(np.int64)
+            owner = np.repeat(np.asarray(due), [len(v) for v in visible])
+            values = self._object_values(sight.boxes, objects, pos[owner], north[owner])
+            categories = self._object_classes(frame)
+            start = 0
+            for i, v in zip(due, visible, strict=True):
+                part = slice(start, start + len(v))
+                start += len(v)
                 cpm = self._cpm(
                     self.stations[i],
                     i,
                     frame,
-                    table,
-                    pos[i],
-                    float(north[i]),
                     kinematics(i),
                     int(station_type[i]),
-                    visible,
-                    sight,
+                    objects[part],
+                    table[objects[part]],
+                    values[:, part],
+                    categories[objects[part]],
                 )
                 if cpm is not None:
                     outgoing.append(cpm)
@@ -472,60 +481,69 @@ class V2XService:
             cached = sight.sample_points = boxes.centers[:, None, :] + offsets
         return np.asarray(cached)
 
-    def _cpm(
-        self,
-        station: Station,
-        index: int,
-        frame: WorldFrame,
-        table: np.ndarray,
-        origin: np.ndarray,
-        north: float,
-        ref: etsi.Kinematics,
-        station_type: int,
-        seen: np.ndarray,
-        sight: Any,
-    ) -> _Outgoing | None:
-        t = frame.time
-        objs = [frame.entities[j] for j in seen.tolist()]
-        ids = [e.name for e in objs]
-        for name in ids:
-            station.first_seen.setdefault(name, t)
-        chosen = station.cpm_triggers.select(t, ids, table[seen, 0:2], table[seen, 4], table[seen, 3])
-        if not chosen.any() and t - station.last_cpm < T_GEN_CPM_MAX - _SLACK:
-            return None
-        station.last_cpm = t
-        take = seen[chosen]
-        names = [frame.entities[j].name for j in take.tolist()]
-        boxes = sight.boxes
-        # the CPM's frame: x east, y north (the map's axes turned by the north angle at the station)
-        ex, ey = math.sin(north), -math.cos(north)
-        nx, ny = math.cos(north), math.sin(north)
-        d = boxes.centers[take] - origin
-        v = boxes.velocities[take]
-        first = np.array([station.first_seen[name] for name in names], dtype=np.float64)
-        values = np.stack(
+    @staticmethod
+    def _object_values(boxes: Any, objects: np.ndarray, origins: np.ndarray, north: np.ndarray) -> np.ndarray:
+        """(10, P): per (station, object) pair the object in the CPM's frame (x east, y north: the map's axes
+        turned by the north angle at the station) as `etsi.PerceivedObjects.values`, the age left at 0."""
+        ex, ey = np.sin(north), -np.cos(north)
+        nx, ny = np.cos(north), np.sin(north)
+        d = boxes.centers[objects] - origins
+        v = boxes.velocities[objects]
+        return np.stack(
             [
                 d[:, 0] * ex + d[:, 1] * ey,
                 d[:, 0] * nx + d[:, 1] * ny,
                 d[:, 2],
                 v[:, 0] * ex + v[:, 1] * ey,
                 v[:, 0] * nx + v[:, 1] * ny,
-                np.degrees(boxes.yaws[take] - (north - math.pi / 2)),  # counter-clockwise from east
-                boxes.half[take, 0] * 2,
-                boxes.half[take, 1] * 2,
-                boxes.half[take, 2] * 2,
-                t - first,
+                np.degrees(boxes.yaws[objects] - (north - math.pi / 2)),  # counter-clockwise from east
+                boxes.half[objects, 0] * 2,
+                boxes.half[objects, 1] * 2,
+                boxes.half[objects, 2] * 2,
+                np.zeros(len(objects)),
             ]
         ).reshape(10, -1)
-        classes = np.array(
+
+    @staticmethod
+    def _object_classes(frame: WorldFrame) -> np.ndarray:
+        """Per entity of the frame its class in a CPM: the ETSI station type (−1: not a road user)."""
+        return np.array(
             [
                 etsi.STATION_TYPES.get(e.category, 0 if e.object_type == "vehicle" else -1)
-                for e in (frame.entities[j] for j in take.tolist())
+                for e in frame.entities
             ],
             dtype=np.int64,
         )
+
+    def _cpm(
+        self,
+        station: Station,
+        index: int,
+        frame: WorldFrame,
+        ref: etsi.Kinematics,
+        station_type: int,
+        seen: np.ndarray,
+        rows: np.ndarray,
+        values: np.ndarray,
+        classes: np.ndarray,
+    ) -> _Outgoing | None:
+        """The station's CPM of the objects `seen` (entity indexes; `rows`: their `step` table rows, `values`
+        and `classes` as `_object_values` and `_object_classes`), or None when no object is due and the last
+        CPM is less than T_GenCpmMax old."""
+        t = frame.time
+        ids = [frame.entities[j].name for j in seen.tolist()]
+        first_seen = station.first_seen
+        for name in ids:
+            first_seen.setdefault(name, t)
+        chosen = station.cpm_triggers.select(t, ids, rows[:, 0:2], rows[:, 4], rows[:, 3])
+        if not chosen.any() and t - station.last_cpm < T_GEN_CPM_MAX - _SLACK:
+            return None
+        station.last_cpm = t
+        names = [name for name, take in zip(ids, chosen.tolist(), strict=True) if take]
+        values = values[:, chosen]
+        values[9] = t - np.array([first_seen[name] for name in names], dtype=np.float64)  # age
         # object ids: the entity's position in the frame + 1, as in the sensors' labels
-        perceived = etsi.PerceivedObjects(take + 1, values, classes)
+        perceived = etsi.PerceivedObjects(seen[chosen] + 1, values, classes[chosen])
         msg = etsi.cpm(station.station_id, station_type, t, ref, perceived, rsu=station.rsu)
         return _Outgoing("cpm", index, msg, objects=tuple(names))
 
