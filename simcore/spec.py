@@ -869,7 +869,10 @@ class RsuV2X(Model):
         80.0,
         gt=0,
         le=1000,
-        description="Range of its perception (ground truth in line of sight from its mast), m. Default 80.",
+        description=(
+            "Range of its perception for CPMs (ground truth in line of sight from its mast, or what "
+            "`perceptionSensor` saw), m. Default 80."
+        ),
     )
     perception_sensor: str | None = Field(
         None,

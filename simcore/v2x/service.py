@@ -8,14 +8,20 @@ Topics (recorded): `/carlos/<entity>/v2x/cam|cpm|denm` per receiving entity stat
 `/carlos/infrastructure/<rsu>/v2x/cam|cpm|denm` per receiving RSU, `/carlos/v2x/transmissions` (every link
 of every message of a step and its outcome, `carlos_v2x_msgs/msg/TransmissionArray`). A message sent at
 frame time t and delayed by d is published with time t + d in the step it is sent (latency and jitter are
-well below a step; a longer delay is published in the step it arrives).
+well below a step; a longer delay is published in the step it arrives). The copies of one message go out as
+bus `Message`s sharing one CDR serialisation (made by the first subscriber that asks for bytes).
 
 Stations: `spec.v2x.stations` or every vehicle of the first frame, in frame order (station ids 1, 2, …), then
 the RSUs with a `v2x` station (ids 1001, 1002, …). An entity station absent from a frame neither sends nor
 receives in it. Antennas sit 0.1 m above the entity's box, RSU antennas at the mast height. RSU and vehicle
 CPMs contain the other entities within the station's perception range whose box centre or a box corner (at
-mid height) is in line of sight; a CPM goes out at most every 100 ms, with the objects the TS 103 324
-inclusion rules select, or every second without any.
+mid height) is in line of sight, or for an RSU with `perceptionSensor` the entities with enough points in that
+lidar's latest sweep (its `…/objects/info`, received on the bus); a CPM goes out at most every 100 ms, with the
+objects the TS 103 324 inclusion rules select, or every second without any.
+
+Per step the work is vectorised over the stations: the CAM triggers and fields of all senders (one numpy pass,
+`etsi.cams`), line of sight of all CPM stations' candidate objects in one pass, the CPM values of every
+(station, object) pair in one pass, the channel over all (sender, receiver) pairs.
 """
 
 from __future__ import annotations
