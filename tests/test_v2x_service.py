@@ -287,3 +287,31 @@ def test_rsu_cpms_describe_what_its_lidar_saw():
         SimulationRunSpec.model_validate(
             {**spec, "infrastructure": [{**spec["infrastructure"][0], "v2x": {"perceptionSensor": "side"}}]}
         )
+
+
+def test_copies_of_a_message_share_one_serialisation(tmp_path: Path):
+    """Every received copy of one message carries the CDR bytes the first copy's subscriber made (the
+    recorder writes them as they are): a message delivered to N receivers is serialised once, and the
+    recording decodes to the message."""
+    from simcore.recorder import McapRecorder
+
+    spec = _spec(channel={"shadowingSigmaDb": 0, "lineOfSight": False})
+    service, got = _service(spec)
+    with McapRecorder(tmp_path / "v2x.mcap", metadata={}) as recorder:
+        service.bus.subscribe("/carlos/*/v2x/*", recorder.write_message)
+        service.step(_frame(0, _entity("Ego", 0.0), _entity("A", 20.0), _entity("B", 40.0)))
+    copies: dict[int, set[int]] = {}
+    for message in got:
+        if "/v2x/cam" in message.topic:
+            assert message.data is not None
+            copies.setdefault(id(message.msg), set()).add(id(message.data))
+    assert len(copies) == 3 and all(len(data) == 1 for data in copies.values())  # 3 CAMs, 2 copies each
+    with (tmp_path / "v2x.mcap").open("rb") as f:
+        decoded = [
+            (channel.topic, value)
+            for _, channel, _, value in make_reader(
+                f, decoder_factories=[DecoderFactory()]
+            ).iter_decoded_messages()
+        ]
+    cams = [value for topic, value in decoded if topic.endswith("/v2x/cam")]
+    assert len(cams) == 6 and {c.header.station_id.value for c in cams} == {1, 2, 3}
