@@ -155,3 +155,20 @@ def test_recorded_messages_decode_with_the_embedded_schemas(tmp_path: Path):
         for conn, _, raw in reader.messages():
             embedded = reader.deserialize(raw, conn.msgtype)
             assert messages.serialize(embedded) == messages.serialize(messages.deserialize(raw, conn.msgtype))
+
+
+def test_vectorised_clipping_equals_the_scalar_rule():
+    """`clip_rows` (the CAM and CPM builders' one numpy pass) gives `_clip`'s integers: round half to even,
+    saturation at the row's limits, non-finite values at the largest."""
+    import math
+
+    import numpy as np
+
+    rng = np.random.default_rng(3)
+    values = np.concatenate(
+        [rng.normal(0, 300, 200), [0.5, 1.5, -2.5, 1e12, -1e12, math.nan, math.inf, -math.inf]]
+    )
+    limits = np.array([[-100, 100], [0, 3600]], dtype=np.float64)
+    rows = etsi.clip_rows(np.stack([values, values * 10]), limits)
+    assert rows[0] == [etsi._clip(v, -100, 100) for v in values]
+    assert rows[1] == [etsi._clip(v * 10, 0, 3600) for v in values]

@@ -174,15 +174,9 @@ def _speed(pkg: str, speed: float) -> Any:
 _CAM = "etsi_its_cam_msgs"
 
 
-def clip_ints(values: Any, lo: int, hi: int) -> list[int]:
-    """`_clip` of every value (rounded half to even like `round`, non-finite → `hi`), as Python ints."""
-    v = np.asarray(values, dtype=np.float64)
-    out = np.where(np.isfinite(v), np.clip(np.rint(np.where(np.isfinite(v), v, 0.0)), lo, hi), hi)
-    return [int(x) for x in out.astype(np.int64).tolist()]
-
-
 def clip_rows(values: np.ndarray, limits: np.ndarray) -> list[list[int]]:
-    """`clip_ints` of each row of `values` (F, M) to its row of `limits` (F, 2), in one numpy pass."""
+    """`_clip` of every value of `values` (F, M) to its row's `limits` (F, 2) (rounded half to even like
+    `round`, non-finite → the row's largest value), as Python ints, in one numpy pass."""
     finite = np.isfinite(values)
     lo, hi = limits[:, 0:1], limits[:, 1:2]
     out = np.where(finite, np.clip(np.rint(np.where(finite, values, 0.0)), lo, hi), hi)
