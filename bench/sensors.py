@@ -391,7 +391,9 @@ def raw_cast() -> dict[str, float]:
         t0 = time.perf_counter()
         lidar.scan(rs, boxes, frame.entities[ego], ego)
         scans.append(time.perf_counter() - t0)
+    unit = roadside_scan(frame, rs, boxes)
     return {
+        **unit,
         "rays": float(lidar.ray_count),
         "rawCastSeconds": min(raw),
         "rawRaysPerSecond": lidar.ray_count / min(raw),
@@ -401,6 +403,55 @@ def raw_cast() -> dict[str, float]:
         "scanSeconds": min(scans),
         "scanRaysPerSecond": lidar.ray_count / min(scans),
     }
+
+
+def roadside_scan(frame: Any, rs: Any, boxes: Any) -> dict[str, float]:
+    """The same lidar on a roadside unit 6 m up a mast 15 m to the right of Ego (a stationary carrier with no
+    box): `Lidar.scan` as run, and with every ray handed to open3d (no culling), best of REPEAT × 5."""
+    import math
+
+    from simcore.sensors.lidar import Lidar
+    from simcore.spec import LidarSensor
+    from simcore.world.infrastructure import UnitPose
+
+    ego = frame.entity("Ego")
+    x, y = ego.x + 15.0 * math.sin(ego.heading), ego.y - 15.0 * math.cos(ego.heading)
+    carrier = UnitPose("rsu", 0, x, y, ego.z, 6.0, ego.heading).carrier()
+    config = {**LIDAR, "mount": {"z": 6.0}}
+    config.pop("entity")
+    lidar = Lidar(LidarSensor.model_validate(config), seed=0)
+    casts: list[int] = []
+    original = type(rs).cast_ids
+
+    def counting(self: Any, rays: np.ndarray) -> Any:
+        casts.append(len(rays))
+        return original(self, rays)
+
+    def every_ray(self: Lidar, road: Any, pos: np.ndarray, r32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        rays = self._ray_array(self.ray_count, pos)
+        rays[:, 3], rays[:, 4] = self._world_dirs(r32, None, range(2))
+        rays[:, 5] = self._dirs_t[2]
+        return np.arange(self.ray_count), rays
+
+    out: dict[str, float] = {}
+    for key, level_rays in (("rsuScanSeconds", None), ("rsuScanEveryRaySeconds", every_ray)):
+        saved = Lidar._level_rays
+        type(rs).cast_ids = counting  # type: ignore[method-assign]
+        if level_rays is not None:
+            Lidar._level_rays = level_rays  # type: ignore[method-assign]
+        try:
+            lidar.scan(rs, boxes, carrier, -1)
+            times = []
+            for _ in range(max(REPEAT, 3) * 5):
+                t0 = time.perf_counter()
+                lidar.scan(rs, boxes, carrier, -1)
+                times.append(time.perf_counter() - t0)
+        finally:
+            Lidar._level_rays = saved  # type: ignore[method-assign]
+            type(rs).cast_ids = original  # type: ignore[method-assign]
+        out[key] = min(times)
+        out[key.replace("Seconds", "CastRays")] = float(casts[-1])
+    return out
 
 
 def kernel_compile() -> tuple[float, float, float]:
@@ -486,6 +537,20 @@ def main() -> None:
             None,
         ),
         (
+            f"roadside lidar (6 m mast), {int(raw['rsuScanCastRays'])} rays cast",
+            raw["rsuScanSeconds"] * 1e3,
+            None,
+            raw["rays"] / raw["rsuScanSeconds"],
+            None,
+        ),
+        (
+            "  ... casting every ray (no culling)",
+            raw["rsuScanEveryRaySeconds"] * 1e3,
+            None,
+            raw["rays"] / raw["rsuScanEveryRaySeconds"],
+            None,
+        ),
+        (
             "  ... numpy reference (no kernels)",
             replay["replayNumpyScan"] * 1e3,
             None,
@@ -568,6 +633,9 @@ def main() -> None:
         "simSeconds": round(sim, 2),
         "rawCastRaysPerSecond": round(raw["rawRaysPerSecond"]),
         "scanRaysPerSecond": round(raw["scanRaysPerSecond"]),
+        "roadsideScanMs": round(raw["rsuScanSeconds"] * 1e3, 3),
+        "roadsideScanEveryRayMs": round(raw["rsuScanEveryRaySeconds"] * 1e3, 3),
+        "roadsideCastRaysPerSweep": int(raw["rsuScanCastRays"]),
         "fullStepRaysPerSecond": round(full_rate),
         "fullStepToRawCast": round(full_rate / raw["rawRaysPerSecond"], 3),
         "realTimeFactor": round(sim / wall, 2),

@@ -6,13 +6,14 @@ vehicle also sends CPMs of what it perceives within 50 m. Every message goes thr
 (log-distance path loss, 4 dB shadowing, Rayleigh fading) to all other stations. One step = one frame.
 
 Configurations (each `V2XService.step` on the same frames, messages delivered on an `InProcessBus`):
-- "core": the rules and the channel only (CamTriggers + cam() builders + Channel.transmit), no service;
+- "core": the rules and the channel only (CamTriggers + cams() builder + Channel.transmit), no service;
 - "service": the full service, receivers' messages dropped by the subscriber;
 - "service+los": the same with line-of-sight blocking by the entity boxes (slab tests, no road mesh);
-- "service+cdr": the full service with a subscriber that serialises every message to CDR (what recording adds).
+- "service+cdr": the full service with a subscriber that takes every received copy's CDR bytes, as the recorder
+  does (each message is serialised once, its copies share the bytes).
 
 Times are CPU seconds of this process (`time.process_time`: the machine is shared, wall time would count the
-other processes' turns). "× real time" = simulated seconds / CPU seconds of the whole step; "gen+chan ×" counts only the service's
+other processes' turns), the best of BENCH_REPEAT (3) runs of each configuration. "× real time" = simulated seconds / CPU seconds of the whole step; "gen+chan ×" counts only the service's
 generation and channel phases (message rules and builders, perception for CPMs, path loss, shadowing,
 fading, line of sight, link records), leaving out the delivery of each received copy on its receiver's topic
 and the metrics. The target is ≥ 20× for 100 stations at 10 Hz. Prints a table and, as its last line, one JSON
@@ -36,7 +37,6 @@ sys.path.insert(0, str(ROOT))
 
 from simcore.spec import SimulationRunSpec  # noqa: E402
 from simcore.transport.bus import InProcessBus, Message  # noqa: E402
-from simcore.transport.messages import serialize  # noqa: E402
 from simcore.v2x import etsi  # noqa: E402
 from simcore.v2x.channel import Channel, ChannelParameters  # noqa: E402
 from simcore.v2x.service import V2XService  # noqa: E402
@@ -44,6 +44,7 @@ from simcore.v2x.triggers import CamTriggers  # noqa: E402
 from simcore.world.state import BoundingBox, EntityState, WorldFrame  # noqa: E402
 
 STATIONS = int(os.environ.get("BENCH_STATIONS", "100"))
+REPEAT = int(os.environ.get("BENCH_REPEAT", "3"))
 SECONDS = float(os.environ.get("BENCH_SECONDS", "20"))
 STEP = 0.1
 TARGET = 20.0
@@ -117,8 +118,8 @@ def run_service(frames_: list[WorldFrame], line_of_sight: bool, cdr: bool) -> tu
     size = [0]
 
     def sink(message: Message) -> None:
-        if cdr:
-            size[0] += len(serialize(message.obj()))
+        if cdr:  # as the recorder does: the message's CDR bytes (made once per message, shared by its copies)
+            size[0] += len(message.cdr())
 
     bus.subscribe("*", sink)
     service = V2XService(spec(line_of_sight), bus, road=None, road_file=None, parameters={}, seed=1)
@@ -135,7 +136,6 @@ def run_service(frames_: list[WorldFrame], line_of_sight: bool, cdr: bool) -> tu
 def run_core(frames_: list[WorldFrame]) -> tuple[float, int]:
     triggers = CamTriggers(STATIONS)
     channel = Channel(ChannelParameters(shadowing_sigma_db=4.0, fading_m=1.0), seed=1)
-    kin = etsi.Kinematics(50.78, 6.05, 0.0, 0.0, 0.0)
     sent = 0
     started = time.process_time()
     for frame in frames_:
@@ -144,8 +144,14 @@ def run_core(frames_: list[WorldFrame]) -> tuple[float, int]:
         speed = np.array([e.speed for e in frame.entities])
         due = triggers.step(frame.time, pos[:, :2], heading, speed)
         senders = np.flatnonzero(due.send)
-        for i in senders:
-            etsi.cam(int(i) + 1, 5, frame.time, kin, low_frequency=bool(due.low_frequency[i]))
+        m = len(senders)
+        zero = np.zeros(m)
+        kin = etsi.KinematicsArrays(
+            np.full(m, 50.78), np.full(m, 6.05), zero, zero, speed[senders], zero, zero, zero, zero
+        )
+        etsi.cams(
+            (senders + 1).tolist(), [5] * m, frame.time, kin, due.low_frequency[senders].tolist(), [False] * m
+        )
         if len(senders):
             channel.transmit(
                 frame.step, STEP, pos[senders], pos, senders[:, None] == np.arange(STATIONS)[None, :]
@@ -154,24 +160,37 @@ def run_core(frames_: list[WorldFrame]) -> tuple[float, int]:
     return time.process_time() - started, sent
 
 
+def best_service(frames_: list[WorldFrame], line_of_sight: bool, cdr: bool) -> tuple[float, dict[str, float]]:
+    """The run with the least CPU time of REPEAT (each a new service on the same frames)."""
+    runs = [run_service(frames_, line_of_sight, cdr) for _ in range(REPEAT)]
+    return min(runs, key=lambda run: run[0])
+
+
 def main() -> None:
     frames_ = frames()
     sim = frames_[-1].time
     rows: list[tuple[str, float, dict[str, Any]]] = []
-    wall, cams = run_core(frames_)
+    wall, cams = min((run_core(frames_) for _ in range(REPEAT)), key=lambda run: run[0])
     rows.append(("core", wall, {"v2x.messages.cam": float(cams)}))
     for name, los, cdr in (
         ("service", False, False),
         ("service+los", True, False),
         ("service+cdr", False, True),
     ):
-        wall, metrics = run_service(frames_, los, cdr)
+        wall, metrics = best_service(frames_, los, cdr)
         rows.append((name, wall, metrics))
-    print(f"{STATIONS} stations, {sim:g} s simulated at {1 / STEP:g} Hz")
+    print(f"{STATIONS} stations, {sim:g} s simulated at {1 / STEP:g} Hz, best of {REPEAT} runs")
     print(
-        f"{'configuration':<14} {'CPU s':>8} {'× real time':>12} {'CAM/s':>8} {'CPM/s':>7} {'DENM/s':>7} {'links/s':>9}"
+        f"{'configuration':<14} {'CPU s':>8} {'× real time':>12} {'gen+chan ×':>11} {'CAM/s':>8} {'CPM/s':>7}"
+        f" {'DENM/s':>7} {'links/s':>9}"
     )
-    figures: dict[str, Any] = {"stations": STATIONS, "simSeconds": sim, "stepHz": 1 / STEP, "target": TARGET}
+    figures: dict[str, Any] = {
+        "stations": STATIONS,
+        "simSeconds": sim,
+        "stepHz": 1 / STEP,
+        "target": TARGET,
+        "repeat": REPEAT,
+    }
     for name, wall, m in rows:
         factor = sim / wall
         cam, cpm, denm = (m.get(f"v2x.messages.{k}", 0.0) / sim for k in ("cam", "cpm", "denm"))

@@ -249,11 +249,18 @@ def assemble(
                 metadata=_metadata(run, point, scenario, scenario_file),
             )
             _subscribe(bus, "*", _record_into(recorder), wants=recorder.wants)
-        if spec.sensors or spec.system_under_test is not None or spec.evaluation.detection is not None:
+        perceiving = spec.sensors or any(rsu.sensors for rsu in spec.infrastructure)
+        if perceiving or spec.system_under_test is not None or spec.evaluation.detection is not None:
             from simcore.sensors.loop import PerceptionLoop
 
             parts.perception = PerceptionLoop(
-                spec, bus, road=road, road_file=scenario.road_file, seed=point.seed, base_dir=base_dir
+                spec,
+                bus,
+                road=road,
+                road_file=scenario.road_file,
+                seed=point.seed,
+                base_dir=base_dir,
+                parameters=scenario.parameters,
             )
         if spec.v2x is not None:
             from simcore.v2x.service import V2XService
@@ -285,10 +292,7 @@ def _subscribe(bus: Bus, pattern: str, callback: Callable[[Message], None], *, w
 
 
 def _record_into(recorder: McapRecorder) -> Callable[[Message], None]:
-    def record(message: Message) -> None:
-        recorder.write(message.topic, message.typename, message.obj(), message.time_s)
-
-    return record
+    return recorder.write_message
 
 
 def drive(

@@ -53,6 +53,7 @@ import numpy as np
 
 from simcore.spec import Recording
 from simcore.store import fsync_dir
+from simcore.transport.bus import Message
 from simcore.transport.messages import frame_messages, msgdef, serialize
 from simcore.world.state import WorldFrame
 
@@ -551,6 +552,20 @@ class McapRecorder:
         if chunk.size >= self.chunk_size:
             self._flush_chunk()
         return True
+
+    def write_message(self, message: Message) -> None:
+        """`write` of a bus message: its CDR bytes when it carries them; else its object, serialised here
+        (kept on the message, so that a message object delivered on several topics is serialised once), but
+        for point clouds and images, whose arrays are written without a copy."""
+        if message.data is not None:
+            payload: Any = message.data
+        elif message.typename in _BLOB_TYPES:
+            payload = message.obj()
+        else:
+            if not self.wants(message.topic):
+                return
+            payload = message.cdr()
+        self.write(message.topic, message.typename, payload, message.time_s)
 
     def write_frame(self, frame: WorldFrame) -> int:
         """Record one step's messages (`frame_messages`); returns how many were recorded."""

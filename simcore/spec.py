@@ -869,21 +869,47 @@ class RsuV2X(Model):
         80.0,
         gt=0,
         le=1000,
-        description="Range of its perception (ground truth in line of sight from its mast), m. Default 80.",
+        description=(
+            "Range of its perception for CPMs (ground truth in line of sight from its mast, or what "
+            "`perceptionSensor` saw), m. Default 80."
+        ),
+    )
+    perception_sensor: str | None = Field(
+        None,
+        pattern=_SENSOR_NAME,
+        max_length=63,
+        description=(
+            "One of the unit's lidars (with ground truth): its CPMs then describe the objects with at least "
+            "`perceptionMinPoints` points in that lidar's latest sweep (within `perceptionRange`). Default: "
+            "ground truth in line of sight from the mast."
+        ),
+    )
+    perception_min_points: int = Field(
+        3, ge=1, le=100_000, description="Lidar points an object needs to be perceived. Default 3."
     )
 
 
 class Infrastructure(Model):
-    """A roadside unit: a fixed pose and an optional V2X station."""
+    """A roadside unit: a fixed pose, optional sensors and an optional V2X station."""
 
     name: DnsLabel = Field(description="Name (topics `/carlos/infrastructure/<name>/…`).")
     position: WorldPosition | None = Field(None, description="Where it stands (map frame); or `road`.")
     road: RoadPose | None = Field(None, description="Where it stands on the road; or `position`.")
     height: NumberOrParameter = Field(
-        6.0, description="Height of the mast (antenna, sensors) above ground, m. Default 6."
+        6.0, description="Height of the mast (the V2X antenna) above ground, m. Default 6."
     )
     yaw: NumberOrParameter = Field(
         0.0, description="Orientation, degrees counter-clockwise from east. Default 0."
+    )
+    sensors: list[Sensor] = Field(
+        default_factory=list,
+        description=(
+            "Sensors on the unit (lidar, camera; fields as in `spec.sensors` without `entity`), `mount` "
+            "relative to the unit's foot and yaw (e.g. `mount: {z: 6}` at the top of a 6 m mast): "
+            "topics `/carlos/infrastructure/<name>/<sensor>/…`, frame `<name>/<sensor>` (a static "
+            "transform from `map`). Default: none."
+        ),
+        max_length=16,
     )
     v2x: RsuV2X | None = Field(None, description="Its V2X station. Default: none.")
 
@@ -891,6 +917,23 @@ class Infrastructure(Model):
     def _one_pose(self) -> Infrastructure:
         if (self.position is None) == (self.road is None):
             raise ValueError(f"infrastructure {self.name!r}: give exactly one of position and road")
+        names: set[str] = set()
+        for sensor in self.sensors:
+            if sensor.entity is not None:
+                raise ValueError(
+                    f"infrastructure {self.name!r}: sensor {sensor.name!r} stands on the unit; leave out entity"
+                )
+            if sensor.name in names:
+                raise ValueError(f"infrastructure {self.name!r}: sensor name {sensor.name!r} is used twice")
+            names.add(sensor.name)
+        wanted = self.v2x.perception_sensor if self.v2x is not None else None
+        if wanted is not None and not any(
+            isinstance(s, LidarSensor) and s.name == wanted and s.ground_truth for s in self.sensors
+        ):
+            raise ValueError(
+                f"infrastructure {self.name!r}: v2x.perceptionSensor {wanted!r} names no lidar with ground "
+                "truth among its sensors"
+            )
         return self
 
 
@@ -1075,7 +1118,7 @@ class SimulationRunSpec(Model):
     )
     infrastructure: list[Infrastructure] = Field(
         default_factory=list,
-        description="Roadside units (fixed poses, optional V2X station). Default: none.",
+        description="Roadside units (fixed poses, optional sensors and V2X station). Default: none.",
         max_length=100,
     )
     evaluation: Evaluation = Field(default_factory=Evaluation, description="Verdict criteria.")

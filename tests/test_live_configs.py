@@ -20,7 +20,13 @@ def test_foxglove_layout_is_generated_and_current() -> None:
     assert (LIVE / "foxglove-layout.json").read_text() == module.render(), "run examples/live/make_layout.py"
     layout = json.loads((LIVE / "foxglove-layout.json").read_text())
     text = json.dumps(layout)
-    for topic in ("/carlos/objects/markers", "/carlos/Ego/odometry", "/carlos/status", "/carlos/Ego/v2x/cpm"):
+    for topic in (
+        "/carlos/objects/markers",
+        "/carlos/Ego/odometry",
+        "/carlos/status",
+        "/carlos/Ego/v2x/cpm",
+        "/carlos/infrastructure/rsu/lidar/points",
+    ):
         assert topic in text
 
 

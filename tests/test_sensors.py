@@ -1106,3 +1106,116 @@ def test_column_culling_is_exact_on_corpus_roads(name: str, monkeypatch: pytest.
             assert np.array_equal(culled.visible_rays, every.visible_rays)
             seen += len(culled.points)
     assert seen > 20_000
+
+
+# --- roadside units' sensors ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("mount", ["level", "tilted"])
+def test_culling_is_exact_for_a_roadside_lidar(monkeypatch: pytest.MonkeyPatch, mount: str) -> None:
+    """A lidar on a roadside unit (a stationary stand-in carrier with no box, 6 m up a mast beside the
+    curved highway, level or pitched down 15°) culls rays and boxes exactly: the scan is the one casting every
+    ray and intersecting every box with every ray gives; the level sweep still casts far fewer rays."""
+    from simcore.world.infrastructure import UnitPose
+
+    road = OpenDrive.from_file(HIGHWAY)
+    scene = RoadScene(road)
+    side = road.road_to_world("1", 1200.0, -18.0)
+    unit = UnitPose("rsu", 0, side.x, side.y, side.z, 6.0, side.heading + 0.3).carrier()
+    config: dict[str, object] = {
+        "channels": 32,
+        "horizontal_resolution": 720,
+        "vertical_fov": [-30, 10],
+        "range_max": 100.0,
+        "mount": {"z": 6.0, "pitch": 15.0 if mount == "tilted" else 0.0},
+    }
+    cars = []
+    for k, (lane, ds) in enumerate(((-1, -30.0), (-2, 5.0), (-3, 25.0), (-4, -10.0), (-1, 60.0))):
+        p = road.lane_to_world("1", lane, 1200.0 + ds)
+        cars.append(dataclasses.replace(car(f"c{k}", p.x, p.y, heading=p.heading), z=p.z))
+    boxes = Boxes.of(frame(*cars))
+    cast_sizes = count_casts(monkeypatch)
+    culled = lidar(**config).scan(scene, boxes, unit, -1)
+    with monkeypatch.context() as m:
+        m.setattr(Lidar, "_reachable", lambda self, *args: None)
+        m.setattr(Lidar, "_level_rays", every_level_ray)
+        m.setattr(Lidar, "_channels_of", lambda self, *args: None)
+        m.setattr(kernels, "boxes_returns", every_box_ray)
+        every = lidar(**config).scan(scene, boxes, unit, -1)
+    assert cast_sizes[-1] == culled.rays
+    assert len(culled.points) == len(every.points) > 1000
+    for name in culled.points.dtype.names or ():
+        assert np.allclose(culled.points[name], every.points[name], rtol=0, atol=1e-6), name
+    assert np.array_equal(culled.visible_rays, every.visible_rays)
+    assert np.array_equal(culled.unoccluded_rays, every.unoccluded_rays)
+    assert np.count_nonzero(culled.object_points) == len(cars)  # it sees every car, none is its own
+    if mount == "level":
+        assert cast_sizes[-2] < culled.rays * 0.5, cast_sizes[-2:]
+
+
+def test_rig_runs_a_roadside_units_sensors_from_its_pose() -> None:
+    """Sensors of `spec.infrastructure[]`: topics under /carlos/infrastructure/<unit>/, frames
+    `<unit>/<sensor>` with a static transform from `map` at the unit's pose and mount, ground truth in that
+    frame, and the same cloud as a lidar with that pose on a standing vehicle."""
+    from simcore.world.infrastructure import unit_pose
+
+    spec = SimulationRunSpec.model_validate(
+        {
+            "scenarios": [{"name": "s", "openscenario": "x.xosc"}],
+            "infrastructure": [
+                {
+                    "name": "rsu",
+                    "position": {"x": 60.0, "y": 8.0},
+                    "yaw": 90.0,
+                    "sensors": [
+                        {"type": "lidar", "name": "top", "channels": 8, "mount": {"z": 6.0, "pitch": 10}},
+                        {"type": "camera", "name": "cam", "width": 16, "height": 8, "mount": {"z": 5.0}},
+                    ],
+                }
+            ],
+        }
+    )
+    rsu = spec.infrastructure[0]
+    pose = unit_pose(rsu, 0, None, {})
+    road = OpenDrive.from_string(STRAIGHT)
+    bus = InProcessBus()
+    seen: list[Message] = []
+    bus.subscribe("*", seen.append)
+    rig = SensorRig([], road, bus, seed=0, units=[(pose, rsu.sensors)])
+    cars = (car("Ego", 50, -1.75), car("B", 70, -1.75))
+    for step in range(3):
+        rig.step(WorldFrame(step, step * 0.1, cars, ego="Ego"))
+    topics = [m.topic for m in seen]
+    assert topics.count("/carlos/infrastructure/rsu/top/points") == 3
+    assert topics.count("/carlos/infrastructure/rsu/top/objects") == 3
+    assert topics.count("/carlos/infrastructure/rsu/cam/image") == 3
+    assert topics.count("/carlos/infrastructure/rsu/top/label_info") == 1
+    tf = next(m.msg for m in seen if m.topic == "/tf_static")
+    by_child = {t.child_frame_id: t for t in tf.transforms}
+    assert by_child["rsu/top"].header.frame_id == "map"
+    assert by_child["rsu/cam_optical"].header.frame_id == "rsu/cam"
+    top = by_child["rsu/top"].transform.translation
+    assert (top.x, top.y, top.z) == pytest.approx((60.0, 8.0, 6.0))
+    points = next(m.msg for m in seen if m.topic == "/carlos/infrastructure/rsu/top/points")
+    assert points.header.frame_id == "rsu/top"
+    cloud = ros.read_pointcloud2(points)
+    assert {1, 2} <= set(cloud["object_id"].tolist())  # both cars, from the mast
+    objects = next(m.msg for m in seen if m.topic == "/carlos/infrastructure/rsu/top/objects")
+    assert len(objects.detections) == 2
+    # ground truth in the sensor frame: the box centre seen from the mast's pose
+    rot, pos = mount_pose(pose.carrier(), rig.sensors[0].model.mount_rot, rig.sensors[0].model.mount_pos)  # type: ignore[union-attr]
+    want = (Boxes.of(frame(*cars)).centers[1] - pos) @ rot
+    got = next(d for d in objects.detections if d.id == "B").bbox.center.position
+    assert (got.x, got.y, got.z) == pytest.approx(tuple(want))
+    for m in seen:  # every message serialises
+        assert deserialize(serialize(m.msg), m.typename) is not None
+
+
+def test_spec_roadside_sensors_stand_on_the_unit() -> None:
+    unit = {"name": "rsu", "position": {"x": 0, "y": 0}}
+    spec = _spec(infrastructure=[{**unit, "sensors": [{"type": "lidar", "name": "top"}]}])
+    assert isinstance(spec.infrastructure[0].sensors[0], LidarSensor)
+    with pytest.raises(ValidationError, match="stands on the unit; leave out entity"):
+        _spec(infrastructure=[{**unit, "sensors": [{"type": "lidar", "name": "top", "entity": "Ego"}]}])
+    with pytest.raises(ValidationError, match="sensor name 'top' is used twice"):
+        _spec(infrastructure=[{**unit, "sensors": [{"type": "lidar", "name": "top"}] * 2}])

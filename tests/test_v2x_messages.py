@@ -58,6 +58,54 @@ def test_cam_fields_in_etsi_units():
     assert rsu.cam.cam_parameters.high_frequency_container.choice == 1
 
 
+def test_cpm_fields_in_ts_103_324_units():
+    """The CPM of an RSU and of a vehicle: header (protocol 2, message id 14), management container
+    (reference time in ms, reference position in 0.1 µdeg), originating station container (vehicle: its
+    heading in 0.1° from north), perceived objects (east/north offsets in cm, velocity in cm/s, yaw in 0.1°
+    from east, dimensions in dm rounded up, age in ms up to 1.5 s, class, quality)."""
+    walker = etsi.PerceivedObject(3, 12.5, -4.0, 0.8, 1.2, -0.5, 450.0, 0.6, 0.6, 1.8, 2.5, 1)
+    truck = etsi.PerceivedObject(9, -2000.0, 0.0, 1.9, 0.0, 0.0, 0.0, 12.0, 2.55, 3.8, 0.25, 8)
+    rock = etsi.PerceivedObject(11, 5.0, 5.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, -1)
+    msg = etsi.cpm(1001, 15, 1.3, K, [walker, truck, rock], rsu=True)
+    assert msg.header.protocol_version.value == 2 and msg.header.message_id.value == 14
+    assert msg.header.station_id.value == 1001
+    management = msg.payload.management_container
+    assert management.reference_time.value == etsi.SIM_EPOCH_ITS_MS + 1300
+    assert management.reference_position.latitude.value == 507833000
+    station, objects = msg.payload.cpm_containers.value.array
+    assert station.container_id.value == 2 and objects.container_id.value == 5
+    container = objects.container_data_perceived_object_container
+    assert container.number_of_perceived_objects.value == 3
+    w, t, r = container.perceived_objects.array
+    assert w.object_id.value == 3 and w.object_id_is_present
+    assert (w.position.x_coordinate.value.value, w.position.y_coordinate.value.value) == (1250, -400)
+    assert w.position.z_coordinate.value.value == 80 and w.position.z_coordinate_is_present
+    v = w.velocity.cartesian_velocity
+    assert w.velocity.choice == 1 and (v.x_velocity.value.value, v.y_velocity.value.value) == (120, -50)
+    assert w.angles.z_angle.value.value == 900  # 450° = 90°
+    dims = (
+        w.object_dimension_x.value.value,
+        w.object_dimension_y.value.value,
+        w.object_dimension_z.value.value,
+    )
+    assert dims == (6, 6, 18)
+    assert w.object_age.value == 1500  # observed for more than 1.5 s
+    assert w.object_perception_quality.value == 15
+    walker_class = w.classification.array[0]
+    assert walker_class.object_class.choice == 1 and walker_class.object_class.vru_sub_class.choice == 0
+    assert walker_class.confidence.value == 100
+    assert t.position.x_coordinate.value.value == -131072  # −2 km: the largest negative value
+    truck_class = t.classification.array[0].object_class
+    assert truck_class.choice == 0 and truck_class.vehicle_sub_class.value == 8
+    assert (t.object_dimension_x.value.value, t.object_dimension_y.value.value) == (120, 26)
+    assert r.classification.array[0].object_class.choice == 3
+    vehicle = etsi.cpm(7, 5, 1.3, K, [])
+    station, objects = vehicle.payload.cpm_containers.value.array
+    assert station.container_id.value == 1
+    assert station.container_data_originating_vehicle_container.orientation_angle.value.value == 2715
+    assert objects.container_data_perceived_object_container.number_of_perceived_objects.value == 0
+
+
 def test_saturation_at_the_largest_valid_value():
     fast = etsi.Kinematics(0.0, 0.0, 0.0, 0.0, speed=500.0, acceleration=-100.0, length=120.0, width=9.0)
     hf = etsi.cam(1, 5, 0.0, fast, low_frequency=False).cam.cam_parameters.high_frequency_container
@@ -98,11 +146,29 @@ def test_recorded_messages_decode_with_the_embedded_schemas(tmp_path: Path):
     assert denm.denm.situation.event_type.cause_code.value == 99
     assert denm.denm.management.action_id.sequence_number.value == 3
     name, cpm = decoded["/carlos/ego/v2x/cpm"]
-    assert name == "carlos_v2x_msgs/msg/CollectivePerceptionMessage"
-    assert cpm.perceived_objects[0].x_distance == 1250 and cpm.perceived_objects[0].classification == 1
+    assert name == "etsi_its_cpm_ts_msgs/msg/CollectivePerceptionMessage"
+    perceived = cpm.payload.cpm_containers.value.array[1].container_data_perceived_object_container
+    assert perceived.perceived_objects.array[0].position.x_coordinate.value.value == 1250
     with AnyReader([path], default_typestore=messages.TYPESTORE) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
         assert types["/carlos/ego/v2x/denm"] == etsi.DENM_TYPE
         for conn, _, raw in reader.messages():
             embedded = reader.deserialize(raw, conn.msgtype)
             assert messages.serialize(embedded) == messages.serialize(messages.deserialize(raw, conn.msgtype))
+
+
+def test_vectorised_clipping_equals_the_scalar_rule():
+    """`clip_rows` (the CAM and CPM builders' one numpy pass) gives `_clip`'s integers: round half to even,
+    saturation at the row's limits, non-finite values at the largest."""
+    import math
+
+    import numpy as np
+
+    rng = np.random.default_rng(3)
+    values = np.concatenate(
+        [rng.normal(0, 300, 200), [0.5, 1.5, -2.5, 1e12, -1e12, math.nan, math.inf, -math.inf]]
+    )
+    limits = np.array([[-100, 100], [0, 3600]], dtype=np.float64)
+    rows = etsi.clip_rows(np.stack([values, values * 10]), limits)
+    assert rows[0] == [etsi._clip(v, -100, 100) for v in values]
+    assert rows[1] == [etsi._clip(v * 10, 0, 3600) for v in values]

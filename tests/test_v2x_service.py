@@ -59,6 +59,14 @@ def _service(spec: dict[str, Any], seed: int = 0) -> tuple[V2XService, list[Mess
     return service, got
 
 
+def _perceived(cpm: Any) -> list[Any]:
+    """The perceived objects of an etsi_its_cpm_ts_msgs CPM."""
+    for container in cpm.payload.cpm_containers.value.array:
+        if container.container_id.value == 5:
+            return list(container.container_data_perceived_object_container.perceived_objects.array)
+    return []
+
+
 def _frame(step: int, *entities: EntityState, ego: str | None = "Ego") -> WorldFrame:
     return WorldFrame(step=step, time=round(step * 0.1, 6), entities=tuple(entities), ego=ego)
 
@@ -88,13 +96,22 @@ def test_rsu_perceives_ground_truth_from_its_fixed_pose_in_line_of_sight():
     service.step(frame)
     cpms = [m for m in got if m.topic == "/carlos/Ego/v2x/cpm"]
     assert len(cpms) == 1
-    objects = cpms[0].obj().perceived_objects
+    objects = _perceived(cpms[0].obj())
     truck_x = 85.0 + 5.0
-    by_x = sorted((o.x_distance, o.y_distance, o.classification) for o in objects)
-    assert by_x == sorted([(round((truck_x - 100.0) * 100), 0, 8), (0, 2000, 1)])
-    assert cpms[0].obj().station_id == 1001 and cpms[0].obj().station_type == 15
-    dims = {o.classification: (o.x_dimension, o.y_dimension, o.z_dimension) for o in objects}
-    assert dims[8] == (120, 26, 38)
+    by_x = sorted((o.position.x_coordinate.value.value, o.position.y_coordinate.value.value) for o in objects)
+    # the origin's map frame is east/north: x east, y north from the mast
+    assert by_x == sorted([(round((truck_x - 100.0) * 100), 0), (0, 2000)])
+    assert cpms[0].obj().header.station_id.value == 1001
+    assert cpms[0].obj().payload.cpm_containers.value.array[0].container_id.value == 2  # originating RSU
+    dims = {
+        o.classification.array[0].object_class.choice: (
+            o.object_dimension_x.value.value,
+            o.object_dimension_y.value.value,
+            o.object_dimension_z.value.value,
+        )
+        for o in objects
+    }
+    assert dims[0] == (120, 26, 38)  # the truck: a vehicle class
 
 
 def test_receivers_get_other_stations_messages_and_every_link_is_recorded():
@@ -216,6 +233,85 @@ def test_carlos_run_records_v2x_topics_and_metrics(tmp_path: Path):
             schemas[channel.topic] = schema.name
     assert schemas["/carlos/Ego/v2x/cam"] == "etsi_its_cam_msgs/msg/CAM"
     assert schemas["/carlos/Ego/v2x/denm"] == "etsi_its_denm_msgs/msg/DENM"
-    assert schemas["/carlos/Ego/v2x/cpm"] == "carlos_v2x_msgs/msg/CollectivePerceptionMessage"
+    assert schemas["/carlos/Ego/v2x/cpm"] == "etsi_its_cpm_ts_msgs/msg/CollectivePerceptionMessage"
     assert schemas["/carlos/infrastructure/rsu/v2x/cam"] == "etsi_its_cam_msgs/msg/CAM"
     assert schemas["/carlos/v2x/transmissions"] == "carlos_v2x_msgs/msg/TransmissionArray"
+    assert schemas["/carlos/infrastructure/rsu/lidar/points"] == "sensor_msgs/msg/PointCloud2"
+    assert schemas["/carlos/infrastructure/rsu/lidar/objects"] == "vision_msgs/msg/Detection3DArray"
+
+
+def test_rsu_cpms_describe_what_its_lidar_saw():
+    """With `v2x.perceptionSensor`, a unit's CPMs carry the objects with enough points in its lidar's latest
+    sweep: a lidar looking north (90° field of view) sees the walker, not the truck west of the mast that
+    the line of sight would give; before its first sweep the unit perceives nothing."""
+    from simcore.sensors.rig import SensorRig
+    from simcore.world.infrastructure import unit_pose
+
+    spec = _spec(
+        stations=[{"entity": "Ego", "cam": False}], channel={"shadowingSigmaDb": 0, "lineOfSight": False}
+    )
+    lidar = {
+        "type": "lidar",
+        "name": "top",
+        "channels": 16,
+        "horizontalResolution": 360,
+        "horizontalFov": 90,
+        "verticalFov": [-20, 5],
+        "mount": {"z": 1.0, "yaw": 90},
+    }
+    spec["infrastructure"] = [
+        {
+            "name": "mast",
+            "position": {"x": 100.0, "y": 0.0},
+            "height": 1.0,
+            "sensors": [lidar],
+            "v2x": {"cam": False, "perceptionSensor": "top", "perceptionMinPoints": 3},
+        }
+    ]
+    service, got = _service(spec)
+    rsu = service.spec.infrastructure[0]
+    rig = SensorRig([], None, service.bus, seed=0, units=[(unit_pose(rsu, 0, None, {}), rsu.sensors)])
+    entities = (
+        _entity("Ego", 30.0),
+        _entity("Truck", 85.0, box=TRUCK),
+        _entity("Walker", 100.0, 20.0, box=PERSON),
+    )
+    service.step(_frame(0, *entities))  # the lidar has not swept yet
+    rig.step(_frame(1, *entities))
+    service.step(_frame(1, *entities))
+    cpms = [m.obj() for m in got if m.topic == "/carlos/Ego/v2x/cpm"]
+    assert [len(_perceived(c)) for c in cpms] == [0, 1]
+    walker = _perceived(cpms[1])[0].classification.array[0].object_class
+    assert walker.choice == 1 and walker.vru_sub_class.choice == 0  # a pedestrian
+    with pytest.raises(ValueError, match="perceptionSensor 'side' names no lidar"):
+        SimulationRunSpec.model_validate(
+            {**spec, "infrastructure": [{**spec["infrastructure"][0], "v2x": {"perceptionSensor": "side"}}]}
+        )
+
+
+def test_copies_of_a_message_share_one_serialisation(tmp_path: Path):
+    """Every received copy of one message carries the CDR bytes the first copy's subscriber made (the
+    recorder writes them as they are): a message delivered to N receivers is serialised once, and the
+    recording decodes to the message."""
+    from simcore.recorder import McapRecorder
+
+    spec = _spec(channel={"shadowingSigmaDb": 0, "lineOfSight": False})
+    service, got = _service(spec)
+    with McapRecorder(tmp_path / "v2x.mcap", metadata={}) as recorder:
+        service.bus.subscribe("/carlos/*/v2x/*", recorder.write_message)
+        service.step(_frame(0, _entity("Ego", 0.0), _entity("A", 20.0), _entity("B", 40.0)))
+    copies: dict[int, set[int]] = {}
+    for message in got:
+        if "/v2x/cam" in message.topic:
+            assert message.data is not None
+            copies.setdefault(id(message.msg), set()).add(id(message.data))
+    assert len(copies) == 3 and all(len(data) == 1 for data in copies.values())  # 3 CAMs, 2 copies each
+    with (tmp_path / "v2x.mcap").open("rb") as f:
+        decoded = [
+            (channel.topic, value)
+            for _, channel, _, value in make_reader(
+                f, decoder_factories=[DecoderFactory()]
+            ).iter_decoded_messages()
+        ]
+    cams = [value for topic, value in decoded if topic.endswith("/v2x/cam")]
+    assert len(cams) == 6 and {c.header.station_id.value for c in cams} == {1, 2, 3}

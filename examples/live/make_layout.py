@@ -1,7 +1,9 @@
 """Writes examples/live/foxglove-layout.json, the Foxglove layout for `carlos run --live` and recordings.
 
-3D view following the ego (TF, ground-truth boxes, lidar points, a detector's boxes), the ego's speed and
-the gap metrics as plots, the run status, and the V2X messages the ego receives (CPMs, DENMs; `spec.v2x`). Built with foxglove-sdk's typed layout API, so it stays valid;
+3D view following the ego (TF, ground-truth boxes, lidar points, a detector's boxes, the lidar of a roadside
+unit named `rsu` as in examples/runs/cooperative-perception.yaml), the ego's speed and the gap metrics as
+plots, the run status, and the V2X messages the ego receives (CPMs, DENMs; `spec.v2x`). Built with
+foxglove-sdk's typed layout API, so it stays valid;
 `python examples/live/make_layout.py` regenerates it (a test fails when the file drifts).
 """
 
@@ -15,6 +17,7 @@ import foxglove.layouts as fl
 
 HERE = Path(__file__).resolve().parent
 EGO = "Ego"
+RSU = "rsu"
 
 
 def layout() -> fl.Layout:
@@ -27,6 +30,9 @@ def layout() -> fl.Layout:
                 "/carlos/objects/markers": fl.BaseRendererRosMarkerTopicSettings(visible=True),
                 "/carlos/detections/markers": fl.BaseRendererRosMarkerTopicSettings(visible=True),
                 f"/carlos/{EGO}/lidar/points": fl.BaseRendererPointCloudTopicSettings(visible=True),
+                f"/carlos/infrastructure/{RSU}/lidar/points": fl.BaseRendererPointCloudTopicSettings(
+                    visible=True
+                ),
             },
         ),
     )

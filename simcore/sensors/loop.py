@@ -32,6 +32,7 @@ from typing import Any
 from simcore.errors import BadInput
 from simcore.spec import SimulationRunSpec, SystemUnderTest
 from simcore.transport.bus import Bus, Callback, Message, Publisher
+from simcore.world.infrastructure import unit_pose
 from simcore.world.opendrive import OpenDrive
 from simcore.world.state import WorldFrame
 
@@ -181,6 +182,7 @@ class PerceptionLoop:
         road_file: Path | None,
         seed: int,
         base_dir: Path | None = None,
+        parameters: Mapping[str, Any] | None = None,
     ) -> None:
         self.rig = None
         self.evaluator = None
@@ -188,10 +190,15 @@ class PerceptionLoop:
         self.guard: GuardedBus | None = None
         self._bus = bus
         self._time = 0.0
-        if spec.sensors:
+        units = [
+            (unit_pose(rsu, index, road, parameters or {}), rsu.sensors)
+            for index, rsu in enumerate(spec.infrastructure)
+            if rsu.sensors
+        ]
+        if spec.sensors or units:
             from simcore.sensors.rig import SensorRig
 
-            self.rig = SensorRig(spec.sensors, road, bus, seed, road_file=road_file)
+            self.rig = SensorRig(spec.sensors, road, bus, seed, road_file=road_file, units=units)
         if spec.evaluation.detection is not None:
             from simcore.evaluation.criteria import ranges_of
             from simcore.evaluation.detection import DetectionEvaluator

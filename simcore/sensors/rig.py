@@ -1,9 +1,14 @@
 """The sensors of a run: scheduling, ground truth and publishing on the bus.
 
-`SensorRig(spec.sensors, road, bus, seed)`; `start(frame)` checks the carriers and publishes `/tf_static`
-and every lidar's label table; `step(frame)` runs every sensor that is due (a lidar at its rotation rate,
+`SensorRig(spec.sensors, road, bus, seed, units=…)`; `start(frame)` checks the carriers and publishes
+`/tf_static` and every lidar's label table; `step(frame)` runs every sensor that is due (a lidar at its rotation rate,
 a camera at its rate, both from t = 0, stamped with the frame's time) and publishes its messages
 (`simcore.sensors.ros`). The road scene is built once per road file and worker process.
+
+Sensors of roadside units (`units`: each unit's pose and `spec.infrastructure[].sensors`) work the same
+way from a fixed pose: mounted relative to the unit's foot (a stationary stand-in carrier that is no box of
+the scene), frame `<unit>/<sensor>` with a static transform from `map`, topics
+`/carlos/infrastructure/<unit>/<sensor>/…`.
 """
 
 from __future__ import annotations
@@ -25,9 +30,10 @@ from simcore.sensors.lidar import Lidar, LidarScan, mount_pose
 from simcore.sensors.scene import Boxes, RoadScene, static_objects
 from simcore.spec import CameraSensor, LidarSensor
 from simcore.transport.bus import Bus, Publisher
-from simcore.transport.messages import base_link
+from simcore.transport.messages import MAP_FRAME, base_link, ros_name
+from simcore.world.infrastructure import UnitPose
 from simcore.world.opendrive import OpenDrive
-from simcore.world.state import WorldFrame
+from simcore.world.state import EntityState, WorldFrame
 
 _ROAD_CACHE: dict[tuple[str, int, int], RoadScene] = {}
 _EPS = 1e-9
@@ -57,6 +63,25 @@ class _Mounted:
     model: Lidar | Camera | None = None
     next_time: float = 0.0
     publishers: dict[str, Publisher] = field(default_factory=dict)
+    unit: UnitPose | None = None  # a roadside unit's sensor
+    stand_in: EntityState | None = None  # the unit's stationary stand-in carrier
+
+    @property
+    def spec_field(self) -> str:
+        if self.unit is not None:
+            return f"spec.infrastructure[{self.unit.index}].sensors[{self.index}]"
+        return f"spec.sensors[{self.index}]"
+
+    def frame_id(self) -> str:
+        return ros.sensor_frame(self.entity, self.config.name)
+
+    def optical_frame(self) -> str:
+        return ros.optical_frame(self.entity, self.config.name)
+
+    def topic(self, leaf: str) -> str:
+        if self.unit is not None:
+            return f"/carlos/infrastructure/{ros_name(self.unit.name)}/{self.config.name}/{leaf}"
+        return ros.sensor_topic(self.entity, self.config.name, leaf)
 
 
 @dataclass
@@ -79,11 +104,18 @@ class SensorRig:
         seed: int,
         *,
         road_file: Path | None = None,
+        units: Sequence[tuple[UnitPose, Sequence[LidarSensor | CameraSensor]]] = (),
     ) -> None:
         self.bus = bus
         self.seed = seed
         self.road = road_scene(road, road_file)
         self.sensors = [_Mounted(config, i) for i, config in enumerate(sensors)]
+        for unit, configs in units:
+            carrier = unit.carrier()
+            self.sensors.extend(
+                _Mounted(config, i, entity=unit.name, unit=unit, stand_in=carrier)
+                for i, config in enumerate(configs)
+            )
         self.timings = Timings()
         self._started = False
 
@@ -93,46 +125,44 @@ class SensorRig:
         labels: list[tuple[str, str]] = []
         for s in self.sensors:
             cfg = s.config
-            entity = cfg.entity or frame.ego or (names[0] if names else None)
-            if entity is None or entity not in names:
-                raise BadInput(
-                    f"sensor {cfg.name!r} is mounted on {entity!r}, which is not an entity of the scenario "
-                    f"(entities: {', '.join(names) or 'none'})",
-                    field=f"spec.sensors[{s.index}].entity",
-                )
-            s.entity = entity
-            frame_id = ros.sensor_frame(entity, cfg.name)
+            if s.unit is None:
+                entity = cfg.entity or frame.ego or (names[0] if names else None)
+                if entity is None or entity not in names:
+                    raise BadInput(
+                        f"sensor {cfg.name!r} is mounted on {entity!r}, which is not an entity of the scenario "
+                        f"(entities: {', '.join(names) or 'none'})",
+                        field=f"{s.spec_field}.entity",
+                    )
+                s.entity = entity
+            frame_id = s.frame_id()
             if isinstance(cfg, LidarSensor):
                 # seed per sensor: the run's seed and the sensor's name and carrier, stable across edits of others
-                salt = zlib.crc32(f"{entity}/{cfg.name}".encode())
+                salt = zlib.crc32(f"{s.entity}/{cfg.name}".encode())
                 s.model = Lidar(cfg, seed=np.random.SeedSequence([self.seed, salt]).generate_state(1)[0])
                 leaves = ["points"] + (["objects", "objects/info"] if cfg.ground_truth else [])
                 types = [ros.POINTCLOUD2, ros.DETECTIONS, ros.DIAGNOSTICS]
                 for leaf, typename in zip(leaves, types, strict=False):
-                    s.publishers[leaf] = self.bus.advertise(
-                        ros.sensor_topic(entity, cfg.name, leaf), typename
-                    )
-                labels.append((ros.sensor_topic(entity, cfg.name, "label_info"), frame_id))
+                    s.publishers[leaf] = self.bus.advertise(s.topic(leaf), typename)
+                labels.append((s.topic("label_info"), frame_id))
             else:
                 s.model = Camera(cfg)
-                s.publishers["image"] = self.bus.advertise(
-                    ros.sensor_topic(entity, cfg.name, "image"), ros.IMAGE
-                )
-                s.publishers["labels"] = self.bus.advertise(
-                    ros.sensor_topic(entity, cfg.name, "labels"), ros.IMAGE
-                )
-                s.publishers["camera_info"] = self.bus.advertise(
-                    ros.sensor_topic(entity, cfg.name, "camera_info"), ros.CAMERA_INFO
-                )
+                s.publishers["image"] = self.bus.advertise(s.topic("image"), ros.IMAGE)
+                s.publishers["labels"] = self.bus.advertise(s.topic("labels"), ros.IMAGE)
+                s.publishers["camera_info"] = self.bus.advertise(s.topic("camera_info"), ros.CAMERA_INFO)
                 transforms.append(
-                    ros.transform(
-                        frame_id, ros.optical_frame(entity, cfg.name), np.zeros(3), OPTICAL, frame.time
-                    )
+                    ros.transform(frame_id, s.optical_frame(), np.zeros(3), OPTICAL, frame.time)
                 )
             model = s.model
-            transforms.insert(
-                0, ros.transform(base_link(entity), frame_id, model.mount_pos, model.mount_rot, frame.time)
-            )
+            if s.stand_in is not None:  # a unit's sensor: its pose in the map, fixed
+                rot, pos = mount_pose(s.stand_in, model.mount_rot, model.mount_pos)
+                transforms.insert(0, ros.transform(MAP_FRAME, frame_id, pos, rot, frame.time))
+            else:
+                transforms.insert(
+                    0,
+                    ros.transform(
+                        base_link(s.entity), frame_id, model.mount_pos, model.mount_rot, frame.time
+                    ),
+                )
         if transforms:
             self.bus.advertise(ros.TF_STATIC_TOPIC, ros.TF).publish(ros.tf_message(transforms), frame.time)
         for topic, frame_id in labels:
@@ -156,16 +186,19 @@ class SensorRig:
             period = s.model.period  # type: ignore[union-attr]
             while s.next_time <= frame.time + _EPS:
                 s.next_time += period
-            i = index.get(s.entity)
-            if i is None:
-                continue  # the carrier left the simulation
-            carrier = frame.entities[i]
+            if s.stand_in is not None:
+                i, carrier = -1, s.stand_in  # a unit's sensor: no box of its own in the scene
+            else:
+                j = index.get(s.entity)
+                if j is None:
+                    continue  # the carrier left the simulation
+                i, carrier = j, frame.entities[j]
             t1 = time.perf_counter()
             if isinstance(s.model, Lidar):
                 scan = s.model.scan(self.road, boxes, carrier, i)
                 self.timings.rays += scan.rays
                 t2 = time.perf_counter()
-                self._publish_lidar(s, scan, boxes, frame, i)
+                self._publish_lidar(s, scan, boxes, frame, i, carrier)
             else:
                 assert isinstance(s.model, Camera)
                 img = s.model.capture(self.road, boxes, carrier, i)
@@ -177,15 +210,21 @@ class SensorRig:
             self.timings.messages += time.perf_counter() - t2
 
     def _publish_lidar(
-        self, s: _Mounted, scan: LidarScan, boxes: Boxes, frame: WorldFrame, carrier: int
+        self,
+        s: _Mounted,
+        scan: LidarScan,
+        boxes: Boxes,
+        frame: WorldFrame,
+        carrier: int,
+        carrier_state: EntityState,
     ) -> None:
         cfg = s.config
         assert isinstance(cfg, LidarSensor) and isinstance(s.model, Lidar)
-        frame_id = ros.sensor_frame(s.entity, cfg.name)
+        frame_id = s.frame_id()
         s.publishers["points"].publish(ros.pointcloud2(scan.points, frame.time, frame_id), frame.time)
         if not cfg.ground_truth:
             return
-        objects = ground_truth(s.model, boxes, frame, carrier, scan)
+        objects = ground_truth(s.model, boxes, frame, carrier, scan, mounted_on=carrier_state)
         hdr = ros.header(frame.time, frame_id)
         dets = [
             ros.detection(
@@ -213,7 +252,7 @@ class SensorRig:
     def _publish_camera(self, s: _Mounted, img: Any, frame: WorldFrame) -> None:
         cfg = s.config
         assert isinstance(cfg, CameraSensor) and isinstance(s.model, Camera)
-        optical = ros.optical_frame(s.entity, cfg.name)
+        optical = s.optical_frame()
         s.publishers["image"].publish(ros.image(img.depth, "32FC1", frame.time, optical), frame.time)
         s.publishers["labels"].publish(ros.image(img.labels, "mono8", frame.time, optical), frame.time)
         m = s.model
@@ -222,13 +261,22 @@ class SensorRig:
 
 
 def ground_truth(
-    lidar: Lidar, boxes: Boxes, frame: WorldFrame, carrier: int, scan: LidarScan
+    lidar: Lidar,
+    boxes: Boxes,
+    frame: WorldFrame,
+    carrier: int,
+    scan: LidarScan,
+    *,
+    mounted_on: EntityState | None = None,
 ) -> list[dict[str, Any]]:
     """The objects within the lidar's maximum range (box centre), in the sensor frame at the stamp: centre,
     rotation, size (length, width, height), class, velocity (the object's, in the sensor frame), points in
     the cloud, occlusion ratio (1 - rays whose first return is the object / rays that would hit it alone;
-    1 when no ray reaches it: out of the field of view), BEV distance."""
-    rot, pos = mount_pose(frame.entities[carrier], lidar.mount_rot, lidar.mount_pos)
+    1 when no ray reaches it: out of the field of view), BEV distance. `carrier` is the index of the
+    carrier's box (−1: none), `mounted_on` the carrier when it is not an entity of the frame (a roadside
+    unit's stand-in)."""
+    carrier_state = mounted_on if mounted_on is not None else frame.entities[carrier]
+    rot, pos = mount_pose(carrier_state, lidar.mount_rot, lidar.mount_pos)
     out = []
     for i, name in enumerate(boxes.names):
         if i == carrier:

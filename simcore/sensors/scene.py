@@ -49,6 +49,24 @@ def rotation(yaw: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
     )
 
 
+def rotations(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
+    """`rotation` of N (yaw, pitch, roll) triples at once: (N, 3, 3)."""
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cr, sr = np.cos(roll), np.sin(roll)
+    out = np.empty((len(yaw), 3, 3))
+    out[:, 0, 0] = cy * cp
+    out[:, 0, 1] = cy * sp * sr - sy * cr
+    out[:, 0, 2] = cy * sp * cr + sy * sr
+    out[:, 1, 0] = sy * cp
+    out[:, 1, 1] = sy * sp * sr + cy * cr
+    out[:, 1, 2] = sy * sp * cr - cy * sr
+    out[:, 2, 0] = -sp
+    out[:, 2, 1] = cp * sr
+    out[:, 2, 2] = cp * cr
+    return out
+
+
 def road_mesh(road: OpenDrive, step: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(vertices (V, 3) float32, triangles (T, 3) uint32, triangle classes (T,) uint8) of the road surface:
     two triangles per lane and sample interval, degenerate (zero-width) ones dropped."""
@@ -172,35 +190,42 @@ class Boxes:
     @classmethod
     def of(cls, frame: WorldFrame) -> Boxes:
         n = len(frame.entities)
-        centers = np.zeros((n, 3))
-        rots = np.zeros((n, 3, 3))
-        half = np.zeros((n, 3))
-        yaws = np.zeros(n)
-        vel = np.zeros((n, 3))
-        classes = np.zeros(n, np.uint8)
-        names = []
-        class_names = []
-        for i, e in enumerate(frame.entities):
-            r = rotation(e.heading, e.pitch, e.roll)
-            rots[i] = r
-            centers[i] = (e.x, e.y, e.z) + r @ (e.bbox.center_x, e.bbox.center_y, e.bbox.center_z)
-            half[i] = (e.bbox.length / 2, e.bbox.width / 2, e.bbox.height / 2)
-            yaws[i] = e.heading
-            vel[i] = r[:, 0] * e.speed
-            name = entity_class(e.object_type, e.category)
-            classes[i] = CLASS_IDS[name]
-            names.append(e.name)
-            class_names.append(name)
+        # per entity: x, y, z, heading, pitch, roll, box centre x, y, z, length, width, height, speed
+        table = np.array(
+            [
+                (
+                    e.x,
+                    e.y,
+                    e.z,
+                    e.heading,
+                    e.pitch,
+                    e.roll,
+                    e.bbox.center_x,
+                    e.bbox.center_y,
+                    e.bbox.center_z,
+                    e.bbox.length,
+                    e.bbox.width,
+                    e.bbox.height,
+                    e.speed,
+                )
+                for e in frame.entities
+            ],
+            dtype=np.float64,
+        ).reshape(n, 13)
+        rots = rotations(table[:, 3], table[:, 4], table[:, 5])
+        centers = table[:, 0:3] + np.einsum("nij,nj->ni", rots, table[:, 6:9])
+        names = tuple(e.name for e in frame.entities)
+        class_names = tuple(entity_class(e.object_type, e.category) for e in frame.entities)
         return cls(
-            names=tuple(names),
+            names=names,
             ids=np.arange(1, n + 1, dtype=np.uint32),
-            classes=classes,
-            class_names=tuple(class_names),
+            classes=np.array([CLASS_IDS[c] for c in class_names], dtype=np.uint8).reshape(n),
+            class_names=class_names,
             centers=centers,
             rotations=rots,
-            half=half,
-            yaws=yaws,
-            velocities=vel,
+            half=table[:, 9:12] / 2,
+            yaws=table[:, 3].copy(),
+            velocities=rots[:, :, 0] * table[:, 12:13],
         )
 
     def corners(self, i: int) -> np.ndarray:

@@ -2,9 +2,9 @@
 
 One type store, :data:`TYPESTORE`: rosbags' ROS 2 jazzy store extended with `vision_msgs` (4.x) and
 `ackermann_msgs` (2.x), whose official `.msg` definitions ship under `simcore/transport/msg/<pkg>/`, and the
-V2X packages: `etsi_its_cam_msgs` and `etsi_its_denm_msgs` (the layout of ika's etsi_its_messages, written
-from the ETSI ASN.1: EN 302 637-2/-3, CDD TS 102 894-2 V1.3.1) and CARLOS' own `carlos_v2x_msgs` (CPM,
-link outcomes); see `simcore/v2x/etsi.py`.
+V2X packages: `etsi_its_cam_msgs`, `etsi_its_denm_msgs` and `etsi_its_cpm_ts_msgs` (the layout of ika's
+etsi_its_messages, written from the ETSI ASN.1: EN 302 637-2/-3, CDD TS 102 894-2 V1.3.1, CPM TS 103 324
+V2.1.1 with CDD V2.1.1) and CARLOS' own `carlos_v2x_msgs` (link outcomes); see `simcore/v2x/etsi.py`.
 
 Every builder is a pure function of a :class:`~simcore.world.state.WorldFrame`; stamps are simulated time
 from 0 (`/clock` and every header carry `frame.time`). Frames follow REP-103/105: the world frame is

@@ -73,14 +73,21 @@ class GeoReference:
 
     def north_angles(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """`north_angle` of many points at once."""
+        return self.wgs84_and_north(x, y, np.zeros(np.shape(x)))[3]
+
+    def wgs84_and_north(
+        self, x: np.ndarray, y: np.ndarray, z: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """`to_wgs84` and `north_angles` of many points in one transformation: (lat, lon, alt, north)."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
         lat, lon, _ = self.to_wgs84(np.concatenate([x, x]), np.concatenate([y, y + 1.0]))
         n = len(x)
+        alt = np.asarray(z, dtype=np.float64) + self.offset_z
         # the direction of map +y in the geographic frame: map +y is this far clockwise from north
         east = (lon[n:] - lon[:n]) * np.cos(np.radians(lat[:n]))
         north = lat[n:] - lat[:n]
-        return np.asarray(math.pi / 2 + np.arctan2(east, north))
+        return lat[:n], lon[:n], alt, np.asarray(math.pi / 2 + np.arctan2(east, north))
 
 
 def geo_reference_of(road_file: Path) -> GeoReference | None:

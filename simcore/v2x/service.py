@@ -8,14 +8,20 @@ Topics (recorded): `/carlos/<entity>/v2x/cam|cpm|denm` per receiving entity stat
 `/carlos/infrastructure/<rsu>/v2x/cam|cpm|denm` per receiving RSU, `/carlos/v2x/transmissions` (every link
 of every message of a step and its outcome, `carlos_v2x_msgs/msg/TransmissionArray`). A message sent at
 frame time t and delayed by d is published with time t + d in the step it is sent (latency and jitter are
-well below a step; a longer delay is published in the step it arrives).
+well below a step; a longer delay is published in the step it arrives). The copies of one message go out as
+bus `Message`s sharing one CDR serialisation (made by the first subscriber that asks for bytes).
 
 Stations: `spec.v2x.stations` or every vehicle of the first frame, in frame order (station ids 1, 2, …), then
 the RSUs with a `v2x` station (ids 1001, 1002, …). An entity station absent from a frame neither sends nor
 receives in it. Antennas sit 0.1 m above the entity's box, RSU antennas at the mast height. RSU and vehicle
 CPMs contain the other entities within the station's perception range whose box centre or a box corner (at
-mid height) is in line of sight; a CPM goes out at most every 100 ms, with the objects the TS 103 324
-inclusion rules select, or every second without any.
+mid height) is in line of sight, or for an RSU with `perceptionSensor` the entities with enough points in that
+lidar's latest sweep (its `…/objects/info`, received on the bus); a CPM goes out at most every 100 ms, with the
+objects the TS 103 324 inclusion rules select, or every second without any.
+
+Per step the work is vectorised over the stations: the CAM triggers and fields of all senders (one numpy pass,
+`etsi.cams`), line of sight of all CPM stations' candidate objects in one pass, the CPM values of every
+(station, object) pair in one pass, the channel over all (sender, receiver) pairs.
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ import heapq
 import itertools
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,13 +40,14 @@ import numpy as np
 from simcore.errors import BadInput
 from simcore.evaluation.criteria import ranges_of
 from simcore.spec import NumberOrParameter, SimulationRunSpec
-from simcore.transport.bus import Bus, Publisher
+from simcore.transport.bus import Bus, Message, Publisher
 from simcore.transport.messages import TYPESTORE, ros_name, stamp
 from simcore.v2x import etsi
 from simcore.v2x.channel import Channel, ChannelParameters
 from simcore.v2x.geo import GeoReference, geo_reference_of
 from simcore.v2x.metrics import V2XMetrics
 from simcore.v2x.triggers import T_GEN_CPM_MAX, T_GEN_CPM_MIN, CamTriggers, CpmObjectTriggers, HazardTriggers
+from simcore.world.infrastructure import resolve_number, unit_pose
 from simcore.world.opendrive import OpenDrive
 from simcore.world.state import EntityState, WorldFrame
 
@@ -48,27 +55,6 @@ TRANSMISSIONS_TOPIC = "/carlos/v2x/transmissions"
 RSU_STATION_BASE = 1000
 ANTENNA_ABOVE_ROOF = 0.1
 _SLACK = 1e-6
-
-
-def resolve_number(value: NumberOrParameter, parameters: Mapping[str, Any], field: str) -> float:
-    """A spec number, or the value of the scenario parameter `$name` it names."""
-    if isinstance(value, str):
-        name = value[1:]
-        if name not in parameters:
-            raise BadInput(
-                f"{value} names no parameter of the scenario (declare it or set it in spec.parameters or the sweep)",
-                field=field,
-            )
-        raw = parameters[name]
-        try:
-            number = float(raw)
-        except (TypeError, ValueError):
-            raise BadInput(f"{value} = {raw!r} is not a number", field=field) from None
-    else:
-        number = float(value)
-    if not math.isfinite(number):
-        raise BadInput(f"{value} is not a finite number", field=field)
-    return number
 
 
 def channel_parameters(spec: SimulationRunSpec, parameters: Mapping[str, Any]) -> ChannelParameters:
@@ -118,19 +104,38 @@ class Station:
     last_cpm: float = -math.inf
     first_seen: dict[str, float] = field(default_factory=dict)
     sequence: int = 0
+    #: with a perception lidar: the entities with enough points in its latest sweep (None: line of sight)
+    lidar_objects: set[str] | None = None
 
     @property
     def rsu(self) -> bool:
         return self.rsu_pose is not None
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True, eq=False)
 class _Outgoing:
     kind: str
     sender: int
     msg: Any
     objects: tuple[str, ...] = ()  # CPM: the entities it describes
     hazard: tuple[str, int, float] | None = None  # DENM: (station, cause, detection time)
+    cdr: bytes | None = (
+        None  # its CDR bytes, once a receiver's subscriber asked for them (shared by all copies)
+    )
+
+
+def _lidar_perception(station: Station, min_points: int) -> Callable[[Message], None]:
+    """A subscriber of a lidar's `…/objects/info`: the station perceives the objects with enough points."""
+
+    def perceive(message: Message) -> None:
+        objects = set()
+        for status in message.obj().status:
+            values = {kv.key: kv.value for kv in status.values}
+            if int(values.get("points", "0")) >= min_points:
+                objects.add(status.name)
+        station.lidar_objects = objects
+
+    return perceive
 
 
 def _antenna(entity: EntityState) -> tuple[float, float, float]:
@@ -157,6 +162,7 @@ class V2XService:
         self.step_seconds = spec.simulation.step_seconds
         self.channel = Channel(channel_parameters(spec, parameters), seed)
         self.geo = self._geo_reference(road_file)
+        self.geo.to_wgs84(0.0, 0.0)  # set up PROJ's transformation now, not in the first step
         self.road = road
         self.road_file = road_file
         self._scene: Any = None
@@ -177,6 +183,10 @@ class V2XService:
         self._ego_name: str | None = None
         self._ego_cpm: dict[str, float] = {}  # object → arrival of the newest CPM about it at the ego
         self._transmissions = bus.advertise(TRANSMISSIONS_TOPIC, "carlos_v2x_msgs/msg/TransmissionArray")
+        #: how a received copy goes out as a `Message` (so that its CDR bytes are made once per message)
+        self._send: Callable[[Message], None] | None = getattr(bus, "publish_message", None) or getattr(
+            bus, "dispatch", None
+        )
 
     # --- set-up -----------------------------------------------------------------------------------------
     def _geo_reference(self, road_file: Path | None) -> GeoReference:
@@ -192,45 +202,26 @@ class V2XService:
     def _rsu_stations(self) -> list[Station]:
         out: list[Station] = []
         for index, rsu in enumerate(self.spec.infrastructure):
-            where = f"spec.infrastructure[{index}]"
-
-            def number(name: str, value: NumberOrParameter, where: str = where) -> float:
-                return resolve_number(value, self.parameters, f"{where}.{name}")
-
-            if rsu.position is not None:
-                x = number("position.x", rsu.position.x)
-                y = number("position.y", rsu.position.y)
-                z = number("position.z", rsu.position.z)
-            else:
-                assert rsu.road is not None
-                if self.road is None:
-                    raise BadInput(
-                        "a road position needs the scenario's OpenDRIVE road", field=f"{where}.road"
-                    )
-                if rsu.road.road_id not in self.road.roads:
-                    raise BadInput(f"the road has no road {rsu.road.road_id!r}", field=f"{where}.road.roadId")
-                s = number("road.s", rsu.road.s)
-                t = number("road.t", rsu.road.t)
-                if not 0 <= s <= self.road.road_length(rsu.road.road_id):
-                    raise BadInput(f"s = {s} lies outside road {rsu.road.road_id!r}", field=f"{where}.road.s")
-                pose = self.road.road_to_world(rsu.road.road_id, s, t)
-                x, y, z = pose.x, pose.y, pose.z
-            height = number("height", rsu.height)
-            yaw = math.radians(number("yaw", rsu.yaw))
+            pose = unit_pose(rsu, index, self.road, self.parameters)
             if rsu.v2x is None:
                 continue
-            out.append(
-                Station(
-                    name=rsu.name,
-                    station_id=RSU_STATION_BASE + 1 + len(out),
-                    cam=rsu.v2x.cam,
-                    denm=False,
-                    cpm=rsu.v2x.cpm,
-                    perception_range=rsu.v2x.perception_range,
-                    rsu_pose=(x, y, z + height, yaw),
-                    topic_prefix=f"/carlos/infrastructure/{ros_name(rsu.name)}/v2x",
-                )
+            station = Station(
+                name=rsu.name,
+                station_id=RSU_STATION_BASE + 1 + len(out),
+                cam=rsu.v2x.cam,
+                denm=False,
+                cpm=rsu.v2x.cpm,
+                perception_range=rsu.v2x.perception_range,
+                rsu_pose=(pose.x, pose.y, pose.z + pose.height, pose.yaw),
+                topic_prefix=f"/carlos/infrastructure/{ros_name(rsu.name)}/v2x",
             )
+            if rsu.v2x.perception_sensor is not None:
+                station.lidar_objects = set()
+                topic = (
+                    f"/carlos/infrastructure/{ros_name(rsu.name)}/{rsu.v2x.perception_sensor}/objects/info"
+                )
+                self.bus.subscribe(topic, _lidar_perception(station, rsu.v2x.perception_min_points))
+            out.append(station)
         return out
 
     def _setup(self, frame: WorldFrame) -> None:
@@ -260,6 +251,15 @@ class V2XService:
             for kind, typename in (("cam", etsi.CAM_TYPE), ("cpm", etsi.CPM_TYPE), ("denm", etsi.DENM_TYPE)):
                 station.publishers[kind] = self.bus.advertise(f"{station.topic_prefix}/{kind}", typename)
         self.metrics_acc.stations([s.name for s in self.stations])
+        self._rsu_mask = np.array([s.rsu for s in self.stations], dtype=bool)
+        self._cam_mask = np.array([s.cam for s in self.stations], dtype=bool)
+        self._cpm_mask = np.array([s.cpm for s in self.stations], dtype=bool)
+        self._station_ids = np.array([s.station_id for s in self.stations], dtype=np.int64)
+        poses = np.array([s.rsu_pose for s in self.stations if s.rsu_pose is not None]).reshape(-1, 4)
+        self._rsu_xyz, self._rsu_yaw = poses[:, 0:3], poses[:, 3]
+        self._names = [s.name for s in self.stations]
+        #: per station, the other stations' names (its message's receivers when every station is present)
+        self._others = [self._names[:i] + self._names[i + 1 :] for i in range(len(self.stations))]
         self._cam = CamTriggers(len(self.stations))
         self._hazards = HazardTriggers(len(self.stations), hard_braking=self.config.hard_braking)
 
@@ -278,30 +278,47 @@ class V2XService:
         assert self._cam is not None and self._hazards is not None
         t = frame.time
         self._ego_name = frame.ego
-        entities = {e.name: e for e in frame.entities}
-        present = np.array([s.rsu or s.name in entities for s in self.stations], dtype=bool)
+        own = self._entity_index(frame)  # per station its entity's index in the frame, −1: RSU or absent
+        rsu = self._rsu_mask
+        present = rsu | (own >= 0)
         n = len(self.stations)
-        pos = np.zeros((n, 3))
-        heading = np.zeros(n)
-        speed = np.zeros(n)
-        accel = np.zeros(n)
-        for i, station in enumerate(self.stations):
-            if station.rsu_pose is not None:
-                pos[i] = station.rsu_pose[:3]
-                heading[i] = station.rsu_pose[3]
-            elif station.name in entities:
-                e = entities[station.name]
-                pos[i] = _antenna(e)
-                heading[i], speed[i], accel[i] = e.heading, e.speed, e.acceleration
+        ents = frame.entities
+        # per entity: antenna x, y, z, heading, speed, acceleration, yaw rate, length, width
+        table = np.array(
+            [
+                (
+                    e.x,
+                    e.y,
+                    e.z + e.bbox.center_z + e.bbox.height / 2 + ANTENNA_ABOVE_ROOF,
+                    e.heading,
+                    e.speed,
+                    e.acceleration,
+                    e.yaw_rate,
+                    e.bbox.length,
+                    e.bbox.width,
+                )
+                for e in ents
+            ],
+            dtype=np.float64,
+        ).reshape(-1, 9)
+        rows = np.zeros((n, 9))
+        has = own >= 0
+        rows[has] = table[own[has]]
+        rows[rsu, 0:3] = self._rsu_xyz
+        rows[rsu, 3] = self._rsu_yaw
+        pos = rows[:, 0:3]
+        heading, speed, accel = rows[:, 3], rows[:, 4], rows[:, 5]
         sight = self._sight(frame)
-        lat, lon, alt = self.geo.to_wgs84(pos[:, 0], pos[:, 1], pos[:, 2])
-        north = self.geo.north_angles(pos[:, 0], pos[:, 1])
+        lat, lon, alt, north = self.geo.wgs84_and_north(pos[:, 0], pos[:, 1], pos[:, 2])
+        etsi_heading = np.degrees(north - heading) % 360.0
+        station_type = np.full(n, etsi.STATION_TYPE_RSU, dtype=np.int64)
+        station_type[~rsu] = [
+            etsi.STATION_TYPES.get(ents[j].category, 0) if j >= 0 else 0 for j in own[~rsu].tolist()
+        ]
         outgoing: list[_Outgoing] = []
         cam_due = self._cam.step(t, pos[:, :2], heading, speed)
-        etsi_heading = np.degrees(north - heading) % 360.0
 
         def kinematics(i: int) -> etsi.Kinematics:
-            entity = None if self.stations[i].rsu else entities.get(self.stations[i].name)
             return etsi.Kinematics(
                 latitude=float(lat[i]),
                 longitude=float(lon[i]),
@@ -309,24 +326,33 @@ class V2XService:
                 heading=float(etsi_heading[i]),
                 speed=float(speed[i]),
                 acceleration=float(accel[i]),
-                yaw_rate=entity.yaw_rate if entity is not None else 0.0,
-                length=entity.bbox.length if entity is not None else 0.0,
-                width=entity.bbox.width if entity is not None else 0.0,
+                yaw_rate=float(rows[i, 6]),
+                length=float(rows[i, 7]),
+                width=float(rows[i, 8]),
             )
 
-        for i in map(int, np.flatnonzero(cam_due.send & present)):
-            station = self.stations[i]
-            entity = None if station.rsu else entities.get(station.name)
-            if station.cam:
-                msg = etsi.cam(
-                    station.station_id,
-                    self._station_type(station, entity),
-                    t,
-                    kinematics(i),
-                    low_frequency=bool(cam_due.low_frequency[i]),
-                    rsu=station.rsu,
-                )
-                outgoing.append(_Outgoing("cam", i, msg))
+        senders = np.flatnonzero(cam_due.send & present & self._cam_mask)
+        if len(senders):
+            k = etsi.KinematicsArrays(
+                lat[senders],
+                lon[senders],
+                alt[senders],
+                etsi_heading[senders],
+                speed[senders],
+                accel[senders],
+                rows[senders, 6],
+                rows[senders, 7],
+                rows[senders, 8],
+            )
+            msgs = etsi.cams(
+                self._station_ids[senders].tolist(),
+                station_type[senders].tolist(),
+                t,
+                k,
+                cam_due.low_frequency[senders].tolist(),
+                rsu[senders].tolist(),
+            )
+            outgoing.extend(_Outgoing("cam", i, msg) for i, msg in zip(senders.tolist(), msgs, strict=True))
         for hazard in self._hazards.step(t, np.where(present, speed, 0.0), np.where(present, accel, 0.0)):
             station = self.stations[hazard.station]
             if station.rsu or not station.denm or not present[hazard.station]:
@@ -338,7 +364,7 @@ class V2XService:
                 self.metrics_acc.hazard(key)
             msg = etsi.denm(
                 station.station_id,
-                self._station_type(station, entities.get(station.name)),
+                int(station_type[hazard.station]),
                 station.sequence,
                 t,
                 hazard.detection_time,
@@ -347,15 +373,46 @@ class V2XService:
                 hazard.sub_cause,
             )
             outgoing.append(_Outgoing("denm", hazard.station, msg, hazard=key))
-        for i, station in enumerate(self.stations):
-            if station.cpm and present[i] and t - station.last_cpm >= T_GEN_CPM_MIN - _SLACK:
-                cpm = self._cpm(station, i, frame, pos[i], kinematics(i), sight)
+        due = [
+            i
+            for i in np.flatnonzero(self._cpm_mask & present).tolist()
+            if t - self.stations[i].last_cpm >= T_GEN_CPM_MIN - _SLACK
+        ]
+        if due:
+            by_sight = [i for i in due if self.stations[i].lidar_objects is None]
+            reach = np.array([self.stations[i].perception_range for i in by_sight])
+            seen = dict(
+                zip(by_sight, self._visible_many(sight, pos[by_sight], own[by_sight], reach), strict=True)
+            )
+            visible = [
+                seen[i] if i in seen else self._lidar_seen(self.stations[i], sight, pos[i]) for i in due
+            ]
+            # every (station, object) pair of this step in one pass: the CPM's values of each object
+            objects = np.concatenate(visible).astype(np.int64)
+            owner = np.repeat(np.asarray(due), [len(v) for v in visible])
+            values = self._object_values(sight.boxes, objects, pos[owner], north[owner])
+            categories = self._object_classes(frame)
+            start = 0
+            for i, v in zip(due, visible, strict=True):
+                part = slice(start, start + len(v))
+                start += len(v)
+                cpm = self._cpm(
+                    self.stations[i],
+                    i,
+                    frame,
+                    kinematics(i),
+                    int(station_type[i]),
+                    objects[part],
+                    table[objects[part]],
+                    values[:, part],
+                    categories[objects[part]],
+                )
                 if cpm is not None:
                     outgoing.append(cpm)
         clock = time.process_time()
         self.seconds["generate"] += clock - started
         if outgoing:
-            self._transmit(frame, outgoing, pos, present, sight)
+            self._transmit(frame, outgoing, pos, present, sight, own)
         self.seconds["channel"] += time.process_time() - clock
         clock = time.process_time()
         self._deliver(t + self.step_seconds - _SLACK)
@@ -364,11 +421,6 @@ class V2XService:
         self.metrics_acc.sample_age(t)
         self._ego_view(frame, sight)
         self.seconds["metrics"] += time.process_time() - clock
-
-    def _station_type(self, station: Station, entity: EntityState | None) -> int:
-        if station.rsu:
-            return etsi.STATION_TYPE_RSU
-        return etsi.STATION_TYPES.get(entity.category, 0) if entity is not None else 0
 
     def _sight(self, frame: WorldFrame) -> Any:
         from simcore.sensors.scene import Boxes
@@ -380,20 +432,47 @@ class V2XService:
         """Indexes of the frame's entities (other than `own`) whose box centre lies within `reach` of `origin`
         (horizontally) and whose centre or a ground-plane box corner (at mid height, 10 % inside) is in line of
         sight."""
+        seen = self._visible_many(sight, np.asarray(origin)[None, :], np.array([own]), np.array([reach]))
+        return [int(j) for j in seen[0]]
+
+    def _visible_many(
+        self, sight: Any, origins: np.ndarray, owns: np.ndarray, reaches: np.ndarray
+    ) -> list[np.ndarray]:
+        """`_visible` for M observers at once (one line-of-sight pass): per observer the ascending indexes."""
         boxes = sight.boxes
-        n = len(boxes.names)
+        n, m = len(boxes.names), len(origins)
+        empty = np.zeros(0, dtype=np.int64)
         if n == 0:
-            return []
-        near = np.hypot(boxes.centers[:, 0] - origin[0], boxes.centers[:, 1] - origin[1]) <= reach
-        if 0 <= own < n:
-            near[own] = False
-        candidates = np.flatnonzero(near)
-        if len(candidates) == 0:
-            return []
-        points = self._sample_points(sight)[candidates].reshape(-1, 3)
-        targets = np.repeat(candidates, 5)
-        clear = sight.clear(np.broadcast_to(origin, points.shape), points, np.full(len(points), own), targets)
-        return [int(j) for j in candidates[clear.reshape(-1, 5).any(axis=1)]]
+            return [empty] * m
+        near = (
+            np.hypot(boxes.centers[None, :, 0] - origins[:, 0:1], boxes.centers[None, :, 1] - origins[:, 1:2])
+            <= reaches[:, None]
+        )
+        mine = owns >= 0
+        near[np.flatnonzero(mine), owns[mine]] = False
+        rows, cols = np.nonzero(near)
+        if len(rows) == 0:
+            return [empty] * m
+        points = self._sample_points(sight)[cols].reshape(-1, 3)
+        clear = sight.clear(
+            np.repeat(origins[rows], 5, axis=0), points, np.repeat(owns[rows], 5), np.repeat(cols, 5)
+        )
+        visible = clear.reshape(-1, 5).any(axis=1)
+        rows, cols = rows[visible], cols[visible]
+        bounds = np.searchsorted(rows, np.arange(m + 1))
+        return [cols[bounds[i] : bounds[i + 1]] for i in range(m)]
+
+    @staticmethod
+    def _lidar_seen(station: Station, sight: Any, origin: np.ndarray) -> np.ndarray:
+        """Indexes of the frame's entities the station's perception lidar saw in its latest sweep, within its
+        perception range (box centre, horizontally)."""
+        boxes = sight.boxes
+        names = station.lidar_objects or set()
+        index = np.array([j for j, name in enumerate(boxes.names) if name in names], dtype=np.int64)
+        if not len(index):
+            return index
+        gap = np.hypot(boxes.centers[index, 0] - origin[0], boxes.centers[index, 1] - origin[1])
+        return index[gap <= station.perception_range]
 
     @staticmethod
     def _sample_points(sight: Any) -> np.ndarray:
@@ -408,76 +487,86 @@ class V2XService:
             cached = sight.sample_points = boxes.centers[:, None, :] + offsets
         return np.asarray(cached)
 
+    @staticmethod
+    def _object_values(boxes: Any, objects: np.ndarray, origins: np.ndarray, north: np.ndarray) -> np.ndarray:
+        """(10, P): per (station, object) pair the object in the CPM's frame (x east, y north: the map's axes
+        turned by the north angle at the station) as `etsi.PerceivedObjects.values`, the age left at 0."""
+        ex, ey = np.sin(north), -np.cos(north)
+        nx, ny = np.cos(north), np.sin(north)
+        d = boxes.centers[objects] - origins
+        v = boxes.velocities[objects]
+        return np.stack(
+            [
+                d[:, 0] * ex + d[:, 1] * ey,
+                d[:, 0] * nx + d[:, 1] * ny,
+                d[:, 2],
+                v[:, 0] * ex + v[:, 1] * ey,
+                v[:, 0] * nx + v[:, 1] * ny,
+                np.degrees(boxes.yaws[objects] - (north - math.pi / 2)),  # counter-clockwise from east
+                boxes.half[objects, 0] * 2,
+                boxes.half[objects, 1] * 2,
+                boxes.half[objects, 2] * 2,
+                np.zeros(len(objects)),
+            ]
+        ).reshape(10, -1)
+
+    @staticmethod
+    def _object_classes(frame: WorldFrame) -> np.ndarray:
+        """Per entity of the frame its class in a CPM: the ETSI station type (−1: not a road user)."""
+        return np.array(
+            [
+                etsi.STATION_TYPES.get(e.category, 0 if e.object_type == "vehicle" else -1)
+                for e in frame.entities
+            ],
+            dtype=np.int64,
+        )
+
     def _cpm(
         self,
         station: Station,
         index: int,
         frame: WorldFrame,
-        origin: np.ndarray,
         ref: etsi.Kinematics,
-        sight: Any,
+        station_type: int,
+        seen: np.ndarray,
+        rows: np.ndarray,
+        values: np.ndarray,
+        classes: np.ndarray,
     ) -> _Outgoing | None:
+        """The station's CPM of the objects `seen` (entity indexes; `rows`: their `step` table rows, `values`
+        and `classes` as `_object_values` and `_object_classes`), or None when no object is due and the last
+        CPM is less than T_GenCpmMax old."""
         t = frame.time
-        own = (
-            -1
-            if station.rsu
-            else next((j for j, e in enumerate(frame.entities) if e.name == station.name), -1)
-        )
-        seen = self._visible(sight, origin, own, station.perception_range)
-        for j in seen:
-            station.first_seen.setdefault(frame.entities[j].name, t)
-        objs = [frame.entities[j] for j in seen]
-        ids = [e.name for e in objs]
-        xy = np.array([[e.x, e.y] for e in objs]).reshape(-1, 2)
-        chosen = station.cpm_triggers.select(
-            t, ids, xy, np.array([e.speed for e in objs]), np.array([e.heading for e in objs])
-        )
+        ids = [frame.entities[j].name for j in seen.tolist()]
+        first_seen = station.first_seen
+        for name in ids:
+            first_seen.setdefault(name, t)
+        chosen = station.cpm_triggers.select(t, ids, rows[:, 0:2], rows[:, 4], rows[:, 3])
         if not chosen.any() and t - station.last_cpm < T_GEN_CPM_MAX - _SLACK:
             return None
         station.last_cpm = t
-        north = float(self.geo.north_angles(origin[:1], origin[1:2])[0])
-        perceived = []
-        names = []
-        for j, e, take in zip(seen, objs, chosen, strict=True):
-            if not take:
-                continue
-            cx, cy, cz = e.box_center()
-            vx, vy = e.velocity
-            perceived.append(
-                etsi.PerceivedObject(
-                    object_id=1 + j,  # the entity's position in the frame, as in the sensors' labels
-                    dx=cx - float(origin[0]),
-                    dy=cy - float(origin[1]),
-                    dz=cz - float(origin[2]),
-                    vx=vx,
-                    vy=vy,
-                    heading=etsi.etsi_heading(north, e.heading),
-                    length=e.bbox.length,
-                    width=e.bbox.width,
-                    height=e.bbox.height,
-                    age=t - station.first_seen[e.name],
-                    classification=etsi.STATION_TYPES.get(e.category, 0),
-                )
-            )
-            names.append(e.name)
-        msg = etsi.cpm(
-            station.station_id,
-            self._station_type(station, None if station.rsu else frame.entities[own] if own >= 0 else None),
-            t,
-            ref,
-            perceived,
-        )
+        names = [name for name, take in zip(ids, chosen.tolist(), strict=True) if take]
+        values = values[:, chosen]
+        values[9] = t - np.array([first_seen[name] for name in names], dtype=np.float64)  # age
+        # object ids: the entity's position in the frame + 1, as in the sensors' labels
+        perceived = etsi.PerceivedObjects(seen[chosen] + 1, values, classes[chosen])
+        msg = etsi.cpm(station.station_id, station_type, t, ref, perceived, rsu=station.rsu)
         return _Outgoing("cpm", index, msg, objects=tuple(names))
 
     def _transmit(
-        self, frame: WorldFrame, outgoing: list[_Outgoing], pos: np.ndarray, present: np.ndarray, sight: Any
+        self,
+        frame: WorldFrame,
+        outgoing: list[_Outgoing],
+        pos: np.ndarray,
+        present: np.ndarray,
+        sight: Any,
+        own: np.ndarray,
     ) -> None:
         senders = np.array([o.sender for o in outgoing])
         n = len(self.stations)
         same = senders[:, None] == np.arange(n)[None, :]
         same |= ~present[None, :]  # an absent station receives nothing
         if sight is not None and self.config.channel.line_of_sight:
-            own = self._entity_index(frame)
 
             def los(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
                 a, b = senders[rows], cols
@@ -491,24 +580,33 @@ class V2XService:
         delivered = delivery.delivered & link
         self.metrics_acc.links(delivery.distance[link], delivered[link])
         transmission = TYPESTORE.types["carlos_v2x_msgs/msg/Transmission"]
-        names = [s.name for s in self.stations]
-        records = []
+        # every sender is present, so each row links the same number of receivers: the other present stations
+        width = int(present.sum()) - 1
+        outcomes = delivery.lost[link].astype(np.uint8).reshape(-1, width)
+        distances = delivery.distance[link].astype(np.float32).reshape(-1, width)
+        power = delivery.rx_power_dbm[link].astype(np.float32).reshape(-1, width)
+        delays = delivery.delay[link].astype(np.float32).reshape(-1, width)
+        everyone = width == n - 1
         sent = stamp(frame.time)
+        records = []
         for m, out in enumerate(outgoing):
             self.metrics_acc.message_sent(out.kind)
             sender = self.stations[out.sender]
-            cols = np.flatnonzero(link[m])
+            if everyone:
+                receivers = self._others[out.sender]
+            else:
+                receivers = [self._names[r] for r in np.flatnonzero(link[m]).tolist()]
             records.append(
                 transmission(
                     sent=sent,
                     sender=sender.name,
                     station_id=sender.station_id,
                     message_type=out.kind,
-                    receivers=[names[r] for r in cols],
-                    outcomes=delivery.lost[m, cols].astype(np.uint8),
-                    distances=delivery.distance[m, cols].astype(np.float32),
-                    rx_power_dbm=delivery.rx_power_dbm[m, cols].astype(np.float32),
-                    delays=delivery.delay[m, cols].astype(np.float32),
+                    receivers=receivers,
+                    outcomes=outcomes[m],
+                    distances=distances[m],
+                    rx_power_dbm=power[m],
+                    delays=delays[m],
                 )
             )
         rows, cols = np.nonzero(delivered)
@@ -547,9 +645,16 @@ class V2XService:
                     heapq.heappush(self._pending, item)
         if late:
             due.sort(key=lambda item: (item[0], item[1]))
+        send = self._send
         for arrival, _, r, out, _ in due:
             receiver = self.stations[r]
-            receiver.publishers[out.kind].publish(out.msg, arrival)
+            publisher = receiver.publishers[out.kind]
+            if send is None:
+                publisher.publish(out.msg, arrival)
+            else:  # every copy carries the CDR bytes the first copy's subscribers made
+                message = Message(publisher.topic, publisher.typename, arrival, msg=out.msg, data=out.cdr)
+                send(message)
+                out.cdr = message.data
             if receiver.name == self._ego_name:
                 if out.kind == "cpm":
                     for name in out.objects:

@@ -32,14 +32,25 @@ def _blocked_by_boxes(
     blocked = np.zeros(k, dtype=bool)
     if n == 0:
         return blocked
-    radius = np.linalg.norm(boxes.half, axis=1)  # (N,)
-    rel = boxes.centers[None, :, :] - a[:, None, :]  # (K, N, 3)
-    along = np.clip(np.einsum("knj,kj->kn", rel, dirs), 0.0, length[:, None])
-    gap = np.linalg.norm(rel - along[:, :, None] * dirs[:, None, :], axis=2)
-    near = gap <= radius[None, :]
-    near &= np.arange(n)[None, :] != ignore_a[:, None]
-    near &= np.arange(n)[None, :] != ignore_b[:, None]
+    radius = np.sqrt((boxes.half**2).sum(axis=1))  # (N,) bounding spheres
+    b = a + dirs * length[:, None]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    cx, cy, cz = boxes.centers[:, 0], boxes.centers[:, 1], boxes.centers[:, 2]
+    # broad phase 1: the sphere's bounding cube overlaps the segment's bounding box (K, N)
+    near = (cx + radius >= lo[:, 0:1]) & (cx - radius <= hi[:, 0:1])
+    near &= (cy + radius >= lo[:, 1:2]) & (cy - radius <= hi[:, 1:2])
+    near &= (cz + radius >= lo[:, 2:3]) & (cz - radius <= hi[:, 2:3])
+    near[np.flatnonzero(ignore_a >= 0), ignore_a[ignore_a >= 0]] = False
+    near[np.flatnonzero(ignore_b >= 0), ignore_b[ignore_b >= 0]] = False
     rows, cols = np.nonzero(near)
+    if len(rows) == 0:
+        return blocked
+    # broad phase 2: the sphere comes within reach of the segment
+    rel = boxes.centers[cols] - a[rows]
+    along = np.clip((rel * dirs[rows]).sum(axis=1), 0.0, length[rows])
+    gap = rel - along[:, None] * dirs[rows]
+    keep = (gap**2).sum(axis=1) <= radius[cols] ** 2
+    rows, cols = rows[keep], cols[keep]
     if len(rows) == 0:
         return blocked
     rot = boxes.rotations[cols]  # (P, 3, 3), columns are the box axes
