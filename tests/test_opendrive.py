@@ -638,3 +638,22 @@ def test_world_to_road_near_agrees_with_world_to_road() -> None:
         assert (near.road_id, near.lane_id) == (full.road_id, full.lane_id)
         assert near.s == pytest.approx(full.s, abs=1e-6) and near.t == pytest.approx(full.t, abs=1e-6)
     assert answered > 250
+
+
+def test_shared_parses_a_file_once_per_content(tmp_path: Path) -> None:
+    """A worker's runs on one road share its parse and spatial index; a changed file is parsed again."""
+    source = Path(__file__).resolve().parents[1] / "examples" / "maps" / "highway.xodr"
+    road = tmp_path / "road.xodr"
+    road.write_bytes(source.read_bytes())
+    first = OpenDrive.shared(road)
+    assert first.world_to_road(100.0, -5.0) is not None  # builds the index on the shared network
+    assert OpenDrive.shared(road) is first
+    assert OpenDrive.shared(road).world_to_road(100.0, -5.0) == OpenDrive.from_file(road).world_to_road(
+        100.0, -5.0
+    )
+    road.write_bytes(source.read_bytes().replace(b'length="2000.0"', b'length="1500.0"', 1))
+    changed = OpenDrive.shared(road)
+    assert changed is not first and changed.roads["1"].length == 1500.0
+    road.write_text("<OpenDRIVE>")
+    with pytest.raises(OpenDriveError, match=r"road\.xodr: not well-formed XML"):
+        OpenDrive.shared(road)

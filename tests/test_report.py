@@ -149,3 +149,20 @@ def test_criteria_rows_and_swept_parameters() -> None:
         }
     ]
     assert swept_parameters([summary(0, 10.0, 1, True), summary(1, 20.0, 1, True)]) == ["speed"]
+
+
+def test_sweep_plots_are_svg_with_a_cell_per_value_pair_and_a_bar_per_bin() -> None:
+    from simcore.report.plots import distributions, heat_map, share_colour
+
+    assert (share_colour(0.0), share_colour(0.5), share_colour(1.0)) == ("#c62828", "#fdd835", "#2e7d32")
+    points = [(x, y, x + y < 4 or i == 0) for i in range(2) for x in (1.0, 2.0, 3.0) for y in (0.5, 1.5)]
+    svg = heat_map("speed", "gap", points)
+    assert svg.startswith('<svg role="img" aria-label="pass/fail heat map over speed and gap" class="plot"')
+    # x + y < 4 in 5 of the 6 cells; the sixth passed in one of its two runs
+    assert svg.count(">2/2<") == 5 and svg.count(">1/2<") == 1 and svg.count(">0/2<") == 0
+    assert svg.count(f'fill="{share_colour(1.0)}"') == 5  # the cells where every run passed
+    assert f'fill="{share_colour(0.5)}"' in svg
+    many = heat_map("a", "b", [(float(i), float(i % 3), i % 2 == 0) for i in range(30)])  # scatter
+    assert many.count("a2.4 2.4") == 2 * 30
+    hist = distributions({"minDistance": [1.0, 2.0, 2.5, 3.0, 9.0], "flat": [0.0, 1.0]})
+    assert hist.count('fill="#1565c0"') >= 4 and ">minDistance<" in hist and ">flat<" in hist
