@@ -453,11 +453,19 @@ class V2XService:
         rows, cols = np.nonzero(near)
         if len(rows) == 0:
             return [empty] * m
-        points = self._sample_points(sight)[cols].reshape(-1, 3)
-        clear = sight.clear(
-            np.repeat(origins[rows], 5, axis=0), points, np.repeat(owns[rows], 5), np.repeat(cols, 5)
-        )
-        visible = clear.reshape(-1, 5).any(axis=1)
+        samples = self._sample_points(sight)
+        # the box centres first; the four corners only of the boxes whose centre is hidden
+        visible = sight.clear(origins[rows], samples[cols, 0], owns[rows], cols)
+        hidden = np.flatnonzero(~visible)
+        if len(hidden):
+            r, c = rows[hidden], cols[hidden]
+            corners = sight.clear(
+                np.repeat(origins[r], 4, axis=0),
+                samples[c, 1:].reshape(-1, 3),
+                np.repeat(owns[r], 4),
+                np.repeat(c, 4),
+            )
+            visible[hidden] = corners.reshape(-1, 4).any(axis=1)
         rows, cols = rows[visible], cols[visible]
         bounds = np.searchsorted(rows, np.arange(m + 1))
         return [cols[bounds[i] : bounds[i + 1]] for i in range(m)]
