@@ -370,3 +370,18 @@ def test_reach_position_with_an_orientation_needs_that_heading(
     engine = engine_for(tmp_path, event("R", gen.speed_to(0.0), condition), place("Ego", 50, speed=10), road)
     trace = speeds(engine, 5.0)
     assert (trace[5.0] == 0.0) is fires
+
+
+def test_an_inline_trailer_is_an_entity_named_after_its_tow_vehicle(tmp_path: Path) -> None:
+    path = write_scenario(tmp_path, gen.GENERATORS["loading.inline_Trailer"](random.Random(4)))
+    scenario = load_scenario(path)
+    ego = next(e for e in scenario.entities if e.name == "Ego")
+    assert ego.trailer == "Ego+" and any(
+        e.name == "Ego+" and e.category == "trailer" for e in scenario.entities
+    )
+    result, trace = conformance.run_scenario(path, 30.0)
+    assert result.status == "ended"
+    (_, ex, ey), (_, tx, ty) = trace.tracks["Ego"][0], trace.tracks["Ego+"][0]
+    trailer = next(e for e in scenario.entities if e.name == "Ego+")
+    coupler, hitch = trailer.trailer_coupler, ego.trailer_hitch
+    assert math.hypot(ex - tx, ey - ty) == pytest.approx((coupler or 0) - (hitch or 0), abs=1e-6)  # behind it
