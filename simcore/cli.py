@@ -684,6 +684,8 @@ def conformance(
     if against is not None:
         if against != "esmini":
             raise _fail(BadInput(f"unknown reference player {against!r} (known: esmini)", field="--against"))
+        if esmini is not None and not (esmini.is_file() and os.access(esmini, os.X_OK)):
+            raise _fail(BadInput("not an executable file", file=str(esmini), field="--esmini"))
         player = find_esmini(esmini)
         if player is None:
             raise _fail(CarlosError("no esmini binary: give --esmini PATH or set ESMINI=/path/to/esmini"))

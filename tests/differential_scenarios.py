@@ -1213,3 +1213,21 @@ def _c_reach_orientation(rng: random.Random) -> str:
         "Ego", f'<ReachPositionCondition tolerance="{r1(rng.uniform(1, 4))}">{where}</ReachPositionCondition>'
     )
     return _reacting(s, rng, cond)
+
+
+@feature("loading.inline_Trailer")
+def _l_inline_trailer(rng: random.Random) -> str:
+    # OpenSCENARIO 1.3: a truck with its trailer defined inline; esmini creates the trailer as "<name>+"
+    coupler = r1(rng.uniform(3, 8))
+    trailer = (
+        '<Trailer><Trailer name="box"><Vehicle name="box" vehicleCategory="trailer">'
+        '<BoundingBox><Center x="0" y="0" z="1.5"/><Dimensions width="2.5" length="8" height="3"/></BoundingBox>'
+        '<Performance maxSpeed="40" maxAcceleration="5" maxDeceleration="9"/>'
+        '<Axles><FrontAxle maxSteering="0" wheelDiameter="0.8" trackWidth="2" positionX="0" positionZ="0.4"/>'
+        '<RearAxle maxSteering="0" wheelDiameter="0.8" trackWidth="2" positionX="0" positionZ="0.4"/></Axles>'
+        f'<Properties/><TrailerCoupler dx="{coupler}"/></Vehicle></Trailer></Trailer>'
+    )
+    ev = event("S", speed_to(r1(rng.uniform(5, 20)), "linear", "rate", 2), at(rng.uniform(0.5, 2)))
+    text = _simple(rng, road=HIGHWAY, stories=one_story(ev), minor="3")
+    hitch = f'<TrailerHitch dx="{r1(rng.uniform(-1.5, 0))}"/>'
+    return text.replace("<Properties/>\n  </Vehicle>", f"<Properties/>{hitch}{trailer}\n  </Vehicle>", 1)

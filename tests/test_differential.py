@@ -5,6 +5,7 @@ there ($ESMINI) — a sample of generated scenarios of every feature type run by
 from __future__ import annotations
 
 import math
+import os
 import random
 import subprocess
 import sys
@@ -73,13 +74,26 @@ def test_against_an_unknown_player_is_bad_input(tmp_path: Path) -> None:
     assert "--against" in result.stdout + result.stderr and "carla" in result.stdout + result.stderr
 
 
-def test_against_esmini_without_the_binary_is_an_infrastructure_error(tmp_path: Path) -> None:
+def test_against_esmini_with_a_missing_binary_is_bad_input(tmp_path: Path) -> None:
     path = write_scenario(tmp_path, gen.GENERATORS["action.TeleportAction"](random.Random(1)))
     result = run_cli(str(path), "--against", "esmini", "--esmini", str(tmp_path / "no-such-esmini"))
-    # --esmini names a missing file: the search goes on with $ESMINI and PATH, so only assert when neither has one
-    if result.returncode != 0:
-        assert result.returncode == 3
-        assert "no esmini binary" in result.stdout + result.stderr
+    assert result.returncode == 2
+    assert "no-such-esmini" in result.stdout + result.stderr and "--esmini" in result.stdout + result.stderr
+
+
+def test_against_esmini_without_any_binary_is_an_infrastructure_error(tmp_path: Path) -> None:
+    path = write_scenario(tmp_path, gen.GENERATORS["action.TeleportAction"](random.Random(1)))
+    env = {k: v for k, v in os.environ.items() if k != "ESMINI"}
+    env["PATH"] = str(tmp_path)  # no esmini on it
+    result = subprocess.run(
+        [sys.executable, "-m", "simcore.cli", "conformance", str(path), "--against", "esmini"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=env,
+    )
+    assert result.returncode == 3
+    assert "no esmini binary" in result.stdout + result.stderr
 
 
 def test_every_generator_writes_a_scenario_carlos_loads(tmp_path: Path) -> None:
@@ -370,3 +384,18 @@ def test_reach_position_with_an_orientation_needs_that_heading(
     engine = engine_for(tmp_path, event("R", gen.speed_to(0.0), condition), place("Ego", 50, speed=10), road)
     trace = speeds(engine, 5.0)
     assert (trace[5.0] == 0.0) is fires
+
+
+def test_an_inline_trailer_is_an_entity_named_after_its_tow_vehicle(tmp_path: Path) -> None:
+    path = write_scenario(tmp_path, gen.GENERATORS["loading.inline_Trailer"](random.Random(4)))
+    scenario = load_scenario(path)
+    ego = next(e for e in scenario.entities if e.name == "Ego")
+    assert ego.trailer == "Ego+" and any(
+        e.name == "Ego+" and e.category == "trailer" for e in scenario.entities
+    )
+    result, trace = conformance.run_scenario(path, 30.0)
+    assert result.status == "ended"
+    (_, ex, ey), (_, tx, ty) = trace.tracks["Ego"][0], trace.tracks["Ego+"][0]
+    trailer = next(e for e in scenario.entities if e.name == "Ego+")
+    coupler, hitch = trailer.trailer_coupler, ego.trailer_hitch
+    assert math.hypot(ex - tx, ey - ty) == pytest.approx((coupler or 0) - (hitch or 0), abs=1e-6)  # behind it

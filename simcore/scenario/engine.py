@@ -266,6 +266,9 @@ class ScenarioEngine:
                     pull_trailer(current, trailer)
                 else:
                     align_trailer(current, trailer)
+                    if current.placed and not current.gone and not trailer.placed:
+                        # a trailer without a position of its own is where its tow vehicle puts it
+                        trailer.placed, trailer.gone = True, False
                 self.track_road(trailer)
                 current = trailer
 

@@ -109,6 +109,8 @@ class _Reader:
         self._catalog_files: dict[Path, ET.Element | None] = {}
         self._catalog_roots: list[ET.Element] = []
         self.variables: dict[str, ParamValue] = {}
+        # inline trailers met while reading an entity: (their entity name, the Trailer element defining them)
+        self.inline_trailers: list[tuple[str, ET.Element]] = []
 
     def line(self, element: ET.Element | None) -> int | None:
         return None if element is None else self.lines.get(id(element))
@@ -488,6 +490,13 @@ def _entities(reader: _Reader, element: ET.Element, catalogs: dict[str, Path]) -
     for obj in element.findall("ScenarioObject"):
         name = reader.attr(obj, "name")
         entities.append(reader.within(obj, name, _entity, reader, obj, name, catalogs))
+        # a trailer defined inline is an entity of its own, named after its tow vehicle with a "+" (as esmini
+        # names it; a trailer's own inline trailer gets another "+")
+        while reader.inline_trailers:
+            trailer_name, trailer = reader.inline_trailers.pop(0)
+            entities.append(
+                reader.within(trailer, trailer_name, _entity, reader, trailer, trailer_name, catalogs)
+            )
     if element.find("EntitySelection") is not None:
         raise reader.fail("EntitySelection is not supported yet", element)
     return entities
@@ -549,7 +558,7 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         )
         properties = _properties(reader, body)
         wheelbase, max_steering = _axles(reader, body)
-        hitch, coupler, trailer = _trailer(reader, body)
+        hitch, coupler, trailer = _trailer(reader, body, name)
     finally:
         if pushed:
             reader.pop()
@@ -574,10 +583,10 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
     )
 
 
-def _trailer(reader: _Reader, body: ET.Element) -> tuple[float | None, float | None, str | None]:
+def _trailer(reader: _Reader, body: ET.Element, owner: str) -> tuple[float | None, float | None, str | None]:
     """A vehicle's TrailerHitch dx, TrailerCoupler dx and the entity it tows from the start (Trailer/TrailerRef,
-    OpenSCENARIO 1.3; an empty reference tows nothing). A trailer defined inline is warned about: it is not
-    created."""
+    OpenSCENARIO 1.3; an empty reference tows nothing). A trailer defined inline (Trailer/Trailer with its
+    Vehicle or CatalogReference) becomes the entity `<owner>+`, read after the owner."""
     hitch_el, coupler_el = body.find("TrailerHitch"), body.find("TrailerCoupler")
     hitch = reader.num(hitch_el, "dx", 0.0) if hitch_el is not None else None
     coupler = reader.num(coupler_el, "dx", 0.0) if coupler_el is not None else None
@@ -585,12 +594,12 @@ def _trailer(reader: _Reader, body: ET.Element) -> tuple[float | None, float | N
     towed = body.find("Trailer")
     if towed is not None:
         ref = towed.find("TrailerRef")
+        inline = towed.find("Trailer")
         if ref is not None:
             trailer = reader.attr(ref, "entityRef", "") or None
-        else:
-            reader.warn(
-                "an inline Trailer is not created (only Trailer/TrailerRef to a declared entity)", towed
-            )
+        elif inline is not None:
+            trailer = f"{owner}+"
+            reader.inline_trailers.append((trailer, inline))
     return hitch, coupler, trailer
 
 
