@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +43,7 @@ def _frame(step: int) -> WorldFrame:
     )
     heading = 0.1 * t
     truck = EntityState(
-        name="lead truck",
+        name="lead_truck",
         object_type="vehicle",
         category="truck",
         x=50.0 + 20.0 * t,
@@ -125,7 +126,7 @@ def test_mcap_reader_decodes_values(tmp_path: Path, compression: Any) -> None:
     last = tfs[-1]
     assert [t.child_frame_id for t in last.transforms] == ["Ego/base_link", "lead_truck/base_link"]
     assert all(t.header.frame_id == "map" for t in last.transforms)
-    truck = FRAMES[-1].entity("lead truck")
+    truck = FRAMES[-1].entity("lead_truck")
     tr = last.transforms[1].transform
     assert tr.translation.x == pytest.approx(truck.x)
     assert tr.translation.y == pytest.approx(3.5)
@@ -146,7 +147,7 @@ def test_mcap_reader_decodes_values(tmp_path: Path, compression: Any) -> None:
     dets = [m for topic, _, _, m in msgs if topic == "/carlos/objects"]
     arr = dets[-1]
     assert arr.header.frame_id == "map"
-    assert [d.id for d in arr.detections] == ["Ego", "lead truck"]
+    assert [d.id for d in arr.detections] == ["Ego", "lead_truck"]
     d = arr.detections[1]
     assert d.results[0].hypothesis.class_id == "truck"
     assert d.results[0].hypothesis.score == 1.0
@@ -267,15 +268,21 @@ def test_bad_arguments(tmp_path: Path) -> None:
             rec.write("/a", "tf2_msgs/msg/TFMessage", messages.tf(FRAMES[0]), 0.0)
 
 
-def test_entity_name_collision_is_an_error() -> None:
+def test_entity_names_map_to_ros_names_injectively() -> None:
+    """`lead_truck` and `lead-truck` are two vehicles with two frames and two topics; a valid name is kept."""
     a = FRAMES[0].entities[1]
+    assert a.name == "lead_truck"
     b = EntityState(**{**{s: getattr(a, s) for s in a.__slots__}, "name": "lead-truck"})
     frame = WorldFrame(step=0, time=0.0, entities=(a, b))
-    with pytest.raises(ValueError, match="lead_truck"):
-        messages.frame_messages(frame)
-    assert messages.ros_name("1st car") == "e1st_car"
+    topics = {topic for topic, _, _ in messages.frame_messages(frame)}
+    assert {"/carlos/lead_truck/odometry", f"/carlos/{messages.ros_name('lead-truck')}/odometry"} <= topics
+    assert messages.ros_name("lead-truck").startswith("lead_truck_")
     assert messages.ros_name("Ego") == "Ego"
-    assert messages.ros_name("a//b--c") == "a_b_c"
+    assert messages.ros_name("1st car").startswith("e1st_car_")
+    names = ["Ego_0_-1", "Ego_0_1", "car-2", "car 2", "car_2", "a//b--c", "a_b_c", "", "entity"]
+    tokens = [messages.ros_name(n) for n in names]
+    assert len(set(tokens)) == len(names)
+    assert all(re.fullmatch(r"[A-Za-z][A-Za-z0-9]*(_[A-Za-z0-9]+)*", t) for t in tokens), tokens
 
 
 def test_bytes_per_frame(tmp_path: Path) -> None:

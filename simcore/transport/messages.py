@@ -10,9 +10,11 @@ Every builder is a pure function of a :class:`~simcore.world.state.WorldFrame`; 
 from 0 (`/clock` and every header carry `frame.time`). Frames follow REP-103/105: the world frame is
 `map` (ENU), each entity's frame `<entity>/base_link` at its reference point (x forward, y left, z up).
 
-Entity names become ROS name tokens through :func:`ros_name` (characters other than letters, digits and
-`_` become `_`, runs of `_` collapse, a leading digit gets an `e` prefix); two entities whose names map to
-the same token are an error rather than two vehicles silently sharing one frame.
+Entity names become ROS name tokens through :func:`ros_name`, injectively: a name that is a valid token
+stays as it is; any other is made one (characters other than letters, digits and `_` become `_`, runs of
+`_` collapse, a leading digit gets an `e` prefix) and gets the first 6 hex digits of its SHA-256 as a
+suffix, so `Ego_0_-1` and `Ego_0_1` (or `car-2` and `car 2`) never share a frame. The original name stays
+in the messages that name entities (ground truth ids, metadata).
 
 `/carlos/status` uses `diagnostic_msgs/msg/DiagnosticStatus` (see :func:`status`).
 """
@@ -143,14 +145,20 @@ _INVALID = re.compile(r"[^A-Za-z0-9_]+")
 _UNDERSCORES = re.compile(r"_{2,}")
 
 
+@cache
 def ros_name(name: str) -> str:
-    """`name` as a valid ROS 2 name token (letters, digits, single `_`, not starting with a digit)."""
+    """`name` as a valid ROS 2 name token (letters, digits, single `_`, not starting with a digit), one token
+    per name: a name that needed changing carries a hash of itself (`car 2` → `car_2_4f1c2a`)."""
     token = _UNDERSCORES.sub("_", _INVALID.sub("_", name)).strip("_")
     if not token:
         token = "entity"
     if token[0].isdigit():
         token = "e" + token
-    return token
+    if token == name:
+        return token
+    import hashlib
+
+    return f"{token}_{hashlib.sha256(name.encode()).hexdigest()[:6]}"
 
 
 def base_link(entity: str) -> str:
