@@ -11,6 +11,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from math import prod
 
+from simcore.errors import BadInput
 from simcore.spec import ParameterValue, ScenarioRef, SimulationRunSpec
 
 
@@ -48,6 +49,12 @@ class Plan(Sequence[RunPoint]):
             (name, tuple(values)) for name, values in spec.sweep.matrix.items()
         )
         self.distribution = None
+        if spec.sweep.distribution_config_map_ref is not None:
+            raise BadInput(
+                "a distribution from a ConfigMap exists on a cluster only (the operator reads it); locally "
+                "give the file's path in 'distribution'",
+                field="spec.sweep.distributionConfigMapRef",
+            )
         if spec.sweep.distribution:
             from simcore.scenario.distribution import load_distribution
 

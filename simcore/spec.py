@@ -193,6 +193,19 @@ class Sweep(Model):
             "after its keys. Its ScenarioFile is not used: the scenarios are spec.scenarios. Default: none."
         ),
     )
+    distribution_config_map_ref: ConfigMapKeyRef | None = Field(
+        None,
+        description=(
+            "The distribution file (as `distribution`) from a ConfigMap key (cluster only; `carlos submit` "
+            "packs a local distribution file there). Default: none."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _one_distribution(self) -> Sweep:
+        if self.distribution is not None and self.distribution_config_map_ref is not None:
+            raise ValueError("set at most one of 'distribution' and 'distributionConfigMapRef'")
+        return self
 
     @field_validator("matrix")
     @classmethod

@@ -192,3 +192,88 @@ def test_configmap_names_stay_dns_labels() -> None:
     assert inputs_name("demo") == "demo-inputs"
     long = inputs_name("x" * 63)
     assert len(long) <= 63 and long.endswith("-inputs")
+
+
+DISTRIBUTION = """<?xml version="1.0" encoding="UTF-8"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="2" date="2026-11-25T00:00:00" description="two speeds" author="tests"/>
+  <ParameterValueDistribution>
+    <ScenarioFile filepath="braking.xosc"/>
+    <Deterministic>
+      <DeterministicSingleParameterDistribution parameterName="Speed">
+        <DistributionSet><Element value="20.0"/><Element value="25.0"/></DistributionSet>
+      </DeterministicSingleParameterDistribution>
+    </Deterministic>
+  </ParameterValueDistribution>
+</OpenSCENARIO>
+"""
+
+
+def distribution_manifest(folder: Path, name: str = "dist", max_seconds: float = 40) -> Path:
+    """A sweep over a local distribution file of 2 points on the braking example (beside the manifest)."""
+    (folder / "speeds.xosc").write_text(DISTRIBUTION)
+    manifest = folder / f"{name}.yaml"
+    manifest.write_text(
+        f"""apiVersion: carlos.dev/v1alpha1
+kind: SimulationRun
+metadata: {{name: {name}}}
+spec:
+  scenarios:
+    - name: braking
+      openscenario: {ROOT / "examples" / "scenarios" / "braking.xosc"}
+  sweep: {{distribution: speeds.xosc}}
+  simulation: {{stepSeconds: 0.1, maxSeconds: {max_seconds}}}
+  evaluation: {{criteria: ["simSeconds <= 100"]}}
+"""
+    )
+    return manifest
+
+
+def test_a_local_distribution_is_packed_and_reaches_the_pods_beside_the_spec(tmp_path: Path) -> None:
+    from carlos_operator.builders import DISTRIBUTION_FILE, SPEC_FILE
+
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan
+    from tests.apiserver import admit
+
+    result = carlos("submit", distribution_manifest(tmp_path), "--dry-run", "-o", "yaml", "-n", "sims")
+    assert result.returncode == 0, result.stderr
+    configmap, body = _objects(result.stdout)
+    assert configmap is not None
+    admit(configmap)
+    admit(body)  # the strict stand-in: the shipped CRD knows distributionConfigMapRef
+    sweep = body["spec"]["sweep"]
+    assert "distribution" not in sweep
+    assert sweep["distributionConfigMapRef"] == {"name": "dist-inputs", "key": "speeds.xosc"}
+    assert configmap["data"]["speeds.xosc"] == DISTRIBUTION
+    # the operator hands the file it read to the pods beside the spec they load
+    run = SimulationRun.model_validate(body)
+    owner = {
+        "metadata": {"name": "dist", "uid": "u1", "namespace": "sims"},
+        "apiVersion": "carlos.dev/v1alpha1",
+    }
+    cm = build_configmap(run, owner, OperatorSettings.from_env({}), DISTRIBUTION)
+    admit(cm)
+    pod_dir = tmp_path / "pod"
+    pod_dir.mkdir()
+    for key, text in cm["data"].items():
+        (pod_dir / key).write_text(text)
+    assert set(cm["data"]) == {SPEC_FILE, DISTRIBUTION_FILE}
+    plan = Plan(load_manifest(pod_dir / SPEC_FILE).spec)
+    assert [p.parameters["Speed"] for p in plan] == ["20.0", "25.0"]
+
+
+def test_a_distribution_over_the_configmap_limit_goes_to_the_object_store(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from simcore.manifest import load_manifest
+    from simcore.workflow import submit
+
+    monkeypatch.setattr(submit, "CONFIGMAP_LIMIT", 1000)
+    manifest = distribution_manifest(tmp_path)
+    packed = submit.pack(load_manifest(manifest), manifest, "default", results_url="s3://bucket/out")
+    assert packed.configmap() is None
+    sweep = packed.run["spec"]["sweep"]
+    assert sweep["distribution"] == "s3://bucket/out/dist/inputs/speeds.xosc"
+    assert "distributionConfigMapRef" not in sweep
+    assert packed.uploads["dist/inputs/speeds.xosc"].decode() == DISTRIBUTION
