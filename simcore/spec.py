@@ -201,6 +201,17 @@ class Sweep(Model):
         ),
     )
 
+    indexes: list[Annotated[int, Field(ge=0)]] | None = Field(
+        None,
+        min_length=1,
+        max_length=100_000,
+        description=(
+            "Run only these indexes of the sweep, in this order: index k of this run is index `indexes[k]` "
+            "of the whole sweep (the same scenario, parameters and seed). `carlos rerun --failed` sets it "
+            "for a run on a cluster. Default: every index."
+        ),
+    )
+
     @model_validator(mode="after")
     def _one_distribution(self) -> Sweep:
         if self.distribution is not None and self.distribution_config_map_ref is not None:

@@ -209,7 +209,9 @@ DISTRIBUTION = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
-def distribution_manifest(folder: Path, name: str = "dist", max_seconds: float = 40) -> Path:
+def distribution_manifest(
+    folder: Path, name: str = "dist", max_seconds: float = 40, criterion: str = "simSeconds <= 100"
+) -> Path:
     """A sweep over a local distribution file of 2 points on the braking example (beside the manifest)."""
     (folder / "speeds.xosc").write_text(DISTRIBUTION)
     manifest = folder / f"{name}.yaml"
@@ -223,7 +225,7 @@ spec:
       openscenario: {ROOT / "examples" / "scenarios" / "braking.xosc"}
   sweep: {{distribution: speeds.xosc}}
   simulation: {{stepSeconds: 0.1, maxSeconds: {max_seconds}}}
-  evaluation: {{criteria: ["simSeconds <= 100"]}}
+  evaluation: {{criteria: ["{criterion}"]}}
 """
     )
     return manifest
@@ -277,3 +279,93 @@ def test_a_distribution_over_the_configmap_limit_goes_to_the_object_store(
     assert sweep["distribution"] == "s3://bucket/out/dist/inputs/speeds.xosc"
     assert "distributionConfigMapRef" not in sweep
     assert packed.uploads["dist/inputs/speeds.xosc"].decode() == DISTRIBUTION
+
+
+def test_a_rerun_of_a_cluster_run_is_a_new_run_over_its_failed_indexes() -> None:
+    from simcore.workflow.rerun import cluster_rerun, rerun_name
+
+    obj = {
+        "metadata": {"name": "dist", "namespace": "sims"},
+        "spec": {
+            "scenarios": [{"name": "b", "configMapRef": {"name": "dist-inputs", "key": "braking.xosc"}}],
+            "sweep": {"distributionConfigMapRef": {"name": "dist-inputs", "key": "speeds.xosc"}},
+            "suspend": True,
+        },
+    }
+    packed = cluster_rerun(obj, [1, 3], "dist-rerun", {"braking.xosc": "a", "speeds.xosc": "b"})
+    spec = packed.run["spec"]
+    assert spec["sweep"]["indexes"] == [1, 3] and "suspend" not in spec
+    assert spec["scenarios"][0]["configMapRef"]["name"] == "dist-rerun-inputs"
+    assert spec["sweep"]["distributionConfigMapRef"]["name"] == "dist-rerun-inputs"
+    assert packed.configmap() is not None and packed.files == {"braking.xosc": "a", "speeds.xosc": "b"}
+    # a rerun of a rerun: its indexes are the whole sweep's
+    again = cluster_rerun(packed.run, [1], "dist-rerun-2", None)
+    assert again.run["spec"]["sweep"]["indexes"] == [3]
+    assert rerun_name("dist", {"dist-rerun"}.__contains__) == "dist-rerun-2"
+    assert len(rerun_name("x" * 63, lambda _: False)) <= 63
+
+
+@pytest.mark.s3
+@pytest.mark.timeout(400)
+def test_a_submitted_distribution_runs_on_the_cluster_and_its_failures_rerun_there(
+    env: tuple[Cluster, Kube],  # noqa: F811 - the fixture imported from tests.test_operator
+    s3_server: S3Server,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """2 points of a local distribution (Speed 20 passes maxSpeed <= 22, Speed 25 fails it), then
+    `carlos rerun dist --failed`: a new SimulationRun over index 1 only, same parameters and seed."""
+    c, kube = env
+    monkeypatch.setenv("CARLOS_DEFAULT_S3_SECRET", "s3")  # the Helm value: the manifest names no Secret
+    c.start_operator()
+    manifest = distribution_manifest(tmp_path, max_seconds=2, criterion="maxSpeed <= 22")
+    dry = carlos("submit", manifest, "--dry-run", "-n", "default")
+    planned, _ = _objects(dry.stdout)
+    assert planned is not None
+    for name in ("dist-inputs", "dist-rerun-inputs"):  # the kubelet stand-in's scenario mounts
+        mounted = tmp_path / "scenarios" / name
+        mounted.mkdir(parents=True)
+        for key, text in planned["data"].items():
+            (mounted / key).write_text(text)
+    python_path = {"PYTHONPATH": os.environ["PYTHONPATH"]} if os.environ.get("PYTHONPATH") else {}
+    jobs = JobRunner(
+        kube=kube,
+        workdir=tmp_path,
+        extra_env={
+            "AWS_REGION": s3_server.region,
+            "CARLOS_SCENARIO_DIR": str(tmp_path / "scenarios"),
+            **python_path,
+        },
+    ).start()
+    s3_env = s3_server.env()
+    try:
+        result = carlos("submit", manifest, "-n", "default", "--results", f"s3://{s3_server.bucket}/d")
+        assert result.returncode == 0, result.stderr
+        st = wait_for(lambda: terminal(kube, "dist"), 150, "a terminal phase")
+        assert st["phase"] == "Failed" and (st["total"], st["passed"], st["testFailures"]) == (2, 1, 1), st
+        for key, value in s3_env.items():
+            monkeypatch.setenv(key, value)  # the client reads the results (as a user with S3 access)
+        rerun = carlos("rerun", "dist", "--failed", "-n", "default")
+        assert rerun.returncode == 0, rerun.stderr
+        assert "dist-rerun: rerunning indexes 1 of dist" in rerun.stdout
+        again = wait_for(lambda: terminal(kube, "dist-rerun"), 150, "a terminal phase of the rerun")
+    finally:
+        jobs.stop()
+    assert jobs.errors == []
+    assert again["phase"] == "Failed" and (again["total"], again["testFailures"]) == (1, 1), again
+    body = kube.custom.get_namespaced_custom_object(
+        "carlos.dev", "v1alpha1", "default", "simulationruns", "dist-rerun"
+    )
+    assert body["spec"]["sweep"]["indexes"] == [1]
+    inputs = next(m for m in c.objects("configmaps") if m["metadata"]["name"] == "dist-rerun-inputs")
+    assert inputs["metadata"]["ownerReferences"][0]["uid"] == body["metadata"]["uid"]
+    assert inputs["data"] == planned["data"]
+    store = open_store(
+        f"s3://{s3_server.bucket}/d/default", endpoint=s3_server.endpoint, region=s3_server.region
+    )
+    old = json.loads(store.get_bytes("dist/1/summary.json"))
+    new = json.loads(store.get_bytes("dist-rerun/0/summary.json"))
+    assert old["parameters"]["Speed"] == new["parameters"]["Speed"] == "25.0"
+    assert old["seed"] == new["seed"] and new["status"] == "failed"
+    for run in ("dist", "dist-rerun"):
+        assert "<h1>SimulationRun" in store.get_bytes(f"{run}/report.html").decode()
