@@ -93,6 +93,8 @@ POD_SAMPLE = 20
 REPORT_INDEXES = 1000
 #: bird's-eye plots (recordings read) of a run's report.html
 REPORT_WORST = 6
+#: tries of writing report.html before the run finishes without it
+REPORT_ATTEMPTS = 3
 #: a distribution file the operator copies into a Job's ConfigMap (1 MiB at most, with the spec)
 MAX_DISTRIBUTION_BYTES = 900 * 1024
 #: a missing prerequisite is looked for again after 5 s, 10 s, 20 s … at most this often
@@ -835,18 +837,27 @@ class Controller:
         from simcore.report.html import write_after_run
 
         assert state.run is not None
-        try:
-            write_after_run(
-                state.store,
-                state.run,
-                summary,
-                sample.summaries(),
-                omitted=sample.omitted,
-                worst=REPORT_WORST,
-            )
-        except Exception as exc:  # the report never changes the run's outcome (as `carlos run`)
-            metrics.ERRORS.labels(kind="ReportFailed").inc()
-            log.warning("%s: writing report.html failed: %s: %s", state.run.name, type(exc).__name__, exc)
+        for attempt in range(REPORT_ATTEMPTS):  # a passing store or API error is tried again
+            try:
+                write_after_run(
+                    state.store,
+                    state.run,
+                    summary,
+                    sample.summaries(),
+                    omitted=sample.omitted,
+                    worst=REPORT_WORST,
+                )
+                return
+            except Exception as exc:  # the report never changes the run's outcome (as `carlos run`)
+                log.warning(
+                    "%s: writing report.html failed (attempt %d/%d): %s: %s",
+                    state.run.name,
+                    attempt + 1,
+                    REPORT_ATTEMPTS,
+                    type(exc).__name__,
+                    exc,
+                )
+        metrics.ERRORS.labels(kind="ReportFailed").inc()
 
     def _maybe(self, state: RunState, index: int) -> dict[str, Any] | None:
         from simcore.store import NotFoundError
