@@ -390,7 +390,7 @@ def _preflight_scenarios(simulation_run: Any, manifest: Path) -> None:
 
             search_space(simulation_run, path)
             continue
-        parsed = load_scenario(path, plan[plan.indexes_of(scenario.name).start].parameters)
+        parsed = load_scenario(path, plan.sweep_point(plan.indexes_of(scenario.name).start).parameters)
         if parsed.road_file is not None:
             check_road_file(parsed.road_file, scenario_file=str(path))
 

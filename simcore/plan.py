@@ -8,9 +8,10 @@ materialised: any index is computed alone, on any machine, in O(number of matrix
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from math import prod
 
+from simcore.errors import BadInput
 from simcore.spec import ParameterValue, ScenarioRef, SimulationRunSpec
 
 
@@ -48,6 +49,12 @@ class Plan(Sequence[RunPoint]):
             (name, tuple(values)) for name, values in spec.sweep.matrix.items()
         )
         self.distribution = None
+        if spec.sweep.distribution_config_map_ref is not None:
+            raise BadInput(
+                "a distribution from a ConfigMap exists on a cluster only (the operator reads it); locally "
+                "give the file's path in 'distribution'",
+                field="spec.sweep.distributionConfigMapRef",
+            )
         if spec.sweep.distribution:
             from simcore.scenario.distribution import load_distribution
 
@@ -56,8 +63,18 @@ class Plan(Sequence[RunPoint]):
         self.permutations = self.matrix_permutations * (len(self.distribution) if self.distribution else 1)
         self.repetitions = spec.sweep.repetitions
         self.per_scenario = self.permutations * self.repetitions
+        self.selected = spec.sweep.indexes
+        whole = len(self.spec.scenarios) * self.per_scenario
+        for index in self.selected or ():
+            if index >= whole:
+                raise BadInput(
+                    f"index {index} is out of range: the sweep has {whole} indexes",
+                    field="spec.sweep.indexes",
+                )
 
     def __len__(self) -> int:
+        if self.selected is not None:
+            return len(self.selected)
         return len(self.spec.scenarios) * self.per_scenario
 
     def __getitem__(self, index: int) -> RunPoint:  # type: ignore[override]
@@ -66,6 +83,12 @@ class Plan(Sequence[RunPoint]):
         total = len(self)
         if not 0 <= index < total:
             raise IndexError(f"index {index} is out of range 0..{total - 1}")
+        if self.selected is not None:  # index k runs the sweep's index selected[k]
+            return replace(self.sweep_point(self.selected[index]), index=index)
+        return self.sweep_point(index)
+
+    def sweep_point(self, index: int) -> RunPoint:
+        """Index `index` of the whole sweep (`spec.sweep.indexes` aside)."""
         scenario_index, k = divmod(index, self.per_scenario)
         perm, repetition = divmod(k, self.repetitions)
         scenario = self.spec.scenarios[scenario_index]
@@ -91,6 +114,7 @@ class Plan(Sequence[RunPoint]):
             yield self[index]
 
     def indexes_of(self, scenario_name: str) -> range:
+        """The indexes of a scenario in the whole sweep (without `spec.sweep.indexes`)."""
         for position, scenario in enumerate(self.spec.scenarios):
             if scenario.name == scenario_name:
                 return range(position * self.per_scenario, (position + 1) * self.per_scenario)

@@ -193,6 +193,30 @@ class Sweep(Model):
             "after its keys. Its ScenarioFile is not used: the scenarios are spec.scenarios. Default: none."
         ),
     )
+    distribution_config_map_ref: ConfigMapKeyRef | None = Field(
+        None,
+        description=(
+            "The distribution file (as `distribution`) from a ConfigMap key (cluster only; `carlos submit` "
+            "packs a local distribution file there). Default: none."
+        ),
+    )
+
+    indexes: list[Annotated[int, Field(ge=0)]] | None = Field(
+        None,
+        min_length=1,
+        max_length=100_000,
+        description=(
+            "Run only these indexes of the sweep, in this order: index k of this run is index `indexes[k]` "
+            "of the whole sweep (the same scenario, parameters and seed). `carlos rerun --failed` sets it "
+            "for a run on a cluster. Default: every index."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _one_distribution(self) -> Sweep:
+        if self.distribution is not None and self.distribution_config_map_ref is not None:
+            raise ValueError("set at most one of 'distribution' and 'distributionConfigMapRef'")
+        return self
 
     @field_validator("matrix")
     @classmethod

@@ -147,6 +147,9 @@ def test_run_succeeds_end_to_end(
     summary = json.loads(store.get_bytes("e2e-pass/summary.json"))
     assert summary["counts"]["passed"] == 3 and summary["status"] == "passed"
     assert "<testcase" in store.get_bytes("e2e-pass/junit.xml").decode()
+    # the report beside the summary, its links relative to it (the recordings of the run)
+    page = store.get_bytes("e2e-pass/report.html").decode()
+    assert "SimulationRun e2e-pass" in page and 'href="0/recording.mcap"' in page
     reasons = {e.get("reason") for e in c.objects("events")}
     assert {"JobCreated", "Succeeded"} <= reasons
 

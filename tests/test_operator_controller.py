@@ -703,3 +703,126 @@ def test_a_rounds_job_that_fails_before_every_index_finished_ends_the_search() -
     assert kube.job_creates == 1 and not store.exists("s/search/state.json")  # never told, no round 1
     assert final["search"]["rounds"] == "0/2" and final["search"]["round"] is None
     assert json.loads(store.objects["s/search.json"])["runs"] == 0 and "s/summary.json" in store.objects
+
+
+class ReportlessStore(FakeStore):
+    """An object store that refuses report.html (a store hiccup, a plot of unusual data)."""
+
+    def put_bytes(self, key: str, data: bytes) -> None:
+        if key.endswith("/report.html"):
+            raise OSError("the store refused report.html")
+        super().put_bytes(key, data)
+
+
+def _finish_run(kube: FakeKube, store: FakeStore, n: int, failed: int | None = None) -> dict[str, Any]:
+    for i in range(n):
+        store.put_bytes(f"r/{i}/summary.json", summary(i, "failed" if i == failed else "passed"))
+    c = controller(kube, store)
+    c.observe_run("ADDED", run_body("r", "uid-1", n))
+    drain(c)
+    job = kube.jobs[job_name("r")]
+    done = [i for i in range(n) if i != failed]
+    job["status"] = {
+        "completedIndexes": format_intervals(done),
+        "failedIndexes": format_intervals([] if failed is None else [failed]),
+        "conditions": [
+            {"type": "Failed" if failed is not None else "Complete", "status": "True", "reason": "Done"}
+        ],
+    }
+    c.observe_job("MODIFIED", job)
+    drain(c)
+    return kube.status_patches[-1]
+
+
+def test_a_finished_run_gets_report_html_beside_its_summary() -> None:
+    kube, store = FakeKube(), FakeStore()
+    final = _finish_run(kube, store, 4, failed=2)
+    assert final["phase"] == "Failed"
+    page = store.objects["r/report.html"].decode()
+    assert "SimulationRun r" in page and "4 runs" in page and "1 failed" in page
+    assert "indexes shown" not in page  # every index of a small run is in it
+
+
+def test_a_report_that_cannot_be_written_never_changes_the_verdict() -> None:
+    for failed in (None, 1):
+        kube, store = FakeKube(), ReportlessStore()
+        final = _finish_run(kube, store, 3, failed=failed)
+        assert final["phase"] == ("Succeeded" if failed is None else "Failed")
+        assert json.loads(store.objects["r/summary.json"])["counts"]["total"] == 3
+        assert "r/report.html" not in store.objects and "r/junit.xml" in store.objects
+
+
+def test_the_report_of_a_large_run_holds_a_bounded_sample(monkeypatch: Any) -> None:
+    import carlos_operator.controller as controller_module
+
+    monkeypatch.setattr(controller_module, "REPORT_INDEXES", 5)
+    kube, store = FakeKube(), FakeStore()
+    final = _finish_run(kube, store, 12, failed=9)
+    assert final["phase"] == "Failed"
+    page = store.objects["r/report.html"].decode()
+    assert "5 of 12 indexes shown" in page and "12 runs" in page
+    assert page.count("<tr><td class=num>") == 5 and "<td class=num>9</td>" in page
+
+
+DISTRIBUTION = b"""<OpenSCENARIO><ParameterValueDistribution><ScenarioFile filepath="s.xosc"/><Deterministic>
+<DeterministicSingleParameterDistribution parameterName="Speed"><DistributionSet>
+<Element value="20"/><Element value="25"/><Element value="30"/></DistributionSet>
+</DeterministicSingleParameterDistribution></Deterministic></ParameterValueDistribution></OpenSCENARIO>
+"""
+
+
+def test_a_distribution_from_a_configmap_is_waited_for_expanded_and_handed_to_the_pods() -> None:
+    import yaml
+    from carlos_operator.builders import DISTRIBUTION_FILE, SPEC_FILE
+
+    kube, store = FakeKube(), FakeStore()
+    body = run_body("d", "uid-1", 2)
+    body["spec"]["sweep"]["distributionConfigMapRef"] = {"name": "d-inputs", "key": "speeds.xosc"}
+    c = controller(kube, store, backoff=3600.0)
+    c.observe_run("ADDED", body)
+    drain(c)
+    assert kube.jobs == {} and kube.status_patches[-1]["conditions"][-1]["reason"] == "ConfigMapNotFound"
+    kube.configmaps["d-inputs"] = {"metadata": {"name": "d-inputs"}, "data": {"other": "x"}}
+    c = controller(kube, store)
+    c.observe_run("ADDED", body)
+    drain(c)
+    rejected = kube.status_patches[-1]["conditions"][0]
+    assert (
+        rejected["reason"] == "InvalidSpec"
+        and "spec.sweep.distributionConfigMapRef.key" in rejected["message"]
+    )
+    kube.configmaps["d-inputs"]["data"]["speeds.xosc"] = DISTRIBUTION.decode()
+    kube.status_patches.clear()
+    c = controller(kube, store)
+    c.observe_run("ADDED", body)
+    drain(c)
+    job = kube.jobs[job_name("d")]
+    assert job["spec"]["completions"] == 6  # 3 speeds x 2 repetitions
+    data = kube.configmaps[job_name("d")]["data"]
+    assert data[DISTRIBUTION_FILE] == DISTRIBUTION.decode()
+    sweep = yaml.safe_load(data[SPEC_FILE])["spec"]["sweep"]
+    assert sweep["distribution"] == DISTRIBUTION_FILE and "distributionConfigMapRef" not in sweep
+    # the results keep the spec as submitted
+    stored = yaml.safe_load(store.objects["d/run.yaml"])["spec"]["sweep"]
+    assert stored["distributionConfigMapRef"] == {"name": "d-inputs", "key": "speeds.xosc"}
+
+
+def test_a_distribution_in_the_object_store_is_read_with_the_runs_credentials() -> None:
+    from carlos_operator.builders import DISTRIBUTION_FILE
+
+    kube, store = FakeKube(), FakeStore()
+    body = run_body("d", "uid-1", 1)
+    body["spec"]["sweep"]["distribution"] = "s3://bucket/inputs/speeds.xosc"
+    c = controller(kube, store)
+    c.observe_run("ADDED", body)
+    drain(c)
+    assert kube.status_patches[-1]["conditions"][0]["reason"] == "InvalidSpec"
+    assert (
+        "s3://bucket/inputs/speeds.xosc does not exist" in kube.status_patches[-1]["conditions"][0]["message"]
+    )
+    store.put_bytes("inputs/speeds.xosc", DISTRIBUTION)
+    c = controller(kube, store)
+    c.observe_run("ADDED", body)
+    drain(c)
+    assert kube.jobs[job_name("d")]["spec"]["completions"] == 3
+    assert kube.configmaps[job_name("d")]["data"][DISTRIBUTION_FILE] == DISTRIBUTION.decode()

@@ -201,3 +201,24 @@ def test_spec_is_immutable_and_round_trips_camel_case() -> None:
     assert parse_manifest(dumped, source="again") == run
     with pytest.raises(ValidationError):
         run.spec.simulation.step_seconds = 1.0  # type: ignore[misc]
+
+
+def test_selected_indexes_run_the_whole_sweeps_points_in_their_order() -> None:
+    body = {
+        "scenarios": [{"name": "a", "openscenario": "a.xosc"}, {"name": "b", "openscenario": "b.xosc"}],
+        "sweep": {"matrix": {"v": [1, 2, 3]}, "repetitions": 2},
+        "simulation": {"seed": 7},
+    }
+    whole = Plan(SimulationRunSpec.model_validate(body))
+    chosen = [11, 0, 5]
+    part = Plan(SimulationRunSpec.model_validate({**body, "sweep": {**body["sweep"], "indexes": chosen}}))
+    assert len(part) == 3 and len(whole) == 12
+    for k, index in enumerate(chosen):
+        assert part[k].index == k
+        assert (part[k].scenario.name, part[k].parameters, part[k].seed) == (
+            whole[index].scenario.name,
+            whole[index].parameters,
+            whole[index].seed,
+        )
+    with pytest.raises(BadInput, match="index 12 is out of range"):
+        Plan(SimulationRunSpec.model_validate({**body, "sweep": {**body["sweep"], "indexes": [12]}}))

@@ -192,3 +192,180 @@ def test_configmap_names_stay_dns_labels() -> None:
     assert inputs_name("demo") == "demo-inputs"
     long = inputs_name("x" * 63)
     assert len(long) <= 63 and long.endswith("-inputs")
+
+
+DISTRIBUTION = """<?xml version="1.0" encoding="UTF-8"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="2" date="2026-11-25T00:00:00" description="two speeds" author="tests"/>
+  <ParameterValueDistribution>
+    <ScenarioFile filepath="braking.xosc"/>
+    <Deterministic>
+      <DeterministicSingleParameterDistribution parameterName="Speed">
+        <DistributionSet><Element value="20.0"/><Element value="25.0"/></DistributionSet>
+      </DeterministicSingleParameterDistribution>
+    </Deterministic>
+  </ParameterValueDistribution>
+</OpenSCENARIO>
+"""
+
+
+def distribution_manifest(
+    folder: Path, name: str = "dist", max_seconds: float = 40, criterion: str = "simSeconds <= 100"
+) -> Path:
+    """A sweep over a local distribution file of 2 points on the braking example (beside the manifest)."""
+    (folder / "speeds.xosc").write_text(DISTRIBUTION)
+    manifest = folder / f"{name}.yaml"
+    manifest.write_text(
+        f"""apiVersion: carlos.dev/v1alpha1
+kind: SimulationRun
+metadata: {{name: {name}}}
+spec:
+  scenarios:
+    - name: braking
+      openscenario: {ROOT / "examples" / "scenarios" / "braking.xosc"}
+  sweep: {{distribution: speeds.xosc}}
+  simulation: {{stepSeconds: 0.1, maxSeconds: {max_seconds}}}
+  evaluation: {{criteria: ["{criterion}"]}}
+"""
+    )
+    return manifest
+
+
+def test_a_local_distribution_is_packed_and_reaches_the_pods_beside_the_spec(tmp_path: Path) -> None:
+    from carlos_operator.builders import DISTRIBUTION_FILE, SPEC_FILE
+
+    from simcore.manifest import load_manifest
+    from simcore.plan import Plan
+    from tests.apiserver import admit
+
+    result = carlos("submit", distribution_manifest(tmp_path), "--dry-run", "-o", "yaml", "-n", "sims")
+    assert result.returncode == 0, result.stderr
+    configmap, body = _objects(result.stdout)
+    assert configmap is not None
+    admit(configmap)
+    admit(body)  # the strict stand-in: the shipped CRD knows distributionConfigMapRef
+    sweep = body["spec"]["sweep"]
+    assert "distribution" not in sweep
+    assert sweep["distributionConfigMapRef"] == {"name": "dist-inputs", "key": "speeds.xosc"}
+    assert configmap["data"]["speeds.xosc"] == DISTRIBUTION
+    # the operator hands the file it read to the pods beside the spec they load
+    run = SimulationRun.model_validate(body)
+    owner = {
+        "metadata": {"name": "dist", "uid": "u1", "namespace": "sims"},
+        "apiVersion": "carlos.dev/v1alpha1",
+    }
+    cm = build_configmap(run, owner, OperatorSettings.from_env({}), DISTRIBUTION)
+    admit(cm)
+    pod_dir = tmp_path / "pod"
+    pod_dir.mkdir()
+    for key, text in cm["data"].items():
+        (pod_dir / key).write_text(text)
+    assert set(cm["data"]) == {SPEC_FILE, DISTRIBUTION_FILE}
+    plan = Plan(load_manifest(pod_dir / SPEC_FILE).spec)
+    assert [p.parameters["Speed"] for p in plan] == ["20.0", "25.0"]
+
+
+def test_a_distribution_over_the_configmap_limit_goes_to_the_object_store(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from simcore.manifest import load_manifest
+    from simcore.workflow import submit
+
+    monkeypatch.setattr(submit, "CONFIGMAP_LIMIT", 1000)
+    manifest = distribution_manifest(tmp_path)
+    packed = submit.pack(load_manifest(manifest), manifest, "default", results_url="s3://bucket/out")
+    assert packed.configmap() is None
+    sweep = packed.run["spec"]["sweep"]
+    assert sweep["distribution"] == "s3://bucket/out/dist/inputs/speeds.xosc"
+    assert "distributionConfigMapRef" not in sweep
+    assert packed.uploads["dist/inputs/speeds.xosc"].decode() == DISTRIBUTION
+
+
+def test_a_rerun_of_a_cluster_run_is_a_new_run_over_its_failed_indexes() -> None:
+    from simcore.workflow.rerun import cluster_rerun, rerun_name
+
+    obj = {
+        "metadata": {"name": "dist", "namespace": "sims"},
+        "spec": {
+            "scenarios": [{"name": "b", "configMapRef": {"name": "dist-inputs", "key": "braking.xosc"}}],
+            "sweep": {"distributionConfigMapRef": {"name": "dist-inputs", "key": "speeds.xosc"}},
+            "suspend": True,
+        },
+    }
+    packed = cluster_rerun(obj, [1, 3], "dist-rerun", {"braking.xosc": "a", "speeds.xosc": "b"})
+    spec = packed.run["spec"]
+    assert spec["sweep"]["indexes"] == [1, 3] and "suspend" not in spec
+    assert spec["scenarios"][0]["configMapRef"]["name"] == "dist-rerun-inputs"
+    assert spec["sweep"]["distributionConfigMapRef"]["name"] == "dist-rerun-inputs"
+    assert packed.configmap() is not None and packed.files == {"braking.xosc": "a", "speeds.xosc": "b"}
+    # a rerun of a rerun: its indexes are the whole sweep's
+    again = cluster_rerun(packed.run, [1], "dist-rerun-2", None)
+    assert again.run["spec"]["sweep"]["indexes"] == [3]
+    assert rerun_name("dist", {"dist-rerun"}.__contains__) == "dist-rerun-2"
+    assert len(rerun_name("x" * 63, lambda _: False)) <= 63
+
+
+@pytest.mark.s3
+@pytest.mark.timeout(400)
+def test_a_submitted_distribution_runs_on_the_cluster_and_its_failures_rerun_there(
+    env: tuple[Cluster, Kube],  # noqa: F811 - the fixture imported from tests.test_operator
+    s3_server: S3Server,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """2 points of a local distribution (Speed 20 passes maxSpeed <= 22, Speed 25 fails it), then
+    `carlos rerun dist --failed`: a new SimulationRun over index 1 only, same parameters and seed."""
+    c, kube = env
+    monkeypatch.setenv("CARLOS_DEFAULT_S3_SECRET", "s3")  # the Helm value: the manifest names no Secret
+    c.start_operator()
+    manifest = distribution_manifest(tmp_path, max_seconds=2, criterion="maxSpeed <= 22")
+    dry = carlos("submit", manifest, "--dry-run", "-n", "default")
+    planned, _ = _objects(dry.stdout)
+    assert planned is not None
+    for name in ("dist-inputs", "dist-rerun-inputs"):  # the kubelet stand-in's scenario mounts
+        mounted = tmp_path / "scenarios" / name
+        mounted.mkdir(parents=True)
+        for key, text in planned["data"].items():
+            (mounted / key).write_text(text)
+    python_path = {"PYTHONPATH": os.environ["PYTHONPATH"]} if os.environ.get("PYTHONPATH") else {}
+    jobs = JobRunner(
+        kube=kube,
+        workdir=tmp_path,
+        extra_env={
+            "AWS_REGION": s3_server.region,
+            "CARLOS_SCENARIO_DIR": str(tmp_path / "scenarios"),
+            **python_path,
+        },
+    ).start()
+    s3_env = s3_server.env()
+    try:
+        result = carlos("submit", manifest, "-n", "default", "--results", f"s3://{s3_server.bucket}/d")
+        assert result.returncode == 0, result.stderr
+        st = wait_for(lambda: terminal(kube, "dist"), 150, "a terminal phase")
+        assert st["phase"] == "Failed" and (st["total"], st["passed"], st["testFailures"]) == (2, 1, 1), st
+        for key, value in s3_env.items():
+            monkeypatch.setenv(key, value)  # the client reads the results (as a user with S3 access)
+        rerun = carlos("rerun", "dist", "--failed", "-n", "default")
+        assert rerun.returncode == 0, rerun.stderr
+        assert "dist-rerun: rerunning indexes 1 of dist" in rerun.stdout
+        again = wait_for(lambda: terminal(kube, "dist-rerun"), 150, "a terminal phase of the rerun")
+    finally:
+        jobs.stop()
+    assert jobs.errors == []
+    assert again["phase"] == "Failed" and (again["total"], again["testFailures"]) == (1, 1), again
+    body = kube.custom.get_namespaced_custom_object(
+        "carlos.dev", "v1alpha1", "default", "simulationruns", "dist-rerun"
+    )
+    assert body["spec"]["sweep"]["indexes"] == [1]
+    inputs = next(m for m in c.objects("configmaps") if m["metadata"]["name"] == "dist-rerun-inputs")
+    assert inputs["metadata"]["ownerReferences"][0]["uid"] == body["metadata"]["uid"]
+    assert inputs["data"] == planned["data"]
+    store = open_store(
+        f"s3://{s3_server.bucket}/d/default", endpoint=s3_server.endpoint, region=s3_server.region
+    )
+    old = json.loads(store.get_bytes("dist/1/summary.json"))
+    new = json.loads(store.get_bytes("dist-rerun/0/summary.json"))
+    assert old["parameters"]["Speed"] == new["parameters"]["Speed"] == "25.0"
+    assert old["seed"] == new["seed"] and new["status"] == "failed"
+    for run in ("dist", "dist-rerun"):
+        assert "<h1>SimulationRun" in store.get_bytes(f"{run}/report.html").decode()

@@ -390,7 +390,27 @@ def _labels(run: SimulationRun, settings: OperatorSettings) -> dict[str, str]:
     }
 
 
-def build_configmap(run: SimulationRun, body: dict[str, Any], settings: OperatorSettings) -> dict[str, Any]:
+#: the run's distribution file beside its spec in the Job's ConfigMap (the pods read it there)
+DISTRIBUTION_FILE = "distribution.xosc"
+
+
+def pod_manifest(run: SimulationRun) -> SimulationRun:
+    """The run as its pods read it: a distribution (a ConfigMap key, s3://) becomes `DISTRIBUTION_FILE`
+    beside the spec, which the operator copies into the Job's ConfigMap (pure)."""
+    sweep = run.spec.sweep
+    if sweep.distribution_config_map_ref is None and not (sweep.distribution or "").startswith("s3://"):
+        return run
+    moved = sweep.model_copy(update={"distribution": DISTRIBUTION_FILE, "distribution_config_map_ref": None})
+    return run.model_copy(update={"spec": run.spec.model_copy(update={"sweep": moved})})
+
+
+def build_configmap(
+    run: SimulationRun, body: dict[str, Any], settings: OperatorSettings, distribution: str | None = None
+) -> dict[str, Any]:
+    """The Job's ConfigMap: the spec as the pods read it, and the distribution file the operator read."""
+    data = {SPEC_FILE: manifest_yaml(pod_manifest(run) if distribution is not None else run)}
+    if distribution is not None:
+        data[DISTRIBUTION_FILE] = distribution
     return {
         "apiVersion": "v1",
         "kind": "ConfigMap",
@@ -400,7 +420,7 @@ def build_configmap(run: SimulationRun, body: dict[str, Any], settings: Operator
             "labels": _labels(run, settings),
             "ownerReferences": [owner_reference(body)],
         },
-        "data": {SPEC_FILE: manifest_yaml(run)},
+        "data": data,
     }
 
 

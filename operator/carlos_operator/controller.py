@@ -34,15 +34,18 @@ import dataclasses
 import json
 import logging
 import os
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from carlos_operator import metrics
 from carlos_operator.builders import (
+    DISTRIBUTION_FILE,
     OperatorSettings,
     Output,
     build_configmap,
@@ -55,6 +58,7 @@ from carlos_operator.builders import (
     scenario_configmaps,
     secret_references,
 )
+from carlos_operator.inputs import read_input
 from carlos_operator.kube import Conflict, Kube, NotFound, now_rfc3339
 from carlos_operator.searching import SearchProgress, SearchRuns
 from carlos_operator.status import TERMINAL_PHASES, Tally, aggregate, condition, job_finished
@@ -84,6 +88,15 @@ STUCK_REASONS = frozenset(
 )
 #: pods read per check (bounded: a run may have thousands)
 POD_SAMPLE = 20
+#: index summaries a run's report.html shows at most (failed and errored first): bounds the operator's
+#: memory and the report's reads for the largest runs (its counts are summary.json's, of every index)
+REPORT_INDEXES = 1000
+#: bird's-eye plots (recordings read) of a run's report.html
+REPORT_WORST = 6
+#: tries of writing report.html before the run finishes without it
+REPORT_ATTEMPTS = 3
+#: a distribution file the operator copies into a Job's ConfigMap (1 MiB at most, with the spec)
+MAX_DISTRIBUTION_BYTES = 900 * 1024
 #: a missing prerequisite is looked for again after 5 s, 10 s, 20 s … at most this often
 MAX_BACKOFF_S = 300.0
 
@@ -215,6 +228,7 @@ class Controller:
         self.pod_check = pod_check
         self.backoff = backoff
         self.store_factory = store_factory
+        self.scratch = Path(tempfile.mkdtemp(prefix="carlos-operator-inputs-"))
         self.runs: dict[Key, RunState] = {}
         self.jobs: dict[Key, dict[str, Any]] = {}  # (namespace, job name) → Job
         self._lock = threading.Lock()
@@ -460,8 +474,15 @@ class Controller:
         document = {k: body[k] for k in ("apiVersion", "kind", "metadata", "spec") if k in body}
         try:
             run = parse_manifest(json.loads(json.dumps(document)), source=f"{namespace}/{meta['name']}")
-            check_cluster_spec(run)
             output = resolve_output(run, self.settings, namespace=namespace)
+        except CarlosError as exc:
+            raise Rejected("InvalidSpec", str(exc)) from None
+        submitted = run
+        distribution = self._distribution(run, namespace, output)
+        if distribution is not None:
+            run = distribution[1]  # the sweep expands from the operator's copy of the file
+        try:
+            check_cluster_spec(run)
         except CarlosError as exc:
             raise Rejected("InvalidSpec", str(exc)) from None
         chosen = run.spec.output.endpoint
@@ -515,7 +536,7 @@ class Controller:
         state.held = bool(suspended and run.spec.execution.queue_name)
         if state.held:
             return  # Kueue would admit (unsuspend) a queued Job: it is created when the run is resumed
-        spec_bytes = manifest_yaml(run).encode()
+        spec_bytes = manifest_yaml(submitted).encode()
         run_yaml = f"{run.name}/run.yaml"
         if state.store.exists(run_yaml):
             if state.store.get_bytes(run_yaml) != spec_bytes:
@@ -529,7 +550,7 @@ class Controller:
         if state.search is not None:
             state.ensured = True  # a search creates one Job per round (searching.py)
             return
-        cm = build_configmap(run, body, self.settings)
+        cm = build_configmap(submitted, body, self.settings, distribution[0] if distribution else None)
         try:
             self.kube.create_configmap(namespace, cm)
         except Conflict:
@@ -557,6 +578,53 @@ class Controller:
             log.info("created Job %s/%s (%d runs)", namespace, job["metadata"]["name"], total)
         else:
             log.info("adopted Job %s/%s", namespace, job["metadata"]["name"])
+
+    def _distribution(
+        self, run: SimulationRun, namespace: str, output: Output
+    ) -> tuple[str, SimulationRun] | None:
+        """A distribution the pods cannot read as a path (a ConfigMap key, s3://): (its text, the run with
+        the operator's copy of it as `spec.sweep.distribution`); None when there is none such."""
+        sweep = run.spec.sweep
+        ref = sweep.distribution_config_map_ref
+        if ref is None and not (sweep.distribution or "").startswith("s3://"):
+            return None
+        if ref is not None:
+            try:
+                self.kube.read_configmap(namespace, ref.name)
+            except NotFound:
+                raise Waiting(
+                    "ConfigMapNotFound",
+                    f"spec.sweep.distributionConfigMapRef: ConfigMap {ref.name!r} not found in namespace "
+                    f"{namespace!r}; the run starts when it exists",
+                ) from None
+        try:
+            _, data = read_input(
+                self,
+                namespace,
+                output,
+                ref=ref,
+                source=sweep.distribution,
+                field="spec.sweep.distribution",
+                ref_field="spec.sweep.distributionConfigMapRef",
+                why="to expand the sweep",
+            )
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            raise Rejected("InvalidSpec", "spec.sweep.distribution: the file is not UTF-8 text") from None
+        except CarlosError as exc:
+            raise Rejected("InvalidSpec", str(exc)) from None
+        if len(data) > MAX_DISTRIBUTION_BYTES:
+            raise Rejected(
+                "InvalidSpec",
+                f"spec.sweep.distribution: the file is {len(data):,} bytes; the pods read it from the Job's "
+                f"ConfigMap, which holds at most {MAX_DISTRIBUTION_BYTES:,}: split the sweep",
+            )
+        folder = self.scratch / namespace / run.name
+        folder.mkdir(parents=True, exist_ok=True)
+        local = folder / DISTRIBUTION_FILE
+        local.write_bytes(data)
+        moved = sweep.model_copy(update={"distribution": str(local), "distribution_config_map_ref": None})
+        return text, run.model_copy(update={"spec": run.spec.model_copy(update={"sweep": moved})})
 
     def _check_owned(self, obj: dict[str, Any], state: RunState, what: str) -> None:
         meta = obj.get("metadata", {})
@@ -747,12 +815,49 @@ class Controller:
                     elif tally.known(index):
                         yield _missing_summary(run, index, "the pod ended without writing its summary")
 
-        summary = run_summary(run.name, summaries(), total=tally.total)
+        from simcore.report.html import ReportSample
+
+        sample = ReportSample(REPORT_INDEXES)
+
+        def sampled() -> Iterator[dict[str, Any]]:
+            for summary in summaries():
+                sample.add(summary)
+                yield summary
+
+        summary = run_summary(run.name, sampled(), total=tally.total)
         summary["outputUrl"] = state.store.url_for(run.name)
         state.store.put_bytes(f"{run.name}/junit.xml", junit_xml(run.name, summaries()).encode())
         state.store.put_bytes(
             f"{run.name}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
         )
+        self._report(state, summary, sample)
+
+    def _report(self, state: RunState, summary: dict[str, Any], sample: Any) -> None:
+        """`report.html` beside summary.json, best effort: a failure is logged, the verdict stands."""
+        from simcore.report.html import write_after_run
+
+        assert state.run is not None
+        for attempt in range(REPORT_ATTEMPTS):  # a passing store or API error is tried again
+            try:
+                write_after_run(
+                    state.store,
+                    state.run,
+                    summary,
+                    sample.summaries(),
+                    omitted=sample.omitted,
+                    worst=REPORT_WORST,
+                )
+                return
+            except Exception as exc:  # the report never changes the run's outcome (as `carlos run`)
+                log.warning(
+                    "%s: writing report.html failed (attempt %d/%d): %s: %s",
+                    state.run.name,
+                    attempt + 1,
+                    REPORT_ATTEMPTS,
+                    type(exc).__name__,
+                    exc,
+                )
+        metrics.ERRORS.labels(kind="ReportFailed").inc()
 
     def _maybe(self, state: RunState, index: int) -> dict[str, Any] | None:
         from simcore.store import NotFoundError

@@ -18,10 +18,8 @@ seed and the round); a round's Job that finished while the operator was down is 
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
-import os
 import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -29,12 +27,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from carlos_operator.builders import (
-    Output,
     SearchRound,
     build_job,
     build_round_configmap,
     round_job_name,
 )
+from carlos_operator.inputs import read_input
 from carlos_operator.kube import Conflict, NotFound, now_rfc3339
 from carlos_operator.status import (
     ERROR,
@@ -47,7 +45,6 @@ from carlos_operator.status import (
     iter_intervals,
     job_finished,
 )
-from simcore.errors import BadInput
 from simcore.search import driver
 from simcore.search.export import distribution_xml
 from simcore.search.space import Dimension
@@ -246,54 +243,21 @@ class SearchRuns:
         run, output = state.run, state.output
         assert run is not None and output is not None
         ref = run.spec.scenarios[0]
-        field_name = "spec.scenarios[0]"
-        if ref.config_map_ref is not None:
-            try:
-                data = self.c.kube.read_configmap(namespace, ref.config_map_ref.name).get("data") or {}
-            except NotFound:
-                data = {}
-            if ref.config_map_ref.key not in data:
-                raise BadInput(
-                    f"ConfigMap {ref.config_map_ref.name!r} has no key {ref.config_map_ref.key!r}",
-                    field=f"{field_name}.configMapRef.key",
-                )
-            text = str(data[ref.config_map_ref.key]).encode()
-            name = ref.config_map_ref.key
-        else:
-            source = ref.openscenario or ""
-            name = source.rsplit("/", 1)[-1] or "scenario.xosc"
-            text = self._read_source(namespace, output, source)
+        name, text = read_input(
+            self.c,
+            namespace,
+            output,
+            ref=ref.config_map_ref,
+            source=ref.openscenario,
+            field="spec.scenarios[0].openscenario",
+            ref_field="spec.scenarios[0].configMapRef",
+            why="to choose a search's points",
+        )
         folder = self._scratch / namespace / run.name
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / name
         path.write_bytes(text)
         return SearchProgress(scenario_name=name, space=driver.search_space(run, path))
-
-    def _read_source(self, namespace: str, output: Output, source: str) -> bytes:
-        if source.startswith("s3://"):
-            from simcore.store import NotFoundError
-
-            bucket, _, key = source.removeprefix("s3://").partition("/")
-            # the run's credentials where its namespace may name Secrets, else the operator's own (as for
-            # its results)
-            allowed = namespace in self.c.settings.secret_namespaces
-            scenarios = dataclasses.replace(
-                output, url=f"s3://{bucket}", secret=output.secret if allowed else None
-            )
-            store = self.c.store_factory(self.c.kube, namespace, scenarios)
-            try:
-                return bytes(store.get_bytes(key))
-            except NotFoundError:
-                raise BadInput(f"{source} does not exist", field="spec.scenarios[0].openscenario") from None
-        path = source.removeprefix("file://")
-        if os.path.isfile(path):
-            return Path(path).read_bytes()
-        raise BadInput(
-            f"{source!r}: the operator reads a search's scenario to choose its points, and this file is only "
-            "inside the simcore image: give the scenario as a configMapRef (carlos submit packs it) or as "
-            "s3://bucket/key",
-            field="spec.scenarios[0].openscenario",
-        )
 
     # --- reconciliation --------------------------------------------------------------------------------
 

@@ -268,9 +268,10 @@ def _index_table(results: RunResults, relative: bool, metric_limit: int = 8) -> 
     return "".join(out)
 
 
-def render(results: RunResults, *, worst: int = 6, relative_links: bool = False) -> str:
+def render(results: RunResults, *, worst: int = 6, relative_links: bool = False, omitted: int = 0) -> str:
     """The whole page. `relative_links`: the page is stored next to the run's summary.json, so the links
-    to recordings and logs are relative to it; else they are the store's URLs."""
+    to recordings and logs are relative to it; else they are the store's URLs. `omitted`: index summaries
+    left out of `results.indexes` (a large run: the verdict's counts stay those of summary.json)."""
     now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     body = [
         f"<h1>SimulationRun {_e(results.name)}</h1>",
@@ -284,6 +285,13 @@ def render(results: RunResults, *, worst: int = 6, relative_links: bool = False)
         _distributions(results),
         _birds_eye(results, worst),
         "<h2>Runs</h2>",
+        (
+            f'<p class="muted">{len(results.indexes):,} of {len(results.indexes) + omitted:,} indexes shown '
+            "(failed and errored first); the counts above are the whole run's (summary.json), the tables "
+            "and plots are of the indexes shown.</p>"
+            if omitted
+            else ""
+        ),
         _index_table(results, relative_links),
     ]
     return (
@@ -294,16 +302,49 @@ def render(results: RunResults, *, worst: int = 6, relative_links: bool = False)
     )
 
 
-def write_next_to_summary(results: RunResults, *, worst: int = 6) -> str:
+def write_next_to_summary(results: RunResults, *, worst: int = 6, omitted: int = 0) -> str:
     """Render the report and store it as `<run>/report.html`; returns its URL."""
-    results.store.put_bytes(REPORT_KEY, render(results, worst=worst, relative_links=True).encode())
+    page = render(results, worst=worst, relative_links=True, omitted=omitted)
+    results.store.put_bytes(REPORT_KEY, page.encode())
     return results.store.url_for(REPORT_KEY)
 
 
+class ReportSample:
+    """At most `limit` index summaries for a report of a run too large to hold every summary: the failed
+    and errored ones first, then passed ones, in index order. Fed one summary at a time (a stream)."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self.seen = 0
+        self._bad: list[dict[str, Any]] = []
+        self._good: list[dict[str, Any]] = []
+
+    def add(self, summary: Mapping[str, Any]) -> None:
+        self.seen += 1
+        kept = self._bad if summary.get("status") != "passed" else self._good
+        if len(kept) < self.limit:
+            kept.append(dict(summary))
+
+    def summaries(self) -> list[dict[str, Any]]:
+        chosen = self._bad + self._good[: max(0, self.limit - len(self._bad))]
+        return sorted(chosen, key=lambda s: int(s["index"]))
+
+    @property
+    def omitted(self) -> int:
+        return self.seen - len(self.summaries())
+
+
 def write_after_run(
-    store: Store, run: SimulationRun, summary: dict[str, Any], index_summaries: Sequence[dict[str, Any]]
+    store: Store,
+    run: SimulationRun,
+    summary: dict[str, Any],
+    index_summaries: Sequence[dict[str, Any]],
+    *,
+    omitted: int = 0,
+    worst: int = 6,
 ) -> str:
-    """Store `<run>/report.html` at the end of `carlos run` (from what the run has in memory); its URL."""
+    """Store `<run>/report.html` at the end of a run (`carlos run`, the operator) from the summaries at
+    hand (`omitted`: how many more the run has); its URL."""
     results = RunResults(
         url=store.url_for(run.name),
         store=PrefixedStore(store, run.name),
@@ -312,4 +353,4 @@ def write_after_run(
         summary=summary,
         indexes=sorted(index_summaries, key=lambda s: int(s["index"])),
     )
-    return write_next_to_summary(results)
+    return write_next_to_summary(results, worst=worst, omitted=omitted)

@@ -206,15 +206,17 @@ def export(
 
 
 def rerun(
-    results_url: Annotated[str, typer.Argument(help="The run's results: file://…/<run> or s3://…/<run>.")],
+    run_ref: Annotated[str, typer.Argument(metavar="RUN", help=_RUN_HELP)],
     failed: Annotated[bool, typer.Option("--failed", help="Rerun the failed and errored indexes.")] = False,
     base_dir: Annotated[
         Path | None,
         typer.Option("--base-dir", help="Folder of the original manifest (relative scenario paths)."),
     ] = None,
     parallel: Annotated[int | None, typer.Option("--parallel", "-j", min=1, help="Worker processes.")] = None,
+    namespace: Annotated[str | None, _NAMESPACE] = None,
 ) -> None:
-    """A new run `<run>-rerun` over the failed indexes only, beside the old one; exit code as `carlos run`."""
+    """A new run `<run>-rerun` over the failed indexes only: of a local run, run here beside the old one
+    (exit code as `carlos run`); of a cluster run, a new SimulationRun created on the cluster."""
     from simcore.executor import execute
     from simcore.results import open_results
     from simcore.workflow.rerun import rerun_spec
@@ -222,7 +224,10 @@ def rerun(
 
     if not failed:
         raise BadInput("say what to rerun: --failed", field="--failed")
-    results = open_results(results_url)
+    if "://" not in run_ref:
+        _rerun_on_cluster(run_ref, namespace)
+        return
+    results = open_results(run_ref)
     run, indexes, base = rerun_spec(results, base_dir)
     typer.echo(f"{run.name}: rerunning indexes {', '.join(map(str, indexes))} of {results.name}")
     report = execute(
@@ -237,3 +242,37 @@ def rerun(
         typer.echo(line)
     typer.echo(f"{report.summary['status']} · results: {report.output_url}")
     raise typer.Exit(report.exit_code)
+
+
+def _rerun_on_cluster(name: str, namespace: str | None) -> None:
+    """`carlos rerun NAME --failed` of a cluster run: a new SimulationRun over its failed indexes."""
+    from kubernetes.client.exceptions import ApiException
+
+    from simcore.errors import SimulationError
+    from simcore.workflow.rerun import cluster_rerun, failed_indexes, rerun_name
+    from simcore.workflow.status import cluster_runs
+    from simcore.workflow.submit import create, current_namespace, inputs_name, kube_clients
+
+    namespace = namespace or current_namespace()
+    obj = cluster_runs(namespace, name)[0]
+    failed = failed_indexes(_results_of(name, namespace))
+    _, core = kube_clients()
+
+    def taken(candidate: str) -> bool:
+        try:
+            cluster_runs(namespace, candidate)
+        except BadInput:
+            return False
+        return True
+
+    try:
+        inputs = core.read_namespaced_config_map(inputs_name(name), namespace).data or {}
+    except ApiException as exc:
+        if exc.status != 404:
+            raise SimulationError(f"Kubernetes API: {exc.status} {exc.reason}") from None
+        inputs = None  # not submitted by `carlos submit`: its ConfigMaps are the user's
+    packed = cluster_rerun(obj, failed, rerun_name(name, taken), inputs)
+    create(packed)
+    new = packed.run["metadata"]["name"]
+    typer.echo(f"{new}: rerunning indexes {', '.join(map(str, failed))} of {name}")
+    typer.echo(f"simulationrun.carlos.dev/{new} created in namespace {namespace}")

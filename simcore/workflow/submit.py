@@ -1,9 +1,10 @@
 """`carlos submit`: the manifest that runs locally, made runnable on a cluster.
 
 A pod has no manifest directory, so every local scenario (a path relative to the manifest), the road
-network and catalog files it names are packed into one ConfigMap owned by
-the run (`<run>-inputs`, flat keys, the scenarios' relative paths rewritten to those keys), and each
-scenario becomes a `configMapRef`. `s3://` scenarios and absolute `file:///` paths (inside the image) stay.
+network and catalog files it names, and a local distribution file (`spec.sweep.distribution`) are packed
+into one ConfigMap owned by the run (`<run>-inputs`, flat keys, the scenarios' relative paths rewritten to
+those keys); each scenario becomes a `configMapRef`, the distribution a `distributionConfigMapRef` (the
+operator reads it to expand the sweep and hands it to the pods beside the spec). `s3://` scenarios and absolute `file:///` paths (inside the image) stay.
 A ConfigMap holds at most `CONFIGMAP_LIMIT` bytes; larger inputs are uploaded to the run's object store
 (`<output>/<run>/inputs/`) and named by their `s3://` URL instead.
 
@@ -178,12 +179,12 @@ def pack(
         ref["configMapRef"] = {"name": packed.configmap_name, "key": key}
     distribution = simulation_run.spec.sweep.distribution
     if distribution is not None and "://" not in distribution:
-        raise BadInput(
-            "a local distribution file cannot be handed to the operator yet (it expands the sweep before any "
-            "pod starts): put the permutations in spec.sweep.matrix, or run it locally",
-            file=str(manifest),
-            field="spec.sweep.distribution",
-        )
+        # made absolute when the manifest was loaded; the operator reads it from the ConfigMap
+        path = (base_dir / distribution).resolve()
+        key = _key(path, taken)
+        packed.files[key] = _read_text(path, str(manifest), "spec.sweep.distribution")
+        spec["sweep"].pop("distribution")
+        spec["sweep"]["distributionConfigMapRef"] = {"name": packed.configmap_name, "key": key}
     if packed.size() > CONFIGMAP_LIMIT:
         _to_object_store(packed, simulation_run, str(manifest))
     return packed
@@ -206,6 +207,11 @@ def _to_object_store(packed: Packed, simulation_run: SimulationRun, manifest: st
         if cm is not None and cm["name"] == packed.configmap_name:
             ref.pop("configMapRef")
             ref["openscenario"] = f"{url.rstrip('/')}/{prefix}/{cm['key']}"
+    sweep = packed.run["spec"].get("sweep") or {}
+    cm = sweep.get("distributionConfigMapRef")
+    if cm is not None and cm["name"] == packed.configmap_name:
+        sweep.pop("distributionConfigMapRef")
+        sweep["distribution"] = f"{url.rstrip('/')}/{prefix}/{cm['key']}"
     packed.files = {}
 
 
