@@ -15,6 +15,7 @@ tail of its log.
 
 from __future__ import annotations
 
+import functools
 import os
 import secrets
 import shutil
@@ -29,6 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+from simcore.lifetime import die_with_parent
 
 __all__ = ["S3Server", "find_weed", "s3_server"]
 
@@ -138,7 +141,14 @@ def _start(
     ]
     with log.open("wb") as out:
         proc = subprocess.Popen(
-            cmd, cwd=root, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True
+            cmd,
+            cwd=root,
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            # a pytest worker that crashes (no fixture teardown) takes its server with it
+            preexec_fn=functools.partial(die_with_parent, os.getpid()),
         )
     server = S3Server(
         endpoint=f"http://127.0.0.1:{ports['s3.port']}",
