@@ -399,3 +399,47 @@ def test_an_inline_trailer_is_an_entity_named_after_its_tow_vehicle(tmp_path: Pa
     trailer = next(e for e in scenario.entities if e.name == "Ego+")
     coupler, hitch = trailer.trailer_coupler, ego.trailer_hitch
     assert math.hypot(ex - tx, ey - ty) == pytest.approx((coupler or 0) - (hitch or 0), abs=1e-6)  # behind it
+
+
+def test_a_follow_ghost_controllers_ghost_is_published_but_is_no_object_of_the_world(tmp_path: Path) -> None:
+    """esmini's ghost (`Ego_ghost`) gets its odometry and tf frame in the recording; ground truth, metrics and
+    sensors see only the scenario's entities."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    scenario = write_scenario(tmp_path, gen.GENERATORS["controller.FollowGhostController"](random.Random(2)))
+    manifest = tmp_path / "ghost.yaml"
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: ghost}\nspec:\n"
+        f"  scenarios: [{{name: ghost, openscenario: {scenario}}}]\n"
+        "  simulation: {stepSeconds: 0.05, maxSeconds: 20}\n"
+        '  recording: {enabled: true, topics: ["*"]}\n'
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "simcore.cli", "run", str(manifest), "--output", (tmp_path / "out").as_uri()],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    odometry: dict[str, list[tuple[float, float]]] = {}
+    tf_frames: set[str] = set()
+    object_ids: set[str] = set()
+    with (tmp_path / "out/ghost/0/recording.mcap").open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages():
+            if channel.topic.endswith("/odometry"):
+                odometry.setdefault(channel.topic, []).append(
+                    (msg.pose.pose.position.x, msg.pose.pose.position.y)
+                )
+            elif channel.topic == "/tf":
+                tf_frames.update(t.child_frame_id for t in msg.transforms)
+            elif channel.topic == "/carlos/objects":
+                object_ids.update(d.id for d in msg.detections)
+    assert {"/carlos/Ego/odometry", "/carlos/Ego_ghost/odometry"} <= set(odometry)
+    assert {"Ego/base_link", "Ego_ghost/base_link"} <= tf_frames
+    assert "Ego_ghost" not in object_ids and "Ego" in object_ids
+    ghost, ego = odometry["/carlos/Ego_ghost/odometry"], odometry["/carlos/Ego/odometry"]
+    assert ghost[0] != ghost[-1]  # it drives ahead
+    assert math.dist(ghost[len(ghost) // 2], ego[len(ego) // 2]) > 1.0  # and is not the entity itself

@@ -608,11 +608,13 @@ class ScenarioEngine:
         )
 
     def frame(self) -> WorldFrame:
-        bodies = self.bodies.values()
-        if self.ghosts is not None:  # a ghost is no object of the world (esmini shows it as a shadow)
-            bodies = [b for b in bodies if b.name not in self.ghosts.names]  # type: ignore[assignment]
-        entities = tuple(self.state_of(b) for b in bodies)
-        return WorldFrame(step=self.step_index, time=self.time, entities=entities, ego=self.ego)
+        ghost_names = self.ghosts.names if self.ghosts is not None else ()
+        # a ghost is no object of the world (esmini shows it as a shadow): published apart
+        entities = tuple(self.state_of(b) for b in self.bodies.values() if b.name not in ghost_names)
+        ghosts = tuple(self.state_of(b) for b in self.bodies.values() if b.name in ghost_names)
+        return WorldFrame(
+            step=self.step_index, time=self.time, entities=entities, ego=self.ego, ghosts=ghosts
+        )
 
     @property
     def started(self) -> bool:

@@ -172,7 +172,7 @@ def odometry_topic(entity: str) -> str:
 
 def _check_unique(frame: WorldFrame) -> None:
     seen: dict[str, str] = {}
-    for entity in frame.entities:
+    for entity in (*frame.entities, *frame.ghosts):
         token = ros_name(entity.name)
         if token in seen and seen[token] != entity.name:
             raise ValueError(
@@ -220,7 +220,8 @@ def clock(frame: WorldFrame) -> Clock:
 
 
 def tf(frame: WorldFrame) -> TFMessage:
-    """tf2_msgs/msg/TFMessage: one transform `map` → `<entity>/base_link` per entity (full orientation)."""
+    """tf2_msgs/msg/TFMessage: one transform `map` → `<entity>/base_link` per entity and per FollowGhost ghost
+    (full orientation)."""
     _check_unique(frame)
     header = _header(frame)
     return TFMessage(
@@ -233,7 +234,7 @@ def tf(frame: WorldFrame) -> TFMessage:
                     rotation=_orientation(entity),
                 ),
             )
-            for entity in frame.entities
+            for entity in (*frame.entities, *frame.ghosts)
         ]
     )
 
@@ -321,7 +322,8 @@ def status(frame: WorldFrame, state: str, detail: Mapping[str, str] | None = Non
 
 def frame_builders(frame: WorldFrame) -> list[tuple[str, str, Callable[[], Any]]]:
     """(topic, typename, build) for one step: `/clock`, `/tf`, `/carlos/<entity>/odometry` for every
-    entity, `/carlos/objects`; `build()` makes the message (called only for topics someone consumes)."""
+    entity and FollowGhost ghost, `/carlos/objects` (entities only); `build()` makes the message (called only
+    for topics someone consumes)."""
     _check_unique(frame)
     out: list[tuple[str, str, Callable[[], Any]]] = [
         (CLOCK_TOPIC, Clock.__msgtype__, lambda: clock(frame)),
@@ -329,7 +331,7 @@ def frame_builders(frame: WorldFrame) -> list[tuple[str, str, Callable[[], Any]]
     ]
     out.extend(
         (odometry_topic(entity.name), Odometry.__msgtype__, partial(odometry, frame, entity))
-        for entity in frame.entities
+        for entity in (*frame.entities, *frame.ghosts)
     )
     out.append((OBJECTS_TOPIC, "vision_msgs/msg/Detection3DArray", lambda: objects(frame)))
     return out

@@ -82,6 +82,9 @@ class WorldFrame:
     entities: tuple[EntityState, ...]
     ego: str | None = None
     events: tuple[str, ...] = field(default_factory=tuple)  # storyboard transitions this step, for logs
+    # a FollowGhost controller's ghost (`<entity>_ghost`, esmini's): published (odometry, tf) but no object of
+    # the world: sensors, metrics, V2X and ground truth see only `entities`
+    ghosts: tuple[EntityState, ...] = field(default_factory=tuple)
 
     def entity(self, name: str) -> EntityState:
         for entity in self.entities:
