@@ -107,6 +107,21 @@ class PointGrid:
         return sorted(near.tolist())
 
 
+def _read_bounded(p: Path) -> bytes:
+    """The bytes of the road file `p`, refused (OpenDriveError) if unreadable or larger than 64 MiB."""
+    try:
+        size = p.stat().st_size
+    except OSError as e:
+        raise OpenDriveError(f"{p}: cannot read: {e.strerror or e}") from None
+    if size > MAX_FILE_BYTES:
+        raise OpenDriveError(f"{p}: file is {size} bytes, larger than the {MAX_FILE_BYTES} byte limit")
+    with p.open("rb") as fh:
+        data = fh.read(MAX_FILE_BYTES + 1)
+    if len(data) > MAX_FILE_BYTES:
+        raise OpenDriveError(f"{p}: file is larger than the {MAX_FILE_BYTES} byte limit")
+    return data
+
+
 class OpenDriveError(ValueError):
     """A malformed, unsupported or unsafe OpenDRIVE input, or a query on something the file does not have."""
 
@@ -935,38 +950,17 @@ class OpenDrive:
     @classmethod
     def from_file(cls, path: str | Path) -> OpenDrive:
         """Parse an ``.xodr`` file (refused if larger than 64 MiB)."""
-        p = Path(path)
-        try:
-            size = p.stat().st_size
-        except OSError as e:
-            raise OpenDriveError(f"{p}: cannot read: {e.strerror or e}") from None
-        if size > MAX_FILE_BYTES:
-            raise OpenDriveError(f"{p}: file is {size} bytes, larger than the {MAX_FILE_BYTES} byte limit")
-        with p.open("rb") as fh:
-            data = fh.read(MAX_FILE_BYTES + 1)
-        if len(data) > MAX_FILE_BYTES:
-            raise OpenDriveError(f"{p}: file is larger than the {MAX_FILE_BYTES} byte limit")
-        return cls._from_bytes(data, str(path))
+        return cls._from_bytes(_read_bounded(Path(path)), str(path))
 
     @classmethod
     def shared(cls, path: str | Path) -> OpenDrive:
         """:meth:`from_file`, parsed once per process for the same file content: a worker running run after
         run on one road (a sweep) parses it and builds its spatial index once. Callers treat the network as
         read-only (its lazily built index and memos are pure functions of the file)."""
-        p = Path(path)
-        try:
-            size = p.stat().st_size
-        except OSError as e:
-            raise OpenDriveError(f"{p}: cannot read: {e.strerror or e}") from None
-        if size > MAX_FILE_BYTES:
-            raise OpenDriveError(f"{p}: file is {size} bytes, larger than the {MAX_FILE_BYTES} byte limit")
-        with p.open("rb") as fh:
-            data = fh.read(MAX_FILE_BYTES + 1)
+        data = _read_bounded(Path(path))
         key = (str(path), hashlib.sha256(data).digest())
         network = _SHARED.pop(key, None)
         if network is None:
-            if len(data) > MAX_FILE_BYTES:
-                raise OpenDriveError(f"{p}: file is larger than the {MAX_FILE_BYTES} byte limit")
             network = cls._from_bytes(data, str(path))
         _SHARED[key] = network  # most recently used last
         while len(_SHARED) > _SHARED_MAX:
