@@ -44,6 +44,7 @@ from carlos_operator.status import (
     count_intervals,
     iter_intervals,
     job_finished,
+    verdict_fields,
 )
 from simcore.search import driver
 from simcore.search.export import distribution_xml
@@ -198,11 +199,7 @@ def search_status(
         "active": active,
         "succeeded": passed + (round_done if current is not None else 0),
         "failed": len(points) - passed + (round_failed if current is not None else 0),
-        "passed": tally.counts[PASSED],
-        "testFailures": tally.counts[FAILED],
-        "errors": tally.counts[ERROR],
-        "resultsURL": results_url,
-        "failures": list(tally.failures),
+        **verdict_fields(tally, results_url),
         "search": rounds,
         "conditions": conditions,
     }

@@ -167,6 +167,17 @@ def _job_failure_reason(job: Mapping[str, Any]) -> tuple[str, str]:
     return "JobFailed", ""
 
 
+def verdict_fields(tally: Tally, results_url: str) -> dict[str, Any]:
+    """The status fields every run shows of its verdicts: counts, where the results are, the first failures."""
+    return {
+        "passed": tally.counts[PASSED],
+        "testFailures": tally.counts[FAILED],
+        "errors": tally.counts[ERROR],
+        "resultsURL": results_url,
+        "failures": list(tally.failures),
+    }
+
+
 def aggregate(
     *,
     total: int,
@@ -244,11 +255,7 @@ def aggregate(
         "active": active,
         "succeeded": succeeded,
         "failed": failed,
-        "passed": tally.counts[PASSED],
-        "testFailures": tally.counts[FAILED],
-        "errors": tally.counts[ERROR],
-        "resultsURL": results_url,
-        "failures": list(tally.failures),
+        **verdict_fields(tally, results_url),
         "conditions": conditions,
     }
     start = job_status.get("startTime") or previous.get("startTime")
