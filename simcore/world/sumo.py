@@ -31,6 +31,12 @@ NETCONVERT_OPTIONS = (
     "false",
 )
 NETCONVERT_TIMEOUT_S = 300
+#: moveToXY: a scripted vehicle whose front is this close to the centre line of a lane of its route is put on
+#: that lane, matched against the route's lanes only (half the cost of a search of all lanes nearby; within a
+#: driving lane of 4 m or less, its nearest lane centre is at most this far) ...
+ON_ROUTE_MATCH_M = 2.0
+#: ... otherwise on the nearest lane within this distance (off the network beyond it), its route replaced
+ANY_LANE_MATCH_M = 50.0
 #: SUMO's default deceleration of a passenger car (m/s²): what its driver uses when not in an emergency
 COMFORT_DECELERATION = 4.5
 
@@ -280,10 +286,13 @@ class SumoWorld:
         """Put a scripted vehicle's reference point at (x, y) with heading and speed, for the next step."""
         front = self._front[name]
         fx, fy = x + front * math.cos(heading), y + front * math.sin(heading)
+        angle = _sumo_angle(heading)
+        move = self._sumo.vehicle.moveToXY
         try:
-            self._sumo.vehicle.moveToXY(
-                name, "", -1, fx, fy, _sumo_angle(heading), keepRoute=2, matchThreshold=50
-            )
+            try:  # on a lane of its route: matched against the route's lanes only (half the cost)
+                move(name, "", -1, fx, fy, angle, keepRoute=1, matchThreshold=ON_ROUTE_MATCH_M)
+            except self._sumo.TraCIException:  # anywhere else: any lane nearby, and a new route
+                move(name, "", -1, fx, fy, angle, keepRoute=2, matchThreshold=ANY_LANE_MATCH_M)
             if name in self._scripted:
                 self._sumo.vehicle.setSpeed(name, max(speed, 0.0))
         except Exception as exc:
