@@ -1,7 +1,7 @@
 """SUMO as the traffic world: road networks converted with netconvert, vehicles simulated with libsumo.
 
 Every scenario entity is a SUMO vehicle, so SUMO's drivers see it (leaders, gaps, collisions). Entities the
-scenario moves are placed each step with `moveToXY`; entities assigned the SUMO driver
+scenario moves are placed each step (`moveTo` while on their edge, `moveToXY` elsewhere); entities assigned the SUMO driver
 (controller property `carlos.driver: sumo`) are moved by SUMO's car-following model and read back.
 
 libsumo holds one simulation per process (a worker runs its runs one after another); `import libsumo`
@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from simcore.errors import BadInput, SimulationError
+from simcore.world.sumo_lanes import LaneShape, nearest_lane
 
 NETCONVERT_OPTIONS = (
     "--output.original-names",  # keep OpenDRIVE road/lane ids on the SUMO edges and lanes
@@ -167,6 +168,12 @@ class SumoWorld:
         self._front: dict[str, float] = {}  # reference point → front bumper distance
         self._scripted: set[str] = set()
         self._departed: set[str] = set()
+        # scripted vehicles: the place each is to have at the end of the next step (front x, y, SUMO angle,
+        # speed), the lane it is on after the last step, and per lane the polyline segment it was on
+        self._targets: dict[str, tuple[float, float, float, float]] = {}
+        self._lane_of: dict[str, str] = {}
+        self._hints: dict[str, dict[str, int]] = {}
+        self._edge_of_lane: dict[str, list[LaneShape]] = {}
         args = [
             "sumo",
             "-n",
@@ -283,20 +290,60 @@ class SumoWorld:
         return route
 
     def place(self, name: str, x: float, y: float, heading: float, speed: float) -> None:
-        """Put a scripted vehicle's reference point at (x, y) with heading and speed, for the next step."""
+        """Put a vehicle's reference point at (x, y) with heading and speed, for the next step: a scripted
+        vehicle is there (and at that speed) when the step ends; a SUMO-driven one is reset there."""
         front = self._front[name]
         fx, fy = x + front * math.cos(heading), y + front * math.sin(heading)
-        angle = _sumo_angle(heading)
-        move = self._sumo.vehicle.moveToXY
         try:
-            try:  # on a lane of its route: matched against the route's lanes only (half the cost)
-                move(name, "", -1, fx, fy, angle, keepRoute=1, matchThreshold=ON_ROUTE_MATCH_M)
-            except self._sumo.TraCIException:  # anywhere else: any lane nearby, and a new route
-                move(name, "", -1, fx, fy, angle, keepRoute=2, matchThreshold=ANY_LANE_MATCH_M)
             if name in self._scripted:
                 self._sumo.vehicle.setSpeed(name, max(speed, 0.0))
+                self._targets[name] = (fx, fy, _sumo_angle(heading), max(speed, 0.0))
+            else:
+                self._move_xy(name, fx, fy, _sumo_angle(heading))
         except Exception as exc:
             raise SimulationError(f"SUMO could not place {name!r} at ({x:.2f}, {y:.2f}): {exc}") from exc
+
+    def _move_xy(self, name: str, fx: float, fy: float, angle: float) -> None:
+        """SUMO's own search for the place of a front bumper at (fx, fy); the vehicle is there at the end of
+        the next step (remote control: it does not move by itself in that step)."""
+        move = self._sumo.vehicle.moveToXY
+        try:  # on a lane of its route: matched against the route's lanes only (half the cost)
+            move(name, "", -1, fx, fy, angle, keepRoute=1, matchThreshold=ON_ROUTE_MATCH_M)
+        except self._sumo.TraCIException:  # anywhere else: any lane nearby, and a new route
+            move(name, "", -1, fx, fy, angle, keepRoute=2, matchThreshold=ANY_LANE_MATCH_M)
+
+    def _spot_on_edge(self, name: str, fx: float, fy: float, speed: float) -> tuple[str, float] | None:
+        """(lane, position) for a scripted vehicle's front at (fx, fy) found from where it was, while it stays
+        on a lane of the edge it is on and clear of the edge's end (SUMO moves it by itself for a step before
+        it is put there: it must not run off its edge meanwhile); None otherwise."""
+        lane = self._lane_of.get(name)
+        if not lane:
+            return None
+        shapes = self._edge_shapes(lane)
+        if shapes is None:
+            return None
+        hints = self._hints.setdefault(name, {})
+        found = nearest_lane(shapes, fx, fy, hints)
+        if found is None:
+            return None
+        shape, on = found
+        if on.distance > ON_ROUTE_MATCH_M or on.pos + 2.0 * speed * self.step_seconds + 1.0 > shape.length:
+            return None
+        return shape.lane_id, on.pos
+
+    def _edge_shapes(self, lane: str) -> list[LaneShape] | None:
+        """The lanes of the (normal) edge `lane` belongs to; None for a junction's internal lane."""
+        shapes = self._edge_of_lane.get(lane)
+        if shapes is None:
+            sumo = self._sumo
+            edge = sumo.lane.getEdgeID(lane)
+            if edge.startswith(":"):
+                return None
+            lanes = [f"{edge}_{i}" for i in range(sumo.edge.getLaneNumber(edge))]
+            shapes = [LaneShape.of(lid, sumo.lane.getShape(lid), sumo.lane.getLength(lid)) for lid in lanes]
+            for lid in lanes:
+                self._edge_of_lane[lid] = shapes
+        return shapes
 
     def has(self, name: str) -> bool:
         return name in self._front
@@ -311,8 +358,34 @@ class SumoWorld:
         return int(self._sumo.vehicle.getLaneIndex(name))
 
     def step(self) -> None:
+        """One SUMO step; afterwards each scripted vehicle is where it was last placed. One that stays on a
+        lane of its edge is put there with `moveTo` after the step (as cheap as a step); any other is left
+        to SUMO's `moveToXY` search before it."""
+        sumo = self._sumo
+        after: list[tuple[str, str, float]] = []
+        searched: list[str] = []
         try:
-            self._sumo.simulationStep()
+            for name, (fx, fy, angle, speed) in self._targets.items():
+                spot = self._spot_on_edge(name, fx, fy, speed)
+                if spot is None:
+                    self._move_xy(name, fx, fy, angle)
+                    searched.append(name)
+                else:
+                    after.append((name, *spot))
+        except Exception as exc:
+            raise SimulationError(f"SUMO could not place {name!r}: {exc}") from exc
+        self._targets.clear()
+        try:
+            sumo.simulationStep()
+            for name, lane, pos in after:
+                sumo.vehicle.moveTo(name, lane, pos)
+                self._lane_of[name] = lane
+            for name in searched:
+                self._hints.pop(name, None)
+                try:
+                    self._lane_of[name] = sumo.vehicle.getLaneID(name)
+                except sumo.TraCIException:  # not in the network (yet): SUMO searches next time too
+                    self._lane_of.pop(name, None)
         except Exception as exc:
             raise SimulationError(f"SUMO step failed: {exc}") from exc
 
