@@ -1,8 +1,8 @@
 """SUMO as the traffic world: road networks converted with netconvert, vehicles simulated with libsumo.
 
 Every scenario entity is a SUMO vehicle, so SUMO's drivers see it (leaders, gaps, collisions). Entities the
-scenario moves are placed each step (`moveTo` while on their edge, `moveToXY` elsewhere); entities assigned the SUMO driver
-(controller property `carlos.driver: sumo`) are moved by SUMO's car-following model and read back.
+scenario moves are placed each step (`moveTo` while on their edge, `moveToXY` elsewhere); entities assigned the
+SUMO driver (controller property `carlos.driver: sumo`) are moved by SUMO's car-following model and read back.
 
 libsumo holds one simulation per process (a worker runs its runs one after another); `import libsumo`
 happens only here, when a run starts, never at operator import time.
