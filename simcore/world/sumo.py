@@ -11,6 +11,7 @@ happens only here, when a run starts, never at operator import time.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import math
 import os
@@ -55,6 +56,7 @@ def default_cache_dir() -> Path:
     return Path(base) / "networks"
 
 
+@functools.cache  # installed packages do not change under a running process (a worker asks once per run)
 def sumo_version() -> str:
     from importlib.metadata import version
 
