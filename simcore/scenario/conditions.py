@@ -12,7 +12,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from simcore.errors import BadInput
-from simcore.evaluation.metrics import Box, boxes_overlap
+from simcore.evaluation.metrics import boxes_overlap
 from simcore.scenario import model as m
 from simcore.scenario.measure import LARGE, directional
 from simcore.scenario.motion import lane_shift, wrap_angle
@@ -169,8 +169,10 @@ def relative_speed(c: m.RelativeSpeedCondition, world: ScenarioWorld, body: Body
 
 def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool:
     others = [world.body(c.entity)] if c.entity else [b for b in world.bodies.values() if b is not body]
-    mine = Box.of(world.state_of(body))
-    return any(boxes_overlap(mine, Box.of(world.state_of(o))) for o in others)
+    # the footprints this step (the ones `EntityState.corners()` gives, without building the states)
+    box = world.measure.box
+    mine = box(body)
+    return any(boxes_overlap(mine, box(o)) for o in others)
 
 
 REACH_ANGLE_TOLERANCE = 1e-6  # rad: esmini's ReachPosition with an Orientation wants the heading itself

@@ -271,9 +271,8 @@ def along_lane(
 def update_pose_from_road(road: OpenDrive, body: Body) -> None:
     assert body.road_id is not None
     t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
-    pose = road.road_to_world(body.road_id, body.s, t)
-    body.x, body.y, body.z = pose.x, pose.y, pose.z
-    road_heading = pose.heading if body.direction > 0 else pose.heading + math.pi
+    body.x, body.y, body.z, heading = road.road_xyzh(body.road_id, body.s, t)
+    road_heading = heading if body.direction > 0 else heading + math.pi
     drift = 0.0
     if abs(body.speed) > 0.1:
         lateral = body.lateral_velocity * body.direction  # + is to the left of the travel direction

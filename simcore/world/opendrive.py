@@ -610,8 +610,18 @@ class Road:
         return out
 
     def all_borders(self, s: float) -> list[tuple[Lane, float, float]]:
-        """Borders of every non-centre lane at ``s`` (right side first, then left)."""
-        return self.side_borders(s, -1) + self.side_borders(s, 1)
+        """Borders of every non-centre lane at ``s`` (right side first, then left; memoised as
+        `side_borders`: callers must not mutate)."""
+        cache: dict[float, list[tuple[Lane, float, float]]] | None = self.__dict__.get("_all_borders")
+        if cache is None:
+            cache = self.__dict__["_all_borders"] = {}
+        hit = cache.get(s)
+        if hit is not None:
+            return hit
+        if len(cache) > 256:
+            cache.clear()
+        out = cache[s] = self.side_borders(s, -1) + self.side_borders(s, 1)
+        return out
 
 
 @dataclass(frozen=True)
@@ -1040,6 +1050,24 @@ class OpenDrive:
         s = self._check_s(road, s)
         return Pose(*road.world_xyz(s, t))
 
+    def road_xyzh(self, road_id: str, s: float, t: float) -> tuple[float, float, float, float]:
+        """`road_to_world` as a plain ``(x, y, z, heading)`` tuple (for the per-step motion)."""
+        road = self.roads.get(road_id)
+        if road is None:
+            road = self.road(road_id)
+        if not 0.0 <= s <= road.length:
+            s = self._check_s(road, s)
+        return road.world_xyz(s, t)
+
+    def road_z(self, road_id: str, s: float, t: float) -> float:
+        """``z`` of road coordinates ``(s, t)`` (the one `road_to_world` gives)."""
+        road = self.road(road_id)
+        s = self._check_s(road, s)
+        z = road.elevation(s)
+        if road.superelevations:
+            z += t * math.sin(road.roll(s))
+        return z
+
     def _lane_borders(self, road: Road, lane_id: int, s: float) -> tuple[Lane, float, float]:
         if lane_id == 0:
             off = road.lane_offset(s)
@@ -1053,8 +1081,11 @@ class OpenDrive:
 
     def lane_center_t(self, road_id: str, lane_id: int, s: float) -> float:
         """``t`` of the lane's centre at ``s`` (includes laneOffset; lane 0 gives the laneOffset)."""
-        road = self.road(road_id)
-        s = self._check_s(road, s)
+        road = self.roads.get(road_id)
+        if road is None:
+            road = self.road(road_id)
+        if not 0.0 <= s <= road.length:
+            s = self._check_s(road, s)
         if lane_id == 0:
             return road.lane_offset(s)
         centers: dict[tuple[float, int], float] | None = road.__dict__.get("_centers")
@@ -1065,27 +1096,9 @@ class OpenDrive:
             return hit
         if len(centers) > 256:
             centers.clear()
-        side = 1 if lane_id > 0 else -1
-        cache = road.__dict__.get("_borders")
-        if cache is not None and (s, side) in cache:
-            _, inner, outer = self._lane_borders(road, lane_id, s)
-            centers[(s, lane_id)] = t = 0.5 * (inner + outer)
-            return t
-        # only the lanes from the centre out to this one (as side_borders computes them)
-        sec = road.section_at(s, side)
-        ds = s - sec.s
-        off = road.lane_offset(s)
-        acc = 0.0
-        for lane in sec.left if side > 0 else sec.right:
-            if lane.widths:
-                w = lane.width_at(ds)
-            else:
-                b = lane.border_at(ds)
-                w = 0.0 if b is None else abs(b) - acc
-            inner = off + side * acc
-            acc += w
+        for lane, inner, outer in road.side_borders(s, 1 if lane_id > 0 else -1):
             if lane.id == lane_id:
-                centers[(s, lane_id)] = t = 0.5 * (inner + (off + side * acc))
+                centers[(s, lane_id)] = t = 0.5 * (inner + outer)
                 return t
         raise OpenDriveError(f"{self.name}: road id={road.id}: no lane id={lane_id} at s={s:.3f}")
 
@@ -1294,27 +1307,37 @@ class OpenDrive:
 
     def _project(
         self, road: Road, px: float, py: float, s0: float, spacing: float
-    ) -> tuple[float, float, float]:
-        """Newton projection of ``(px, py)`` on the reference line from ``s0``: ``(s, t, along_residual)``."""
+    ) -> tuple[float, float, float, float]:
+        """Newton projection of ``(px, py)`` on the reference line from ``s0``: ``(s, t, along_residual,
+        reference heading at s)``."""
         s = s0
         along = 0.0
         t = 0.0
+        h = 0.0
+        at = math.nan  # the s that h is the heading at
+        geometry_at = road.geometry_at
         for _ in range(30):
-            x, y, h = road.reference_xyh(s)
+            g = geometry_at(s)  # as road.reference_xyh(s) and road.curvature(s)
+            ds = s - g.s
+            ds = ds if ds >= 0.0 else 0.0
+            x, y, h = g.local(ds)
+            at = s
             c, sn = math.cos(h), math.sin(h)
             dx, dy = px - x, py - y
             along = dx * c + dy * sn
             t = -dx * sn + dy * c
             if abs(along) < 1e-9:
                 break
-            denom = 1.0 - road.curvature(s) * t
+            denom = 1.0 - g.curvature(ds) * t
             step = along / denom if denom > 0.2 else along
             step = max(-2.0 * spacing - 1.0, min(2.0 * spacing + 1.0, step))
             s_new = min(max(s + step, 0.0), road.length)
             if abs(s_new - s) < 1e-10:
                 break
             s = s_new
-        return s, t, along
+        if at != s:
+            _, _, h = road.reference_xyh(s)
+        return s, t, along, h
 
     def world_to_road(
         self, x: float, y: float, z: float | None = None, road_hint: str | None = None
@@ -1353,7 +1376,7 @@ class OpenDrive:
             road: Road = idx["roads"][ri]
             sp = idx["spacing"][ri]
             for s0 in starts:
-                s, t, along = self._project(road, x, y, s0, sp)
+                s, t, along, h = self._project(road, x, y, s0, sp)
                 if road.superelevations:
                     t /= max(math.cos(road.roll(s)), 1e-6)
                 if abs(along) > 0.05:  # beyond the road's ends (or not converged)
@@ -1385,7 +1408,6 @@ class OpenDrive:
                     outside + abs(along),
                     abs(offset) / max(width, 1e-6),
                 )
-                _, _, h = road.reference_xyh(s)
                 rc = RoadCoordinates(road.id, lane.id, s, t, offset, h)
                 if best is None or key < best[0]:
                     best = (key, rc)
@@ -1400,14 +1422,13 @@ class OpenDrive:
         road = self.roads.get(road_id)
         if road is None or road.junction != "-1":
             return None
-        s, t, along = self._project(road, x, y, min(max(s_previous, 0.0), road.length), 2.0)
+        s, t, along, h = self._project(road, x, y, min(max(s_previous, 0.0), road.length), 2.0)
         if road.superelevations:
             t /= max(math.cos(road.roll(s)), 1e-6)
         if abs(along) > 1e-6:
             return None
         for lane, inner, outer in road.all_borders(s):
             if abs(outer - inner) > 1e-9 and min(inner, outer) <= t <= max(inner, outer):
-                _, _, h = road.reference_xyh(s)
                 return RoadCoordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
         return None
 
