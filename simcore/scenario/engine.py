@@ -36,7 +36,14 @@ from simcore.scenario.storyboard import State
 from simcore.scenario.sumo_bridge import SumoBridge
 from simcore.scenario.triggers import Triggers
 from simcore.scenario.world import Pose
-from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
+from simcore.world.state import (
+    BoundingBox,
+    EntityState,
+    WorldFrame,
+    entity_state,
+    lane_coordinates,
+    world_frame,
+)
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
@@ -590,13 +597,13 @@ class ScenarioEngine:
             s = body.s
             t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
             lane_id, offset = lane_at_t(road, road_id, s, t)
-            lane = LaneCoordinates(road_id, lane_id, s, t, offset)
+            lane = lane_coordinates(road_id, lane_id, s, t, offset)
         box = e.box
         known = self._bboxes.get(body.name)
         if known is None or known[0] is not box:
             bbox = BoundingBox(box.center_x, box.center_y, box.center_z, box.length, box.width, box.height)
             known = self._bboxes[body.name] = (box, bbox)
-        return EntityState(
+        return entity_state(
             body.name,
             e.object_type,
             e.category,
@@ -618,12 +625,12 @@ class ScenarioEngine:
         state_of = self.state_of
         if self.ghosts is None:
             entities = tuple([state_of(b) for b in self.bodies.values()])
-            return WorldFrame(self.step_index, self.time, entities, self.ego)
+            return world_frame(self.step_index, self.time, entities, self.ego, (), ())
         ghost_names = self.ghosts.names
         # a ghost is no object of the world (esmini shows it as a shadow): published apart
         entities = tuple([state_of(b) for b in self.bodies.values() if b.name not in ghost_names])
         ghosts = tuple([state_of(b) for b in self.bodies.values() if b.name in ghost_names])
-        return WorldFrame(self.step_index, self.time, entities, self.ego, ghosts=ghosts)
+        return world_frame(self.step_index, self.time, entities, self.ego, (), ghosts)
 
     @property
     def started(self) -> bool:

@@ -594,12 +594,20 @@ class Road:
 
     def _side_borders(self, s: float, side: int) -> list[tuple[Lane, float, float]]:
         sec = self.section_at(s, side)
+        lanes = sec.left if side > 0 else sec.right
+        if not lanes:
+            return []
         ds = s - sec.s
         off = self.lane_offset(s)
         out: list[tuple[Lane, float, float]] = []
         acc = 0.0
-        for lane in sec.left if side > 0 else sec.right:
-            if lane.widths:
+        for lane in lanes:
+            widths = lane.widths
+            if len(widths) == 1:  # the common case, as Lane.width_at (inline: every step, every lane)
+                p = widths[0]
+                d = ds - p.s0
+                w = p.a + d * (p.b + d * (p.c + d * p.d))
+            elif widths:
                 w = lane.width_at(ds)
             else:
                 b = lane.border_at(ds)
