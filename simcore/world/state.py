@@ -109,7 +109,7 @@ def _builder(cls: type[_T]) -> Callable[..., _T]:
     def build(*values: Any) -> _T:
         obj = twin(*values)
         obj.__class__ = cls
-        return obj  # type: ignore[no-any-return]
+        return obj
 
     try:
         build(*range(len(names)))
