@@ -167,12 +167,24 @@ def relative_speed(c: m.RelativeSpeedCondition, world: ScenarioWorld, body: Body
     return compare(c.rule, relative, c.value)
 
 
+#: m: boxes whose bounding circles are this far apart do not collide (their separating-axis gap is at least
+#: 1/√2 of it, far above `TOUCH_TOLERANCE`), so their footprints are not built
+APART = 1e-3
+
+
 def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool:
     others = [world.body(c.entity)] if c.entity else [b for b in world.bodies.values() if b is not body]
     # the footprints this step (the ones `EntityState.corners()` gives, without building the states)
-    box = world.measure.box
-    mine = box(body)
-    return any(boxes_overlap(mine, box(o)) for o in others)
+    measure = world.measure
+    mine = None
+    for other in others:
+        if measure.box_distance_lower_bound(body, other) > APART:
+            continue
+        if mine is None:
+            mine = measure.box(body)
+        if boxes_overlap(mine, measure.box(other)):
+            return True
+    return False
 
 
 REACH_ANGLE_TOLERANCE = 1e-6  # rad: esmini's ReachPosition with an Orientation wants the heading itself

@@ -39,6 +39,8 @@ import defusedxml.ElementTree as DET
 import numpy as np
 from defusedxml import DefusedXmlException
 
+from simcore.world.frozen import builder
+
 __all__ = [
     "MAX_FILE_BYTES",
     "Geometry",
@@ -149,6 +151,9 @@ class RoadCoordinates:
     t: float
     offset: float
     heading: float
+
+
+_road_coordinates = builder(RoadCoordinates)  # RoadCoordinates(...), built as fast as a plain object
 
 
 @dataclass(frozen=True)
@@ -1416,7 +1421,7 @@ class OpenDrive:
                     outside + abs(along),
                     abs(offset) / max(width, 1e-6),
                 )
-                rc = RoadCoordinates(road.id, lane.id, s, t, offset, h)
+                rc = _road_coordinates(road.id, lane.id, s, t, offset, h)
                 if best is None or key < best[0]:
                     best = (key, rc)
         return None if best is None else best[1]
@@ -1437,7 +1442,7 @@ class OpenDrive:
             return None
         for lane, inner, outer in road.all_borders(s):
             if abs(outer - inner) > 1e-9 and min(inner, outer) <= t <= max(inner, outer):
-                return RoadCoordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
+                return _road_coordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
         return None
 
 

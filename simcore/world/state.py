@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, field, fields, make_dataclass
-from typing import Any, TypeVar
+from dataclasses import dataclass, field
 
-_T = TypeVar("_T")
+from simcore.world.frozen import builder
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,29 +95,8 @@ class WorldFrame:
         raise KeyError(name)
 
 
-def _builder(cls: type[_T]) -> Callable[..., _T]:
-    """A positional constructor of the frozen slots dataclass `cls` (every field, in order) at the cost of
-    a plain one: a frozen dataclass's `__init__` sets each field through `object.__setattr__` (five times
-    slower for an `EntityState`, built for every entity at every step). The object is built as an unfrozen
-    twin with the same slots, then becomes a `cls` (the same memory layout): the same object `cls(...)`
-    gives. Falls back to `cls` itself where the layout does not allow it."""
-    names = [f.name for f in fields(cls)]  # type: ignore[arg-type]
-    twin = make_dataclass(f"_{cls.__name__}Builder", names, slots=True)
-
-    def build(*values: Any) -> _T:
-        obj = twin(*values)
-        obj.__class__ = cls
-        return obj
-
-    try:
-        build(*range(len(names)))
-    except TypeError:
-        return cls
-    return build
-
-
 #: `EntityState`, `LaneCoordinates` and `WorldFrame` from every field, positionally (the engine's per-step
 #: frames); equal to the objects their constructors give
-entity_state = _builder(EntityState)
-lane_coordinates = _builder(LaneCoordinates)
-world_frame = _builder(WorldFrame)
+entity_state = builder(EntityState)
+lane_coordinates = builder(LaneCoordinates)
+world_frame = builder(WorldFrame)
