@@ -177,6 +177,18 @@ class Poly3:
         return self.b + ds * (2.0 * self.c + ds * 3.0 * self.d)
 
 
+def _constant(p: Poly3) -> bool:
+    """Does the polynomial give the same number (``a``) at every ``s``? (``a + ds·(0 + ds·(0 + ds·0))`` is
+    ``a`` for every finite ``ds``, unless ``a`` is -0.0.)"""
+    return (
+        p.b == 0.0
+        and p.c == 0.0
+        and p.d == 0.0
+        and math.isfinite(p.a)
+        and (p.a != 0.0 or math.copysign(1.0, p.a) > 0)
+    )
+
+
 def _poly_at(polys: Sequence[Poly3], starts: Sequence[float], s: float) -> Poly3 | None:
     """The record in effect at ``s`` (the last one starting at or before ``s``; the first one before it)."""
     if not polys:
@@ -214,8 +226,12 @@ class Line(Geometry):
 
     kind = "line"
 
+    def __init__(self, s: float, x: float, y: float, hdg: float, length: float) -> None:
+        super().__init__(s, x, y, hdg, length)
+        self._cos, self._sin = math.cos(hdg), math.sin(hdg)  # of the constant heading, once
+
     def local(self, ds: float) -> tuple[float, float, float]:
-        return self.x + ds * math.cos(self.hdg), self.y + ds * math.sin(self.hdg), self.hdg
+        return self.x + ds * self._cos, self.y + ds * self._sin, self.hdg
 
     def curvature(self, ds: float) -> float:
         return 0.0
@@ -602,6 +618,29 @@ class Road:
         lanes = sec.left if side > 0 else sec.right
         if not lanes:
             return []
+        fixed = self._fixed_borders(sec, side)
+        return fixed if fixed is not None else self._borders_in(sec, lanes, s, side)
+
+    def _fixed_borders(self, sec: LaneSection, side: int) -> list[tuple[Lane, float, float]] | None:
+        """The borders of a section's side where they are the same at every ``s`` of it (constant widths,
+        constant or no laneOffset: the sums below give the same numbers at every ``s``), else None."""
+        fixed: dict[tuple[int, int], list[tuple[Lane, float, float]] | None] | None = self.__dict__.get(
+            "_fixed"
+        )
+        if fixed is None:
+            fixed = self.__dict__["_fixed"] = {}
+        key = (id(sec), side)
+        if key in fixed:
+            return fixed[key]
+        lanes = sec.left if side > 0 else sec.right
+        constant = len(self.lane_offsets) <= 1 and all(_constant(p) for p in self.lane_offsets)
+        constant = constant and all(len(lane.widths) == 1 and _constant(lane.widths[0]) for lane in lanes)
+        out = fixed[key] = self._borders_in(sec, lanes, sec.s, side) if constant else None
+        return out
+
+    def _borders_in(
+        self, sec: LaneSection, lanes: list[Lane], s: float, side: int
+    ) -> list[tuple[Lane, float, float]]:
         ds = s - sec.s
         off = self.lane_offset(s)
         out: list[tuple[Lane, float, float]] = []
