@@ -17,7 +17,7 @@ from simcore.scenario import model as m
 from simcore.scenario.measure import LARGE, directional
 from simcore.scenario.motion import lane_shift, wrap_angle
 from simcore.scenario.positions import fixed_point
-from simcore.scenario.storyboard import Node, transition_of
+from simcore.scenario.storyboard import Node, Transition, transition_of
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
@@ -79,22 +79,23 @@ def simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> bool:
 
 
 def storyboard_element_state(c: m.StoryboardElementStateCondition, world: ScenarioWorld) -> bool:
-    nodes: list[Node] | None = world.memo.get(("element_nodes", id(c)))
-    if nodes is None:
-        nodes = world.memo[("element_nodes", id(c))] = world.registry.find(c.element_type, c.element_ref)
-    if not nodes:
-        raise BadInput(
-            f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
-            file=world.source,
-        )
-    transition = transition_of(c.state)
+    # per condition, found once: the elements, the transition it names (None: a state) and, per element, how
+    # many of those transitions this condition has seen
+    key = ("element_state", id(c))
+    found: tuple[list[Node], Transition | None, dict[int, int]] | None = world.memo.get(key)
+    if found is None:
+        nodes = world.registry.find(c.element_type, c.element_ref)
+        if not nodes:
+            raise BadInput(
+                f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
+                file=world.source,
+            )
+        found = world.memo[key] = (nodes, transition_of(c.state), {})
+    nodes, transition, seen = found
     if transition is None:
         return any(node.is_(c.state, world.step_index) for node in nodes)
     # a transition holds when the element went through it since this condition was last evaluated
     # (every transition counts once for each condition, however late it looks; as esmini)
-    seen: dict[int, int] | None = world.memo.get(("seen_transitions", id(c)))
-    if seen is None:
-        seen = world.memo[("seen_transitions", id(c))] = {}
     happened = False
     for node in nodes:
         count = node.counts.get(transition, 0)

@@ -102,7 +102,8 @@ def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, f
         if lane.id == 0 or inner == outer:
             continue
         centre = 0.5 * (inner + outer)
-        if min(inner, outer) - 1e-9 <= t <= max(inner, outer) + 1e-9:
+        lo, hi = (inner, outer) if inner < outer else (outer, inner)
+        if lo - 1e-9 <= t <= hi + 1e-9:
             return lane.id, t - centre
         if abs(t - centre) < best:
             best, best_lane, best_offset = abs(t - centre), lane.id, t - centre

@@ -1480,7 +1480,10 @@ class OpenDrive:
         if abs(along) > 1e-6:
             return None
         for lane, inner, outer in road.all_borders(s):
-            if abs(outer - inner) > 1e-9 and min(inner, outer) <= t <= max(inner, outer):
+            if inner < outer:
+                if outer - inner > 1e-9 and inner <= t <= outer:
+                    return _road_coordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
+            elif inner - outer > 1e-9 and outer <= t <= inner:
                 return _road_coordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
         return None
 
