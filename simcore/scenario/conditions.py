@@ -8,6 +8,7 @@ triggering entity. Both read the run only through `ScenarioWorld`.
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -23,13 +24,13 @@ if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
 
-_COMPARE = {
-    "greaterThan": lambda a, b: a > b,
-    "lessThan": lambda a, b: a < b,
+_COMPARE: dict[str, Callable[[Any, Any], Any]] = {
+    "greaterThan": operator.gt,
+    "lessThan": operator.lt,
     "equalTo": lambda a, b: abs(a - b) < 1e-9 if isinstance(a, float) else a == b,
-    "greaterOrEqual": lambda a, b: a >= b,
-    "lessOrEqual": lambda a, b: a <= b,
-    "notEqualTo": lambda a, b: a != b,
+    "greaterOrEqual": operator.ge,
+    "lessOrEqual": operator.le,
+    "notEqualTo": operator.ne,
 }
 
 

@@ -624,7 +624,8 @@ class ScenarioEngine:
     def frame(self) -> WorldFrame:
         state_of = self.state_of
         if self.ghosts is None:
-            entities = tuple([state_of(b) for b in self.bodies.values()])
+            states = self._states
+            entities = tuple([states.get(b.name) or state_of(b) for b in self.bodies.values()])
             return world_frame(self.step_index, self.time, entities, self.ego, (), ())
         ghost_names = self.ghosts.names
         # a ghost is no object of the world (esmini shows it as a shadow): published apart

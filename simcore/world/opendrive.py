@@ -1113,8 +1113,11 @@ class OpenDrive:
 
     def road_z(self, road_id: str, s: float, t: float) -> float:
         """``z`` of road coordinates ``(s, t)`` (the one `road_to_world` gives)."""
-        road = self.road(road_id)
-        s = self._check_s(road, s)
+        road = self.roads.get(road_id)
+        if road is None:
+            road = self.road(road_id)
+        if not 0.0 <= s <= road.length:
+            s = self._check_s(road, s)
         z = road.elevation(s)
         if road.superelevations:
             z += t * math.sin(road.roll(s))
