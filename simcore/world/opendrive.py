@@ -26,6 +26,7 @@ problem in the input is reported as :class:`OpenDriveError` naming the file and 
 from __future__ import annotations
 
 import bisect
+import functools
 import hashlib
 import itertools
 import math
@@ -264,6 +265,14 @@ class Arc(Geometry):
 _GL16_X, _GL16_W = np.polynomial.legendre.leggauss(16)
 
 
+@functools.cache
+def _fresnel() -> Any:
+    """scipy's Fresnel integrals: only roads with spirals pay for scipy.special's import (once)."""
+    from scipy.special import fresnel
+
+    return fresnel
+
+
 class Spiral(Geometry):
     """A clothoid whose curvature changes linearly from ``k0`` to ``k1`` over its length.
 
@@ -293,9 +302,7 @@ class Spiral(Geometry):
             self._sin0 = math.sin(self._th0)
 
     def _std(self, u: float) -> tuple[float, float]:
-        from scipy.special import fresnel  # only roads with spirals pay for scipy.special's import
-
-        sf, cf = fresnel(u / self._scale)
+        sf, cf = _fresnel()(u / self._scale)
         return self._scale * float(cf), self._sign * self._scale * float(sf)
 
     def local(self, ds: float) -> tuple[float, float, float]:
