@@ -76,16 +76,13 @@ def holds(cond: m.Condition, world: ScenarioWorld, triggering: list[str]) -> boo
 def simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> bool:
     # to a nanosecond: step 3 of 0.05 s is at 0.15000000000000002 s, which is not "greater than 0.15" (esmini
     # holds a condition "t > k·dt" from step k + 1 on, for every k)
-    # (rounding to digits is slow: the condition's value is rounded once, the clock once per step)
-    memo = world.memo
-    value = memo.get(("simulation_time", id(c)))
+    # (rounding to digits is slow: the condition's value is rounded once; the clock only near it, where the
+    # rounding decides: more than a microsecond away, rounding by at most half a nanosecond changes no order)
+    value = world.memo.get(("simulation_time", id(c)))
     if value is None:
-        value = memo[("simulation_time", id(c))] = round(c.value, 9)
+        value = world.memo[("simulation_time", id(c))] = round(c.value, 9)
     now = world.time
-    clock = memo.get(("rounded_time", 0))
-    if clock is None or clock[0] != now:
-        clock = memo[("rounded_time", 0)] = (now, round(now, 9))
-    return compare(c.rule, clock[1], value)
+    return compare(c.rule, now if abs(now - value) > 1e-6 else round(now, 9), value)
 
 
 def storyboard_element_state(c: m.StoryboardElementStateCondition, world: ScenarioWorld) -> bool:
