@@ -509,3 +509,49 @@ def test_a_signal_missing_from_the_road_network_is_warned_about(tmp_path: Path, 
     engine = run(scenario(tmp_path, event("Go", stop_ego(), green)), road, 0.1)
     assert any("TrafficSignalCondition: traffic signal '42' is not a <signal>" in w for w in engine.warnings)
     assert len([w for w in engine.warnings if "'42'" in w]) == 1
+
+
+# --- collision ----------------------------------------------------------------------------------------------
+
+
+def test_collision_is_the_overlap_of_the_footprints_near_and_far() -> None:
+    """CollisionCondition holds when the footprints touch or overlap (within TOUCH_TOLERANCE), rotated or
+    not; boxes apart (a millimetre up to far away) do not collide, whether or not their footprints are built."""
+    import math
+    from dataclasses import dataclass, field
+
+    from simcore.evaluation.metrics import TOUCH_TOLERANCE
+    from simcore.scenario import conditions
+    from simcore.scenario import model as m
+    from simcore.scenario.measure import Measure
+    from simcore.scenario.motion import Body
+
+    def car(name: str) -> m.Entity:
+        return m.Entity(name, "vehicle", "car", m.Box(1.4, 0.0, 0.75, 4.5, 1.8, 1.5), m.Performance())
+
+    @dataclass
+    class World:
+        bodies: dict[str, Body]
+        road: None = None
+        step_index: int = 0
+        measure: Measure = field(init=False)
+
+        def __post_init__(self) -> None:
+            self.measure = Measure(self)
+
+        def body(self, name: str) -> Body:
+            return self.bodies[name]
+
+    def collides(dx: float, dy: float, heading: float = 0.0) -> bool:
+        ego = Body(car("Ego"))
+        other = Body(car("Other"), x=dx, y=dy, heading=heading)
+        world = World({"Ego": ego, "Other": other})
+        return conditions.collision(m.CollisionCondition("Other"), world, ego)  # type: ignore[arg-type]
+
+    assert collides(4.5, 0.0)  # bumper to bumper: touching
+    assert collides(4.5 + 0.5 * TOUCH_TOLERANCE, 0.0)
+    assert not collides(4.5 + 1e-4, 0.0)  # a tenth of a millimetre apart
+    assert not collides(4.5 + 2e-3, 0.0) and not collides(50.0, 3.0)
+    assert collides(0.0, 1.8) and not collides(0.0, 1.8 + 1e-4)  # side by side
+    # turned 90° with its box centred beside Ego's front (0.9 m either side along x): touching at x = 4.55
+    assert collides(4.55 - 1e-3, -1.4, math.pi / 2) and not collides(4.55 + 2e-3, -1.4, math.pi / 2)

@@ -657,3 +657,43 @@ def test_shared_parses_a_file_once_per_content(tmp_path: Path) -> None:
     road.write_text("<OpenDRIVE>")
     with pytest.raises(OpenDriveError, match=r"road\.xodr: not well-formed XML"):
         OpenDrive.shared(road)
+
+
+def test_constant_lane_borders_are_the_ones_computed_at_every_s() -> None:
+    """A section side with constant widths and laneOffset has its borders computed once: they are, to the
+    bit, the ones the per-s sums give at any s of the section; widths that change are computed at each s."""
+    from simcore.world.opendrive import Poly3, _constant
+
+    od = OpenDrive.from_string(
+        _xodr(
+            _road(
+                "1",
+                120.0,
+                "<geometry s='0' x='0' y='0' hdg='0.2' length='120'><line/></geometry>",
+                "<lanes><laneOffset s='0' a='0.25' b='0' c='0' d='0'/>"
+                "<laneSection s='0'><left>"
+                + _lane(1, 3.25)
+                + "</left><center><lane id='0' type='none'/></center>"
+                "<right>" + _lane(-1, 3.5) + _lane(-2, 3.1) + "</right></laneSection>"
+                "<laneSection s='60'><left>" + _lane(1, 3.25, 0.01) + "</left>"
+                "<center><lane id='0' type='none'/></center><right>"
+                + _lane(-1, 3.4)
+                + "</right></laneSection></lanes>",
+            )
+        ),
+        "constant.xodr",
+    )
+    road = od.roads["1"]
+    for s in (0.0, 0.1, 17.3, 59.99, 60.0, 75.5, 119.0, 120.0):
+        for side in (1, -1):
+            sec = road.section_at(s, side)
+            lanes = sec.left if side > 0 else sec.right
+            assert road.side_borders(s, side) == road._borders_in(sec, lanes, s, side), (s, side)
+        assert road.all_borders(s) == road.side_borders(s, -1) + road.side_borders(s, 1)
+    first = road.section_at(10.0, -1)
+    assert road._fixed_borders(first, -1) is not None and road._fixed_borders(first, 1) is not None
+    second = road.section_at(70.0, 1)
+    assert road._fixed_borders(second, 1) is None  # the left lane widens along the section
+    assert road.side_borders(70.0, 1) != road.side_borders(80.0, 1)
+    assert _constant(Poly3(0.0, 3.5, 0.0, 0.0, 0.0)) and _constant(Poly3(5.0, -1.0, 0.0, 0.0, 0.0))
+    assert not _constant(Poly3(0.0, -0.0, 0.0, 0.0, 0.0)) and not _constant(Poly3(0.0, 3.5, 0.0, 1e-9, 0.0))

@@ -103,9 +103,29 @@ class Box(NamedTuple):
 
     @classmethod
     def of(cls, entity: EntityState) -> Box:
-        c0, c1, c2, c3 = entity.corners()
-        c, s = math.cos(entity.heading), math.sin(entity.heading)
-        return cls((c0, c1, c2, c3), ((c, s), (-s, c)))
+        b = entity.bbox
+        return footprint(entity.x, entity.y, entity.heading, b.center_x, b.center_y, b.length, b.width)
+
+
+def footprint(
+    x: float, y: float, heading: float, center_x: float, center_y: float, length: float, width: float
+) -> Box:
+    """The footprint of a box centred (`center_x`, `center_y`) from a reference point (x, y) in the frame of
+    `heading`: the corners `EntityState.corners()` gives (the same arithmetic), with the box's axes."""
+    c, s = math.cos(heading), math.sin(heading)
+    cx = x + c * center_x - s * center_y
+    cy = y + s * center_x + c * center_y
+    hl, hw = length / 2, width / 2
+    lc, ls, wc, ws = hl * c, hl * s, hw * c, hw * s
+    return Box(
+        (
+            (cx + lc - ws, cy + ls + wc),
+            (cx - lc - ws, cy - ls + wc),
+            (cx - lc + ws, cy - ls - wc),
+            (cx + lc + ws, cy + ls - wc),
+        ),
+        ((c, s), (-s, c)),
+    )
 
 
 def _axis_gap(a: Box, b: Box, ax: float, ay: float) -> float:
@@ -281,8 +301,7 @@ class MetricsAccumulator:
             lower = math.hypot(dx, dy) - e_radius - math.hypot(o_hl, o_hw)
             if lower <= TOUCH_TOLERANCE or lower < self._min_distance:
                 if ego_box is None:
-                    c0, c1, c2, c3 = ego.corners()
-                    ego_box = Box((c0, c1, c2, c3), ((fx, fy), (-fy, fx)))
+                    ego_box = Box.of(ego)
                 other_box = Box.of(other)
                 gap = separation(ego_box, other_box)  # <= TOUCH_TOLERANCE: overlap; else <= the distance
                 if gap <= TOUCH_TOLERANCE:

@@ -8,28 +8,29 @@ triggering entity. Both read the run only through `ScenarioWorld`.
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from simcore.errors import BadInput
-from simcore.evaluation.metrics import Box, boxes_overlap
+from simcore.evaluation.metrics import boxes_overlap
 from simcore.scenario import model as m
 from simcore.scenario.measure import LARGE, directional
 from simcore.scenario.motion import lane_shift, wrap_angle
 from simcore.scenario.positions import fixed_point
-from simcore.scenario.storyboard import Node, transition_of
+from simcore.scenario.storyboard import Node, Transition, transition_of
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
 
-_COMPARE = {
-    "greaterThan": lambda a, b: a > b,
-    "lessThan": lambda a, b: a < b,
+_COMPARE: dict[str, Callable[[Any, Any], Any]] = {
+    "greaterThan": operator.gt,
+    "lessThan": operator.lt,
     "equalTo": lambda a, b: abs(a - b) < 1e-9 if isinstance(a, float) else a == b,
-    "greaterOrEqual": lambda a, b: a >= b,
-    "lessOrEqual": lambda a, b: a <= b,
-    "notEqualTo": lambda a, b: a != b,
+    "greaterOrEqual": operator.ge,
+    "lessOrEqual": operator.le,
+    "notEqualTo": operator.ne,
 }
 
 
@@ -75,26 +76,33 @@ def holds(cond: m.Condition, world: ScenarioWorld, triggering: list[str]) -> boo
 def simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> bool:
     # to a nanosecond: step 3 of 0.05 s is at 0.15000000000000002 s, which is not "greater than 0.15" (esmini
     # holds a condition "t > k·dt" from step k + 1 on, for every k)
-    return compare(c.rule, round(world.time, 9), round(c.value, 9))
+    # (rounding to digits is slow: the condition's value is rounded once; the clock only near it, where the
+    # rounding decides: more than a microsecond away, rounding by at most half a nanosecond changes no order)
+    value = world.memo.get(("simulation_time", id(c)))
+    if value is None:
+        value = world.memo[("simulation_time", id(c))] = round(c.value, 9)
+    now = world.time
+    return compare(c.rule, now if abs(now - value) > 1e-6 else round(now, 9), value)
 
 
 def storyboard_element_state(c: m.StoryboardElementStateCondition, world: ScenarioWorld) -> bool:
-    nodes: list[Node] | None = world.memo.get(("element_nodes", id(c)))
-    if nodes is None:
-        nodes = world.memo[("element_nodes", id(c))] = world.registry.find(c.element_type, c.element_ref)
-    if not nodes:
-        raise BadInput(
-            f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
-            file=world.source,
-        )
-    transition = transition_of(c.state)
+    # per condition, found once: the elements, the transition it names (None: a state) and, per element, how
+    # many of those transitions this condition has seen
+    key = ("element_state", id(c))
+    found: tuple[list[Node], Transition | None, dict[int, int]] | None = world.memo.get(key)
+    if found is None:
+        nodes = world.registry.find(c.element_type, c.element_ref)
+        if not nodes:
+            raise BadInput(
+                f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
+                file=world.source,
+            )
+        found = world.memo[key] = (nodes, transition_of(c.state), {})
+    nodes, transition, seen = found
     if transition is None:
         return any(node.is_(c.state, world.step_index) for node in nodes)
     # a transition holds when the element went through it since this condition was last evaluated
     # (every transition counts once for each condition, however late it looks; as esmini)
-    seen: dict[int, int] | None = world.memo.get(("seen_transitions", id(c)))
-    if seen is None:
-        seen = world.memo[("seen_transitions", id(c))] = {}
     happened = False
     for node in nodes:
         count = node.counts.get(transition, 0)
@@ -167,10 +175,24 @@ def relative_speed(c: m.RelativeSpeedCondition, world: ScenarioWorld, body: Body
     return compare(c.rule, relative, c.value)
 
 
+#: m: boxes whose bounding circles are this far apart do not collide (their separating-axis gap is at least
+#: 1/√2 of it, far above `TOUCH_TOLERANCE`), so their footprints are not built
+APART = 1e-3
+
+
 def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool:
     others = [world.body(c.entity)] if c.entity else [b for b in world.bodies.values() if b is not body]
-    mine = Box.of(world.state_of(body))
-    return any(boxes_overlap(mine, Box.of(world.state_of(o))) for o in others)
+    # the footprints this step (the ones `EntityState.corners()` gives, without building the states)
+    measure = world.measure
+    mine = None
+    for other in others:
+        if measure.box_distance_lower_bound(body, other) > APART:
+            continue
+        if mine is None:
+            mine = measure.box(body)
+        if boxes_overlap(mine, measure.box(other)):
+            return True
+    return False
 
 
 REACH_ANGLE_TOLERANCE = 1e-6  # rad: esmini's ReachPosition with an Orientation wants the heading itself

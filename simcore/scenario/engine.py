@@ -36,7 +36,14 @@ from simcore.scenario.storyboard import State
 from simcore.scenario.sumo_bridge import SumoBridge
 from simcore.scenario.triggers import Triggers
 from simcore.scenario.world import Pose
-from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
+from simcore.world.state import (
+    BoundingBox,
+    EntityState,
+    WorldFrame,
+    entity_state,
+    lane_coordinates,
+    world_frame,
+)
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
@@ -144,6 +151,7 @@ class ScenarioEngine:
             self.warnings.extend(unknown_signals(self.scenario, self.root, road, self.source))
         self.registry = self.story.registry
         self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
+        self._bboxes: dict[str, tuple[m.Box, BoundingBox]] = {}  # each entity's box, as published
         self._init()
         if self.ghosts is not None:
             self.ghosts.start()
@@ -583,38 +591,47 @@ class ScenarioEngine:
     def _state_of(self, body: Body) -> EntityState:
         e = body.entity
         lane = None
-        if body.road_id is not None and self.road is not None:
-            t = self.road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
-            lane_id, offset = lane_at_t(self.road, body.road_id, body.s, t)
-            lane = LaneCoordinates(road_id=body.road_id, lane_id=lane_id, s=body.s, t=t, offset=offset)
-        return EntityState(
-            name=body.name,
-            object_type=e.object_type,
-            category=e.category,
-            x=body.x,
-            y=body.y,
-            z=body.z,
-            heading=body.heading,
-            pitch=body.pitch,
-            roll=body.roll,
-            speed=body.speed,
-            acceleration=body.acceleration,
-            yaw_rate=body.yaw_rate,
-            bbox=BoundingBox(
-                e.box.center_x, e.box.center_y, e.box.center_z, e.box.length, e.box.width, e.box.height
-            ),
-            lane=lane,
-            controlled_by="external" if body.external else e.driver,
+        road = self.road
+        road_id = body.road_id
+        if road_id is not None and road is not None:
+            s = body.s
+            t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
+            lane_id, offset = lane_at_t(road, road_id, s, t)
+            lane = lane_coordinates(road_id, lane_id, s, t, offset)
+        box = e.box
+        known = self._bboxes.get(body.name)
+        if known is None or known[0] is not box:
+            bbox = BoundingBox(box.center_x, box.center_y, box.center_z, box.length, box.width, box.height)
+            known = self._bboxes[body.name] = (box, bbox)
+        return entity_state(
+            body.name,
+            e.object_type,
+            e.category,
+            body.x,
+            body.y,
+            body.z,
+            body.heading,
+            body.pitch,
+            body.roll,
+            body.speed,
+            body.acceleration,
+            body.yaw_rate,
+            known[1],
+            lane,
+            "external" if body.external else e.driver,
         )
 
     def frame(self) -> WorldFrame:
-        ghost_names = self.ghosts.names if self.ghosts is not None else ()
+        state_of = self.state_of
+        if self.ghosts is None:
+            states = self._states
+            entities = tuple([states.get(b.name) or state_of(b) for b in self.bodies.values()])
+            return world_frame(self.step_index, self.time, entities, self.ego, (), ())
+        ghost_names = self.ghosts.names
         # a ghost is no object of the world (esmini shows it as a shadow): published apart
-        entities = tuple(self.state_of(b) for b in self.bodies.values() if b.name not in ghost_names)
-        ghosts = tuple(self.state_of(b) for b in self.bodies.values() if b.name in ghost_names)
-        return WorldFrame(
-            step=self.step_index, time=self.time, entities=entities, ego=self.ego, ghosts=ghosts
-        )
+        entities = tuple([state_of(b) for b in self.bodies.values() if b.name not in ghost_names])
+        ghosts = tuple([state_of(b) for b in self.bodies.values() if b.name in ghost_names])
+        return world_frame(self.step_index, self.time, entities, self.ego, (), ghosts)
 
     @property
     def started(self) -> bool:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Protocol
 
-from simcore.evaluation.metrics import Box, box_distance, boxes_overlap
+from simcore.evaluation.metrics import Box, box_distance, boxes_overlap, footprint
 from simcore.scenario import paths
 
 if TYPE_CHECKING:
@@ -233,19 +233,8 @@ class Measure:
         cached = self._boxes.get(body.name)
         if cached is None:
             box = body.entity.box
-            c, s = math.cos(body.heading), math.sin(body.heading)
-            cx = body.x + c * box.center_x - s * box.center_y
-            cy = body.y + s * box.center_x + c * box.center_y
-            hl, hw = box.length / 2, box.width / 2
-            lc, ls, wc, ws = hl * c, hl * s, hw * c, hw * s
-            cached = self._boxes[body.name] = Box(
-                (
-                    (cx + lc - ws, cy + ls + wc),
-                    (cx - lc - ws, cy - ls + wc),
-                    (cx - lc + ws, cy - ls - wc),
-                    (cx + lc + ws, cy + ls - wc),
-                ),
-                ((c, s), (-s, c)),
+            cached = self._boxes[body.name] = footprint(
+                body.x, body.y, body.heading, box.center_x, box.center_y, box.length, box.width
             )
         return cached
 

@@ -102,7 +102,8 @@ def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, f
         if lane.id == 0 or inner == outer:
             continue
         centre = 0.5 * (inner + outer)
-        if min(inner, outer) - 1e-9 <= t <= max(inner, outer) + 1e-9:
+        lo, hi = (inner, outer) if inner < outer else (outer, inner)
+        if lo - 1e-9 <= t <= hi + 1e-9:
             return lane.id, t - centre
         if abs(t - centre) < best:
             best, best_lane, best_offset = abs(t - centre), lane.id, t - centre
@@ -271,9 +272,8 @@ def along_lane(
 def update_pose_from_road(road: OpenDrive, body: Body) -> None:
     assert body.road_id is not None
     t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
-    pose = road.road_to_world(body.road_id, body.s, t)
-    body.x, body.y, body.z = pose.x, pose.y, pose.z
-    road_heading = pose.heading if body.direction > 0 else pose.heading + math.pi
+    body.x, body.y, body.z, heading = road.road_xyzh(body.road_id, body.s, t)
+    road_heading = heading if body.direction > 0 else heading + math.pi
     drift = 0.0
     if abs(body.speed) > 0.1:
         lateral = body.lateral_velocity * body.direction  # + is to the left of the travel direction

@@ -248,7 +248,7 @@ def locate(road: OpenDrive | None, body: Body) -> None:
     if rc is not None:
         body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
         body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
-        body.z = road.road_to_world(rc.road_id, rc.s, rc.t).z
+        body.z = road.road_z(rc.road_id, rc.s, rc.t)
 
 
 def track(road: OpenDrive | None, body: Body, lock_lane: bool = False) -> None:

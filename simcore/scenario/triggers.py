@@ -31,29 +31,35 @@ class Triggers:
         self.states: dict[int, ConditionState] = {}
 
     def _condition(self, cond: m.Condition, triggering: list[str]) -> bool:
-        if cond.edge == "none" and cond.delay <= 0:
+        edge, delay = cond.edge, cond.delay
+        if edge == "none" and delay <= 0:
             return holds(cond, self.world, triggering)  # no edge, no delay: nothing to remember
         state = self.states.get(id(cond))
         if state is None:
             state = self.states[id(cond)] = ConditionState(cond)
         value = holds(cond, self.world, triggering)
         # an edge needs a change: the first evaluation only records the value (as esmini does)
-        previous = state.previous if state.previous is not None else value
+        previous = state.previous
+        if previous is None:
+            previous = value
         state.previous = value
-        if cond.edge == "rising":
+        if edge == "rising":
             fired = value and not previous
-        elif cond.edge == "falling":
+        elif edge == "falling":
             fired = previous and not value
-        elif cond.edge == "risingOrFalling":
+        elif edge == "risingOrFalling":
             fired = value != previous
         else:
             fired = value
-        if cond.delay <= 0:
+        if delay <= 0:
             return fired
-        state.history.append((self.world.time, fired))
+        now = self.world.time
+        history = state.history
+        history.append((now, fired))
         result = False
-        while state.history and state.history[0][0] <= self.world.time - cond.delay + 1e-9:
-            result = state.history.popleft()[1] or result
+        due = now - delay + 1e-9
+        while history and history[0][0] <= due:
+            result = history.popleft()[1] or result
         return result
 
     def fire(self, trigger: m.Trigger | None, triggering: list[str] | None = None) -> bool:

@@ -26,6 +26,7 @@ problem in the input is reported as :class:`OpenDriveError` naming the file and 
 from __future__ import annotations
 
 import bisect
+import functools
 import hashlib
 import itertools
 import math
@@ -38,6 +39,8 @@ from xml.etree.ElementTree import Element
 import defusedxml.ElementTree as DET
 import numpy as np
 from defusedxml import DefusedXmlException
+
+from simcore.world.frozen import builder
 
 __all__ = [
     "MAX_FILE_BYTES",
@@ -151,6 +154,9 @@ class RoadCoordinates:
     heading: float
 
 
+_road_coordinates = builder(RoadCoordinates)  # RoadCoordinates(...), built as fast as a plain object
+
+
 @dataclass(frozen=True)
 class Poly3:
     """``a + b*ds + c*ds**2 + d*ds**3`` with ``ds = s - s0`` (``s0`` is ``s`` or ``sOffset`` in the file)."""
@@ -170,6 +176,18 @@ class Poly3:
         """The first derivative at ``s``."""
         ds = s - self.s0
         return self.b + ds * (2.0 * self.c + ds * 3.0 * self.d)
+
+
+def _constant(p: Poly3) -> bool:
+    """Does the polynomial give the same number (``a``) at every ``s``? (``a + ds·(0 + ds·(0 + ds·0))`` is
+    ``a`` for every finite ``ds``, unless ``a`` is -0.0.)"""
+    return (
+        p.b == 0.0
+        and p.c == 0.0
+        and p.d == 0.0
+        and math.isfinite(p.a)
+        and (p.a != 0.0 or math.copysign(1.0, p.a) > 0)
+    )
 
 
 def _poly_at(polys: Sequence[Poly3], starts: Sequence[float], s: float) -> Poly3 | None:
@@ -209,8 +227,12 @@ class Line(Geometry):
 
     kind = "line"
 
+    def __init__(self, s: float, x: float, y: float, hdg: float, length: float) -> None:
+        super().__init__(s, x, y, hdg, length)
+        self._cos, self._sin = math.cos(hdg), math.sin(hdg)  # of the constant heading, once
+
     def local(self, ds: float) -> tuple[float, float, float]:
-        return self.x + ds * math.cos(self.hdg), self.y + ds * math.sin(self.hdg), self.hdg
+        return self.x + ds * self._cos, self.y + ds * self._sin, self.hdg
 
     def curvature(self, ds: float) -> float:
         return 0.0
@@ -243,6 +265,14 @@ class Arc(Geometry):
 _GL16_X, _GL16_W = np.polynomial.legendre.leggauss(16)
 
 
+@functools.cache
+def _fresnel() -> Any:
+    """scipy's Fresnel integrals: only roads with spirals pay for scipy.special's import (once)."""
+    from scipy.special import fresnel
+
+    return fresnel
+
+
 class Spiral(Geometry):
     """A clothoid whose curvature changes linearly from ``k0`` to ``k1`` over its length.
 
@@ -272,9 +302,7 @@ class Spiral(Geometry):
             self._sin0 = math.sin(self._th0)
 
     def _std(self, u: float) -> tuple[float, float]:
-        from scipy.special import fresnel  # only roads with spirals pay for scipy.special's import
-
-        sf, cf = fresnel(u / self._scale)
+        sf, cf = _fresnel()(u / self._scale)
         return self._scale * float(cf), self._sign * self._scale * float(sf)
 
     def local(self, ds: float) -> tuple[float, float, float]:
@@ -594,12 +622,43 @@ class Road:
 
     def _side_borders(self, s: float, side: int) -> list[tuple[Lane, float, float]]:
         sec = self.section_at(s, side)
+        lanes = sec.left if side > 0 else sec.right
+        if not lanes:
+            return []
+        fixed = self._fixed_borders(sec, side)
+        return fixed if fixed is not None else self._borders_in(sec, lanes, s, side)
+
+    def _fixed_borders(self, sec: LaneSection, side: int) -> list[tuple[Lane, float, float]] | None:
+        """The borders of a section's side where they are the same at every ``s`` of it (constant widths,
+        constant or no laneOffset: the sums below give the same numbers at every ``s``), else None."""
+        fixed: dict[tuple[int, int], list[tuple[Lane, float, float]] | None] | None = self.__dict__.get(
+            "_fixed"
+        )
+        if fixed is None:
+            fixed = self.__dict__["_fixed"] = {}
+        key = (id(sec), side)
+        if key in fixed:
+            return fixed[key]
+        lanes = sec.left if side > 0 else sec.right
+        constant = len(self.lane_offsets) <= 1 and all(_constant(p) for p in self.lane_offsets)
+        constant = constant and all(len(lane.widths) == 1 and _constant(lane.widths[0]) for lane in lanes)
+        out = fixed[key] = self._borders_in(sec, lanes, sec.s, side) if constant else None
+        return out
+
+    def _borders_in(
+        self, sec: LaneSection, lanes: list[Lane], s: float, side: int
+    ) -> list[tuple[Lane, float, float]]:
         ds = s - sec.s
         off = self.lane_offset(s)
         out: list[tuple[Lane, float, float]] = []
         acc = 0.0
-        for lane in sec.left if side > 0 else sec.right:
-            if lane.widths:
+        for lane in lanes:
+            widths = lane.widths
+            if len(widths) == 1:  # the common case, as Lane.width_at (inline: every step, every lane)
+                p = widths[0]
+                d = ds - p.s0
+                w = p.a + d * (p.b + d * (p.c + d * p.d))
+            elif widths:
                 w = lane.width_at(ds)
             else:
                 b = lane.border_at(ds)
@@ -610,8 +669,18 @@ class Road:
         return out
 
     def all_borders(self, s: float) -> list[tuple[Lane, float, float]]:
-        """Borders of every non-centre lane at ``s`` (right side first, then left)."""
-        return self.side_borders(s, -1) + self.side_borders(s, 1)
+        """Borders of every non-centre lane at ``s`` (right side first, then left; memoised as
+        `side_borders`: callers must not mutate)."""
+        cache: dict[float, list[tuple[Lane, float, float]]] | None = self.__dict__.get("_all_borders")
+        if cache is None:
+            cache = self.__dict__["_all_borders"] = {}
+        hit = cache.get(s)
+        if hit is not None:
+            return hit
+        if len(cache) > 256:
+            cache.clear()
+        out = cache[s] = self.side_borders(s, -1) + self.side_borders(s, 1)
+        return out
 
 
 @dataclass(frozen=True)
@@ -1040,6 +1109,27 @@ class OpenDrive:
         s = self._check_s(road, s)
         return Pose(*road.world_xyz(s, t))
 
+    def road_xyzh(self, road_id: str, s: float, t: float) -> tuple[float, float, float, float]:
+        """`road_to_world` as a plain ``(x, y, z, heading)`` tuple (for the per-step motion)."""
+        road = self.roads.get(road_id)
+        if road is None:
+            road = self.road(road_id)
+        if not 0.0 <= s <= road.length:
+            s = self._check_s(road, s)
+        return road.world_xyz(s, t)
+
+    def road_z(self, road_id: str, s: float, t: float) -> float:
+        """``z`` of road coordinates ``(s, t)`` (the one `road_to_world` gives)."""
+        road = self.roads.get(road_id)
+        if road is None:
+            road = self.road(road_id)
+        if not 0.0 <= s <= road.length:
+            s = self._check_s(road, s)
+        z = road.elevation(s)
+        if road.superelevations:
+            z += t * math.sin(road.roll(s))
+        return z
+
     def _lane_borders(self, road: Road, lane_id: int, s: float) -> tuple[Lane, float, float]:
         if lane_id == 0:
             off = road.lane_offset(s)
@@ -1053,8 +1143,11 @@ class OpenDrive:
 
     def lane_center_t(self, road_id: str, lane_id: int, s: float) -> float:
         """``t`` of the lane's centre at ``s`` (includes laneOffset; lane 0 gives the laneOffset)."""
-        road = self.road(road_id)
-        s = self._check_s(road, s)
+        road = self.roads.get(road_id)
+        if road is None:
+            road = self.road(road_id)
+        if not 0.0 <= s <= road.length:
+            s = self._check_s(road, s)
         if lane_id == 0:
             return road.lane_offset(s)
         centers: dict[tuple[float, int], float] | None = road.__dict__.get("_centers")
@@ -1065,27 +1158,9 @@ class OpenDrive:
             return hit
         if len(centers) > 256:
             centers.clear()
-        side = 1 if lane_id > 0 else -1
-        cache = road.__dict__.get("_borders")
-        if cache is not None and (s, side) in cache:
-            _, inner, outer = self._lane_borders(road, lane_id, s)
-            centers[(s, lane_id)] = t = 0.5 * (inner + outer)
-            return t
-        # only the lanes from the centre out to this one (as side_borders computes them)
-        sec = road.section_at(s, side)
-        ds = s - sec.s
-        off = road.lane_offset(s)
-        acc = 0.0
-        for lane in sec.left if side > 0 else sec.right:
-            if lane.widths:
-                w = lane.width_at(ds)
-            else:
-                b = lane.border_at(ds)
-                w = 0.0 if b is None else abs(b) - acc
-            inner = off + side * acc
-            acc += w
+        for lane, inner, outer in road.side_borders(s, 1 if lane_id > 0 else -1):
             if lane.id == lane_id:
-                centers[(s, lane_id)] = t = 0.5 * (inner + (off + side * acc))
+                centers[(s, lane_id)] = t = 0.5 * (inner + outer)
                 return t
         raise OpenDriveError(f"{self.name}: road id={road.id}: no lane id={lane_id} at s={s:.3f}")
 
@@ -1294,27 +1369,37 @@ class OpenDrive:
 
     def _project(
         self, road: Road, px: float, py: float, s0: float, spacing: float
-    ) -> tuple[float, float, float]:
-        """Newton projection of ``(px, py)`` on the reference line from ``s0``: ``(s, t, along_residual)``."""
+    ) -> tuple[float, float, float, float]:
+        """Newton projection of ``(px, py)`` on the reference line from ``s0``: ``(s, t, along_residual,
+        reference heading at s)``."""
         s = s0
         along = 0.0
         t = 0.0
+        h = 0.0
+        at = math.nan  # the s that h is the heading at
+        geometry_at = road.geometry_at
         for _ in range(30):
-            x, y, h = road.reference_xyh(s)
+            g = geometry_at(s)  # as road.reference_xyh(s) and road.curvature(s)
+            ds = s - g.s
+            ds = ds if ds >= 0.0 else 0.0
+            x, y, h = g.local(ds)
+            at = s
             c, sn = math.cos(h), math.sin(h)
             dx, dy = px - x, py - y
             along = dx * c + dy * sn
             t = -dx * sn + dy * c
             if abs(along) < 1e-9:
                 break
-            denom = 1.0 - road.curvature(s) * t
+            denom = 1.0 - g.curvature(ds) * t
             step = along / denom if denom > 0.2 else along
             step = max(-2.0 * spacing - 1.0, min(2.0 * spacing + 1.0, step))
             s_new = min(max(s + step, 0.0), road.length)
             if abs(s_new - s) < 1e-10:
                 break
             s = s_new
-        return s, t, along
+        if at != s:
+            _, _, h = road.reference_xyh(s)
+        return s, t, along, h
 
     def world_to_road(
         self, x: float, y: float, z: float | None = None, road_hint: str | None = None
@@ -1353,7 +1438,7 @@ class OpenDrive:
             road: Road = idx["roads"][ri]
             sp = idx["spacing"][ri]
             for s0 in starts:
-                s, t, along = self._project(road, x, y, s0, sp)
+                s, t, along, h = self._project(road, x, y, s0, sp)
                 if road.superelevations:
                     t /= max(math.cos(road.roll(s)), 1e-6)
                 if abs(along) > 0.05:  # beyond the road's ends (or not converged)
@@ -1385,8 +1470,7 @@ class OpenDrive:
                     outside + abs(along),
                     abs(offset) / max(width, 1e-6),
                 )
-                _, _, h = road.reference_xyh(s)
-                rc = RoadCoordinates(road.id, lane.id, s, t, offset, h)
+                rc = _road_coordinates(road.id, lane.id, s, t, offset, h)
                 if best is None or key < best[0]:
                     best = (key, rc)
         return None if best is None else best[1]
@@ -1400,15 +1484,17 @@ class OpenDrive:
         road = self.roads.get(road_id)
         if road is None or road.junction != "-1":
             return None
-        s, t, along = self._project(road, x, y, min(max(s_previous, 0.0), road.length), 2.0)
+        s, t, along, h = self._project(road, x, y, min(max(s_previous, 0.0), road.length), 2.0)
         if road.superelevations:
             t /= max(math.cos(road.roll(s)), 1e-6)
         if abs(along) > 1e-6:
             return None
         for lane, inner, outer in road.all_borders(s):
-            if abs(outer - inner) > 1e-9 and min(inner, outer) <= t <= max(inner, outer):
-                _, _, h = road.reference_xyh(s)
-                return RoadCoordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
+            if inner < outer:
+                if outer - inner > 1e-9 and inner <= t <= outer:
+                    return _road_coordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
+            elif inner - outer > 1e-9 and outer <= t <= inner:
+                return _road_coordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
         return None
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from simcore.world.frozen import builder
+
 
 @dataclass(frozen=True, slots=True)
 class BoundingBox:
@@ -91,3 +93,10 @@ class WorldFrame:
             if entity.name == name:
                 return entity
         raise KeyError(name)
+
+
+#: `EntityState`, `LaneCoordinates` and `WorldFrame` from every field, positionally (the engine's per-step
+#: frames); equal to the objects their constructors give
+entity_state = builder(EntityState)
+lane_coordinates = builder(LaneCoordinates)
+world_frame = builder(WorldFrame)
