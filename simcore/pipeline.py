@@ -38,6 +38,9 @@ if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
     from simcore.world.sumo import SumoWorld
 
+#: wall seconds between two progress reports of a run (a sweep's run of a tenth of a second reports none: its
+#: end is reported anyway; a report from a worker process costs a queue message and a wake-up of the parent)
+PROGRESS_INTERVAL_S = 0.5
 #: called with (index, simulated seconds so far) while a run progresses
 Progress = Callable[[int, float], None]
 #: called with the engine after the initial state and after every step (e.g. a conformance trace)
@@ -336,7 +339,7 @@ def drive(
     if observe is not None:
         observe(engine)
     max_steps = round(spec.simulation.max_seconds / spec.simulation.step_seconds)
-    reported = 0.0
+    next_report = time.monotonic() + PROGRESS_INTERVAL_S
     while not engine.ended and engine.step_index < max_steps:
         if closed_loop is not None:
             closed_loop.wait((b.name for b in engine.bodies.values() if b.external), engine.time)
@@ -347,8 +350,8 @@ def drive(
             engine.advance()
         if observe is not None:
             observe(engine)
-        if progress is not None and engine.time - reported >= 1.0:
-            reported = engine.time
+        if progress is not None and time.monotonic() >= next_report:
+            next_report = time.monotonic() + PROGRESS_INTERVAL_S
             progress(index, engine.time)
         if deadline is not None and engine.step_index % 100 == 0 and time.monotonic() > deadline:
             raise SimulationError(
