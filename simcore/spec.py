@@ -1308,6 +1308,3 @@ class SimulationRun(Model):
         if not self.metadata.name:
             raise ValueError("metadata.name is not set")
         return self.metadata.name
-
-
-ScenarioRef.model_rebuild()
