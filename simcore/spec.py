@@ -5,11 +5,9 @@ conventions: camelCase fields, `spec`/`status`, defaults stated in every field's
 fields rejected with their path.
 """
 
-from __future__ import annotations
-
 import re
 from collections.abc import Callable
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Self
 
 from pydantic import (
     AfterValidator,
@@ -158,13 +156,13 @@ class ScenarioRef(Model):
             "Default false."
         ),
     )
-    criteria: list[Criterion] = Field(
+    criteria: list["Criterion"] = Field(  # defined below: resolved when the model is built
         default_factory=list,
         description="Criteria for this scenario only, in addition to `evaluation.criteria`.",
     )
 
     @model_validator(mode="after")
-    def _one_source(self) -> ScenarioRef:
+    def _one_source(self) -> Self:
         if (self.openscenario is None) == (self.config_map_ref is None):
             raise ValueError("set exactly one of 'openscenario' and 'configMapRef'")
         return self
@@ -218,7 +216,7 @@ class Sweep(Model):
     )
 
     @model_validator(mode="after")
-    def _one_distribution(self) -> Sweep:
+    def _one_distribution(self) -> Self:
         if self.distribution is not None and self.distribution_config_map_ref is not None:
             raise ValueError("set at most one of 'distribution' and 'distributionConfigMapRef'")
         return self
@@ -253,7 +251,7 @@ class SearchParameter(Model):
     )
 
     @model_validator(mode="after")
-    def _range(self) -> SearchParameter:
+    def _range(self) -> Self:
         if self.values is not None and (self.min is not None or self.max is not None):
             raise ValueError(f"{self.name}: set either 'values' or 'min'/'max', not both")
         if self.min is not None and self.max is not None and not self.min < self.max:
@@ -311,7 +309,7 @@ class Search(Model):
     )
 
     @model_validator(mode="after")
-    def _unique(self) -> Search:
+    def _unique(self) -> Self:
         names = [p.name for p in self.parameters]
         twice = sorted({n for n in names if names.count(n) > 1})
         if twice:
@@ -737,7 +735,7 @@ class LidarSensor(_SensorBase):
     )
 
     @model_validator(mode="after")
-    def _angles(self) -> LidarSensor:
+    def _angles(self) -> Self:
         if self.vertical_angles is not None and len(self.vertical_angles) != self.channels:
             raise ValueError(
                 f"verticalAngles has {len(self.vertical_angles)} angles but channels is {self.channels}: "
@@ -943,7 +941,7 @@ class Infrastructure(Model):
     v2x: RsuV2X | None = Field(None, description="Its V2X station. Default: none.")
 
     @model_validator(mode="after")
-    def _one_pose(self) -> Infrastructure:
+    def _one_pose(self) -> Self:
         if (self.position is None) == (self.road is None):
             raise ValueError(f"infrastructure {self.name!r}: give exactly one of position and road")
         names: set[str] = set()
@@ -997,7 +995,7 @@ class EnvVar(Model):
     secret_key_ref: SecretKeyRef | None = Field(None, description="The value from a Secret's key.")
 
     @model_validator(mode="after")
-    def _one_source(self) -> EnvVar:
+    def _one_source(self) -> Self:
         if (self.value is None) == (self.secret_key_ref is None):
             raise ValueError(f"{self.name}: set exactly one of 'value' and 'secretKeyRef'")
         if self.name.startswith("CARLOS_") or self.name in RESERVED_ENV:
@@ -1049,7 +1047,7 @@ class SystemUnderTest(Model):
     )
 
     @model_validator(mode="after")
-    def _something_to_run(self) -> SystemUnderTest:
+    def _something_to_run(self) -> Self:
         if self.module is None and self.image is None:
             raise ValueError("set 'module' (in-process, local runs) or 'image' (cluster), or both")
         names = [e.name for e in self.env]
@@ -1163,7 +1161,7 @@ class SimulationRunSpec(Model):
     )
 
     @model_validator(mode="after")
-    def _unique_names(self) -> SimulationRunSpec:
+    def _unique_names(self) -> Self:
         seen: set[str] = set()
         for scenario in self.scenarios:
             if scenario.name in seen:
