@@ -87,8 +87,10 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-console = Console(stderr=True)
-out = Console()
+# no emoji codes: the messages hold file, run and entity names (`:x:` stays `:x:`; nor is rich's emoji table
+# loaded for the report table)
+console = Console(stderr=True, emoji=False)
+out = Console(emoji=False)
 
 
 def _line(label: str, style: str, text: object) -> Text:
