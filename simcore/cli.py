@@ -1,7 +1,7 @@
 """`carlos` — the command line. Bad input ends in one clear line and exit code 2, never a traceback."""
 
-from __future__ import annotations
-
+# Annotations are evaluated as the module loads (no `from __future__ import annotations`): typer reads
+# every command's parameters at each start, and string annotations would be compiled one by one (~25 ms).
 import gc
 import json
 import os
@@ -37,10 +37,10 @@ class _Commands(TyperGroup):
 
         return {ep.name: ep for ep in entry_points(group=COMMAND_ENTRY_POINTS)}
 
-    def list_commands(self, ctx: _click.Context) -> list[str]:
+    def list_commands(self, ctx: "_click.Context") -> list[str]:
         return sorted({*super().list_commands(ctx), *self._plugins()})
 
-    def get_command(self, ctx: _click.Context, cmd_name: str) -> _click.Command | None:
+    def get_command(self, ctx: "_click.Context", cmd_name: str) -> "_click.Command | None":
         if cmd_name != "run":  # `carlos run` resumes the collector itself, after its start-up
             resume_gc()
         command = super().get_command(ctx, cmd_name)
@@ -327,7 +327,7 @@ class _NoProgress:
         self.console = console
         self.live = _NotLive()
 
-    def __enter__(self) -> _NoProgress:
+    def __enter__(self) -> "_NoProgress":
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -360,7 +360,7 @@ def _plain(line: str) -> None:
     console.print(line, highlight=False, soft_wrap=True, markup=False)
 
 
-def _dds_bus(domain_id: int | None) -> Bus:
+def _dds_bus(domain_id: int | None) -> "Bus":
     """The run's DDS bus (`--transport dds`): ROS_DOMAIN_ID unless --ros-domain-id, configured as a ROS 2
     node with rmw_cyclonedds_cpp would be in this environment (simcore.transport.dds_config)."""
     from simcore.transport.dds_config import config_from_env, describe, domain_id_from_env
