@@ -1,7 +1,8 @@
 """`carlos` — the command line. Bad input ends in one clear line and exit code 2, never a traceback."""
 
-from __future__ import annotations
-
+# Annotations are evaluated as the module loads (no `from __future__ import annotations`): typer reads
+# every command's parameters at each start, and string annotations would be compiled one by one (~25 ms).
+import gc
 import json
 import os
 import sys
@@ -12,7 +13,6 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 import typer.main
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 from rich.text import Text
 from typer.core import TyperGroup
@@ -37,10 +37,12 @@ class _Commands(TyperGroup):
 
         return {ep.name: ep for ep in entry_points(group=COMMAND_ENTRY_POINTS)}
 
-    def list_commands(self, ctx: _click.Context) -> list[str]:
+    def list_commands(self, ctx: "_click.Context") -> list[str]:
         return sorted({*super().list_commands(ctx), *self._plugins()})
 
-    def get_command(self, ctx: _click.Context, cmd_name: str) -> _click.Command | None:
+    def get_command(self, ctx: "_click.Context", cmd_name: str) -> "_click.Command | None":
+        if cmd_name != "run":  # `carlos run` resumes the collector itself, after its start-up
+            resume_gc()
         command = super().get_command(ctx, cmd_name)
         if command is not None:
             return command
@@ -53,6 +55,30 @@ class _Commands(TyperGroup):
         return command
 
 
+_gc_paused = False
+
+
+def pause_gc() -> None:
+    """Start-up (imports, the CLI, the spec's validators, the scenario) allocates some 10^5 objects that live as
+    long as the process and hardly any garbage; the cyclic collector would go through them again and again
+    (40-60 ms of `carlos run`). `carlos` pauses it from the start until resume_gc()."""
+    global _gc_paused
+    if gc.isenabled():
+        gc.disable()
+        _gc_paused = True
+
+
+def resume_gc() -> None:
+    """Collect again, once start-up is over, with what start-up allocated frozen (gc.freeze: never scanned
+    again). Only after pause_gc(): a process that did not pause the collector (tests calling the app, a
+    program importing simcore) is left as it is."""
+    global _gc_paused
+    if _gc_paused:
+        _gc_paused = False
+        gc.freeze()
+        gc.enable()
+
+
 app = typer.Typer(
     cls=_Commands,
     name="carlos",
@@ -61,8 +87,10 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-console = Console(stderr=True)
-out = Console()
+# no emoji codes: the messages hold file, run and entity names (`:x:` stays `:x:`; nor is rich's emoji table
+# loaded for the report table)
+console = Console(stderr=True, emoji=False)
+out = Console(emoji=False)
 
 
 def _line(label: str, style: str, text: object) -> Text:
@@ -195,14 +223,8 @@ def run(
                 highlight=False,
                 soft_wrap=True,
             )
-        progress = Progress(
-            TextColumn("[bold]{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("{task.fields[stats]}"),
-            TimeElapsedColumn(),
-            console=console,
-            disable=quiet or (not console.is_terminal and os.environ.get("CARLOS_PROGRESS") != "1"),
+        progress = _progress(
+            disable=quiet or (not console.is_terminal and os.environ.get("CARLOS_PROGRESS") != "1")
         )
         from simcore.workflow.terminal import ProgressLines
 
@@ -228,10 +250,12 @@ def run(
                 )
 
         def on_progress(i: int, sim_time: float) -> None:
+            resume_gc()  # a run is under way (its imports and set-up done): garbage is collected again
             live_sim[i] = sim_time
             progress.update(task, stats=stats())
 
         def on_done(outcome: object) -> None:
+            resume_gc()  # at the latest when the first run ends (one that failed before any progress)
             summary = outcome.summary  # type: ignore[attr-defined]
             live_sim.pop(summary["index"], None)
             state["sim"] += summary.get("simSeconds", 0.0)
@@ -261,6 +285,7 @@ def run(
 
         with progress:
             if simulation_run.spec.search is not None:
+                resume_gc()
                 report = _search(simulation_run, manifest, output, parallel, fresh or bool(index) or live)
                 _print_report(report)
                 raise typer.Exit(report.exit_code)
@@ -288,11 +313,54 @@ def run(
     raise typer.Exit(report.exit_code)
 
 
+class _NotLive:
+    is_started = False
+
+
+class _NoProgress:
+    """What `carlos run` uses of rich's Progress when no bar is shown (quiet, or not a terminal): rich.progress
+    is then not imported (~15 ms of start-up)."""
+
+    disable = True
+
+    def __init__(self) -> None:
+        self.console = console
+        self.live = _NotLive()
+
+    def __enter__(self) -> "_NoProgress":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def add_task(self, description: str, **fields: Any) -> int:
+        return 0
+
+    def update(self, task: int, **fields: Any) -> None:
+        return None
+
+
+def _progress(*, disable: bool) -> Any:
+    """The progress bar of `carlos run` on the console (rich), or _NoProgress when none is shown."""
+    if disable:
+        return _NoProgress()
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[stats]}"),
+        TimeElapsedColumn(),
+        console=console,
+    )
+
+
 def _plain(line: str) -> None:
     console.print(line, highlight=False, soft_wrap=True, markup=False)
 
 
-def _dds_bus(domain_id: int | None) -> Bus:
+def _dds_bus(domain_id: int | None) -> "Bus":
     """The run's DDS bus (`--transport dds`): ROS_DOMAIN_ID unless --ros-domain-id, configured as a ROS 2
     node with rmw_cyclonedds_cpp would be in this environment (simcore.transport.dds_config)."""
     from simcore.transport.dds_config import config_from_env, describe, domain_id_from_env
@@ -732,6 +800,7 @@ for _command in (
 
 
 def main() -> None:
+    pause_gc()
     try:
         app()
     except CarlosError as exc:  # a last guard: never a traceback for our own errors

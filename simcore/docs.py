@@ -65,6 +65,7 @@ def _rows(
     if (model, prefix) in seen:
         return
     seen.add((model, prefix))
+    model.model_rebuild()  # the spec's models are built on first use: resolves forward references (ScenarioRef)
     for name, field in model.model_fields.items():
         alias = field.alias or name
         path = f"{prefix}.{alias}" if prefix else alias

@@ -13,17 +13,14 @@ cannot be read (a power cut before the flush) counts as not run.
 from __future__ import annotations
 
 import json
-import multiprocessing as mp
 import os
 import queue
 import shutil
 import time
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
@@ -35,6 +32,9 @@ from simcore.runner import RunOutcome, error_outcome, run_index, summary_bytes
 from simcore.spec import ScenarioRef, SimulationRun
 from simcore.store import Store, StoreError, open_store
 from simcore.transport.bus import Bus
+
+if TYPE_CHECKING:
+    from concurrent.futures import Future, ProcessPoolExecutor
 
 _progress_queue: Any = None
 
@@ -249,6 +249,10 @@ def _in_pool(sweep: _Sweep, workers: int) -> None:
     """Run the pending indexes on worker processes (a crashed pool is rebuilt, its indexes retried). The
     object store failing beyond its retries in a worker stops the run: no new index starts, the ones in
     flight end, and the StoreError is raised (exit code 3; finished indexes stay in the store)."""
+    import multiprocessing as mp  # here, not at the top: a run in this process does without them
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
     context = mp.get_context("spawn")
     progress: Any = context.Queue()
     outage: StoreError | None = None

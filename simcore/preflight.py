@@ -45,7 +45,6 @@ def check_road_file(road_file: Path, *, scenario_file: str) -> None:
     """The scenario's road network exists, is a road network by its name, and parses safely (OpenDRIVE: the
     full parse with its limits; SUMO: a streamed safe parse): problems are bad input before any run."""
     from simcore.world.opendrive import OpenDrive, OpenDriveError
-    from simcore.world.sumo import check_network_xml
 
     field = "RoadNetwork/LogicFile"
     if not road_file.name.endswith(ROAD_SUFFIXES):
@@ -62,4 +61,6 @@ def check_road_file(road_file: Path, *, scenario_file: str) -> None:
         except OpenDriveError as exc:
             raise BadInput(str(exc)) from None  # the message starts with the road file's name
     else:
+        from simcore.world.sumo import check_network_xml
+
         check_network_xml(road_file)

@@ -276,3 +276,43 @@ def test_results_go_to_s3_and_scenarios_come_from_s3(s3_server: object, tmp_path
     assert result.returncode == 2  # bad input, kept apart from infrastructure errors
     summary = json.loads(client.get_object(Bucket=bucket, Key="results/t2/0/summary.json")["Body"].read())
     assert summary["status"] == "error" and "outside the bucket" in summary["error"] and summary["badInput"]
+
+
+_GC_PROBE = """
+import gc, sys
+from simcore import cli
+seen = []
+resume = cli.resume_gc
+def probe() -> None:
+    seen.append(gc.isenabled())
+    resume()
+cli.resume_gc = probe
+sys.argv = ["carlos", *sys.argv[1:]]
+try:
+    cli.main()
+finally:
+    print("GC", seen[:1], gc.isenabled(), gc.get_freeze_count() > 0, file=sys.stderr)
+"""
+
+
+@pytest.mark.parametrize("command", ["run", "validate"])
+def test_the_collector_is_paused_for_start_up_only(command: str, tmp_path: Path) -> None:
+    """`carlos` starts with the cyclic garbage collector paused; a run resumes it once under way, any other
+    command when it starts, with start-up's objects frozen."""
+    manifest = tmp_path / "one.yaml"
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: one}\nspec:\n"
+        f"  scenarios: [{{name: one, openscenario: {json.dumps(str(ROOT / 'examples/scenarios/cut-in.xosc'))}}}]\n"
+        "  simulation: {stepSeconds: 0.1, maxSeconds: 3, seed: 1}\n  recording: {enabled: false}\n"
+        f"  output: {{url: {json.dumps((tmp_path / 'results').as_uri())}}}\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", _GC_PROBE, command, str(manifest)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+        check=False,
+    )
+    assert result.returncode in (0, 1), result.stderr
+    assert "GC [False] True True" in result.stderr, result.stderr

@@ -203,8 +203,9 @@ def run_summary(
     }
 
 
-# XML 1.0 cannot hold most control characters, lone surrogates or U+FFFE/U+FFFF, even escaped.
-_XML_INVALID = re.compile("[^\x09\x0a\x0d\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
+# XML 1.0 cannot hold most control characters, lone surrogates or U+FFFE/U+FFFF, even escaped: the
+# complement of XML's Char production, spelled out (the negated class of its ranges takes ~15 ms to compile).
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
 
 
 def _xml_text(value: object) -> str:
