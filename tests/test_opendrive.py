@@ -697,3 +697,113 @@ def test_constant_lane_borders_are_the_ones_computed_at_every_s() -> None:
     assert road.side_borders(70.0, 1) != road.side_borders(80.0, 1)
     assert _constant(Poly3(0.0, 3.5, 0.0, 0.0, 0.0)) and _constant(Poly3(5.0, -1.0, 0.0, 0.0, 0.0))
     assert not _constant(Poly3(0.0, -0.0, 0.0, 0.0, 0.0)) and not _constant(Poly3(0.0, 3.5, 0.0, 1e-9, 0.0))
+
+
+# ------------------------------------------------------------------ no numpy on the run path
+
+
+def test_quadrature_constants_are_numpys_leggauss() -> None:
+    """The Gauss-Legendre nodes and weights written out in the module are exactly numpy's."""
+    from simcore.world import opendrive
+
+    for n, xs, ws in ((6, opendrive._GL_X, opendrive._GL_W), (16, opendrive._GL16_X, opendrive._GL16_W)):
+        x, w = np.polynomial.legendre.leggauss(n)
+        assert list(xs) == x.tolist() and list(ws) == w.tolist()
+
+
+@pytest.mark.parametrize(
+    ("start", "stop", "num"),
+    [
+        (0.0, 1.0, 65),
+        (0.0, 123.59443842600000, 619),
+        (3.5, -2.25, 7),
+        (2.0, 2.0, 5),
+        (1.0, 9.0, 1),
+        (0.0, 1e-300, 3),
+    ],
+)
+def test_linspace_gives_numpys_floats(start: float, stop: float, num: int) -> None:
+    from simcore.world.opendrive import _linspace
+
+    assert _linspace(start, stop, num) == np.linspace(start, stop, num).tolist()
+
+
+def _numpy_arclen(u: tuple[float, ...], v: tuple[float, ...], ps: np.ndarray) -> np.ndarray:
+    """The arc-length table as computed with numpy arrays (the module's former implementation)."""
+    x, w = np.polynomial.legendre.leggauss(6)
+    a, b = ps[:-1], ps[1:]
+    half, mid = 0.5 * (b - a), 0.5 * (a + b)
+    p = mid[:, None] + half[:, None] * x[None, :]
+    speed = np.hypot(u[1] + p * (2 * u[2] + 3 * u[3] * p), v[1] + p * (2 * v[2] + 3 * v[3] * p))
+    return np.concatenate(([0.0], np.cumsum(half * (speed @ w))))
+
+
+@pytest.mark.parametrize(
+    ("u", "v", "p_max", "length"),
+    [
+        ((0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 0.004, -0.00002), 60.0, 60.4),
+        ((0.0, 123.5, -4.2, 1.1), (0.0, 0.3, 35.0, -20.0), 1.0, 130.0),
+        ((0.0, 0.9, 0.001, -1e-5), (0.0, 0.1, 0.002, 3e-6), 4000.0, 4000.0),
+    ],
+)
+def test_param_poly3_table_matches_the_numpy_computation(
+    u: tuple[float, float, float, float], v: tuple[float, float, float, float], p_max: float, length: float
+) -> None:
+    from simcore.world.opendrive import ParamPoly3
+
+    geo = ParamPoly3(0.0, 1.0, 2.0, 0.5, length, u, v, p_max)
+    ps = np.linspace(0.0, p_max, len(geo._ps))
+    assert geo._ps == ps.tolist()
+    expected = _numpy_arclen(u, v, ps)
+    expected = expected * (length / expected[-1])
+    assert np.max(np.abs(np.asarray(geo._ss) - expected)) <= 1e-9
+    for ds in np.linspace(0.0, length, 11):  # the pose differs from the numpy table's by far less than 1e-9 m
+        assert math.isfinite(geo.local(float(ds))[0])
+
+
+@pytest.mark.parametrize(("k0", "k1", "length"), [(0.01, 0.0100000001, 200.0), (-0.3, -0.3000002, 900.0)])
+def test_numeric_spiral_matches_the_numpy_computation(k0: float, k1: float, length: float) -> None:
+    from simcore.world.opendrive import Spiral
+
+    geo = Spiral(0.0, 3.0, -4.0, 1.1, length, k0, k1)
+    assert geo._numeric
+    x, w = np.polynomial.legendre.leggauss(16)
+    for ds in np.linspace(0.0, length, 9)[1:]:
+        n = max(1, math.ceil(max(abs(k0), abs(k0 + geo.c * ds)) * ds / 0.25), math.ceil(ds / 100.0))
+        edges = np.linspace(0.0, ds, n + 1)
+        half = 0.5 * (edges[1:] - edges[:-1])
+        q = 0.5 * (edges[1:] + edges[:-1])[:, None] + half[:, None] * x[None, :]
+        h = 1.1 + k0 * q + 0.5 * geo.c * q * q
+        ex, ey = 3.0 + float(np.sum(half * (np.cos(h) @ w))), -4.0 + float(np.sum(half * (np.sin(h) @ w)))
+        gx, gy, _ = geo.local(float(ds))
+        assert math.hypot(gx - ex, gy - ey) <= 1e-9
+
+
+def test_loading_and_querying_a_road_imports_no_numpy() -> None:
+    """numpy's import costs more than a small scenario's whole run: parsing, poses and world→road run without
+    it (lines, arcs, paramPoly3, poly3, spirals integrated numerically; clothoids through Fresnel integrals
+    still import scipy.special); only the sampled lane outlines (sensors, report plots) import it."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, math\n"
+        "from simcore.world.opendrive import OpenDrive\n"
+        "geo = ''.join([\n"
+        "  \"<geometry s='0' x='0' y='0' hdg='0' length='50'><line/></geometry>\",\n"
+        "  \"<geometry s='50' x='50' y='0' hdg='0' length='40'><arc curvature='0.01'/></geometry>\",\n"
+        "  \"<geometry s='90' x='89.5' y='5.3' hdg='0.4' length='30'><spiral curvStart='0.01' curvEnd='0.0100000001'/></geometry>\",\n"
+        "  \"<geometry s='120' x='117' y='17' hdg='0.7' length='40'><paramPoly3 pRange='normalized' aU='0' bU='40' cU='0' dU='0' aV='0' bV='0' cV='3' dV='-1'/></geometry>\",\n"
+        "  \"<geometry s='160' x='150' y='45' hdg='0.8' length='30'><poly3 a='0' b='0' c='0.001' d='0'/></geometry>\"])\n"
+        "lanes = \"<lanes><laneSection s='0'><center><lane id='0' type='none'/></center><right><lane id='-1' type='driving'><width sOffset='0' a='3.5' b='0' c='0' d='0'/></lane></right></laneSection></lanes>\"\n"
+        "od = OpenDrive.from_string(f\"<OpenDRIVE><header revMajor='1' revMinor='6'/><road id='r' length='190' junction='-1'><planView>{geo}</planView>{lanes}</road></OpenDRIVE>\")\n"
+        "for s in range(0, 190, 7):\n"
+        "    p = od.reference_pose('r', float(s))\n"
+        "    rc = od.world_to_road(p.x + 1.0 * math.sin(p.heading), p.y - 1.0 * math.cos(p.heading))\n"
+        "    assert rc is not None and rc.lane_id == -1, (s, rc)\n"
+        "print('numpy' in sys.modules)\n"
+        "od.sample_lane_boundaries('r')\n"
+        "print('numpy' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "True"]

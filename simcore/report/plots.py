@@ -11,11 +11,12 @@ import io
 import math
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from simcore.report.trajectories import Recording, RoadOutline
+
+if TYPE_CHECKING:  # numpy is imported by the figures that need it (a run's report without them does not)
+    import numpy as np
 
 PASSED_COLOUR = "#2e7d32"
 FAILED_COLOUR = "#c62828"
@@ -51,6 +52,8 @@ def birds_eye(recording: Recording, road: RoadOutline | None, title: str) -> str
     """Every entity's trajectory over the road outline (cropped to the trajectories), the start of each
     trajectory as a dot, the minimum-distance moment as a dashed line between the two boxes' centres and
     every collision as a red cross."""
+    import numpy as np
+
     fig = _figure(9.0, 3.4)
     ax = fig.add_subplot()
     xs = np.concatenate([np.asarray(tr.x) for tr in recording.trajectories.values()] or [np.zeros(1)])
@@ -161,6 +164,8 @@ def _frame(x: float, y: float, w: float, h: float) -> str:
 
 def distributions(values: Mapping[str, Sequence[float]], columns: int = 4) -> str:
     """One histogram per metric (small multiples)."""
+    import numpy as np
+
     names = list(values)
     rows = max(1, math.ceil(len(names) / columns))
     cell_w, cell_h = 864.0 / columns, 182.0

@@ -12,10 +12,12 @@ import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from simcore.evaluation.metrics import Box, box_distance
+
+if TYPE_CHECKING:  # the outline's arrays come from OpenDrive.sample_lane_boundaries, which imports numpy
+    import numpy as np
 
 
 @dataclass

@@ -33,14 +33,16 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from xml.etree.ElementTree import Element
 
 import defusedxml.ElementTree as DET
-import numpy as np
 from defusedxml import DefusedXmlException
 
 from simcore.world.frozen import builder
+
+if TYPE_CHECKING:  # numpy is imported only where arrays are built (lane outlines, long arc-length tables)
+    import numpy as np
 
 __all__ = [
     "MAX_FILE_BYTES",
@@ -81,33 +83,51 @@ _S_TOL = 1e-3  # m: s values this far outside [0, length] are clamped silently
 class PointGrid:
     """Points in square cells of side `cell`, for `query_ball_point(p, r)` with r <= cell: the indices of
     the points within r of p, ascending (the set scipy's cKDTree finds; this index costs no scipy import,
-    whose load outweighs a whole run on a small road)."""
+    whose load outweighs a whole run on a small road, and no numpy import: a query looks at a few dozen
+    points, which plain Python does faster than numpy's per-call overhead)."""
 
-    def __init__(self, data: np.ndarray, cell: float) -> None:
-        self.data = data
+    def __init__(self, data: Sequence[Sequence[float]], cell: float) -> None:
+        self.xs: list[float] = [float(p[0]) for p in data]
+        self.ys: list[float] = [float(p[1]) for p in data]
         self.cell = max(cell, 1e-9)
-        keys = np.floor(data / self.cell).astype(np.int64)
         buckets: dict[tuple[int, int], list[int]] = {}
-        for i, (kx, ky) in enumerate(keys.tolist()):
-            buckets.setdefault((kx, ky), []).append(i)
-        self._buckets = {key: np.asarray(rows, dtype=np.int64) for key, rows in buckets.items()}
+        c = self.cell
+        for i, (x, y) in enumerate(zip(self.xs, self.ys, strict=True)):
+            buckets.setdefault((math.floor(x / c), math.floor(y / c)), []).append(i)
+        self._buckets = buckets
 
     def query_ball_point(self, point: Sequence[float], r: float) -> list[int]:
         x, y = float(point[0]), float(point[1])
         span = max(1, math.ceil(r / self.cell))
         kx, ky = math.floor(x / self.cell), math.floor(y / self.cell)
-        found = [
-            rows
+        xs, ys, r2 = self.xs, self.ys, r * r
+        near = [
+            i
             for gx in range(kx - span, kx + span + 1)
             for gy in range(ky - span, ky + span + 1)
-            if (rows := self._buckets.get((gx, gy))) is not None
+            for i in self._buckets.get((gx, gy), ())
+            if (xs[i] - x) ** 2 + (ys[i] - y) ** 2 <= r2
         ]
-        if not found:
-            return []
-        rows = np.concatenate(found)
-        d = self.data[rows]
-        near = rows[(d[:, 0] - x) ** 2 + (d[:, 1] - y) ** 2 <= r * r]
-        return sorted(near.tolist())
+        near.sort()
+        return near
+
+
+def _linspace(start: float, stop: float, num: int) -> list[float]:
+    """``num`` evenly spaced values from `start` to `stop` inclusive, the same floats as ``numpy.linspace``
+    (``start + i * step``, the last value exactly `stop`)."""
+    if num <= 0:
+        return []
+    if num == 1:
+        return [float(start)]
+    div = num - 1
+    delta = stop - start
+    step = delta / div
+    if step == 0:
+        out = [i / div * delta + start for i in range(num)]
+    else:
+        out = [i * step + start for i in range(num)]
+    out[-1] = float(stop)
+    return out
 
 
 def _read_bounded(p: Path) -> bytes:
@@ -262,7 +282,21 @@ class Arc(Geometry):
         return self.k
 
 
-_GL16_X, _GL16_W = np.polynomial.legendre.leggauss(16)
+# Gauss-Legendre nodes and weights on [-1, 1], as numpy.polynomial.legendre.leggauss(n) gives them (written
+# out: computing them would import numpy; tests/test_opendrive.py checks they are numpy's)
+_GL16_X = (
+    -0.9894009349916499, -0.9445750230732326, -0.8656312023878318, -0.755404408355003,
+    -0.6178762444026438, -0.45801677765722737, -0.2816035507792589, -0.09501250983763744,
+    0.09501250983763744, 0.2816035507792589, 0.45801677765722737, 0.6178762444026438,
+    0.755404408355003, 0.8656312023878318, 0.9445750230732326, 0.9894009349916499,
+)  # fmt: skip
+_GL16_W = (
+    0.027152459411754176, 0.062253523938647456, 0.0951585116824926, 0.12462897125553407,
+    0.1495959888165767, 0.16915651939500265, 0.18260341504492364, 0.18945061045506864,
+    0.18945061045506864, 0.18260341504492364, 0.16915651939500265, 0.1495959888165767,
+    0.12462897125553407, 0.0951585116824926, 0.062253523938647456, 0.027152459411754176,
+)  # fmt: skip
+_GL16 = tuple(zip(_GL16_X, _GL16_W, strict=True))
 
 
 @functools.cache
@@ -330,20 +364,34 @@ class Spiral(Geometry):
         """Composite Gauss-Legendre integration of (cos, sin)(heading) from 0 to ``ds``."""
         turn = max(abs(self.k0), abs(self.k0 + self.c * ds)) * abs(ds)
         n = max(1, math.ceil(turn / 0.25), math.ceil(abs(ds) / 100.0))
-        edges = np.linspace(0.0, ds, n + 1)
-        half = 0.5 * (edges[1:] - edges[:-1])
-        u = 0.5 * (edges[1:] + edges[:-1])[:, None] + half[:, None] * _GL16_X[None, :]
-        h = self.hdg + self.k0 * u + 0.5 * self.c * u * u
-        return (
-            self.x + float(np.sum(half * (np.cos(h) @ _GL16_W))),
-            self.y + float(np.sum(half * (np.sin(h) @ _GL16_W))),
-        )
+        edges = _linspace(0.0, ds, n + 1)
+        hdg, k0, hc = self.hdg, self.k0, 0.5 * self.c
+        sx = sy = 0.0
+        for a, b in itertools.pairwise(edges):
+            half = 0.5 * (b - a)
+            mid = 0.5 * (b + a)
+            cx = cy = 0.0
+            for node, w in _GL16:
+                u = mid + half * node
+                h = hdg + k0 * u + hc * u * u
+                cx += math.cos(h) * w
+                cy += math.sin(h) * w
+            sx += half * cx
+            sy += half * cy
+        return self.x + sx, self.y + sy
 
     def curvature(self, ds: float) -> float:
         return self.k0 + self.c * ds
 
 
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(6)
+_GL_X = (
+    -0.9324695142031519, -0.6612093864662645, -0.2386191860831969,
+    0.2386191860831969, 0.6612093864662645, 0.9324695142031519,
+)  # fmt: skip
+_GL_W = (
+    0.17132449237917027, 0.3607615730481387, 0.46791393457269104,
+    0.46791393457269104, 0.3607615730481387, 0.17132449237917027,
+)  # fmt: skip
 
 
 class ParamPoly3(Geometry):
@@ -375,36 +423,47 @@ class ParamPoly3(Geometry):
             lo, hi = 0.0, max(length, 1e-9)
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
-                if self._arclen(np.linspace(0.0, mid, 65))[-1] < length:
+                if self._arclen(_linspace(0.0, mid, 65))[-1] < length:
                     lo = mid
                 else:
                     hi = mid
             p_max = 0.5 * (lo + hi)
         self.p_max = p_max
         n = int(min(max(64, math.ceil(length / 0.2)), 20000))
-        ps = np.linspace(0.0, p_max, n + 1)
+        ps = _linspace(0.0, p_max, n + 1)
         cum = self._arclen(ps)
-        total = float(cum[-1])
+        total = cum[-1]
         if total > 0:
-            cum = cum * (length / total)
-        self._ps: list[float] = ps.tolist()
-        self._ss: list[float] = cum.tolist()
+            scale = length / total
+            cum = [c * scale for c in cum]
+        self._ps: list[float] = ps
+        self._ss: list[float] = cum
 
-    def _speed(self, p: np.ndarray) -> np.ndarray:
+    def _arclen(self, ps: list[float]) -> list[float]:
+        """Cumulative arc length at the grid ``ps`` (6-point Gauss-Legendre on each interval)."""
         _, bu, cu, du = self.u
         _, bv, cv, dv = self.v
-        up = bu + p * (2 * cu + 3 * du * p)
-        vp = bv + p * (2 * cv + 3 * dv * p)
-        return np.asarray(np.hypot(up, vp))
-
-    def _arclen(self, ps: np.ndarray) -> np.ndarray:
-        """Cumulative arc length at the grid ``ps`` (Gauss-Legendre on each interval)."""
-        a, b = ps[:-1], ps[1:]
-        half = 0.5 * (b - a)
-        mid = 0.5 * (a + b)
-        pts = mid[:, None] + half[:, None] * _GL_X[None, :]
-        seg = half * (self._speed(pts) @ _GL_W)
-        return np.concatenate(([0.0], np.cumsum(seg)))
+        cu2, du3, cv2, dv3 = 2 * cu, 3 * du, 2 * cv, 3 * dv
+        x0, x1, x2, x3, x4, x5 = _GL_X
+        w0, w1, w2, w3, w4, w5 = _GL_W
+        hypot = math.hypot
+        out = [0.0]
+        total = 0.0
+        for a, b in itertools.pairwise(ps):
+            half = 0.5 * (b - a)
+            mid = 0.5 * (a + b)
+            p0, p1, p2 = mid + half * x0, mid + half * x1, mid + half * x2
+            p3, p4, p5 = mid + half * x3, mid + half * x4, mid + half * x5
+            total += half * (
+                hypot(bu + p0 * (cu2 + du3 * p0), bv + p0 * (cv2 + dv3 * p0)) * w0
+                + hypot(bu + p1 * (cu2 + du3 * p1), bv + p1 * (cv2 + dv3 * p1)) * w1
+                + hypot(bu + p2 * (cu2 + du3 * p2), bv + p2 * (cv2 + dv3 * p2)) * w2
+                + hypot(bu + p3 * (cu2 + du3 * p3), bv + p3 * (cv2 + dv3 * p3)) * w3
+                + hypot(bu + p4 * (cu2 + du3 * p4), bv + p4 * (cv2 + dv3 * p4)) * w4
+                + hypot(bu + p5 * (cu2 + du3 * p5), bv + p5 * (cv2 + dv3 * p5)) * w5
+            )
+            out.append(total)
+        return out
 
     def _p_of(self, ds: float) -> float:
         ss, ps = self._ss, self._ps
@@ -1306,6 +1365,8 @@ class OpenDrive:
         Each section is sampled from its start to its end inclusive; zero-width stretches are kept so the
         arrays of one lane stay aligned (triangulation can drop degenerate triangles).
         """
+        import numpy as np  # here only: arrays for sensors' scene meshes and report plots
+
         if step <= 0:
             raise ValueError("step must be positive")
         road = self.road(road_id)
@@ -1345,8 +1406,7 @@ class OpenDrive:
             n = max(2, math.ceil(road.length / 2.0) + 1)
             sp = road.length / (n - 1)
             spacing.append(sp)
-            for s in np.linspace(0.0, road.length, n):
-                s = float(s)
+            for s in _linspace(0.0, road.length, n):
                 x, y, _ = road.reference_xyh(s)
                 ext = 0.0
                 for _lane, inner, outer in road.all_borders(s):
@@ -1356,13 +1416,12 @@ class OpenDrive:
                 rix.append(ri)
                 ss.append(s)
                 reach.append(ext + sp + 0.5)
-        pts = np.column_stack([xs, ys])
         return {
-            "tree": PointGrid(pts, float(max(reach))),
+            "tree": PointGrid(list(zip(xs, ys, strict=True)), float(max(reach))),
             "roads": road_list,
-            "rix": np.asarray(rix),
-            "s": np.asarray(ss),
-            "reach": np.asarray(reach),
+            "rix": rix,
+            "s": ss,
+            "reach": reach,
             "max_reach": float(max(reach)),
             "spacing": spacing,
         }
@@ -1420,16 +1479,14 @@ class OpenDrive:
         cand = idx["tree"].query_ball_point([x, y], idx["max_reach"])
         if not cand:
             return None
-        cand_arr = np.asarray(cand)
-        d = np.hypot(idx["tree"].data[cand_arr, 0] - x, idx["tree"].data[cand_arr, 1] - y)
-        keep = d <= idx["reach"][cand_arr]
-        cand_arr, d = cand_arr[keep], d[keep]
-        order = np.argsort(d)
+        tree: PointGrid = idx["tree"]
+        reach: list[float] = idx["reach"]
+        near = [(d, ci) for ci in cand if (d := math.hypot(tree.xs[ci] - x, tree.ys[ci] - y)) <= reach[ci]]
+        near.sort()  # by distance, ties by index
         seeds: dict[int, list[float]] = {}
-        for j in order:
-            ci = int(cand_arr[j])
-            ri = int(idx["rix"][ci])
-            s0 = float(idx["s"][ci])
+        for _, ci in near:
+            ri = idx["rix"][ci]
+            s0 = idx["s"][ci]
             lst = seeds.setdefault(ri, [])
             if len(lst) < 3 and all(abs(s0 - o) > 3.0 * idx["spacing"][ri] for o in lst):
                 lst.append(s0)
