@@ -728,6 +728,26 @@ def test_linspace_gives_numpys_floats(start: float, stop: float, num: int) -> No
     assert _linspace(start, stop, num) == np.linspace(start, stop, num).tolist()
 
 
+def test_fresnel_integrals_are_scipys() -> None:
+    """The module's Fresnel integrals (no scipy import) give scipy.special.fresnel's floats exactly."""
+    from scipy.special import fresnel
+
+    from simcore.world.opendrive import _fresnel
+
+    rng = np.random.default_rng(3)
+    xs = np.concatenate(
+        [
+            rng.uniform(-3.0, 3.0, 4000),
+            rng.uniform(-200.0, 200.0, 4000),
+            rng.uniform(-6e4, 6e4, 500),
+            10.0 ** rng.uniform(-9.0, 5.0, 1000),
+            [0.0, -0.0, 1.6, -1.6, math.sqrt(2.5625), 36974.0, -36975.5, math.inf, -math.inf],
+        ]
+    )
+    s, c = fresnel(xs)
+    assert [_fresnel(x) for x in xs.tolist()] == list(zip(s.tolist(), c.tolist(), strict=True))
+
+
 def _numpy_arclen(u: tuple[float, ...], v: tuple[float, ...], ps: np.ndarray) -> np.ndarray:
     """The arc-length table as computed with numpy arrays (the module's former implementation)."""
     x, w = np.polynomial.legendre.leggauss(6)
@@ -780,18 +800,19 @@ def test_numeric_spiral_matches_the_numpy_computation(k0: float, k1: float, leng
 
 
 def test_loading_and_querying_a_road_imports_no_numpy() -> None:
-    """numpy's import costs more than a small scenario's whole run: parsing, poses and world→road run without
-    it (lines, arcs, paramPoly3, poly3, spirals integrated numerically; clothoids through Fresnel integrals
-    still import scipy.special); only the sampled lane outlines (sensors, report plots) import it."""
+    """numpy's import costs more than a small scenario's whole run: parsing, poses and world→road (every
+    geometry kind) run without it, and without scipy; only the sampled lane outlines (sensors, report plots)
+    import numpy."""
     import subprocess
     import sys
 
+    maps = Path(__file__).resolve().parent.parent / "examples" / "maps"
     code = (
         "import sys, math\n"
         "from simcore.world.opendrive import OpenDrive\n"
         "geo = ''.join([\n"
         "  \"<geometry s='0' x='0' y='0' hdg='0' length='50'><line/></geometry>\",\n"
-        "  \"<geometry s='50' x='50' y='0' hdg='0' length='40'><arc curvature='0.01'/></geometry>\",\n"
+        "  \"<geometry s='50' x='50' y='0' hdg='0' length='40'><spiral curvStart='0' curvEnd='0.02'/></geometry>\",\n"
         "  \"<geometry s='90' x='89.5' y='5.3' hdg='0.4' length='30'><spiral curvStart='0.01' curvEnd='0.0100000001'/></geometry>\",\n"
         "  \"<geometry s='120' x='117' y='17' hdg='0.7' length='40'><paramPoly3 pRange='normalized' aU='0' bU='40' cU='0' dU='0' aV='0' bV='0' cV='3' dV='-1'/></geometry>\",\n"
         "  \"<geometry s='160' x='150' y='45' hdg='0.8' length='30'><poly3 a='0' b='0' c='0.001' d='0'/></geometry>\"])\n"
@@ -801,7 +822,12 @@ def test_loading_and_querying_a_road_imports_no_numpy() -> None:
         "    p = od.reference_pose('r', float(s))\n"
         "    rc = od.world_to_road(p.x + 1.0 * math.sin(p.heading), p.y - 1.0 * math.cos(p.heading))\n"
         "    assert rc is not None and rc.lane_id == -1, (s, rc)\n"
-        "print('numpy' in sys.modules)\n"
+        f"for name in ('highway', 'rural'):\n"
+        f"    net = OpenDrive.from_file({str(maps)!r} + '/' + name + '.xodr')\n"
+        "    for road in net.roads.values():\n"
+        "        p = net.reference_pose(road.id, road.length / 2)\n"
+        "        assert net.world_to_road(p.x, p.y) is not None\n"
+        "print('numpy' in sys.modules or 'scipy' in sys.modules)\n"
         "od.sample_lane_boundaries('r')\n"
         "print('numpy' in sys.modules)\n"
     )

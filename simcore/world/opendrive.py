@@ -26,7 +26,6 @@ problem in the input is reported as :class:`OpenDriveError` naming the file and 
 from __future__ import annotations
 
 import bisect
-import functools
 import hashlib
 import itertools
 import math
@@ -299,12 +298,116 @@ _GL16_W = (
 _GL16 = tuple(zip(_GL16_X, _GL16_W, strict=True))
 
 
-@functools.cache
-def _fresnel() -> Any:
-    """scipy's Fresnel integrals: only roads with spirals pay for scipy.special's import (once)."""
-    from scipy.special import fresnel
+# Fresnel integrals (Cephes ``fresnl``, as scipy.special.fresnel evaluates them: the same rational
+# approximations in the same operation order, so the same floats, without scipy's and numpy's import)
+_FRESNEL_SN = (
+    -2.99181919401019853726e3, 7.08840045257738576863e5, -6.29741486205862506537e7,
+    2.54890880573376359104e9, -4.42979518059697779103e10, 3.18016297876567817986e11,
+)  # fmt: skip
+_FRESNEL_SD = (
+    2.81376268889994315696e2, 4.55847810806532581675e4, 5.17343888770096400730e6,
+    4.19320245898111231129e8, 2.24411795645340920940e10, 6.07366389490084639049e11,
+)  # fmt: skip
+_FRESNEL_CN = (
+    -4.98843114573573548651e-8, 9.50428062829859605134e-6, -6.45191435683965050962e-4,
+    1.88843319396703850064e-2, -2.05525900955013891793e-1, 9.99999999999999998822e-1,
+)  # fmt: skip
+_FRESNEL_CD = (
+    3.99982968972495980367e-12, 9.15439215774657478799e-10, 1.25001862479598821474e-7,
+    1.22262789024179030997e-5, 8.68029542941784300606e-4, 4.12142090722199792936e-2,
+    1.00000000000000000118e0,
+)  # fmt: skip
+_FRESNEL_FN = (
+    4.21543555043677546506e-1, 1.43407919780758885261e-1, 1.15220955073585758835e-2,
+    3.45017939782574027900e-4, 4.63613749287867322088e-6, 3.05568983790257605827e-8,
+    1.02304514164907233465e-10, 1.72010743268161828879e-13, 1.34283276233062758925e-16,
+    3.76329711269987889006e-20,
+)  # fmt: skip
+_FRESNEL_FD = (
+    7.51586398353378947175e-1, 1.16888925859191382142e-1, 6.44051526508858611005e-3,
+    1.55934409164153020873e-4, 1.84627567348930545870e-6, 1.12699224763999035261e-8,
+    3.60140029589371370404e-11, 5.88754533621578410010e-14, 4.52001434074129701496e-17,
+    1.25443237090011264384e-20,
+)  # fmt: skip
+_FRESNEL_GN = (
+    5.04442073643383265887e-1, 1.97102833525523411709e-1, 1.87648584092575249293e-2,
+    6.84079380915393090172e-4, 1.15138826111884280931e-5, 9.82852443688422223854e-8,
+    4.45344415861750144738e-10, 1.08268041139020870318e-12, 1.37555460633261799868e-15,
+    8.36354435630677421531e-19, 1.86958710162783235106e-22,
+)  # fmt: skip
+_FRESNEL_GD = (
+    1.47495759925128324529e0, 3.37748989120019970451e-1, 2.53603741420338795122e-2,
+    8.14679107184306179049e-4, 1.27545075667729118702e-5, 1.04314589657571990585e-7,
+    4.60680728146520428211e-10, 1.10273215066240270757e-12, 1.38796531259578871258e-15,
+    8.39158816283118707363e-19, 1.86958710162783236342e-22,
+)  # fmt: skip
 
-    return fresnel
+
+def _polevl(x: float, coef: tuple[float, ...]) -> float:
+    """``coef[0] * x**N + ... + coef[N]`` by Horner's rule."""
+    ans = coef[0]
+    for c in coef[1:]:
+        ans = ans * x + c
+    return ans
+
+
+def _p1evl(x: float, coef: tuple[float, ...]) -> float:
+    """As `_polevl` with a leading coefficient 1 not stored in `coef`."""
+    ans = x + coef[0]
+    for c in coef[1:]:
+        ans = ans * x + c
+    return ans
+
+
+def _sinpi(x: float) -> float:
+    s = 1.0
+    if math.copysign(1.0, x) < 0:
+        x, s = -x, -1.0
+    r = math.fmod(x, 2.0)
+    if r < 0.5:
+        return s * math.sin(math.pi * r)
+    if r > 1.5:
+        return s * math.sin(math.pi * (r - 2.0))
+    return -s * math.sin(math.pi * (r - 1.0))
+
+
+def _cospi(x: float) -> float:
+    r = math.fmod(abs(x), 2.0)
+    if r == 0.5:
+        return 0.0
+    if r < 1.0:
+        return -math.sin(math.pi * (r - 0.5))
+    return math.sin(math.pi * (r - 1.5))
+
+
+def _fresnel(xxa: float) -> tuple[float, float]:
+    """The Fresnel integrals ``(S(x), C(x))`` of ``sin`` and ``cos(pi/2 t**2)`` from 0 to `xxa`."""
+    if math.isinf(xxa):
+        cc = ss = 0.5
+    else:
+        x = abs(xxa)
+        x2 = x * x
+        if x2 < 2.5625:
+            t = x2 * x2
+            ss = x * x2 * _polevl(t, _FRESNEL_SN) / _p1evl(t, _FRESNEL_SD)
+            cc = x * _polevl(t, _FRESNEL_CN) / _polevl(t, _FRESNEL_CD)
+        elif x > 36974.0:
+            cc = 0.5 + 1 / (math.pi * x) * _sinpi(x * x / 2)
+            ss = 0.5 - 1 / (math.pi * x) * _cospi(x * x / 2)
+        else:
+            t = math.pi * x2
+            u = 1.0 / (t * t)
+            t = 1.0 / t
+            f = 1.0 - u * _polevl(u, _FRESNEL_FN) / _p1evl(u, _FRESNEL_FD)
+            g = t * _polevl(u, _FRESNEL_GN) / _p1evl(u, _FRESNEL_GD)
+            c = _cospi(x2 / 2)
+            s = _sinpi(x2 / 2)
+            t = math.pi * x
+            cc = 0.5 + (f * s - g * c) / t
+            ss = 0.5 - (f * c + g * s) / t
+    if xxa < 0.0:
+        cc, ss = -cc, -ss
+    return ss, cc
 
 
 class Spiral(Geometry):
@@ -336,8 +439,8 @@ class Spiral(Geometry):
             self._sin0 = math.sin(self._th0)
 
     def _std(self, u: float) -> tuple[float, float]:
-        sf, cf = _fresnel()(u / self._scale)
-        return self._scale * float(cf), self._sign * self._scale * float(sf)
+        sf, cf = _fresnel(u / self._scale)
+        return self._scale * cf, self._sign * self._scale * sf
 
     def local(self, ds: float) -> tuple[float, float, float]:
         h = self.hdg + self.k0 * ds + 0.5 * self.c * ds * ds
