@@ -40,7 +40,7 @@ from defusedxml import DefusedXmlException
 
 from simcore.world.frozen import builder
 
-if TYPE_CHECKING:  # numpy is imported only where arrays are built (lane outlines, long arc-length tables)
+if TYPE_CHECKING:  # numpy is imported only where arrays are built (sample_lane_boundaries)
     import numpy as np
 
 __all__ = [
