@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from simcore.world.state import EntityState, WorldFrame
+from simcore.world.state import EntityState, WorldFrame, box_corners
 
 Point = tuple[float, float]
 
@@ -111,21 +111,9 @@ def footprint(
     x: float, y: float, heading: float, center_x: float, center_y: float, length: float, width: float
 ) -> Box:
     """The footprint of a box centred (`center_x`, `center_y`) from a reference point (x, y) in the frame of
-    `heading`: the corners `EntityState.corners()` gives (the same arithmetic), with the box's axes."""
+    `heading`: the corners `EntityState.corners()` gives, with the box's axes."""
     c, s = math.cos(heading), math.sin(heading)
-    cx = x + c * center_x - s * center_y
-    cy = y + s * center_x + c * center_y
-    hl, hw = length / 2, width / 2
-    lc, ls, wc, ws = hl * c, hl * s, hw * c, hw * s
-    return Box(
-        (
-            (cx + lc - ws, cy + ls + wc),
-            (cx - lc - ws, cy - ls + wc),
-            (cx - lc + ws, cy - ls - wc),
-            (cx + lc + ws, cy + ls - wc),
-        ),
-        ((c, s), (-s, c)),
-    )
+    return Box(box_corners(x, y, heading, center_x, center_y, length, width), ((c, s), (-s, c)))
 
 
 def _axis_gap(a: Box, b: Box, ax: float, ay: float) -> float:

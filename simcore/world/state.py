@@ -7,6 +7,27 @@ from dataclasses import dataclass, field
 
 from simcore.world.frozen import builder
 
+Corners = tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]]
+
+
+def box_corners(
+    x: float, y: float, heading: float, center_x: float, center_y: float, length: float, width: float
+) -> Corners:
+    """The ground-plane corners of a box centred (`center_x`, `center_y`) in the frame of a reference point
+    (x, y) with `heading`, counter-clockwise from front-left (one arithmetic for states, metrics and
+    conditions, so their footprints are the same floats)."""
+    c, s = math.cos(heading), math.sin(heading)
+    cx = x + c * center_x - s * center_y
+    cy = y + s * center_x + c * center_y
+    hl, hw = length / 2, width / 2
+    lc, ls, wc, ws = hl * c, hl * s, hw * c, hw * s
+    return (
+        (cx + lc - ws, cy + ls + wc),
+        (cx - lc - ws, cy - ls + wc),
+        (cx - lc + ws, cy - ls - wc),
+        (cx + lc + ws, cy + ls - wc),
+    )
+
 
 @dataclass(frozen=True, slots=True)
 class BoundingBox:
@@ -66,13 +87,8 @@ class EntityState:
 
     def corners(self) -> list[tuple[float, float]]:
         """The box's four ground-plane corners in the map frame, counter-clockwise from front-left."""
-        cx, cy, _ = self.box_center()
-        c, s = math.cos(self.heading), math.sin(self.heading)
-        hl, hw = self.bbox.length / 2, self.bbox.width / 2
-        return [
-            (cx + c * dx - s * dy, cy + s * dx + c * dy)
-            for dx, dy in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))
-        ]
+        b = self.bbox
+        return list(box_corners(self.x, self.y, self.heading, b.center_x, b.center_y, b.length, b.width))
 
 
 @dataclass(frozen=True, slots=True)
