@@ -201,13 +201,22 @@ class StoryRun:
                         self.set(act, Transition.START, State.RUNNING)
                         for group in act.children:
                             self.start_group(group)
-                elif act.state == State.RUNNING and self.triggers.fire(definition.stop_trigger):
+                elif (
+                    act.state == State.RUNNING
+                    and definition.stop_trigger is not None
+                    and self.triggers.fire(definition.stop_trigger)
+                ):
                     self.stop(act)
                     continue
                 if act.state != State.RUNNING:
                     continue
-                for group in _running(act.children):
-                    for maneuver in _running(group.children):
+                # (each element's state is read when it is reached: starting an event may stop others)
+                for group in act.children:
+                    if group.state != State.RUNNING:
+                        continue
+                    for maneuver in group.children:
+                        if maneuver.state != State.RUNNING:
+                            continue
                         for event in maneuver.children:
                             if event.state != State.STANDBY:
                                 continue
