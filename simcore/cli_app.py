@@ -1,8 +1,9 @@
-"""`carlos` — the command line. Bad input ends in one clear line and exit code 2, never a traceback."""
+"""The commands of `carlos` (a typer app). simcore.cli.main runs it; bad input ends in one clear line and exit
+code 2, never a traceback. Imported only when a command runs (not by the worker processes a run spawns, which
+start from simcore.cli)."""
 
 # Annotations are evaluated as the module loads (no `from __future__ import annotations`): typer reads
 # every command's parameters at each start, and string annotations would be compiled one by one (~25 ms).
-import gc
 import json
 import os
 import sys
@@ -17,6 +18,7 @@ from rich.table import Table
 from rich.text import Text
 from typer.core import TyperGroup
 
+from simcore import cli as entry  # the collector's pause (entry.resume_gc: looked up there, at each call)
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError, shorten
 from simcore.workflow import commands as workflow
 
@@ -42,7 +44,7 @@ class _Commands(TyperGroup):
 
     def get_command(self, ctx: "_click.Context", cmd_name: str) -> "_click.Command | None":
         if cmd_name != "run":  # `carlos run` resumes the collector itself, after its start-up
-            resume_gc()
+            entry.resume_gc()
         command = super().get_command(ctx, cmd_name)
         if command is not None:
             return command
@@ -53,30 +55,6 @@ class _Commands(TyperGroup):
         command = typer.main.get_command(loaded) if isinstance(loaded, typer.Typer) else loaded
         command.name = cmd_name
         return command
-
-
-_gc_paused = False
-
-
-def pause_gc() -> None:
-    """Start-up (imports, the CLI, the spec's validators, the scenario) allocates some 10^5 objects that live as
-    long as the process and hardly any garbage; the cyclic collector would go through them again and again
-    (40-60 ms of `carlos run`). `carlos` pauses it from the start until resume_gc()."""
-    global _gc_paused
-    if gc.isenabled():
-        gc.disable()
-        _gc_paused = True
-
-
-def resume_gc() -> None:
-    """Collect again, once start-up is over, with what start-up allocated frozen (gc.freeze: never scanned
-    again). Only after pause_gc(): a process that did not pause the collector (tests calling the app, a
-    program importing simcore) is left as it is."""
-    global _gc_paused
-    if _gc_paused:
-        _gc_paused = False
-        gc.freeze()
-        gc.enable()
 
 
 app = typer.Typer(
@@ -250,12 +228,12 @@ def run(
                 )
 
         def on_progress(i: int, sim_time: float) -> None:
-            resume_gc()  # a run is under way (its imports and set-up done): garbage is collected again
+            entry.resume_gc()  # a run is under way (its imports and set-up done): garbage is collected again
             live_sim[i] = sim_time
             progress.update(task, stats=stats())
 
         def on_done(outcome: object) -> None:
-            resume_gc()  # at the latest when the first run ends (one that failed before any progress)
+            entry.resume_gc()  # at the latest when the first run ends (one that failed before any progress)
             summary = outcome.summary  # type: ignore[attr-defined]
             live_sim.pop(summary["index"], None)
             state["sim"] += summary.get("simSeconds", 0.0)
@@ -285,7 +263,7 @@ def run(
 
         with progress:
             if simulation_run.spec.search is not None:
-                resume_gc()
+                entry.resume_gc()
                 report = _search(simulation_run, manifest, output, parallel, fresh or bool(index) or live)
                 _print_report(report)
                 raise typer.Exit(report.exit_code)
@@ -797,16 +775,3 @@ for _command in (
     workflow.rerun,
 ):
     app.command()(_command)
-
-
-def main() -> None:
-    pause_gc()
-    try:
-        app()
-    except CarlosError as exc:  # a last guard: never a traceback for our own errors
-        console.print(_line("error:", "bold red", exc), highlight=False, soft_wrap=True)
-        sys.exit(int(exc.exit_code))
-
-
-if __name__ == "__main__":
-    main()
