@@ -123,6 +123,22 @@ def test_compare_false_fields_and_nan_identity_as_dataclasses() -> None:
     assert repr(Point(2.5)) == repr(Ref(2.5)).replace("Ref", "Point")
 
 
+def test_init_is_compiled_when_first_needed() -> None:
+    @record
+    class Pair:
+        a: int
+        b: list[int] = dataclasses.field(default_factory=list)
+
+    assert "__init__" in Pair.__dict__ and not inspect.isfunction(Pair.__dict__["__init__"])
+    first = Pair(1)  # the first instance compiles it
+    assert inspect.isfunction(Pair.__dict__["__init__"]) and Pair.__init__.__qualname__.endswith(
+        "Pair.__init__"
+    )
+    assert (first.a, first.b, Pair(2, [3]).b) == (1, [], [3]) and first.b is not Pair(1).b
+    with pytest.raises(TypeError, match="missing 1 required positional argument: 'a'"):
+        Pair()  # type: ignore[call-arg]
+
+
 def test_recursive_repr_is_cut_like_dataclasses() -> None:
     @record
     class Box:

@@ -3,11 +3,12 @@
 `@dataclass(frozen=True)` compiles six methods per class (`__init__`, `__repr__`, `__eq__`, `__hash__`,
 `__setattr__`, `__delattr__`), each its own `exec` of generated source: for the scenario model's ~85 classes
 that is some 500 compilations, 40-60 ms of every `carlos run` and of every worker's first run. `@record` makes
-the same class with one compilation: the dataclass machinery without generated methods (fields, `__doc__`,
+the same class compiling at most one: the dataclass machinery without generated methods (fields, `__doc__`,
 `__match_args__`; `dataclasses.fields`, `replace`, `asdict` work as on any dataclass), the `__init__` compiled
-from the same source dataclasses would write (the same per-call cost), and the other five as closures over the
-class's field names with the behaviour of the generated ones (Python 3.11's): equality and hash over the
-tuple of compared fields, `Name(field=value, …)` as repr, FrozenInstanceError on assignment and deletion.
+from the same source dataclasses would write (the same per-call cost) when it is first needed (a scenario
+uses a few of the classes), and the other five as closures over the class's field names with the behaviour
+of the generated ones (Python 3.11's): equality and hash over the tuple of compared fields,
+`Name(field=value, …)` as repr, FrozenInstanceError on assignment and deletion.
 
 Supported: fields with a default or a default_factory, `field(compare=…, hash=…, repr=…)`, no inheritance
 between records, no `__post_init__`, `InitVar`, `kw_only` or `init=False` fields (refused with TypeError,
@@ -52,7 +53,9 @@ def record(cls: type[_T]) -> type[_T]:
     for f in own:
         if not f.init or f.kw_only is True:
             raise TypeError(f"{cls.__name__}.{f.name}: @record supports only positional init fields")
-    _install(made, "__init__", _init_fn(made, own))
+    if "__init__" in made.__dict__:
+        raise TypeError(f"{cls.__name__} defines __init__: not a @record")
+    made.__init__ = _LazyInit(made, *_init_source(own))
     _install(made, "__repr__", _repr_fn(made, [f.name for f in own if f.repr]))
     _install(made, "__eq__", _eq_fn([f.name for f in own if f.compare]))
     made.__hash__ = _hash_fn([f.name for f in own if (f.compare if f.hash is None else f.hash)])
@@ -80,9 +83,9 @@ def _set_qualname(cls: type, fn: Callable[..., Any]) -> None:
     fn.__qualname__ = f"{cls.__qualname__}.{fn.__name__}"
 
 
-def _init_fn(cls: type, own: Sequence[Field[Any]]) -> Callable[..., None]:
-    """The `__init__` dataclasses compiles for a frozen class (parameters with their annotations and
-    defaults, each field set through object.__setattr__), compiled the same way."""
+def _init_source(own: Sequence[Field[Any]]) -> tuple[str, dict[str, Any]]:
+    """The source of the `__init__` dataclasses compiles for a frozen class (parameters with their annotations
+    and defaults, each field set through object.__setattr__) and the names it refers to."""
     scope: dict[str, Any] = {
         "__dataclass_builtins_object__": object,
         "__dataclass_HAS_DEFAULT_FACTORY__": _HAS_DEFAULT_FACTORY,
@@ -113,12 +116,29 @@ def _init_fn(cls: type, own: Sequence[Field[Any]]) -> Callable[..., None]:
         + ("\n".join(body) or "  pass")
         + "\n return __init__"
     )
-    namespace: dict[str, Any] = {}
-    # not inheriting this module's `from __future__ import annotations`: the annotations are the fields' types
-    code = compile(source, "<string>", "exec", dont_inherit=True)
-    exec(code, sys.modules[cls.__module__].__dict__, namespace)  # generated source, as dataclasses does
-    init: Callable[..., None] = namespace["__create_fn__"](**scope)
-    return init
+    return source, scope
+
+
+class _LazyInit:
+    """A record's `__init__` until it is first looked up (an instance made, inspect.signature, …): compiled
+    then, as dataclasses would have compiled it, and put in its place on the class. A scenario uses a few of
+    the model's classes; the others' `__init__` is never compiled."""
+
+    def __init__(self, cls: type, source: str, scope: dict[str, Any]) -> None:
+        self._cls = cls
+        self._source = source
+        self._scope = scope
+
+    def __get__(self, obj: object, owner: type | None = None) -> Any:
+        cls = self._cls
+        namespace: dict[str, Any] = {}
+        # not inheriting this module's `from __future__ import annotations`: the annotations are the types
+        code = compile(self._source, "<string>", "exec", dont_inherit=True)
+        exec(code, sys.modules[cls.__module__].__dict__, namespace)  # generated source, as dataclasses does
+        init: Callable[..., None] = namespace["__create_fn__"](**self._scope)
+        _set_qualname(cls, init)
+        type.__setattr__(cls, "__init__", init)  # from now on the class's own, as a dataclass's
+        return init.__get__(obj, owner)
 
 
 def _values(names: list[str]) -> Callable[[Any], tuple[Any, ...]]:
