@@ -184,7 +184,7 @@ def test_walking_the_last_lane_first_finds_what_walking_every_lane_finds(
         every_hints: dict[str, int] = {}
         near_hints: dict[str, int] = {}
         gaps: sumo_lanes.SegmentGaps = {}
-        near: str | None = None
+        near: LaneShape | None = None
         s, lateral, target = rng.uniform(0.0, 5.0), 0.0, 0.0
         for _ in range(200):
             s += rng.uniform(-0.5, 2.0) if rng.random() > 0.02 else rng.uniform(-80.0, 80.0)
@@ -199,13 +199,13 @@ def test_walking_the_last_lane_first_finds_what_walking_every_lane_finds(
             expected = nearest_lane(shapes, x, y, every_hints)
             counting = "near"
             if rng.random() < 0.05:
-                near = rng.choice([None, "e_9", shapes[rng.randrange(len(shapes))].lane_id])
+                near = rng.choice([None, shapes[rng.randrange(len(shapes))]])  # not the lane it was on
             found = nearest_lane(shapes, x, y, near_hints, near, gaps)
             assert (found is None) == (expected is None)
             if found is not None and expected is not None:
                 assert found[0].lane_id == expected[0].lane_id
                 assert tuple(found[1]) == tuple(expected[1])  # bit for bit
             assert near_hints == every_hints
-            near = found[0].lane_id if found is not None else near
+            near = found[0] if found is not None else near
             steps += 1
     assert walks["near"] < 0.75 * walks["every"]  # and it did skip lanes

@@ -295,8 +295,9 @@ class SumoWorld:
         fx, fy = x + front * math.cos(heading), y + front * math.sin(heading)
         try:
             if name in self._scripted:
-                self._sumo.vehicle.setSpeed(name, max(speed, 0.0))
-                self._targets[name] = (fx, fy, _sumo_angle(heading), max(speed, 0.0))
+                speed = 0.0 if speed < 0.0 else speed  # max(speed, 0.0), without the builtin's call cost
+                self._sumo.vehicle.setSpeed(name, speed)
+                self._targets[name] = (fx, fy, _sumo_angle(heading), speed)
             else:
                 self._move_xy(name, fx, fy, _sumo_angle(heading))
         except Exception as exc:
@@ -322,7 +323,7 @@ class SumoWorld:
         if edge is None:
             return None
         hints = self._hints.setdefault(name, {})
-        found = nearest_lane(edge.lanes, fx, fy, hints, lane, edge.gaps)
+        found = nearest_lane(edge.lanes, fx, fy, hints, edge.by_id[lane], edge.gaps)
         if found is None:
             return None
         shape, on = found

@@ -87,7 +87,9 @@ def locate_on(shape: LaneShape, x: float, y: float, hint: int | None, max_walk: 
     """Where (x, y) projects onto `shape`, walking from segment `hint` (all segments when None). None when
     the walk does not settle within `max_walk` segments or the point lies before the start or past the end
     of the lane (the caller then asks SUMO). Called every step per lane: the segment arithmetic of
-    `_along_segment` is written out here (the same operations, so the same floats)."""
+    `_along_segment` is written out here (the same operations, so the same floats), and clamps are written
+    as conditional expressions (`min(max(u, 0.0), 1.0)` gives the same value, NaN and -0.0 included, but a
+    call of the builtin min or max costs several times as much in CPython 3.11)."""
     xs, ys, dxs, dys, seg2s = shape.xs, shape.ys, shape.dxs, shape.dys, shape.seg2s
     last = len(xs) - 2
     if last < 0:
@@ -96,14 +98,15 @@ def locate_on(shape: LaneShape, x: float, y: float, hint: int | None, max_walk: 
         best, best_d2 = 0, math.inf
         for i in range(last + 1):
             x0, y0, dx, dy, seg2 = xs[i], ys[i], dxs[i], dys[i], seg2s[i]
-            c = min(max(((x - x0) * dx + (y - y0) * dy) / seg2, 0.0), 1.0) if seg2 > 0.0 else 0.0
+            u = ((x - x0) * dx + (y - y0) * dy) / seg2 if seg2 > 0.0 else 0.0
+            c = 1.0 if u > 1.0 else (0.0 if u < 0.0 else u)
             fx, fy = x0 + c * dx - x, y0 + c * dy - y
             d2 = fx * fx + fy * fy
             if d2 < best_d2:
                 best, best_d2 = i, d2
         i = best
     else:
-        i = min(max(hint, 0), last)
+        i = 0 if hint < 0 else (last if hint > last else hint)
     seg2 = seg2s[i]
     u = ((x - xs[i]) * dxs[i] + (y - ys[i]) * dys[i]) / seg2 if seg2 > 0.0 else 0.0
     if u > 1.0 or u < 0.0:
@@ -135,7 +138,7 @@ def locate_on(shape: LaneShape, x: float, y: float, hint: int | None, max_walk: 
             return None
         if (u < 0.0 and i == 0) or (u > 1.0 and i == last):
             return None  # before the lane's start or past its end
-        c = min(max(u, 0.0), 1.0)
+        c = 1.0 if u > 1.0 else (0.0 if u < 0.0 else u)
     else:
         c = u
     fx = xs[i] + c * dxs[i] - x
@@ -178,6 +181,10 @@ class EdgeLanes:
 
     lanes: list[LaneShape]
     gaps: SegmentGaps = field(default_factory=dict)
+    by_id: dict[str, LaneShape] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.by_id = {lane.lane_id: lane for lane in self.lanes}
 
 
 #: SUMO's description of a lane: id, polyline points, length
@@ -198,64 +205,78 @@ def edge_lanes(raw: tuple[RawLane, ...]) -> EdgeLanes:
     return found
 
 
-def _clearly_farther(
-    shape: LaneShape, x: float, y: float, hint: int | None, near: LaneShape, on: OnLane, gaps: SegmentGaps
-) -> int | None:
-    """The segment `locate_on(shape, x, y, hint)` would settle on, when it provably returns a place farther
-    from (x, y) than `on` (found on lane `near`); None when that is not shown (then walk `shape`).
-
-    The walk stays on segment j = hint when (x, y) projects inside it. Its distance to segment j is then at
-    least gap(near's segment, j) - on.distance (triangle inequality through (x, y)'s foot on `near`), which
-    exceeds on.distance when the gap is more than twice it: `shape` is not the nearest lane."""
-    last = len(shape.xs) - 2
-    if hint is None or last < 0:
-        return None
-    j = min(max(hint, 0), last)
-    seg2 = shape.seg2s[j]  # _along_segment, written out (called every step)
-    u = ((x - shape.xs[j]) * shape.dxs[j] + (y - shape.ys[j]) * shape.dys[j]) / seg2 if seg2 > 0.0 else 0.0
-    if not 0.0 <= u <= 1.0:
-        return None
-    key = (near.lane_id, on.segment, shape.lane_id, j)
-    gap = gaps.get(key)
-    if gap is None:
-        gap = gaps[key] = segment_gap(near, on.segment, shape, j)
-    return j if gap - 2.0 * on.distance > CLEARLY_FARTHER_M else None
-
-
 def nearest_lane(
     shapes: list[LaneShape],
     x: float,
     y: float,
     hints: dict[str, int],
-    near: str | None = None,
+    near: LaneShape | None = None,
     gaps: SegmentGaps | None = None,
 ) -> tuple[LaneShape, OnLane] | None:
     """The lane among `shapes` whose polyline is nearest to (x, y) (the first on a tie, as SUMO), or None.
     `hints` (lane → segment to start the walk from) is updated with where (x, y) was found on each lane.
 
-    With `near` (the lane (x, y) was on last) and a `gaps` cache, that lane is walked first and any other lane
-    shown to be clearly farther is not walked: the answer and the hints are the same as walking every lane."""
-    first = None
+    With `near` (the lane (x, y) was on last, one of `shapes`) and a `gaps` cache, that lane is walked
+    first and any other lane shown to be farther is not walked (`_nearest_after`): the answer and the hints
+    are the same as walking every lane."""
     if near is not None and gaps is not None:
-        for shape in shapes:
-            if shape.lane_id == near:
-                first = shape
-                break
-    first_on = None if first is None else locate_on(first, x, y, hints.get(first.lane_id))
+        on = locate_on(near, x, y, hints.get(near.lane_id))
+        if on is not None:
+            return _nearest_after(shapes, x, y, hints, near, on, gaps)
     best: tuple[LaneShape, OnLane] | None = None
     for shape in shapes:
         lane_id = shape.lane_id
-        if shape is first:
-            on = first_on
-        elif first is not None and first_on is not None and gaps is not None:
-            hint = hints.get(lane_id)
-            segment = _clearly_farther(shape, x, y, hint, first, first_on, gaps)
-            if segment is not None:
-                hints[lane_id] = segment  # where its walk would have settled; never the nearest
-                continue
-            on = locate_on(shape, x, y, hint)
+        on = locate_on(shape, x, y, hints.get(lane_id))
+        if on is None:
+            hints.pop(lane_id, None)
+            continue
+        hints[lane_id] = on.segment
+        if best is None or on.distance < best[1].distance:
+            best = (shape, on)
+    return best
+
+
+def _nearest_after(
+    shapes: list[LaneShape],
+    x: float,
+    y: float,
+    hints: dict[str, int],
+    near: LaneShape,
+    near_on: OnLane,
+    gaps: SegmentGaps,
+) -> tuple[LaneShape, OnLane] | None:
+    """nearest_lane's loop once (x, y) is known to be `near_on` on lane `near`. Another lane's walk from its
+    hint j stays on segment j when (x, y) projects inside it; its distance to segment j is then at least
+    gap(near's segment, j) - near_on.distance (triangle inequality through (x, y)'s foot on `near`), more
+    than near_on.distance when the gap exceeds twice that: the lane is not the nearest, and its hint stays
+    j. Any other lane is walked. Runs every step: the projection of locate_on is written out here."""
+    near_id, near_segment = near.lane_id, near_on.segment
+    reach = 2.0 * near_on.distance + CLEARLY_FARTHER_M
+    best: tuple[LaneShape, OnLane] | None = None
+    for shape in shapes:
+        lane_id = shape.lane_id
+        if shape is near:
+            on: OnLane | None = near_on
         else:
-            on = locate_on(shape, x, y, hints.get(lane_id))
+            hint = hints.get(lane_id)
+            last = len(shape.xs) - 2
+            if hint is not None and last >= 0:
+                j = 0 if hint < 0 else (last if hint > last else hint)
+                seg2 = shape.seg2s[j]
+                u = (
+                    ((x - shape.xs[j]) * shape.dxs[j] + (y - shape.ys[j]) * shape.dys[j]) / seg2
+                    if seg2 > 0.0
+                    else 0.0
+                )
+                if 0.0 <= u <= 1.0:
+                    key = (near_id, near_segment, lane_id, j)
+                    gap = gaps.get(key)
+                    if gap is None:
+                        gap = gaps[key] = segment_gap(near, near_segment, shape, j)
+                    if gap > reach:
+                        hints[lane_id] = j
+                        continue
+            on = locate_on(shape, x, y, hint)
         if on is None:
             hints.pop(lane_id, None)
             continue
