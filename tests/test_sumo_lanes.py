@@ -209,3 +209,23 @@ def test_walking_the_last_lane_first_finds_what_walking_every_lane_finds(
             near = found[0] if found is not None else near
             steps += 1
     assert walks["near"] < 0.75 * walks["every"]  # and it did skip lanes
+
+
+def test_lane_geometry_is_shared_only_between_identical_edges() -> None:
+    """A warm worker builds an edge's lanes once; an edge whose points or length differ in any way (another
+    network, or the same file changed) gets its own lanes and its own gap cache."""
+    from simcore.world.sumo_lanes import edge_lanes
+
+    raw = (
+        ("e_0", ((0.0, 0.0), (100.0, 0.0)), 100.0),
+        ("e_1", ((0.0, 3.5), (100.0, 3.5)), 100.0),
+    )
+    first = edge_lanes(raw)
+    first.gaps[("e_0", 0, "e_1", 0)] = 3.5
+    again = edge_lanes(tuple((lane_id, tuple(points), length) for lane_id, points, length in raw))
+    assert again is first
+    moved = edge_lanes((raw[0], ("e_1", ((0.0, 3.5), (100.0, 3.6)), 100.0)))
+    longer = edge_lanes((raw[0], ("e_1", ((0.0, 3.5), (100.0, 3.5)), 100.5)))
+    assert moved is not first and longer is not first and moved is not longer
+    assert moved.gaps == {} and longer.gaps == {}
+    assert moved.by_id["e_1"].ys == (3.5, 3.6)
