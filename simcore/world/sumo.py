@@ -167,7 +167,7 @@ class SumoWorld:
         self._front: dict[str, float] = {}  # reference point → front bumper distance
         self._scripted: set[str] = set()
         self._departed: set[str] = set()
-        # scripted vehicles: the place each is to have at the end of the next step (front x, y, SUMO angle,
+        # scripted vehicles: the place each is to have at the end of the next step (front x, y, heading,
         # speed), the lane it is on after the last step, and per lane the polyline segment it was on
         self._targets: dict[str, tuple[float, float, float, float]] = {}
         self._lane_of: dict[str, str] = {}
@@ -297,7 +297,7 @@ class SumoWorld:
             if name in self._scripted:
                 speed = 0.0 if speed < 0.0 else speed  # max(speed, 0.0), without the builtin's call cost
                 self._sumo.vehicle.setSpeed(name, speed)
-                self._targets[name] = (fx, fy, _sumo_angle(heading), speed)
+                self._targets[name] = (fx, fy, heading, speed)  # SUMO's angle only if SUMO searches
             else:
                 self._move_xy(name, fx, fy, _sumo_angle(heading))
         except Exception as exc:
@@ -364,10 +364,10 @@ class SumoWorld:
         after: list[tuple[str, str, float]] = []
         searched: list[str] = []
         try:
-            for name, (fx, fy, angle, speed) in self._targets.items():
+            for name, (fx, fy, heading, speed) in self._targets.items():
                 spot = self._spot_on_edge(name, fx, fy, speed)
                 if spot is None:
-                    self._move_xy(name, fx, fy, angle)
+                    self._move_xy(name, fx, fy, _sumo_angle(heading))
                     searched.append(name)
                 else:
                     after.append((name, *spot))

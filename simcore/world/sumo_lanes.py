@@ -8,6 +8,7 @@ calls are in simcore.world.sumo.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -64,6 +65,10 @@ class OnLane(NamedTuple):  # built once or twice a step: a tuple is the cheapest
     distance: float  # from the polyline, m
     pos: float  # SUMO lane position
     segment: int  # the polyline segment it projects onto (the next search starts there)
+
+
+#: OnLane((distance, pos, segment)) without the Python-level __new__ of a NamedTuple (called every step)
+_on_lane = functools.partial(tuple.__new__, OnLane)
 
 
 def _along_segment(shape: LaneShape, i: int, x: float, y: float) -> float:
@@ -143,7 +148,7 @@ def locate_on(shape: LaneShape, x: float, y: float, hint: int | None, max_walk: 
         c = u
     fx = xs[i] + c * dxs[i] - x
     fy = ys[i] + c * dys[i] - y
-    return OnLane(math.sqrt(fx * fx + fy * fy), (shape.along[i] + c * shape.seglens[i]) * shape.scale, i)
+    return _on_lane((math.sqrt(fx * fx + fy * fy), (shape.along[i] + c * shape.seglens[i]) * shape.scale, i))
 
 
 def _point_to_segment(px: float, py: float, shape: LaneShape, i: int) -> float:
