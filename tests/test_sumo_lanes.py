@@ -138,3 +138,94 @@ def test_a_scripted_vehicle_on_its_edge_is_where_sumo_search_puts_it(tmp_path: P
             ), f"step {step}"
         assert len(lanes_seen) == 2  # it did change lanes
         assert moved_to > 350  # and almost every step took the walk, not SUMO's search
+
+
+def _edge(rng: random.Random, lanes: int, width: float, sharp: bool) -> list[LaneShape]:
+    """Parallel lanes around a wandering centre line (points 0-8 m apart, some repeated; `sharp`: bends tight
+    enough for the inner lanes' polylines to fold over), offset along each point's normal as SUMO does."""
+    x, y, heading = 0.0, 0.0, rng.uniform(-math.pi, math.pi)
+    centre = [(x, y, heading)]
+    for _ in range(rng.randint(2, 120)):
+        step = 0.0 if rng.random() < 0.03 else rng.uniform(0.5, 8.0)
+        heading += rng.uniform(-1.2, 1.2) if sharp else rng.gauss(0.0, 0.03)
+        x, y = x + step * math.cos(heading), y + step * math.sin(heading)
+        centre.append((x, y, heading))
+    shapes = []
+    for index in range(lanes):
+        offset = (index - (lanes - 1) / 2) * width
+        points = tuple((px - offset * math.sin(h), py + offset * math.cos(h)) for px, py, h in centre)
+        shape = LaneShape.of(f"e_{index}", points, 1.0)
+        shapes.append(LaneShape.of(f"e_{index}", points, shape.along[-1] * rng.uniform(0.98, 1.02)))
+    return shapes
+
+
+def test_walking_the_last_lane_first_finds_what_walking_every_lane_finds(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """nearest_lane with the lane of the last step (`near`) skips lanes shown to be farther: every answer and
+    every hint left for the next step must equal those of walking every lane, on straight, curved and folded
+    edges, while drifting across lanes, jumping, and with a wrong `near`."""
+    from simcore.world import sumo_lanes
+
+    walks = {"every": 0, "near": 0}
+    counting = "every"
+    plain_locate = sumo_lanes.locate_on
+
+    def counted(*args: object, **kwargs: object) -> object:
+        walks[counting] += 1
+        return plain_locate(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(sumo_lanes, "locate_on", counted)
+    rng = random.Random(7)
+    steps = 0
+    for case in range(60):
+        shapes = _edge(rng, rng.randint(1, 5), rng.uniform(2.5, 4.0), sharp=case % 6 == 5)
+        lead = shapes[rng.randrange(len(shapes))]
+        every_hints: dict[str, int] = {}
+        near_hints: dict[str, int] = {}
+        gaps: sumo_lanes.SegmentGaps = {}
+        near: LaneShape | None = None
+        s, lateral, target = rng.uniform(0.0, 5.0), 0.0, 0.0
+        for _ in range(200):
+            s += rng.uniform(-0.5, 2.0) if rng.random() > 0.02 else rng.uniform(-80.0, 80.0)
+            if rng.random() < 0.03:  # a lane change (or a drift off the edge)
+                target = rng.uniform(-8.0, 8.0)
+            lateral += 0.2 * (target - lateral) + rng.gauss(0.0, 0.1)
+            i = min(max(int(s / max(lead.along[-1], 1e-9) * (len(lead.xs) - 1)), 0), len(lead.xs) - 2)
+            along, length = rng.uniform(0.0, 1.0), max(lead.seglens[i], 1e-9)
+            x = lead.xs[i] + along * lead.dxs[i] - lateral * lead.dys[i] / length
+            y = lead.ys[i] + along * lead.dys[i] + lateral * lead.dxs[i] / length
+            counting = "every"
+            expected = nearest_lane(shapes, x, y, every_hints)
+            counting = "near"
+            if rng.random() < 0.05:
+                near = rng.choice([None, shapes[rng.randrange(len(shapes))]])  # not the lane it was on
+            found = nearest_lane(shapes, x, y, near_hints, near, gaps)
+            assert (found is None) == (expected is None)
+            if found is not None and expected is not None:
+                assert found[0].lane_id == expected[0].lane_id
+                assert tuple(found[1]) == tuple(expected[1])  # bit for bit
+            assert near_hints == every_hints
+            near = found[0] if found is not None else near
+            steps += 1
+    assert walks["near"] < 0.75 * walks["every"]  # and it did skip lanes
+
+
+def test_lane_geometry_is_shared_only_between_identical_edges() -> None:
+    """A warm worker builds an edge's lanes once; an edge whose points or length differ in any way (another
+    network, or the same file changed) gets its own lanes and its own gap cache."""
+    from simcore.world.sumo_lanes import edge_lanes
+
+    raw = (
+        ("e_0", ((0.0, 0.0), (100.0, 0.0)), 100.0),
+        ("e_1", ((0.0, 3.5), (100.0, 3.5)), 100.0),
+    )
+    first = edge_lanes(raw)
+    first.gaps[("e_0", 0, "e_1", 0)] = 3.5
+    again = edge_lanes(tuple((lane_id, tuple(points), length) for lane_id, points, length in raw))
+    assert again is first
+    moved = edge_lanes((raw[0], ("e_1", ((0.0, 3.5), (100.0, 3.6)), 100.0)))
+    longer = edge_lanes((raw[0], ("e_1", ((0.0, 3.5), (100.0, 3.5)), 100.5)))
+    assert moved is not first and longer is not first and moved is not longer
+    assert moved.gaps == {} and longer.gaps == {}
+    assert moved.by_id["e_1"].ys == (3.5, 3.6)

@@ -18,12 +18,11 @@ import os
 import shutil
 import subprocess
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from simcore.errors import BadInput, SimulationError
-from simcore.world.sumo_lanes import LaneShape, nearest_lane
+from simcore.world.sumo_lanes import EdgeLanes, edge_lanes, nearest_lane
 
 NETCONVERT_OPTIONS = (
     "--output.original-names",  # keep OpenDRIVE road/lane ids on the SUMO edges and lanes
@@ -139,15 +138,13 @@ def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
     return target
 
 
-@dataclass(frozen=True, slots=True)
-class SumoVehicleState:
+class SumoVehicleState(NamedTuple):
+    """A SUMO-driven vehicle after a step (read every step: a tuple is the cheapest record)."""
+
     x: float  # reference point (rear axle), map frame
     y: float
     heading: float
     speed: float
-    acceleration: float
-    edge: str
-    lane_index: int
 
 
 def _sumo_angle(heading: float) -> float:
@@ -170,12 +167,12 @@ class SumoWorld:
         self._front: dict[str, float] = {}  # reference point → front bumper distance
         self._scripted: set[str] = set()
         self._departed: set[str] = set()
-        # scripted vehicles: the place each is to have at the end of the next step (front x, y, SUMO angle,
+        # scripted vehicles: the place each is to have at the end of the next step (front x, y, heading,
         # speed), the lane it is on after the last step, and per lane the polyline segment it was on
         self._targets: dict[str, tuple[float, float, float, float]] = {}
         self._lane_of: dict[str, str] = {}
         self._hints: dict[str, dict[str, int]] = {}
-        self._edge_of_lane: dict[str, list[LaneShape]] = {}
+        self._edge_of_lane: dict[str, EdgeLanes | None] = {}
         args = [
             "sumo",
             "-n",
@@ -298,8 +295,9 @@ class SumoWorld:
         fx, fy = x + front * math.cos(heading), y + front * math.sin(heading)
         try:
             if name in self._scripted:
-                self._sumo.vehicle.setSpeed(name, max(speed, 0.0))
-                self._targets[name] = (fx, fy, _sumo_angle(heading), max(speed, 0.0))
+                speed = 0.0 if speed < 0.0 else speed  # max(speed, 0.0), without the builtin's call cost
+                self._sumo.vehicle.setSpeed(name, speed)
+                self._targets[name] = (fx, fy, heading, speed)  # SUMO's angle only if SUMO searches
             else:
                 self._move_xy(name, fx, fy, _sumo_angle(heading))
         except Exception as exc:
@@ -321,11 +319,11 @@ class SumoWorld:
         lane = self._lane_of.get(name)
         if not lane:
             return None
-        shapes = self._edge_shapes(lane)
-        if shapes is None:
+        edge = self._edge_of_lane[lane] if lane in self._edge_of_lane else self._edge_lanes(lane)
+        if edge is None:
             return None
         hints = self._hints.setdefault(name, {})
-        found = nearest_lane(shapes, fx, fy, hints)
+        found = nearest_lane(edge.lanes, fx, fy, hints, edge.by_id[lane], edge.gaps)
         if found is None:
             return None
         shape, on = found
@@ -333,19 +331,18 @@ class SumoWorld:
             return None
         return shape.lane_id, on.pos
 
-    def _edge_shapes(self, lane: str) -> list[LaneShape] | None:
+    def _edge_lanes(self, lane: str) -> EdgeLanes | None:
         """The lanes of the (normal) edge `lane` belongs to; None for a junction's internal lane."""
-        shapes = self._edge_of_lane.get(lane)
-        if shapes is None:
-            sumo = self._sumo
-            edge = sumo.lane.getEdgeID(lane)
-            if edge.startswith(":"):
-                return None
-            lanes = [f"{edge}_{i}" for i in range(sumo.edge.getLaneNumber(edge))]
-            shapes = [LaneShape.of(lid, sumo.lane.getShape(lid), sumo.lane.getLength(lid)) for lid in lanes]
-            for lid in lanes:
-                self._edge_of_lane[lid] = shapes
-        return shapes
+        sumo = self._sumo
+        edge = sumo.lane.getEdgeID(lane)
+        if edge.startswith(":"):
+            self._edge_of_lane[lane] = None
+            return None
+        lanes = [f"{edge}_{i}" for i in range(sumo.edge.getLaneNumber(edge))]
+        found = edge_lanes(tuple((lid, sumo.lane.getShape(lid), sumo.lane.getLength(lid)) for lid in lanes))
+        for lid in lanes:
+            self._edge_of_lane[lid] = found
+        return found
 
     def has(self, name: str) -> bool:
         return name in self._front
@@ -367,10 +364,10 @@ class SumoWorld:
         after: list[tuple[str, str, float]] = []
         searched: list[str] = []
         try:
-            for name, (fx, fy, angle, speed) in self._targets.items():
+            for name, (fx, fy, heading, speed) in self._targets.items():
                 spot = self._spot_on_edge(name, fx, fy, speed)
                 if spot is None:
-                    self._move_xy(name, fx, fy, angle)
+                    self._move_xy(name, fx, fy, _sumo_angle(heading))
                     searched.append(name)
                 else:
                     after.append((name, *spot))
@@ -392,21 +389,16 @@ class SumoWorld:
             raise SimulationError(f"SUMO step failed: {exc}") from exc
 
     def read(self, name: str) -> SumoVehicleState | None:
-        """A vehicle's state after the last step; None once it left the network."""
-        sumo = self._sumo
-        if name not in sumo.vehicle.getIDList():
+        """A vehicle's pose and speed after the last step; None once it left the network (or before SUMO
+        inserted it)."""
+        vehicle = self._sumo.vehicle
+        if name not in vehicle.getIDList():
             return None
-        fx, fy = sumo.vehicle.getPosition(name)
-        heading = _heading(sumo.vehicle.getAngle(name))
+        fx, fy = vehicle.getPosition(name)
+        heading = _heading(vehicle.getAngle(name))
         front = self._front[name]
         return SumoVehicleState(
-            x=fx - front * math.cos(heading),
-            y=fy - front * math.sin(heading),
-            heading=heading,
-            speed=sumo.vehicle.getSpeed(name),
-            acceleration=sumo.vehicle.getAcceleration(name),
-            edge=sumo.vehicle.getRoadID(name),
-            lane_index=sumo.vehicle.getLaneIndex(name),
+            fx - front * math.cos(heading), fy - front * math.sin(heading), heading, vehicle.getSpeed(name)
         )
 
 
