@@ -246,6 +246,11 @@ class Geometry:
         """World ``(x, y, heading)`` at distance ``ds`` from the start of this geometry."""
         raise NotImplementedError
 
+    def frame(self, ds: float) -> tuple[float, float, float, float, float]:
+        """`local` with the heading's cosine and sine: ``(x, y, heading, cos, sin)``."""
+        x, y, h = self.local(ds)
+        return x, y, h, math.cos(h), math.sin(h)
+
     def curvature(self, ds: float) -> float:
         """Signed curvature (1/m, positive turns left) at ``ds``."""
         raise NotImplementedError
@@ -262,6 +267,10 @@ class Line(Geometry):
 
     def local(self, ds: float) -> tuple[float, float, float]:
         return self.x + ds * self._cos, self.y + ds * self._sin, self.hdg
+
+    def frame(self, ds: float) -> tuple[float, float, float, float, float]:
+        c, s = self._cos, self._sin  # cos and sin of the heading local gives, computed once
+        return self.x + ds * c, self.y + ds * s, self.hdg, c, s
 
     def curvature(self, ds: float) -> float:
         return 0.0
@@ -785,13 +794,15 @@ class Road:
 
     def reference_xyh(self, s: float) -> tuple[float, float, float]:
         """``(x, y, heading)`` of the reference line at ``s``."""
-        g = self.geometry_at(s)
+        i = bisect.bisect_right(self._gstarts, s) - 1  # as geometry_at (inline: every step)
+        g = self.geometries[i if i > 0 else 0]
         ds = s - g.s
         return g.local(ds if ds >= 0.0 else 0.0)
 
     def curvature(self, s: float) -> float:
         """Reference-line curvature at ``s``."""
-        g = self.geometry_at(s)
+        i = bisect.bisect_right(self._gstarts, s) - 1  # as geometry_at (inline: every step)
+        g = self.geometries[i if i > 0 else 0]
         ds = s - g.s
         return g.curvature(ds if ds >= 0.0 else 0.0)
 
@@ -1649,16 +1660,17 @@ class OpenDrive:
         t = 0.0
         h = 0.0
         at = math.nan  # the s that h is the heading at
-        cos, sin = math.cos, math.sin
+        length = road.length
+        most = 2.0 * spacing + 1.0  # the longest Newton step either way
+        least = -2.0 * spacing - 1.0
         g, lo, hi = road.geometry_span(s)
         for _ in range(30):
             if not lo <= s < hi:  # left the record: as road.reference_xyh(s) and road.curvature(s)
                 g, lo, hi = road.geometry_span(s)
             ds = s - g.s
             ds = ds if ds >= 0.0 else 0.0
-            x, y, h = g.local(ds)
+            x, y, h, c, sn = g.frame(ds)
             at = s
-            c, sn = cos(h), sin(h)
             dx, dy = px - x, py - y
             along = dx * c + dy * sn
             t = -dx * sn + dy * c
@@ -1666,8 +1678,12 @@ class OpenDrive:
                 break
             denom = 1.0 - g.curvature(ds) * t
             step = along / denom if denom > 0.2 else along
-            step = max(-2.0 * spacing - 1.0, min(2.0 * spacing + 1.0, step))
-            s_new = min(max(s + step, 0.0), road.length)
+            # max(least, min(most, step)) and min(max(s + step, 0.0), length), without the calls
+            step = step if step < most else most
+            step = step if step > least else least
+            s_new = s + step
+            s_new = 0.0 if s_new < 0.0 else s_new
+            s_new = length if length < s_new else s_new
             if abs(s_new - s) < 1e-10:
                 break
             s = s_new
@@ -1753,10 +1769,19 @@ class OpenDrive:
         """Fast path for tracking a moving entity: project onto `road_id` from its previous `s`. Returns None
         (use :meth:`world_to_road`) when the point is not strictly inside a lane of that road, e.g. after it
         left the road or where roads overlap in a junction."""
+        near = self.near_lane(x, y, road_id, s_previous)
+        return None if near is None else _road_coordinates(self.roads[road_id].id, *near)
+
+    def near_lane(
+        self, x: float, y: float, road_id: str, s_previous: float
+    ) -> tuple[int, float, float, float, float] | None:
+        """`world_to_road_near` as a plain ``(lane_id, s, t, offset, heading)`` (for the per-step tracking)."""
         road = self.roads.get(road_id)
         if road is None or road.junction != "-1":
             return None
-        s, t, along, h = self._project(road, x, y, min(max(s_previous, 0.0), road.length), 2.0)
+        s0 = 0.0 if s_previous < 0.0 else s_previous  # min(max(s_previous, 0.0), road.length)
+        s0 = road.length if road.length < s0 else s0
+        s, t, along, h = self._project(road, x, y, s0, 2.0)
         if road.superelevations:
             t /= max(math.cos(road.roll(s)), 1e-6)
         if abs(along) > 1e-6:
@@ -1765,14 +1790,14 @@ class OpenDrive:
         if cross is not None:
             for lane_id, lo, hi, centre in cross.inside:
                 if lo <= t <= hi:
-                    return _road_coordinates(road.id, lane_id, s, t, t - centre, h)
+                    return lane_id, s, t, t - centre, h
             return None
         for lane, inner, outer in road.all_borders(s):
             if inner < outer:
                 if outer - inner > 1e-9 and inner <= t <= outer:
-                    return _road_coordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
+                    return lane.id, s, t, t - 0.5 * (inner + outer), h
             elif inner - outer > 1e-9 and outer <= t <= inner:
-                return _road_coordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
+                return lane.id, s, t, t - 0.5 * (inner + outer), h
         return None
 
 
