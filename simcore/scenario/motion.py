@@ -99,7 +99,8 @@ def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, f
     """The lane containing lateral position t (else the one with the closest centre) and the offset from
     its centre. One pass over the lane borders at s."""
     r = road.roads.get(road_id) or road.road(road_id)
-    s = min(max(s, 0.0), r.length)
+    s = 0.0 if s < 0.0 else s  # min(max(s, 0.0), r.length)
+    s = r.length if r.length < s else s
     best_lane, best_offset, best = 0, t, math.inf
     cross = r.cross_at(s)
     if cross is not None:  # the same borders over a stretch of road: its table of them, made once

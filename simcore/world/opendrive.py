@@ -821,15 +821,20 @@ class Road:
 
     def world_xyz(self, s: float, t: float) -> tuple[float, float, float, float]:
         """World ``(x, y, z, reference heading)`` of road coordinates ``(s, t)``."""
-        x, y, h = self.reference_xyh(s)
-        z = self.elevation(s)
+        i = bisect.bisect_right(self._gstarts, s) - 1  # as reference_xyh, with the heading's cos and sin
+        g = self.geometries[i if i > 0 else 0]
+        ds = s - g.s
+        x, y, h, cos_h, sin_h = g.frame(ds if ds >= 0.0 else 0.0)
+        z = self._z_fixed
+        if z is None:
+            z = self.elevation(s)
         if self.superelevations:
             r = self.roll(s)
             th = t * math.cos(r)
             z += t * math.sin(r)
         else:
             th = t
-        return x - th * math.sin(h), y + th * math.cos(h), z, h
+        return x - th * sin_h, y + th * cos_h, z, h
 
     def lane_offset(self, s: float) -> float:
         """``t`` of the centre lane (laneOffset) at ``s``."""
