@@ -136,8 +136,9 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
         r = roads.get(road_id) or road.road(road_id)
         length = r.length
         # a curve parallel to the reference line at distance t has length (1 - κ t) per unit of s
-        scale = abs(1.0 - r.curvature(min(max(s, 0.0), length)) * t)
-        ds = remaining / max(scale, 1e-6)
+        on = 0.0 if s < 0.0 else s  # min(max(s, 0.0), length), without the calls
+        scale = abs(1.0 - r.curvature(length if length < on else on) * t)
+        ds = remaining / (1e-6 if scale < 1e-6 else scale)  # max(scale, 1e-6)
         target = s + body.direction * ds
         if 0.0 <= target <= length:
             if lane_id == 0 or _plain_side(r, 1 if lane_id > 0 else -1):
