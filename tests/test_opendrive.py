@@ -835,9 +835,9 @@ def test_loading_and_querying_a_road_imports_no_numpy() -> None:
     assert out.stdout.split() == ["False", "True"]
 
 
-def _two_section_road(offsets: str) -> OpenDrive:
+def _two_section_road(offsets: str, second: bool = True) -> OpenDrive:
     """Three geometry records (line, spiral, arc) and two lane sections: constant widths in the first (one
-    of them 0), a widening left lane in the second."""
+    of them 0), a widening left lane in the second (unless not `second`)."""
     return OpenDrive.from_string(
         _xodr(
             _road(
@@ -850,11 +850,20 @@ def _two_section_road(offsets: str) -> OpenDrive:
                 f"<lanes>{offsets}<laneSection s='0'><left>"
                 + _lane(1, 3.29)
                 + "</left><center><lane id='0' type='none'/></center>"
-                "<right>" + _lane(-1, 0.0) + _lane(-2, 3.37) + _lane(-3, 3.1) + "</right></laneSection>"
-                "<laneSection s='60'><left>" + _lane(1, 3.25, 0.01) + "</left>"
-                "<center><lane id='0' type='none'/></center><right>"
-                + _lane(-1, 3.4)
-                + "</right></laneSection></lanes>",
+                "<right>"
+                + _lane(-1, 0.0)
+                + _lane(-2, 3.37)
+                + _lane(-3, 3.1)
+                + "</right></laneSection>"
+                + (
+                    "<laneSection s='60'><left>" + _lane(1, 3.25, 0.01) + "</left>"
+                    "<center><lane id='0' type='none'/></center><right>"
+                    + _lane(-1, 3.4)
+                    + "</right></laneSection>"
+                    if second
+                    else ""
+                )
+                + "</lanes>",
                 extra="<elevationProfile><elevation s='0' a='1.5' b='0' c='0' d='0'/></elevationProfile>",
             )
         ),
@@ -894,6 +903,14 @@ def test_lane_cross_lookups_give_what_the_per_s_sums_give(offsets: str) -> None:
     assert road.cross_at(10.0) is not None and road.cross_at(59.0) is not None
     assert road.cross_at(60.0) is None and road.cross_at(100.0) is None  # the left lane widens there
     slow = _two_section_road(offsets)
+    slow.roads["1"]._crosses = [None] * (len(slow.roads["1"]._cross_starts) + 1)
+    assert _lookups(fast) == _lookups(slow)
+
+
+def test_one_lane_cross_serves_a_road_of_one_lane_section() -> None:
+    fast = _two_section_road("", second=False)
+    assert fast.roads["1"].cross_at(0.0) is fast.roads["1"].cross_at(120.0) is not None
+    slow = _two_section_road("", second=False)
     slow.roads["1"]._crosses = [None] * (len(slow.roads["1"]._cross_starts) + 1)
     assert _lookups(fast) == _lookups(slow)
 

@@ -778,6 +778,7 @@ class Road:
         # where both sides' lane sections change (`cross_at`); the crosses themselves are built on first use
         self._cross_starts = sorted(set(self._side_starts[1]) | set(self._side_starts[-1]))
         self._crosses: list[LaneCross | None] | None = None
+        self._uniform: LaneCross | None = None  # the cross of every s, where there is one
 
     # -- reference line
     def geometry_at(self, s: float) -> Geometry:
@@ -924,6 +925,11 @@ class Road:
         crosses = self._crosses
         if crosses is None:
             crosses = self._crosses = self._build_crosses()
+            first = crosses[0]
+            self._uniform = first if all(c is first for c in crosses) else None
+        uniform = self._uniform
+        if uniform is not None:  # one lane section on each side, the same borders all along the road
+            return uniform
         # index 0: before every section start; k + 1: from the k-th start (as section_at's s + 1e-9)
         return crosses[bisect.bisect_right(self._cross_starts, s + 1e-9)]
 
