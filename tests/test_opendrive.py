@@ -852,8 +852,8 @@ def _two_section_road(offsets: str, second: bool = True) -> OpenDrive:
                 + "</left><center><lane id='0' type='none'/></center>"
                 "<right>"
                 + _lane(-1, 0.0)
-                + _lane(-2, 3.37)
-                + _lane(-3, 3.1)
+                + _lane(-2, 3.37, typ="Driving")
+                + _lane(-3, 3.1, typ="shoulder")
                 + "</right></laneSection>"
                 + (
                     "<laneSection s='60'><left>" + _lane(1, 3.25, 0.01) + "</left>"
@@ -878,6 +878,7 @@ def _lookups(od: OpenDrive) -> list[str]:
     out = []
     for s in [k * 0.37 for k in range(325)] + [0.0, 59.999999999, 60.0, 120.0]:
         out.append(repr(od.roads["1"].all_borders(s)))
+        out.append(repr((od.lane_ids("1", s), od.lane_ids("1", s, driving_only=True))))
         for lane_id in (-3, -2, -1, 1):
             try:
                 out.append(repr(od.lane_center_t("1", lane_id, s)))
@@ -943,3 +944,18 @@ def test_a_constant_elevation_is_the_polynomial_value_at_every_s() -> None:
     assert _fixed_value([Poly3(0.0, 2.0, 0.0, 0.0, 0.0), Poly3(5.0, 2.0, 0.0, 0.0, 0.0)]) is None
     for p in (Poly3(3.0, 2.0, 0.0, 0.0, 0.0), Poly3(3.0, 1e-300, -0.0, 0.0, -0.0)):
         assert all(p.value(s) == _fixed_value([p]) for s in (-5.0, 0.0, 3.0, 1e6))
+
+
+def test_a_param_poly3_answers_the_same_whatever_it_was_asked_before() -> None:
+    """A paramPoly3 keeps its last evaluation: the point and curvature at a ``ds`` are the ones a fresh
+    record gives, in any order of questions."""
+    from simcore.world.opendrive import ParamPoly3
+
+    def record() -> ParamPoly3:
+        return ParamPoly3(0.0, 1.0, 2.0, 0.3, 50.0, (0.0, 1.0, 0.01, -0.0002), (0.0, 0.0, 0.02, 0.0001), None)
+
+    kept = record()
+    for ds in (0.0, 10.0, 10.0, 3.3, 49.9, 10.0, -0.0, 0.0, 25.0):
+        fresh = record()
+        assert kept.local(ds) == fresh.local(ds) and kept.curvature(ds) == record().curvature(ds), ds
+        assert kept.curvature(ds) == fresh.curvature(ds) and kept.local(ds) == record().local(ds), ds

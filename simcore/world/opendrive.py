@@ -562,6 +562,7 @@ class ParamPoly3(Geometry):
             cum = [c * scale for c in cum]
         self._ps: list[float] = ps
         self._ss: list[float] = cum
+        self._last: tuple[float, tuple[float, float, float, float, float, float]] = (math.nan, (0.0,) * 6)
 
     def _arclen(self, ps: list[float]) -> list[float]:
         """Cumulative arc length at the grid ``ps`` (6-point Gauss-Legendre on each interval)."""
@@ -597,6 +598,16 @@ class ParamPoly3(Geometry):
         f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
         return ps[i] + f * (ps[i + 1] - ps[i])
 
+    def _uv_at(self, ds: float) -> tuple[float, float, float, float, float, float]:
+        """`_uv` at the parameter of ``ds``; the last one kept (a projection asks for the point and then the
+        curvature at the same ``ds``): one ``(ds, uv)`` tuple, replaced whole."""
+        last = self._last
+        if last[0] == ds:
+            return last[1]
+        uv = self._uv(self._p_of(ds))
+        self._last = (ds, uv)
+        return uv
+
     def _uv(self, p: float) -> tuple[float, float, float, float, float, float]:
         au, bu, cu, du = self.u
         av, bv, cv, dv = self.v
@@ -609,8 +620,7 @@ class ParamPoly3(Geometry):
         return u, v, up, vp, upp, vpp
 
     def local(self, ds: float) -> tuple[float, float, float]:
-        p = self._p_of(ds)
-        u, v, up, vp, _, _ = self._uv(p)
+        u, v, up, vp, _, _ = self._uv_at(ds)
         return (
             self.x + u * self._cos - v * self._sin,
             self.y + u * self._sin + v * self._cos,
@@ -618,7 +628,7 @@ class ParamPoly3(Geometry):
         )
 
     def curvature(self, ds: float) -> float:
-        _, _, up, vp, upp, vpp = self._uv(self._p_of(ds))
+        _, _, up, vp, upp, vpp = self._uv_at(ds)
         sp = math.hypot(up, vp)
         return 0.0 if sp == 0 else (up * vpp - vp * upp) / sp**3
 
@@ -699,7 +709,7 @@ class LaneCross:
     section on each side, each with constant widths and a constant or no laneOffset), and the look-ups that
     the per-step queries make on them, derived once (the same floats the per-``s`` loops compute)."""
 
-    __slots__ = ("around", "borders", "centres", "inside")
+    __slots__ = ("around", "borders", "centres", "driving_ids", "ids", "inside")
 
     def __init__(self, right: list[tuple[Lane, float, float]], left: list[tuple[Lane, float, float]]) -> None:
         #: every non-centre lane's ``(lane, t_inner, t_outer)``, right side first (`Road.all_borders`)
@@ -722,6 +732,12 @@ class LaneCross:
             for lane, inner, outer in self.borders
             if lane.id != 0 and inner != outer
             for lo, hi in ((inner, outer) if inner < outer else (outer, inner),)
+        )
+        #: `OpenDrive.lane_ids`: the lanes of positive width, ascending; the drivable ones among them
+        wide = [(lane.id, lane.type) for lane, inner, outer in self.borders if not abs(outer - inner) <= 1e-9]
+        self.ids: tuple[int, ...] = tuple(sorted(lane_id for lane_id, _ in wide))
+        self.driving_ids: tuple[int, ...] = tuple(
+            sorted(lane_id for lane_id, kind in wide if kind.lower() in DRIVING_LANE_TYPES)
         )
 
 
@@ -1518,6 +1534,9 @@ class OpenDrive:
         """Ids of the lanes (not 0) with positive width at ``s``, right to left; optionally drivable ones only."""
         road = self.road(road_id)
         s = self._check_s(road, s)
+        cross = road.cross_at(s)
+        if cross is not None:
+            return list(cross.driving_ids if driving_only else cross.ids)
         out = []
         for lane, inner, outer in road.all_borders(s):
             if abs(outer - inner) <= 1e-9:
