@@ -200,9 +200,12 @@ def plan_route(world: ScenarioWorld, body: Body, targets: list[m.Position]) -> l
     return out
 
 
+_FIXED_POSITIONS = (m.WorldPosition, m.LanePosition, m.RoadPosition)  # positions that depend on no entity
+
+
 def fixed_point(world: ScenarioWorld, position: m.Position) -> Pose:
     """World pose of a condition's position: computed once when it depends on no entity."""
-    if isinstance(position, m.WorldPosition | m.LanePosition | m.RoadPosition):
+    if isinstance(position, _FIXED_POSITIONS):
         key = id(position)
         cached = world.memo.get(("fixed_point", key))
         if cached is None:

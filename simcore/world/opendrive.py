@@ -1387,6 +1387,9 @@ class OpenDrive:
     # ---------------------------------------------------------------- basic queries
     def road(self, road_id: str) -> Road:
         """The road with ``road_id``; :class:`OpenDriveError` if there is none."""
+        road = self.roads.get(road_id)
+        if road is not None:
+            return road
         try:
             return self.roads[str(road_id)]
         except KeyError:
