@@ -7,13 +7,14 @@ means the index is complete (DESIGN.md).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import posixpath
 import tempfile
 import time
 import traceback
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -166,6 +167,23 @@ def summary_bytes(summary: dict[str, Any]) -> bytes:
     return (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
 
 
+def _writes_files(run: SimulationRun, point: RunPoint) -> bool:
+    """Whether a run writes files of its own before they are uploaded: its recording, a scenario (and road)
+    fetched from S3."""
+    return run.spec.recording.enabled or (point.scenario.openscenario or "").startswith("s3://")
+
+
+@contextlib.contextmanager
+def _scratch(index: int, root: Path | None, needed: bool) -> Iterator[Path]:
+    """The scratch directory of one run, removed afterwards; made only when `needed` (most runs of a sweep
+    write no file there: they get its name, and nothing is there)."""
+    if needed:
+        with tempfile.TemporaryDirectory(prefix=f"carlos-{index}-", dir=root) as name:
+            yield Path(name)
+    else:
+        yield Path(root if root is not None else tempfile.gettempdir()) / f"carlos-{index}-none"
+
+
 def run_index(
     run: SimulationRun,
     index: int,
@@ -198,8 +216,7 @@ def run_index(
     ]
     log_lines.append(f"parameters: {json.dumps(point.parameters, sort_keys=True)}")
     prefix = f"{run.name}/{index}"
-    with tempfile.TemporaryDirectory(prefix=f"carlos-{index}-", dir=scratch_root) as scratch_name:
-        scratch = Path(scratch_name)
+    with _scratch(index, scratch_root, _writes_files(run, point)) as scratch:
         try:
             scenario_file = resolve_scenario_file(point, base_dir, scratch, store_factory)
             metrics, end_reason, sim_seconds, storyboard_log = simulate(

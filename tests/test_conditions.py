@@ -555,3 +555,61 @@ def test_collision_is_the_overlap_of_the_footprints_near_and_far() -> None:
     assert collides(0.0, 1.8) and not collides(0.0, 1.8 + 1e-4)  # side by side
     # turned 90° with its box centred beside Ego's front (0.9 m either side along x): touching at x = 4.55
     assert collides(4.55 - 1e-3, -1.4, math.pi / 2) and not collides(4.55 + 2e-3, -1.4, math.pi / 2)
+
+
+# --- relative distance --------------------------------------------------------------------------------------
+
+
+def test_relative_distance_decided_by_bounds_agrees_with_the_measured_distance() -> None:
+    """The bounds that spare measuring (boxes far apart, or centres closer than the value) give the answer
+    the measured distance gives, for every rule, near and far, in front, beside and behind, turned or not."""
+    import itertools
+    import math
+    from dataclasses import dataclass, field
+
+    from simcore.scenario import conditions
+    from simcore.scenario import model as m
+    from simcore.scenario.measure import LARGE, Measure
+    from simcore.scenario.motion import Body
+
+    def car(name: str, length: float = 4.5) -> m.Entity:
+        return m.Entity(name, "vehicle", "car", m.Box(1.4, 0.2, 0.75, length, 1.8, 1.5), m.Performance())
+
+    @dataclass
+    class World:
+        bodies: dict[str, Body]
+        road: None = None
+        step_index: int = 0
+        measure: Measure = field(init=False)
+
+        def __post_init__(self) -> None:
+            self.measure = Measure(self)
+
+        def body(self, name: str) -> Body:
+            return self.bodies[name]
+
+    rules = ("greaterThan", "lessThan", "equalTo", "greaterOrEqual", "lessOrEqual", "notEqualTo")
+    kinds = (("entity", "longitudinal"), ("entity", "lateral"), ("entity", "euclidianDistance"))
+    checked = decided = 0
+    for dx, dy, heading in itertools.product((-30.0, -6.0, 0.0, 3.0, 12.5, 40.0), (0.0, 3.5), (0.0, 0.4)):
+        ego = Body(car("Ego"))
+        other = Body(car("Other", 12.0), x=dx, y=dy, heading=heading)
+        world = World({"Ego": ego, "Other": other})
+        for (system, kind), rule, value in itertools.product(kinds, rules, (0.0, 2.0, 8.0, 15.0, 60.0)):
+            measured = world.measure.to_entity(ego, other, system, kind, True)
+            expected = conditions.compare(rule, LARGE if measured is None else abs(measured), value)
+            c = m.RelativeDistanceCondition("Other", kind, True, value, rule, system)  # type: ignore[arg-type]
+            assert conditions.relative_distance(c, world, ego) == expected, (
+                dx,
+                dy,
+                heading,
+                kind,
+                rule,
+                value,
+            )  # type: ignore[arg-type]
+            checked += 1
+            centres = world.measure.box_distance_lower_bound(ego, other) + 0.5 * (
+                math.hypot(4.5, 1.8) + math.hypot(12.0, 1.8)
+            )
+            decided += centres < value - 1e-6
+    assert checked == 24 * 3 * 6 * 5 and decided > 100  # the bound decided many of them

@@ -807,6 +807,29 @@ def test_a_distribution_from_a_configmap_is_waited_for_expanded_and_handed_to_th
     assert stored["distributionConfigMapRef"] == {"name": "d-inputs", "key": "speeds.xosc"}
 
 
+def test_the_operators_input_copies_go_when_the_run_is_deleted_or_the_operator_stops() -> None:
+    """A long-lived operator keeps no file of a deleted run, and none at all after it stops."""
+    from carlos_operator.builders import DISTRIBUTION_FILE
+
+    kube, store = FakeKube(), FakeStore()
+    c = controller(kube, store)
+    assert c.scratch.root is None  # nothing made until a run needs it
+    for name in ("d", "e"):
+        body = run_body(name, f"uid-{name}", 1)
+        body["spec"]["sweep"]["distribution"] = "s3://bucket/inputs/speeds.xosc"
+        store.put_bytes("inputs/speeds.xosc", DISTRIBUTION)
+        c.observe_run("ADDED", body)
+    drain(c)
+    root = c.scratch.root
+    assert root is not None
+    assert (root / "default" / "d" / DISTRIBUTION_FILE).is_file()
+    assert (root / "default" / "e" / DISTRIBUTION_FILE).is_file()
+    c.observe_run("DELETED", run_body("d", "uid-d", 1))
+    assert not (root / "default" / "d").exists() and (root / "default" / "e" / DISTRIBUTION_FILE).is_file()
+    c.stop()
+    assert not root.exists()
+
+
 def test_a_distribution_in_the_object_store_is_read_with_the_runs_credentials() -> None:
     from carlos_operator.builders import DISTRIBUTION_FILE
 

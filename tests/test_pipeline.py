@@ -218,3 +218,38 @@ def test_point_grid_finds_what_a_kd_tree_finds() -> None:
         grid, tree = PointGrid(points, radius), cKDTree(points)
         for query in [*rng.uniform(-520.0, 520.0, (200, 2)), (0.0, 0.0), points[5]]:
             assert grid.query_ball_point(query, radius) == sorted(tree.query_ball_point(query, radius))
+
+
+@pytest.mark.parametrize("recording", [False, True])
+def test_a_run_makes_a_scratch_directory_only_for_files_it_writes(tmp_path: Path, recording: bool) -> None:
+    """A run that records writes its recording into a scratch directory, uploads it and removes the
+    directory; a run that writes no file of its own (recording off, a local scenario) makes none."""
+    from simcore.runner import run_index
+    from simcore.store import FileStore
+
+    manifest = _manifest(tmp_path, ROOT / "examples" / "scenarios" / "braking.xosc", max_seconds=2)
+    if recording:
+        manifest.write_text(
+            manifest.read_text().replace("recording: {enabled: false}", "recording: {enabled: true}")
+        )
+    run = load_manifest(manifest)
+    scratch_root = tmp_path / "scratch"
+    scratch_root.mkdir()
+    made: list[str] = []
+    original = __import__("tempfile").TemporaryDirectory
+
+    def spy(*args: object, **kwargs: object) -> object:
+        made.append(str(kwargs.get("dir")))
+        return original(*args, **kwargs)  # type: ignore[call-overload]
+
+    store = FileStore(tmp_path / "results")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr("simcore.runner.tempfile.TemporaryDirectory", spy)
+        outcome = run_index(
+            run, 0, base_dir=tmp_path, store=store, store_factory=FileStore, scratch_root=scratch_root
+        )
+    assert outcome.summary["status"] == "passed", outcome.summary
+    assert made == ([str(scratch_root)] if recording else [])
+    assert list(scratch_root.iterdir()) == []
+    assert store.exists("pipeline/0/recording.mcap") == recording
+    assert store.exists("pipeline/0/summary.json") and store.exists("pipeline/0/log.txt")

@@ -4,6 +4,7 @@ and conditions and triggers work against any `ScenarioWorld` (here a small stand
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, cast, get_args
 
 import pytest
@@ -114,3 +115,33 @@ def test_an_unknown_condition_type_is_bad_input_naming_it() -> None:
     )  # type: ignore[arg-type]
     with pytest.raises(BadInput, match="HoverCondition is not supported"):
         holds(condition, world, [])
+
+
+def test_a_scenario_file_is_parsed_once_per_version_and_loaded_with_each_load_s_values(
+    tmp_path: Path,
+) -> None:
+    """Loads of one file share its parsed XML (a sweep's points), each with its own parameter values; an
+    edit of the file, even one keeping its size, is read at the next load."""
+    import os
+
+    from simcore.scenario import xosc
+    from tests.xosc_fixtures import openscenario, place, scenario_object, write_scenario
+
+    def text(default: str) -> str:
+        return openscenario(
+            parameters=f'<ParameterDeclarations><ParameterDeclaration name="S" parameterType="double" value="{default}"/></ParameterDeclarations>',
+            entities=scenario_object("Ego"),
+            init=place("Ego", 10.0).replace('s="10.0"', 's="$S"'),
+        )
+
+    path = write_scenario(tmp_path, text("10.0"))
+    first = xosc.load_scenario(path, {"S": 30.0})
+    second = xosc.load_scenario(path)
+    assert first.parameters["S"] == 30.0 and second.parameters["S"] == 10.0
+    assert first.init[0].action.position.s == 30.0  # type: ignore[union-attr]
+    assert second.init[0].action.position.s == 10.0  # type: ignore[union-attr]
+    assert sum(1 for key in xosc._PARSED if key[0] == str(path.absolute())) == 1
+    stat = path.stat()
+    path.write_text(text("20.0"))  # the same size, and the same modification time
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+    assert xosc.load_scenario(path).parameters["S"] == 20.0

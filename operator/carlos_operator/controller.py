@@ -34,13 +34,11 @@ import dataclasses
 import json
 import logging
 import os
-import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from carlos_operator import metrics
@@ -60,6 +58,7 @@ from carlos_operator.builders import (
 )
 from carlos_operator.inputs import read_input
 from carlos_operator.kube import Conflict, Kube, NotFound, now_rfc3339
+from carlos_operator.scratch import ScratchFolders
 from carlos_operator.searching import SearchProgress, SearchRuns
 from carlos_operator.status import TERMINAL_PHASES, Tally, aggregate, condition, job_finished
 from simcore.errors import BadInput, CarlosError
@@ -228,7 +227,7 @@ class Controller:
         self.pod_check = pod_check
         self.backoff = backoff
         self.store_factory = store_factory
-        self.scratch = Path(tempfile.mkdtemp(prefix="carlos-operator-inputs-"))
+        self.scratch = ScratchFolders("carlos-operator-inputs-")
         self.runs: dict[Key, RunState] = {}
         self.jobs: dict[Key, dict[str, Any]] = {}  # (namespace, job name) → Job
         self._lock = threading.Lock()
@@ -256,6 +255,8 @@ class Controller:
         with self._lock:
             if event_type == "DELETED":
                 self.runs.pop(key, None)
+                self.scratch.forget(*key)
+                self.searches.forget(key)
                 return
             state = self.runs.get(key)
             if state is None or state.uid != meta.get("uid"):
@@ -303,6 +304,8 @@ class Controller:
         for thread in self._threads:
             thread.join(timeout=10)
         self._fetch.shutdown(wait=False, cancel_futures=True)
+        self.scratch.close()
+        self.searches.close()
 
     def _resync_loop(self) -> None:
         while not self._stop.wait(self.resync):
@@ -619,9 +622,7 @@ class Controller:
                 f"spec.sweep.distribution: the file is {len(data):,} bytes; the pods read it from the Job's "
                 f"ConfigMap, which holds at most {MAX_DISTRIBUTION_BYTES:,}: split the sweep",
             )
-        folder = self.scratch / namespace / run.name
-        folder.mkdir(parents=True, exist_ok=True)
-        local = folder / DISTRIBUTION_FILE
+        local = self.scratch.folder(namespace, run.name) / DISTRIBUTION_FILE
         local.write_bytes(data)
         moved = sweep.model_copy(update={"distribution": str(local), "distribution_config_map_ref": None})
         return text, run.model_copy(update={"spec": run.spec.model_copy(update={"sweep": moved})})

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import logging
 import math
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +33,7 @@ from carlos_operator.builders import (
 )
 from carlos_operator.inputs import read_input
 from carlos_operator.kube import Conflict, NotFound, now_rfc3339
+from carlos_operator.scratch import ScratchFolders
 from carlos_operator.status import (
     ERROR,
     FAILED,
@@ -230,7 +230,14 @@ class SearchRuns:
 
     def __init__(self, controller: Controller) -> None:
         self.c = controller
-        self._scratch = Path(tempfile.mkdtemp(prefix="carlos-operator-search-"))
+        self._scratch = ScratchFolders("carlos-operator-search-")
+
+    def forget(self, key: tuple[str, str]) -> None:
+        """The run was deleted: its scenario copy goes."""
+        self._scratch.forget(*key)
+
+    def close(self) -> None:
+        self._scratch.close()
 
     # --- acceptance ------------------------------------------------------------------------------------
 
@@ -250,9 +257,7 @@ class SearchRuns:
             ref_field="spec.scenarios[0].configMapRef",
             why="to choose a search's points",
         )
-        folder = self._scratch / namespace / run.name
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / name
+        path = self._scratch.folder(namespace, run.name) / name
         path.write_bytes(text)
         return SearchProgress(scenario_name=name, space=driver.search_space(run, path))
 

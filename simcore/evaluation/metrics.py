@@ -267,26 +267,33 @@ class MetricsAccumulator:
         if -acc > self._max_dec:
             self._max_dec = -acc
 
-        # Ego geometry, in its own frame: f forward, l left, around the box centre.
+        # Ego geometry, in its own frame: f forward, l left, around the box centre (the centres are the
+        # floats `EntityState.box_center()` gives)
         h = ego.heading
         fx, fy = math.cos(h), math.sin(h)
-        ex, ey, _ = ego.box_center()
-        e_hl, e_hw = ego.bbox.length / 2, ego.bbox.width / 2
+        bbox = ego.bbox
+        bx, by = bbox.center_x, bbox.center_y
+        ex, ey = ego.x + fx * bx - fy * by, ego.y + fy * bx + fx * by
+        e_hl, e_hw = bbox.length / 2, bbox.width / 2
         e_radius = math.hypot(e_hl, e_hw)
         e_speed = ego.speed
         e_lane = ego.lane
         half_lane = self._lane_width / 2
         ego_box: Box | None = None
+        cos, sin, hypot = math.cos, math.sin, math.hypot
 
         for other in frame.entities:
             if other is ego:
                 continue
-            ox, oy, _ = other.box_center()
-            dx, dy = ox - ex, oy - ey
-            o_hl, o_hw = other.bbox.length / 2, other.bbox.width / 2
+            o_heading = other.heading
+            oc, os = cos(o_heading), sin(o_heading)
+            bbox = other.bbox
+            bx, by = bbox.center_x, bbox.center_y
+            dx, dy = (other.x + oc * bx - os * by) - ex, (other.y + os * bx + oc * by) - ey
+            o_hl, o_hw = bbox.length / 2, bbox.width / 2
 
             # Collision and distance; the bounding circles give a cheap lower bound of the distance.
-            lower = math.hypot(dx, dy) - e_radius - math.hypot(o_hl, o_hw)
+            lower = hypot(dx, dy) - e_radius - hypot(o_hl, o_hw)
             if lower <= TOUCH_TOLERANCE or lower < self._min_distance:
                 if ego_box is None:
                     ego_box = Box.of(ego)
@@ -310,8 +317,8 @@ class MetricsAccumulator:
             # Longitudinal / lateral position and extents of the other box in the ego's frame.
             lon = dx * fx + dy * fy
             lat = dy * fx - dx * fy
-            rel = other.heading - h
-            cr, sr = math.cos(rel), abs(math.sin(rel))
+            rel = o_heading - h
+            cr, sr = cos(rel), abs(sin(rel))
             acr = abs(cr)
             o_lon = o_hl * acr + o_hw * sr
             o_lat = o_hl * sr + o_hw * acr

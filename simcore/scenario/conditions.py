@@ -219,11 +219,18 @@ def relative_distance(c: m.RelativeDistanceCondition, world: ScenarioWorld, body
     if other.gone:
         return False
     measure = world.measure
-    if c.freespace and c.distance_type in ("euclidianDistance", "cartesianDistance"):
-        # far apart, a lower bound of the distance between the boxes decides the comparison
+    euclid = c.distance_type in ("euclidianDistance", "cartesianDistance")
+    if c.freespace and (euclid or c.coordinate_system == "entity"):
+        # a bound clear of the value decides the comparison as the distance would: far apart, the lower
+        # bound of the distance between the boxes; close, the distance of their centres, which neither the
+        # distance between the boxes nor their gap along any axis exceeds
         lower = measure.box_distance_lower_bound(body, other)
-        if lower > c.value + 1e-6:
+        if euclid and lower > c.value + 1e-6:
             return compare(c.rule, lower, c.value)
+        a, b = body.entity.box, other.entity.box
+        upper = lower + 0.5 * (math.hypot(a.length, a.width) + math.hypot(b.length, b.width))
+        if upper < c.value - 1e-6:
+            return compare(c.rule, upper, c.value)
     measured = measure.to_entity(body, other, c.coordinate_system, c.distance_type, c.freespace)
     return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
 

@@ -50,6 +50,11 @@ if TYPE_CHECKING:
     from simcore.world.sumo import SumoWorld
 
 
+#: a body's entity, its box and external driving, and what its states take from them: name, object type,
+#: category, published box and who drives it (`ScenarioEngine._fixed_of`)
+_Fixed = tuple[m.Entity, m.Box, bool, str, str, str, BoundingBox, str]
+
+
 class ExternalDriver(Protocol):
     """Moves the entities an external controller drives (`simcore.closedloop`): the pose and speed after
     `dt` from the current ones."""
@@ -151,7 +156,7 @@ class ScenarioEngine:
             self.warnings.extend(unknown_signals(self.scenario, self.root, road, self.source))
         self.registry = self.story.registry
         self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
-        self._bboxes: dict[str, tuple[m.Box, BoundingBox]] = {}  # each entity's box, as published
+        self._fixed: dict[str, _Fixed] = {}  # per body: what its states take from its entity (_fixed_of)
         self._init()
         if self.ghosts is not None:
             self.ghosts.start()
@@ -588,25 +593,47 @@ class ScenarioEngine:
             cached = self._states[body.name] = self._state_of(body)
         return cached
 
-    def _state_of(self, body: Body) -> EntityState:
+    def _fixed_of(self, body: Body) -> _Fixed:
+        """What a body's state takes from its entity and its driver (name, type, category, box, who drives
+        it): built again only when the body's entity (an assigned controller) or its external driving
+        changes; the published box stays the same object while the entity's box does."""
         e = body.entity
-        lane = None
-        road = self.road
-        road_id = body.road_id
-        if road_id is not None and road is not None:
-            s = body.s
-            t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
-            lane_id, offset = lane_at_t(road, road_id, s, t)
-            lane = lane_coordinates(road_id, lane_id, s, t, offset)
+        known = self._fixed.get(body.name)
         box = e.box
-        known = self._bboxes.get(body.name)
-        if known is None or known[0] is not box:
+        if known is not None and known[1] is box:
+            bbox = known[6]
+        else:
             bbox = BoundingBox(box.center_x, box.center_y, box.center_z, box.length, box.width, box.height)
-            known = self._bboxes[body.name] = (box, bbox)
-        return entity_state(
+        external = body.external
+        fixed = self._fixed[body.name] = (
+            e,
+            box,
+            external,
             body.name,
             e.object_type,
             e.category,
+            bbox,
+            "external" if external else e.driver,
+        )
+        return fixed
+
+    def _state_of(self, body: Body) -> EntityState:
+        fixed = self._fixed.get(body.name)
+        if fixed is None or fixed[0] is not body.entity or fixed[2] is not body.external:
+            fixed = self._fixed_of(body)
+        lane = None
+        road_id = body.road_id
+        if road_id is not None:
+            road = self.road
+            if road is not None:
+                s = body.s
+                t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
+                lane_id, offset = lane_at_t(road, road_id, s, t)
+                lane = lane_coordinates(road_id, lane_id, s, t, offset)
+        return entity_state(
+            fixed[3],
+            fixed[4],
+            fixed[5],
             body.x,
             body.y,
             body.z,
@@ -616,22 +643,28 @@ class ScenarioEngine:
             body.speed,
             body.acceleration,
             body.yaw_rate,
-            known[1],
+            fixed[6],
             lane,
-            "external" if body.external else e.driver,
+            fixed[7],
         )
 
     def frame(self) -> WorldFrame:
-        state_of = self.state_of
+        """Every entity's state now (built once per step: `moved` forgets them)."""
+        states = self._states
+        state_of = self._state_of
         if self.ghosts is None:
-            states = self._states
-            entities = tuple([states.get(b.name) or state_of(b) for b in self.bodies.values()])
-            return world_frame(self.step_index, self.time, entities, self.ego, (), ())
+            entities = []
+            for b in self.bodies.values():
+                state = states.get(b.name)
+                if state is None:
+                    state = states[b.name] = state_of(b)
+                entities.append(state)
+            return world_frame(self.step_index, self.time, tuple(entities), self.ego, (), ())
         ghost_names = self.ghosts.names
         # a ghost is no object of the world (esmini shows it as a shadow): published apart
-        entities = tuple([state_of(b) for b in self.bodies.values() if b.name not in ghost_names])
-        ghosts = tuple([state_of(b) for b in self.bodies.values() if b.name in ghost_names])
-        return world_frame(self.step_index, self.time, entities, self.ego, (), ghosts)
+        entities = [self.state_of(b) for b in self.bodies.values() if b.name not in ghost_names]
+        ghosts = tuple([self.state_of(b) for b in self.bodies.values() if b.name in ghost_names])
+        return world_frame(self.step_index, self.time, tuple(entities), self.ego, (), ghosts)
 
     @property
     def started(self) -> bool:

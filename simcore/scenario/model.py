@@ -1,16 +1,19 @@
 """The OpenSCENARIO object model, after parameter resolution: plain typed data, no behaviour.
 
 The parser (`xosc.py`) builds it; the engine (`engine.py`) runs it. New actions, conditions and positions
-are added here as dataclasses, in the parser as one function each, and in the engine as one handler each.
+are added here as frozen dataclasses (`@record`: simcore.scenario.record), in the parser as one function
+each, and in the engine as one handler each.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import field
 from functools import cached_property
 from pathlib import Path
 from typing import Literal
+
+from simcore.scenario.record import record
 
 Rule = Literal["greaterThan", "lessThan", "equalTo", "greaterOrEqual", "lessOrEqual", "notEqualTo"]
 Edge = Literal["rising", "falling", "risingOrFalling", "none"]
@@ -21,7 +24,7 @@ Dimension = Literal["time", "distance", "rate"]
 # --- entities ------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class Box:
     center_x: float
     center_y: float
@@ -31,14 +34,14 @@ class Box:
     height: float
 
 
-@dataclass(frozen=True)
+@record
 class Performance:
     max_speed: float = 70.0
     max_acceleration: float = 5.0
     max_deceleration: float = 9.0
 
 
-@dataclass(frozen=True)
+@record
 class Entity:
     name: str
     object_type: Literal["vehicle", "pedestrian", "miscObject"]
@@ -107,7 +110,7 @@ def property_number(text: str | None, default: float) -> float:
 # --- positions -----------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class Orientation:
     type: Literal["relative", "absolute"] = "absolute"
     h: float = 0.0
@@ -115,7 +118,7 @@ class Orientation:
     r: float = 0.0
 
 
-@dataclass(frozen=True)
+@record
 class WorldPosition:
     x: float
     y: float
@@ -125,7 +128,7 @@ class WorldPosition:
     r: float = 0.0
 
 
-@dataclass(frozen=True)
+@record
 class LanePosition:
     road_id: str
     lane_id: int
@@ -135,7 +138,7 @@ class LanePosition:
     source: str = field(default="", compare=False)  # "file:line" (for messages)
 
 
-@dataclass(frozen=True)
+@record
 class RoadPosition:
     road_id: str
     s: float
@@ -143,7 +146,7 @@ class RoadPosition:
     orientation: Orientation | None = None
 
 
-@dataclass(frozen=True)
+@record
 class RelativeLanePosition:
     entity: str
     d_lane: int
@@ -152,7 +155,7 @@ class RelativeLanePosition:
     orientation: Orientation | None = None
 
 
-@dataclass(frozen=True)
+@record
 class RelativeRoadPosition:
     entity: str
     ds: float
@@ -160,7 +163,7 @@ class RelativeRoadPosition:
     orientation: Orientation | None = None
 
 
-@dataclass(frozen=True)
+@record
 class RelativeWorldPosition:
     entity: str
     dx: float
@@ -169,7 +172,7 @@ class RelativeWorldPosition:
     orientation: Orientation | None = None
 
 
-@dataclass(frozen=True)
+@record
 class RelativeObjectPosition:
     entity: str
     dx: float
@@ -178,7 +181,7 @@ class RelativeObjectPosition:
     orientation: Orientation | None = None
 
 
-@dataclass(frozen=True)
+@record
 class RoutePosition:
     """A position along a route: `route` is resolved when used (the route of `entity` or an inline one)."""
 
@@ -191,7 +194,7 @@ class RoutePosition:
     orientation: Orientation | None = None
 
 
-@dataclass(frozen=True)
+@record
 class TrajectoryPosition:
     trajectory: Trajectory
     s: float
@@ -215,31 +218,31 @@ Position = (
 # --- routes and trajectories -------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class Waypoint:
     position: Position
     strategy: str = "shortest"
 
 
-@dataclass(frozen=True)
+@record
 class Route:
     name: str
     closed: bool
     waypoints: tuple[Waypoint, ...]
 
 
-@dataclass(frozen=True)
+@record
 class Vertex:
     position: Position
     time: float | None = None
 
 
-@dataclass(frozen=True)
+@record
 class Polyline:
     vertices: tuple[Vertex, ...]
 
 
-@dataclass(frozen=True)
+@record
 class ClothoidSegment:
     curvature_start: float
     curvature_end: float
@@ -250,19 +253,19 @@ class ClothoidSegment:
     time_end: float | None = None
 
 
-@dataclass(frozen=True)
+@record
 class Clothoid:
     segments: tuple[ClothoidSegment, ...]
 
 
-@dataclass(frozen=True)
+@record
 class ControlPoint:
     position: Position
     time: float | None = None
     weight: float = 1.0
 
 
-@dataclass(frozen=True)
+@record
 class Nurbs:
     order: int
     control_points: tuple[ControlPoint, ...]
@@ -272,7 +275,7 @@ class Nurbs:
 TrajectoryShape = Polyline | Clothoid | Nurbs
 
 
-@dataclass(frozen=True)
+@record
 class Trajectory:
     name: str
     closed: bool
@@ -282,19 +285,19 @@ class Trajectory:
 # --- actions -------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class TransitionDynamics:
     shape: Shape
     dimension: Dimension
     value: float
 
 
-@dataclass(frozen=True)
+@record
 class AbsoluteTargetSpeed:
     value: float
 
 
-@dataclass(frozen=True)
+@record
 class RelativeTargetSpeed:
     entity: str
     value: float
@@ -302,25 +305,25 @@ class RelativeTargetSpeed:
     continuous: bool
 
 
-@dataclass(frozen=True)
+@record
 class SpeedAction:
     dynamics: TransitionDynamics
     target: AbsoluteTargetSpeed | RelativeTargetSpeed
     domain = "longitudinal"
 
 
-@dataclass(frozen=True)
+@record
 class AbsoluteTargetLane:
     lane_id: int
 
 
-@dataclass(frozen=True)
+@record
 class RelativeTargetLane:
     entity: str
     value: int
 
 
-@dataclass(frozen=True)
+@record
 class LaneChangeAction:
     dynamics: TransitionDynamics
     target: AbsoluteTargetLane | RelativeTargetLane
@@ -328,13 +331,13 @@ class LaneChangeAction:
     domain = "lateral"
 
 
-@dataclass(frozen=True)
+@record
 class TeleportAction:
     position: Position
     domain = "teleport"
 
 
-@dataclass(frozen=True)
+@record
 class LaneOffsetAction:
     shape: Shape
     max_lateral_acc: float | None
@@ -344,7 +347,7 @@ class LaneOffsetAction:
     domain = "lateral"
 
 
-@dataclass(frozen=True)
+@record
 class DynamicConstraints:
     max_acceleration: float | None = None
     max_deceleration: float | None = None
@@ -353,7 +356,7 @@ class DynamicConstraints:
     max_deceleration_rate: float | None = None
 
 
-@dataclass(frozen=True)
+@record
 class LongitudinalDistanceAction:
     entity: str
     distance: float | None
@@ -366,7 +369,7 @@ class LongitudinalDistanceAction:
     domain = "longitudinal"
 
 
-@dataclass(frozen=True)
+@record
 class LateralDistanceAction:
     entity: str
     distance: float
@@ -378,13 +381,13 @@ class LateralDistanceAction:
     domain = "lateral"
 
 
-@dataclass(frozen=True)
+@record
 class SpeedProfileEntry:
     speed: float
     time: float | None
 
 
-@dataclass(frozen=True)
+@record
 class SpeedProfileAction:
     entity: str | None  # speeds relative to this entity's speed when given
     following_mode: str  # position | follow
@@ -394,7 +397,7 @@ class SpeedProfileAction:
     domain = "longitudinal"
 
 
-@dataclass(frozen=True)
+@record
 class FollowTrajectoryAction:
     trajectory: Trajectory
     timing: Literal["none", "absolute", "relative"]
@@ -405,19 +408,19 @@ class FollowTrajectoryAction:
     domain = "lateral"
 
 
-@dataclass(frozen=True)
+@record
 class AssignRouteAction:
     route: Route
     domain = "route"
 
 
-@dataclass(frozen=True)
+@record
 class AcquirePositionAction:
     position: Position
     domain = "route"
 
 
-@dataclass(frozen=True)
+@record
 class SynchronizeAction:
     master: str
     master_position: Position
@@ -431,7 +434,7 @@ class SynchronizeAction:
     domain = "longitudinal"
 
 
-@dataclass(frozen=True)
+@record
 class TrailerAction:
     """ConnectTrailerAction (trailer given) or DisconnectTrailerAction (trailer None), OpenSCENARIO 1.3."""
 
@@ -439,7 +442,7 @@ class TrailerAction:
     domain = "trailer"
 
 
-@dataclass(frozen=True)
+@record
 class NoMotionAction:
     """Recorded, no effect on motion: lights, visibility, appearance, controllers CARLOS does not model."""
 
@@ -447,7 +450,7 @@ class NoMotionAction:
     domain = "none"
 
 
-@dataclass(frozen=True)
+@record
 class ControllerAction:
     """Assign and/or (de)activate an entity's controller. `assign`: the driver of the controller assigned
     now ("external", "scenario"), None when nothing is assigned; `longitudinal`/`lateral`: True activates,
@@ -479,14 +482,14 @@ PrivateAction = (
 )
 
 
-@dataclass(frozen=True)
+@record
 class ParameterSetAction:
     name: str
     value: str
     variable: bool = False  # VariableSetAction
 
 
-@dataclass(frozen=True)
+@record
 class ParameterModifyAction:
     name: str
     rule: Literal["add", "multiply"]
@@ -494,18 +497,18 @@ class ParameterModifyAction:
     variable: bool = False
 
 
-@dataclass(frozen=True)
+@record
 class AddEntityAction:
     entity: str
     position: Position
 
 
-@dataclass(frozen=True)
+@record
 class DeleteEntityAction:
     entity: str
 
 
-@dataclass(frozen=True)
+@record
 class TrafficSignalStateAction:
     """InfrastructureAction/TrafficSignalAction/TrafficSignalStateAction: a signal (by its OpenDRIVE id or
     name) shows `state` (e.g. "off;off;on", one entry per lamp) from now on."""
@@ -514,7 +517,7 @@ class TrafficSignalStateAction:
     state: str
 
 
-@dataclass(frozen=True)
+@record
 class TrafficSignalControllerAction:
     """TrafficSignalControllerAction: the controller jumps to `phase` (its cycle goes on from there)."""
 
@@ -522,7 +525,7 @@ class TrafficSignalControllerAction:
     phase: str
 
 
-@dataclass(frozen=True)
+@record
 class NoMotionGlobalAction:
     kind: str
 
@@ -541,27 +544,27 @@ GlobalAction = (
 # --- conditions ----------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class SimulationTimeCondition:
     value: float
     rule: Rule
 
 
-@dataclass(frozen=True)
+@record
 class StoryboardElementStateCondition:
     element_type: str
     element_ref: str
     state: str  # startTransition, endTransition, stopTransition, skipTransition, completeState, runningState, standbyState
 
 
-@dataclass(frozen=True)
+@record
 class ParameterCondition:
     name: str
     value: str
     rule: Rule
 
 
-@dataclass(frozen=True)
+@record
 class RelativeDistanceCondition:
     entity: str
     distance_type: Literal["longitudinal", "lateral", "cartesianDistance", "euclidianDistance"]
@@ -571,14 +574,14 @@ class RelativeDistanceCondition:
     coordinate_system: str = "entity"  # entity | road | lane | trajectory
 
 
-@dataclass(frozen=True)
+@record
 class SpeedCondition:
     value: float
     rule: Rule
     direction: str | None = None  # 1.2+: longitudinal | lateral | vertical (None: the speed)
 
 
-@dataclass(frozen=True)
+@record
 class RelativeSpeedCondition:
     entity: str
     value: float
@@ -586,24 +589,24 @@ class RelativeSpeedCondition:
     direction: str | None = None  # 1.2+: in the reference entity's frame
 
 
-@dataclass(frozen=True)
+@record
 class AccelerationCondition:
     value: float
     rule: Rule
 
 
-@dataclass(frozen=True)
+@record
 class TraveledDistanceCondition:
     value: float
 
 
-@dataclass(frozen=True)
+@record
 class ReachPositionCondition:
     position: Position
     tolerance: float
 
 
-@dataclass(frozen=True)
+@record
 class DistanceCondition:
     position: Position
     freespace: bool
@@ -613,7 +616,7 @@ class DistanceCondition:
     coordinate_system: str = "entity"  # entity | road | lane | trajectory (1.1+)
 
 
-@dataclass(frozen=True)
+@record
 class TimeHeadwayCondition:
     entity: str
     freespace: bool
@@ -623,7 +626,7 @@ class TimeHeadwayCondition:
     distance_type: str = "euclidianDistance"  # longitudinal | lateral | euclidianDistance
 
 
-@dataclass(frozen=True)
+@record
 class TimeToCollisionCondition:
     entity: str
     freespace: bool
@@ -634,29 +637,29 @@ class TimeToCollisionCondition:
     distance_type: str = "euclidianDistance"
 
 
-@dataclass(frozen=True)
+@record
 class StandStillCondition:
     duration: float
 
 
-@dataclass(frozen=True)
+@record
 class CollisionCondition:
     entity: str | None  # None: with any entity
 
 
-@dataclass(frozen=True)
+@record
 class EndOfRoadCondition:
     duration: float
 
 
-@dataclass(frozen=True)
+@record
 class VariableCondition:
     name: str
     value: str
     rule: Rule
 
 
-@dataclass(frozen=True)
+@record
 class RelativeClearanceCondition:
     entities: tuple[str, ...]
     free_space: bool  # distances between bounding boxes (else reference points)
@@ -666,12 +669,12 @@ class RelativeClearanceCondition:
     lanes: tuple[int, int] | None  # (from, to) relative lanes
 
 
-@dataclass(frozen=True)
+@record
 class OffroadCondition:
     duration: float
 
 
-@dataclass(frozen=True)
+@record
 class TrafficSignalCondition:
     """The signal (OpenDRIVE id or name) shows exactly `state`."""
 
@@ -679,7 +682,7 @@ class TrafficSignalCondition:
     state: str
 
 
-@dataclass(frozen=True)
+@record
 class TrafficSignalControllerCondition:
     """The traffic signal controller is in `phase`."""
 
@@ -687,7 +690,7 @@ class TrafficSignalControllerCondition:
     phase: str
 
 
-@dataclass(frozen=True)
+@record
 class AngleCondition:
     """The triggering entity's heading, pitch or roll is `angle` within `tolerance` (rad): absolute (in
     the world) by default, relative to the road's or the lane's direction in those coordinate systems."""
@@ -698,7 +701,7 @@ class AngleCondition:
     coordinate_system: str = "entity"
 
 
-@dataclass(frozen=True)
+@record
 class RelativeAngleCondition:
     """The triggering entity's heading, pitch or roll less that of `entity` is `angle` within `tolerance`."""
 
@@ -708,7 +711,7 @@ class RelativeAngleCondition:
     tolerance: float
 
 
-@dataclass(frozen=True)
+@record
 class UnsupportedCondition:
     """A condition CARLOS does not evaluate: always false (it is warned about at load)."""
 
@@ -745,7 +748,7 @@ ValueCondition = (
 )
 
 
-@dataclass(frozen=True)
+@record
 class Condition:
     name: str
     delay: float
@@ -756,7 +759,7 @@ class Condition:
     triggering_rule: Literal["any", "all"] = "any"
 
 
-@dataclass(frozen=True)
+@record
 class Trigger:
     """OR over condition groups, AND within a group. An empty trigger never fires."""
 
@@ -766,14 +769,14 @@ class Trigger:
 # --- storyboard ----------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@record
 class Action:
     name: str
     private: PrivateAction | None
     global_action: GlobalAction | None = None
 
 
-@dataclass(frozen=True)
+@record
 class Event:
     name: str
     priority: Literal["override", "overwrite", "skip", "parallel"]
@@ -782,13 +785,13 @@ class Event:
     start_trigger: Trigger | None
 
 
-@dataclass(frozen=True)
+@record
 class Maneuver:
     name: str
     events: tuple[Event, ...]
 
 
-@dataclass(frozen=True)
+@record
 class ManeuverGroup:
     name: str
     maximum_execution_count: int
@@ -797,7 +800,7 @@ class ManeuverGroup:
     maneuvers: tuple[Maneuver, ...]
 
 
-@dataclass(frozen=True)
+@record
 class Act:
     name: str
     groups: tuple[ManeuverGroup, ...]
@@ -805,20 +808,20 @@ class Act:
     stop_trigger: Trigger | None
 
 
-@dataclass(frozen=True)
+@record
 class Story:
     name: str
     acts: tuple[Act, ...]
 
 
-@dataclass(frozen=True)
+@record
 class SignalPhase:
     name: str
     duration: float
     states: tuple[tuple[str, str], ...]  # (traffic signal id, state)
 
 
-@dataclass(frozen=True)
+@record
 class SignalController:
     """RoadNetwork/TrafficSignals/TrafficSignalController: phases cycled from the start (after `delay`
     seconds, counted from the start of the `reference` controller when given)."""
@@ -829,13 +832,13 @@ class SignalController:
     phases: tuple[SignalPhase, ...]
 
 
-@dataclass(frozen=True)
+@record
 class InitAction:
     entity: str  # "" for a global action
     action: PrivateAction | GlobalAction
 
 
-@dataclass(frozen=True)
+@record
 class Scenario:
     path: Path
     version: str

@@ -35,6 +35,8 @@ class StoryRun:
         self.root = self.build()
         self.registry = Registry(self.root)
         self.running: dict[tuple[str, str], Node] = {}  # (actor, domain) → running action node
+        # the running action nodes in the storyboard's order (None: `running` changed since they were listed)
+        self._stepped: list[Node] | None = []
         self._transitions = 0  # state transitions so far, and how many there were at the last completion pass
         self._completed_at = -1
 
@@ -47,9 +49,12 @@ class StoryRun:
     def step_actions(self, dt: float) -> None:
         """Step the running actions in the storyboard's order (as esmini, not in the order they started);
         the ones done end, and completion moves up the tree."""
-        nodes: list[Node] = list({id(n): n for n in self.running.values()}.values())
-        if len(nodes) > 1:
-            nodes = sorted(nodes, key=lambda n: self.action_order.get(id(n), 0))
+        nodes = self._stepped
+        if nodes is None:
+            nodes = list({id(n): n for n in self.running.values()}.values())
+            if len(nodes) > 1:
+                nodes.sort(key=lambda n: self.action_order.get(id(n), 0))
+            self._stepped = nodes
         for node in nodes:
             runtimes: list[Runtime] = node.runtime or []
             for runtime in runtimes:
@@ -116,6 +121,7 @@ class StoryRun:
         for key, running in list(self.running.items()):
             if running is node:
                 del self.running[key]
+                self._stepped = None
         node.runtime = None
 
     def start_group(self, group: Node) -> None:
@@ -166,6 +172,7 @@ class StoryRun:
                 self.release(previous)
                 self.set(previous, Transition.STOP, State.COMPLETE)
             self.running[key] = node
+            self._stepped = None
             # an Init action still running in this domain (a distance kept from the start) is overridden too
             self.world.init_runtimes = [
                 r for r in self.world.init_runtimes if not (r.actor is body and r.domain == runtime.domain)
@@ -194,13 +201,22 @@ class StoryRun:
                         self.set(act, Transition.START, State.RUNNING)
                         for group in act.children:
                             self.start_group(group)
-                elif act.state == State.RUNNING and self.triggers.fire(definition.stop_trigger):
+                elif (
+                    act.state == State.RUNNING
+                    and definition.stop_trigger is not None
+                    and self.triggers.fire(definition.stop_trigger)
+                ):
                     self.stop(act)
                     continue
                 if act.state != State.RUNNING:
                     continue
-                for group in _running(act.children):
-                    for maneuver in _running(group.children):
+                # (each element's state is read when it is reached: starting an event may stop others)
+                for group in act.children:
+                    if group.state != State.RUNNING:
+                        continue
+                    for maneuver in group.children:
+                        if maneuver.state != State.RUNNING:
+                            continue
                         for event in maneuver.children:
                             if event.state != State.STANDBY:
                                 continue

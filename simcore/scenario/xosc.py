@@ -237,16 +237,40 @@ class _Reader:
             self.where.pop()
 
 
+#: parsed scenario files (the XML tree and its element lines, which no parameter changes) by path and file
+#: identity (size, mtime, ctime, inode): a sweep's points load the same file with other parameter values
+_PARSED: dict[tuple[str, int, int, int, int], tuple[ET.Element, dict[int, int]]] = {}
+_PARSED_MAX = 8
+
+
+def _parsed_scenario(path: Path) -> tuple[ET.Element, dict[int, int]]:
+    """The XML tree of a scenario file and the source line of each element, parsed once per file version.
+    The tree is shared between loads and only read (`_Reader` never changes it); an entry is replaced when
+    the file's size, modification or status-change time or inode changes (an edit, an atomic replace)."""
+    lines: dict[int, int] = {}
+    try:
+        st = path.stat()
+    except OSError:  # read_xml says what is wrong
+        return read_xml(path, what="OpenSCENARIO file", lines=lines), lines
+    key = (str(path.absolute()), st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino)
+    hit = _PARSED.get(key)
+    if hit is None:
+        hit = (read_xml(path, what="OpenSCENARIO file", lines=lines), lines)
+        if len(_PARSED) >= _PARSED_MAX:
+            _PARSED.pop(next(iter(_PARSED)))
+        _PARSED[key] = hit
+    return hit
+
+
 def load_scenario(path: str | Path, overrides: Mapping[str, ParamValue] | None = None) -> m.Scenario:
     """Parse an OpenSCENARIO file. `overrides` replace declared parameter defaults; a name the file does not
     declare is bad input (a typo in a sweep must not silently do nothing)."""
     path = Path(path)
-    lines: dict[int, int] = {}
-    root = read_xml(path, what="OpenSCENARIO file", lines=lines)
+    root, lines = _parsed_scenario(path)
     if root.tag != "OpenSCENARIO":
         raise BadInput(f"root element is <{root.tag}>, expected <OpenSCENARIO>", file=str(path))
     reader = _Reader(path, overrides or {})
-    reader.lines = lines
+    reader.lines = dict(lines)  # catalogs read while loading add their elements' lines
     header = root.find("FileHeader")
     version = "1.0"
     description = ""
@@ -399,16 +423,43 @@ def _entity_references(root: object) -> list[tuple[str, str]]:
         if isinstance(item, tuple | list):
             stack.extend(item)
             continue
-        if not dataclasses.is_dataclass(item) or isinstance(item, type):
+        split = _reference_fields(type(item))
+        if split is None:
             continue
-        for f in dataclasses.fields(item):
-            value = getattr(item, f.name)
-            if f.name in _ENTITY_FIELDS:
-                names = value if isinstance(value, tuple | list) else (value,)
-                found.extend((type(item).__name__, n) for n in names if isinstance(n, str) and n)
-            elif dataclasses.is_dataclass(value) or isinstance(value, tuple | list):
-                stack.append(value)
+        entity_fields, other_fields = split
+        for name in entity_fields:
+            value = getattr(item, name)
+            names = value if isinstance(value, tuple | list) else (value,)
+            found.extend((type(item).__name__, n) for n in names if isinstance(n, str) and n)
+        for name in other_fields:
+            value = getattr(item, name)
+            if value is not None and type(value) not in _SCALARS:
+                stack.append(value)  # (anything but a dataclass, tuple or list is skipped when popped)
     return found
+
+
+_SCALARS = (str, float, int, bool)
+
+
+_REFERENCE_FIELDS: dict[type, tuple[tuple[str, ...], tuple[str, ...]] | None] = {}
+
+
+def _reference_fields(cls: type) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
+    """A dataclass's fields naming entities (_ENTITY_FIELDS) and its other fields, in declaration order
+    (None for anything else); found once per class."""
+    try:
+        return _REFERENCE_FIELDS[cls]
+    except KeyError:
+        pass
+    split = None
+    if dataclasses.is_dataclass(cls):
+        names = [f.name for f in dataclasses.fields(cls)]
+        split = (
+            tuple(n for n in names if n in _ENTITY_FIELDS),
+            tuple(n for n in names if n not in _ENTITY_FIELDS),
+        )
+    _REFERENCE_FIELDS[cls] = split
+    return split
 
 
 # --- catalogs and entities --------------------------------------------------------------------------------
