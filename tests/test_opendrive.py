@@ -833,3 +833,129 @@ def test_loading_and_querying_a_road_imports_no_numpy() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "True"]
+
+
+def _two_section_road(offsets: str, second: bool = True) -> OpenDrive:
+    """Three geometry records (line, spiral, arc) and two lane sections: constant widths in the first (one
+    of them 0), a widening left lane in the second (unless not `second`)."""
+    return OpenDrive.from_string(
+        _xodr(
+            _road(
+                "1",
+                120.0,
+                "<geometry s='0' x='0' y='0' hdg='0.2' length='40'><line/></geometry>"
+                "<geometry s='40' x='39.2' y='7.9' hdg='0.2' length='40'>"
+                "<spiral curvStart='0' curvEnd='0.01'/></geometry>"
+                "<geometry s='80' x='77.5' y='19.4' hdg='0.4' length='40'><arc curvature='0.01'/></geometry>",
+                f"<lanes>{offsets}<laneSection s='0'><left>"
+                + _lane(1, 3.29)
+                + "</left><center><lane id='0' type='none'/></center>"
+                "<right>"
+                + _lane(-1, 0.0)
+                + _lane(-2, 3.37, typ="Driving")
+                + _lane(-3, 3.1, typ="shoulder")
+                + "</right></laneSection>"
+                + (
+                    "<laneSection s='60'><left>" + _lane(1, 3.25, 0.01) + "</left>"
+                    "<center><lane id='0' type='none'/></center><right>"
+                    + _lane(-1, 3.4)
+                    + "</right></laneSection>"
+                    if second
+                    else ""
+                )
+                + "</lanes>",
+                extra="<elevationProfile><elevation s='0' a='1.5' b='0' c='0' d='0'/></elevationProfile>",
+            )
+        ),
+        "sections.xodr",
+    )
+
+
+def _lookups(od: OpenDrive) -> list[str]:
+    """Every per-step road query along the road, on a grid of s and t (repr: the floats to the bit)."""
+    from simcore.scenario.motion import lane_at_t
+
+    out = []
+    for s in [k * 0.37 for k in range(325)] + [0.0, 59.999999999, 60.0, 120.0]:
+        out.append(repr(od.roads["1"].all_borders(s)))
+        out.append(repr((od.lane_ids("1", s), od.lane_ids("1", s, driving_only=True))))
+        for lane_id in (-3, -2, -1, 1):
+            try:
+                out.append(repr(od.lane_center_t("1", lane_id, s)))
+            except OpenDriveError as e:
+                out.append(str(e))
+        edges = [t for _, inner, outer in od.roads["1"].all_borders(s) for t in (inner, outer)]
+        near_edges = [t + d for t in edges for d in (-2e-9, -5e-10, 0.0, 5e-10, 2e-9)]
+        for t in [-9.0, -6.6, -6.0, -3.5, -1.0, 0.0, 0.3, 2.0, 3.5, 4.0, 7.0, *near_edges]:
+            out.append(repr(lane_at_t(od, "1", s, t)))
+            pose = od.road_to_world("1", s, t)
+            out.append(repr(od.world_to_road_near(pose.x, pose.y, "1", s + 0.8)))
+            out.append(repr(od.road_xyzh("1", s, t)))
+    return out
+
+
+@pytest.mark.parametrize("offsets", ["", "<laneOffset s='0' a='0.25' b='0' c='0' d='0'/>"])
+def test_lane_cross_lookups_give_what_the_per_s_sums_give(offsets: str) -> None:
+    """Where the lane borders are the same over a stretch of road, lane centres, the lane containing a t,
+    world -> road tracking and all borders come from tables made once: to the bit what the borders summed
+    at each s give (the same queries with the tables switched off)."""
+    fast = _two_section_road(offsets)
+    road = fast.roads["1"]
+    assert road.cross_at(10.0) is not None and road.cross_at(59.0) is not None
+    assert road.cross_at(60.0) is None and road.cross_at(100.0) is None  # the left lane widens there
+    slow = _two_section_road(offsets)
+    slow.roads["1"]._crosses = [None] * (len(slow.roads["1"]._cross_starts) + 1)
+    assert _lookups(fast) == _lookups(slow)
+
+
+def test_one_lane_cross_serves_a_road_of_one_lane_section() -> None:
+    fast = _two_section_road("", second=False)
+    assert fast.roads["1"].cross_at(0.0) is fast.roads["1"].cross_at(120.0) is not None
+    slow = _two_section_road("", second=False)
+    slow.roads["1"]._crosses = [None] * (len(slow.roads["1"]._cross_starts) + 1)
+    assert _lookups(fast) == _lookups(slow)
+
+
+def test_lane_cross_is_off_where_the_lane_offset_varies() -> None:
+    od = _two_section_road("<laneOffset s='0' a='0.25' b='0.01' c='0' d='0'/>")
+    assert od.roads["1"].cross_at(10.0) is None
+    assert od.lane_center_t("1", -2, 10.0) == pytest.approx(0.25 + 0.1 - 3.37 / 2)
+
+
+def test_geometry_span_is_the_range_geometry_at_gives_its_record_for() -> None:
+    road = _two_section_road("").roads["1"]
+    for s in [-1.0, 0.0, 39.999999, 40.0, 40.000001, 79.9, 80.0, 120.0, 130.0] + [
+        k * 0.5 for k in range(241)
+    ]:
+        g, lo, hi = road.geometry_span(s)
+        assert g is road.geometry_at(s) and lo <= s < hi, s
+        for probe in (lo, math.nextafter(hi, -math.inf)):
+            if math.isfinite(probe):
+                assert road.geometry_at(probe) is g, (s, probe)
+
+
+def test_a_constant_elevation_is_the_polynomial_value_at_every_s() -> None:
+    from simcore.world.opendrive import Poly3, _fixed_value
+
+    road = _two_section_road("").roads["1"]
+    assert [road.elevation(s) for s in (0.0, 33.3, 120.0)] == [1.5, 1.5, 1.5]
+    assert _fixed_value([]) == 0.0 and _fixed_value([Poly3(0.0, 2.0, 0.0, 0.0, 0.0)]) == 2.0
+    assert _fixed_value([Poly3(0.0, 2.0, 0.1, 0.0, 0.0)]) is None
+    assert _fixed_value([Poly3(0.0, 2.0, 0.0, 0.0, 0.0), Poly3(5.0, 2.0, 0.0, 0.0, 0.0)]) is None
+    for p in (Poly3(3.0, 2.0, 0.0, 0.0, 0.0), Poly3(3.0, 1e-300, -0.0, 0.0, -0.0)):
+        assert all(p.value(s) == _fixed_value([p]) for s in (-5.0, 0.0, 3.0, 1e6))
+
+
+def test_a_param_poly3_answers_the_same_whatever_it_was_asked_before() -> None:
+    """A paramPoly3 keeps its last evaluation: the point and curvature at a ``ds`` are the ones a fresh
+    record gives, in any order of questions."""
+    from simcore.world.opendrive import ParamPoly3
+
+    def record() -> ParamPoly3:
+        return ParamPoly3(0.0, 1.0, 2.0, 0.3, 50.0, (0.0, 1.0, 0.01, -0.0002), (0.0, 0.0, 0.02, 0.0001), None)
+
+    kept = record()
+    for ds in (0.0, 10.0, 10.0, 3.3, 49.9, 10.0, -0.0, 0.0, 25.0):
+        fresh = record()
+        assert kept.local(ds) == fresh.local(ds) and kept.curvature(ds) == record().curvature(ds), ds
+        assert kept.curvature(ds) == fresh.curvature(ds) and kept.local(ds) == record().local(ds), ds

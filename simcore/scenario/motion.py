@@ -33,8 +33,11 @@ def shape_peak_rate_factor(shape: str) -> float:
     return {"linear": 1.0, "cubic": 1.5, "sinusoidal": math.pi / 2, "step": 1.0}[shape]
 
 
+_TWO_PI = 2 * math.pi
+
+
 def wrap_angle(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
+    return (angle + math.pi) % _TWO_PI - math.pi
 
 
 @dataclass
@@ -95,9 +98,18 @@ def lane_shift(road: OpenDrive, road_id: str, s: float, lane_id: int, steps: int
 def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, float]:
     """The lane containing lateral position t (else the one with the closest centre) and the offset from
     its centre. One pass over the lane borders at s."""
-    r = road.road(road_id)
-    s = min(max(s, 0.0), r.length)
+    r = road.roads.get(road_id) or road.road(road_id)
+    s = 0.0 if s < 0.0 else s  # min(max(s, 0.0), r.length)
+    s = r.length if r.length < s else s
     best_lane, best_offset, best = 0, t, math.inf
+    cross = r.cross_at(s)
+    if cross is not None:  # the same borders over a stretch of road: its table of them, made once
+        for lane_id, lo, hi, centre in cross.around:
+            if lo <= t <= hi:
+                return lane_id, t - centre
+            if abs(t - centre) < best:
+                best, best_lane, best_offset = abs(t - centre), lane_id, t - centre
+        return best_lane, best_offset
     for lane, inner, outer in r.all_borders(s):
         if lane.id == 0 or inner == outer:
             continue
@@ -116,21 +128,26 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
     if distance == 0.0 and body.posed == _road_state(body):
         return  # standing still where the pose was computed: nothing changes
     remaining = distance
+    roads = road.roads
     for _ in range(16):  # at most this many road changes in one step
-        t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
+        road_id, lane_id, s = body.road_id, body.lane_id, body.s
+        t = road.lane_center_t(road_id, lane_id, s) + body.offset
         # metres along the lane per unit of s (curvature makes lanes longer or shorter than the reference line)
-        r = road.road(body.road_id)
+        r = roads.get(road_id) or road.road(road_id)
         length = r.length
         # a curve parallel to the reference line at distance t has length (1 - κ t) per unit of s
-        scale = abs(1.0 - r.curvature(min(max(body.s, 0.0), length)) * t)
-        ds = remaining / max(scale, 1e-6)
-        target = body.s + body.direction * ds
+        on = 0.0 if s < 0.0 else s  # min(max(s, 0.0), length), without the calls
+        scale = abs(1.0 - r.curvature(length if length < on else on) * t)
+        ds = remaining / (1e-6 if scale < 1e-6 else scale)  # max(scale, 1e-6)
+        target = s + body.direction * ds
         if 0.0 <= target <= length:
-            if body.lane_id != 0:
+            if lane_id == 0 or _plain_side(r, 1 if lane_id > 0 else -1):
+                body.s = target  # no lane link or vanishing lane to follow on this side of the road
+            else:
                 _follow_lane_links(r, body, target)
-            body.s = target
-            if body.lane_id != 0:
-                _leave_vanished_lane(r, body)
+                body.s = target
+                if body.lane_id != 0:
+                    _leave_vanished_lane(r, body)
             if ds != 0.0:  # standing still at the end of a road, it stays there
                 body.end_of_road_since = None
             break
@@ -186,6 +203,23 @@ def _leave_vanished_lane(r: object, body: Body) -> None:
     if inner != 0 and section.lane(inner) is not None:
         body.lane_id = inner
         body.offset = 0.0
+
+
+def _plain_side(r: Any, side: int) -> bool:
+    """Is one lane section all of this side of the road, with no lane narrowing to nothing in it? A body in
+    a lane there keeps its lane id along the road (`_follow_lane_links` and `_leave_vanished_lane` change
+    nothing). Found once per road and side, kept on the road (its lanes never change after parsing)."""
+    plain: dict[int, bool] | None = r.__dict__.get("_plain_sides")
+    if plain is None:
+        plain = r.__dict__["_plain_sides"] = {}
+    found = plain.get(side)
+    if found is None:
+        sections = r.side_sections(side)
+        found = len(sections) == 1 and not any(
+            _may_vanish(lane, sections[0]) for lane in (sections[0].left if side > 0 else sections[0].right)
+        )
+        plain[side] = found
+    return found
 
 
 def _may_vanish(lane: Any, section: Any) -> bool:
@@ -270,15 +304,17 @@ def along_lane(
 
 
 def update_pose_from_road(road: OpenDrive, body: Body) -> None:
-    assert body.road_id is not None
-    t = road.lane_center_t(body.road_id, body.lane_id, body.s) + body.offset
-    body.x, body.y, body.z, heading = road.road_xyzh(body.road_id, body.s, t)
+    road_id, s = body.road_id, body.s
+    assert road_id is not None
+    t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
+    body.x, body.y, body.z, heading = road.road_xyzh(road_id, s, t)
     road_heading = heading if body.direction > 0 else heading + math.pi
     drift = 0.0
-    if abs(body.speed) > 0.1:
+    speed = body.speed
+    if abs(speed) > 0.1:
         lateral = body.lateral_velocity * body.direction  # + is to the left of the travel direction
-        drift = math.atan2(lateral, abs(body.speed))
-    body.heading = wrap_angle(road_heading + drift + body.heading_offset)
+        drift = math.atan2(lateral, abs(speed))
+    body.heading = (road_heading + drift + body.heading_offset + math.pi) % _TWO_PI - math.pi  # wrap_angle
     body.posed = _road_state(body)
 
 

@@ -16,7 +16,7 @@ from simcore.scenario.world import Pose
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
-    from simcore.world.opendrive import OpenDrive, RoadCoordinates
+    from simcore.world.opendrive import OpenDrive
 
 
 def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = None) -> Pose:
@@ -200,9 +200,12 @@ def plan_route(world: ScenarioWorld, body: Body, targets: list[m.Position]) -> l
     return out
 
 
+_FIXED_POSITIONS = (m.WorldPosition, m.LanePosition, m.RoadPosition)  # positions that depend on no entity
+
+
 def fixed_point(world: ScenarioWorld, position: m.Position) -> Pose:
     """World pose of a condition's position: computed once when it depends on no entity."""
-    if isinstance(position, m.WorldPosition | m.LanePosition | m.RoadPosition):
+    if isinstance(position, _FIXED_POSITIONS):
         key = id(position)
         cached = world.memo.get(("fixed_point", key))
         if cached is None:
@@ -230,25 +233,28 @@ def walk_lane(road: OpenDrive, road_id: str, lane_id: int, s: float) -> tuple[st
     return road_id, lane_id, s
 
 
-def _nearest_road_point(road: OpenDrive, body: Body) -> RoadCoordinates | None:
-    """The road point under a body: near its last road position first, else anywhere."""
-    rc = None
-    if body.road_id is not None:
-        rc = road.world_to_road_near(body.x, body.y, body.road_id, body.s)
-    if rc is None:
-        rc = road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
-    return rc
+def _nearest_road_point(road: OpenDrive, body: Body) -> tuple[str, int, float, float, float, float] | None:
+    """The road point under a body, ``(road, lane, s, t, offset, reference heading)``: near its last road
+    position first, else anywhere."""
+    road_id = body.road_id
+    if road_id is not None:
+        near = road.near_lane(body.x, body.y, road_id, body.s)
+        if near is not None:
+            return (road_id, *near)
+    rc = road.world_to_road(body.x, body.y, None, road_hint=road_id)
+    return None if rc is None else (rc.road_id, rc.lane_id, rc.s, rc.t, rc.offset, rc.heading)
 
 
 def locate(road: OpenDrive | None, body: Body) -> None:
     """Road coordinates (road, lane, s, offset, direction, z) of a body moved in world coordinates."""
     if road is None:
         return
-    rc = _nearest_road_point(road, body)
-    if rc is not None:
-        body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
-        body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
-        body.z = road.road_z(rc.road_id, rc.s, rc.t)
+    point = _nearest_road_point(road, body)
+    if point is not None:
+        road_id, lane_id, s, t, offset, heading = point
+        body.road_id, body.lane_id, body.s, body.offset = road_id, lane_id, s, offset
+        body.direction = 1 if math.cos(body.heading - heading) >= 0 else -1
+        body.z = road.road_z(road_id, s, t)
 
 
 def track(road: OpenDrive | None, body: Body, lock_lane: bool = False) -> None:
@@ -256,12 +262,12 @@ def track(road: OpenDrive | None, body: Body, lock_lane: bool = False) -> None:
     `lock_lane` the body follows that lane afterwards, in the direction it is heading."""
     if road is None:
         return
-    rc = _nearest_road_point(road, body)
-    if rc is None:
+    point = _nearest_road_point(road, body)
+    if point is None:
         body.road_id = None
         return
-    body.road_id, body.lane_id, body.s, body.offset = rc.road_id, rc.lane_id, rc.s, rc.offset
-    body.direction = 1 if math.cos(body.heading - rc.heading) >= 0 else -1
+    body.road_id, body.lane_id, body.s, _, body.offset, heading = point
+    body.direction = 1 if math.cos(body.heading - heading) >= 0 else -1
     body.heading_offset = 0.0
     body.posed = None
     if lock_lane:

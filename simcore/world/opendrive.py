@@ -209,6 +209,16 @@ def _constant(p: Poly3) -> bool:
     )
 
 
+def _fixed_value(polys: Sequence[Poly3]) -> float | None:
+    """The value `_poly_at(polys, ...).value(s)` gives at every ``s`` (0.0 without records) when it is one
+    number (no or one record, `_constant`), else None."""
+    if not polys:
+        return 0.0
+    if len(polys) == 1 and _constant(polys[0]):
+        return polys[0].a
+    return None
+
+
 def _poly_at(polys: Sequence[Poly3], starts: Sequence[float], s: float) -> Poly3 | None:
     """The record in effect at ``s`` (the last one starting at or before ``s``; the first one before it)."""
     if not polys:
@@ -236,6 +246,11 @@ class Geometry:
         """World ``(x, y, heading)`` at distance ``ds`` from the start of this geometry."""
         raise NotImplementedError
 
+    def frame(self, ds: float) -> tuple[float, float, float, float, float]:
+        """`local` with the heading's cosine and sine: ``(x, y, heading, cos, sin)``."""
+        x, y, h = self.local(ds)
+        return x, y, h, math.cos(h), math.sin(h)
+
     def curvature(self, ds: float) -> float:
         """Signed curvature (1/m, positive turns left) at ``ds``."""
         raise NotImplementedError
@@ -253,6 +268,10 @@ class Line(Geometry):
     def local(self, ds: float) -> tuple[float, float, float]:
         return self.x + ds * self._cos, self.y + ds * self._sin, self.hdg
 
+    def frame(self, ds: float) -> tuple[float, float, float, float, float]:
+        c, s = self._cos, self._sin  # cos and sin of the heading local gives, computed once
+        return self.x + ds * c, self.y + ds * s, self.hdg, c, s
+
     def curvature(self, ds: float) -> float:
         return 0.0
 
@@ -265,15 +284,16 @@ class Arc(Geometry):
     def __init__(self, s: float, x: float, y: float, hdg: float, length: float, k: float) -> None:
         super().__init__(s, x, y, hdg, length)
         self.k = k
+        self._cos, self._sin = math.cos(hdg), math.sin(hdg)  # of the start heading, once
 
     def local(self, ds: float) -> tuple[float, float, float]:
         k = self.k
         h = self.hdg + k * ds
         if abs(k) < 1e-12:
-            return self.x + ds * math.cos(self.hdg), self.y + ds * math.sin(self.hdg), h
+            return self.x + ds * self._cos, self.y + ds * self._sin, h
         return (
-            self.x + (math.sin(h) - math.sin(self.hdg)) / k,
-            self.y - (math.cos(h) - math.cos(self.hdg)) / k,
+            self.x + (math.sin(h) - self._sin) / k,
+            self.y - (math.cos(h) - self._cos) / k,
             h,
         )
 
@@ -424,6 +444,7 @@ class Spiral(Geometry):
         self.k0 = k0
         self.k1 = k1
         self.c = (k1 - k0) / length if length > 0 else 0.0
+        self._cos, self._sin = math.cos(hdg), math.sin(hdg)  # of the start heading, once
         # a clothoid with negligible curvature change over the record is an arc to double precision
         self._as_arc = abs(self.c) * max(length, 1.0) ** 3 < 1e-9 or abs(self.c) < 1e-15
         # for tiny curvature change (huge standard-clothoid scale) the Fresnel difference loses digits:
@@ -447,10 +468,10 @@ class Spiral(Geometry):
         if self._as_arc:
             k = self.k0 + 0.5 * self.c * ds  # mean curvature: exact heading, position to < 1e-9 m
             if abs(k) < 1e-12:
-                return self.x + ds * math.cos(self.hdg), self.y + ds * math.sin(self.hdg), h
+                return self.x + ds * self._cos, self.y + ds * self._sin, h
             return (
-                self.x + (math.sin(self.hdg + k * ds) - math.sin(self.hdg)) / k,
-                self.y - (math.cos(self.hdg + k * ds) - math.cos(self.hdg)) / k,
+                self.x + (math.sin(self.hdg + k * ds) - self._sin) / k,
+                self.y - (math.cos(self.hdg + k * ds) - self._cos) / k,
                 h,
             )
         if self._numeric:
@@ -460,7 +481,7 @@ class Spiral(Geometry):
         # rotate out the standard clothoid's heading at u0, then into the record's start heading
         lx = dx * self._cos0 + dy * self._sin0
         ly = -dx * self._sin0 + dy * self._cos0
-        ch, sh = math.cos(self.hdg), math.sin(self.hdg)
+        ch, sh = self._cos, self._sin
         return self.x + lx * ch - ly * sh, self.y + lx * sh + ly * ch, h
 
     def _integrate(self, ds: float) -> tuple[float, float]:
@@ -541,6 +562,7 @@ class ParamPoly3(Geometry):
             cum = [c * scale for c in cum]
         self._ps: list[float] = ps
         self._ss: list[float] = cum
+        self._last: tuple[float, tuple[float, float, float, float, float, float]] = (math.nan, (0.0,) * 6)
 
     def _arclen(self, ps: list[float]) -> list[float]:
         """Cumulative arc length at the grid ``ps`` (6-point Gauss-Legendre on each interval)."""
@@ -576,6 +598,16 @@ class ParamPoly3(Geometry):
         f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
         return ps[i] + f * (ps[i + 1] - ps[i])
 
+    def _uv_at(self, ds: float) -> tuple[float, float, float, float, float, float]:
+        """`_uv` at the parameter of ``ds``; the last one kept (a projection asks for the point and then the
+        curvature at the same ``ds``): one ``(ds, uv)`` tuple, replaced whole."""
+        last = self._last
+        if last[0] == ds:
+            return last[1]
+        uv = self._uv(self._p_of(ds))
+        self._last = (ds, uv)
+        return uv
+
     def _uv(self, p: float) -> tuple[float, float, float, float, float, float]:
         au, bu, cu, du = self.u
         av, bv, cv, dv = self.v
@@ -588,8 +620,7 @@ class ParamPoly3(Geometry):
         return u, v, up, vp, upp, vpp
 
     def local(self, ds: float) -> tuple[float, float, float]:
-        p = self._p_of(ds)
-        u, v, up, vp, _, _ = self._uv(p)
+        u, v, up, vp, _, _ = self._uv_at(ds)
         return (
             self.x + u * self._cos - v * self._sin,
             self.y + u * self._sin + v * self._cos,
@@ -597,7 +628,7 @@ class ParamPoly3(Geometry):
         )
 
     def curvature(self, ds: float) -> float:
-        _, _, up, vp, upp, vpp = self._uv(self._p_of(ds))
+        _, _, up, vp, upp, vpp = self._uv_at(ds)
         sp = math.hypot(up, vp)
         return 0.0 if sp == 0 else (up * vpp - vp * upp) / sp**3
 
@@ -673,6 +704,43 @@ class LaneSection:
         return None
 
 
+class LaneCross:
+    """The lane borders across a stretch of a road where they do not change with ``s`` (the same lane
+    section on each side, each with constant widths and a constant or no laneOffset), and the look-ups that
+    the per-step queries make on them, derived once (the same floats the per-``s`` loops compute)."""
+
+    __slots__ = ("around", "borders", "centres", "driving_ids", "ids", "inside")
+
+    def __init__(self, right: list[tuple[Lane, float, float]], left: list[tuple[Lane, float, float]]) -> None:
+        #: every non-centre lane's ``(lane, t_inner, t_outer)``, right side first (`Road.all_borders`)
+        self.borders = right + left
+        #: lane id -> ``t`` of its centre (`OpenDrive.lane_center_t`: the first lane of that id on its side)
+        self.centres: dict[int, float] = {}
+        for side, borders in ((-1, right), (1, left)):
+            for lane, inner, outer in borders:
+                if lane.id != 0 and (lane.id > 0) == (side > 0) and lane.id not in self.centres:
+                    self.centres[lane.id] = 0.5 * (inner + outer)
+        #: ``(lane id, t_low, t_high, t_centre)`` of the lanes wider than 1e-9, in `borders` order
+        self.inside: tuple[tuple[int, float, float, float], ...] = tuple(
+            (lane.id, min(inner, outer), max(inner, outer), 0.5 * (inner + outer))
+            for lane, inner, outer in self.borders
+            if abs(outer - inner) > 1e-9
+        )
+        #: the same for lanes (not 0) of any width but zero, their ``t`` range widened by 1e-9 each way
+        self.around: tuple[tuple[int, float, float, float], ...] = tuple(
+            (lane.id, lo - 1e-9, hi + 1e-9, 0.5 * (inner + outer))
+            for lane, inner, outer in self.borders
+            if lane.id != 0 and inner != outer
+            for lo, hi in ((inner, outer) if inner < outer else (outer, inner),)
+        )
+        #: `OpenDrive.lane_ids`: the lanes of positive width, ascending; the drivable ones among them
+        wide = [(lane.id, lane.type) for lane, inner, outer in self.borders if not abs(outer - inner) <= 1e-9]
+        self.ids: tuple[int, ...] = tuple(sorted(lane_id for lane_id, _ in wide))
+        self.driving_ids: tuple[int, ...] = tuple(
+            sorted(lane_id for lane_id, kind in wide if kind.lower() in DRIVING_LANE_TYPES)
+        )
+
+
 @dataclass
 class Road:
     """One ``<road>``: reference line, elevation, lane offset, lane sections and links."""
@@ -714,6 +782,19 @@ class Road:
             ]
             self._side_sections[side] = secs or list(self.lane_sections)
         self._side_starts = {k: [sec.s for sec in v] for k, v in self._side_sections.items()}
+        # the planView record `geometry_at` gives for each s in [lo, hi)
+        n = len(self.geometries)
+        self._gspans = [
+            (g, self._gstarts[i] if i > 0 else -math.inf, self._gstarts[i + 1] if i + 1 < n else math.inf)
+            for i, g in enumerate(self.geometries)
+        ]
+        # elevation and laneOffset where one record gives the same number at every s (else None)
+        self._z_fixed = _fixed_value(self.elevations)
+        self._offset_fixed = _fixed_value(self.lane_offsets)
+        # where both sides' lane sections change (`cross_at`); the crosses themselves are built on first use
+        self._cross_starts = sorted(set(self._side_starts[1]) | set(self._side_starts[-1]))
+        self._crosses: list[LaneCross | None] | None = None
+        self._uniform: LaneCross | None = None  # the cross of every s, where there is one
 
     # -- reference line
     def geometry_at(self, s: float) -> Geometry:
@@ -722,20 +803,31 @@ class Road:
         geometries = self.geometries
         return geometries[0 if i < 0 else i if i < len(geometries) else len(geometries) - 1]
 
+    def geometry_span(self, s: float) -> tuple[Geometry, float, float]:
+        """``(record, lo, hi)``: the planView record `geometry_at` gives at ``s``, and the range ``[lo, hi)``
+        of every ``s`` it gives that record for (a caller moving along the road asks again only on leaving it)."""
+        i = bisect.bisect_right(self._gstarts, s) - 1
+        return self._gspans[i if i > 0 else 0]
+
     def reference_xyh(self, s: float) -> tuple[float, float, float]:
         """``(x, y, heading)`` of the reference line at ``s``."""
-        g = self.geometry_at(s)
+        i = bisect.bisect_right(self._gstarts, s) - 1  # as geometry_at (inline: every step)
+        g = self.geometries[i if i > 0 else 0]
         ds = s - g.s
         return g.local(ds if ds >= 0.0 else 0.0)
 
     def curvature(self, s: float) -> float:
         """Reference-line curvature at ``s``."""
-        g = self.geometry_at(s)
+        i = bisect.bisect_right(self._gstarts, s) - 1  # as geometry_at (inline: every step)
+        g = self.geometries[i if i > 0 else 0]
         ds = s - g.s
         return g.curvature(ds if ds >= 0.0 else 0.0)
 
     def elevation(self, s: float) -> float:
         """``z`` of the reference line at ``s`` (0 without an elevationProfile)."""
+        z = self._z_fixed
+        if z is not None:
+            return z
         p = _poly_at(self.elevations, self._estarts, s)
         return 0.0 if p is None else p.value(s)
 
@@ -746,18 +838,26 @@ class Road:
 
     def world_xyz(self, s: float, t: float) -> tuple[float, float, float, float]:
         """World ``(x, y, z, reference heading)`` of road coordinates ``(s, t)``."""
-        x, y, h = self.reference_xyh(s)
-        z = self.elevation(s)
+        i = bisect.bisect_right(self._gstarts, s) - 1  # as reference_xyh, with the heading's cos and sin
+        g = self.geometries[i if i > 0 else 0]
+        ds = s - g.s
+        x, y, h, cos_h, sin_h = g.frame(ds if ds >= 0.0 else 0.0)
+        z = self._z_fixed
+        if z is None:
+            z = self.elevation(s)
         if self.superelevations:
             r = self.roll(s)
             th = t * math.cos(r)
             z += t * math.sin(r)
         else:
             th = t
-        return x - th * math.sin(h), y + th * math.cos(h), z, h
+        return x - th * sin_h, y + th * cos_h, z, h
 
     def lane_offset(self, s: float) -> float:
         """``t`` of the centre lane (laneOffset) at ``s``."""
+        off = self._offset_fixed
+        if off is not None:
+            return off
         p = _poly_at(self.lane_offsets, self._ostarts, s)
         return 0.0 if p is None else p.value(s)
 
@@ -767,6 +867,10 @@ class Road:
         key = 1 if side > 0 else -1
         i = bisect.bisect_right(self._side_starts[key], s + 1e-9) - 1
         return self._side_sections[key][i if i > 0 else 0]
+
+    def side_sections(self, side: int) -> list[LaneSection]:
+        """The lane sections defining the lanes of ``side`` (+1 left, -1 right), in ``s`` order."""
+        return self._side_sections[1 if side > 0 else -1]
 
     def side_borders(self, s: float, side: int) -> list[tuple[Lane, float, float]]:
         """``(lane, t_inner, t_outer)`` for the lanes of ``side`` at ``s``, innermost first (memoised: the
@@ -830,9 +934,48 @@ class Road:
             out.append((lane, inner, off + side * acc))
         return out
 
+    def cross_at(self, s: float) -> LaneCross | None:
+        """The lane borders at ``s`` with their derived look-ups where they are the same over the whole
+        stretch between lane section changes around ``s`` (see `LaneCross`), else None. Built once per
+        road on first use, from the parsed road (which is never changed afterwards)."""
+        crosses = self._crosses
+        if crosses is None:
+            crosses = self._crosses = self._build_crosses()
+            first = crosses[0]
+            self._uniform = first if all(c is first for c in crosses) else None
+        uniform = self._uniform
+        if uniform is not None:  # one lane section on each side, the same borders all along the road
+            return uniform
+        # index 0: before every section start; k + 1: from the k-th start (as section_at's s + 1e-9)
+        return crosses[bisect.bisect_right(self._cross_starts, s + 1e-9)]
+
+    def _build_crosses(self) -> list[LaneCross | None]:
+        def index(key: int, q: float) -> int:  # as section_at
+            i = bisect.bisect_right(self._side_starts[key], q) - 1
+            return i if i > 0 else 0
+
+        made: dict[tuple[int, int], LaneCross | None] = {}
+        out: list[LaneCross | None] = []
+        for right, left in [(0, 0)] + [(index(-1, q), index(1, q)) for q in self._cross_starts]:
+            if (right, left) not in made:
+                r, le = self._fixed_side(-1, right), self._fixed_side(1, left)
+                made[(right, left)] = None if r is None or le is None else LaneCross(r, le)
+            out.append(made[(right, left)])
+        return out
+
+    def _fixed_side(self, key: int, index: int) -> list[tuple[Lane, float, float]] | None:
+        """`_side_borders` of the `index`-th section of side `key` where it is the same at every s."""
+        sec = self._side_sections[key][index]
+        if not (sec.left if key > 0 else sec.right):
+            return []
+        return self._fixed_borders(sec, key)
+
     def all_borders(self, s: float) -> list[tuple[Lane, float, float]]:
         """Borders of every non-centre lane at ``s`` (right side first, then left; memoised as
         `side_borders`: callers must not mutate)."""
+        cross = self.cross_at(s)
+        if cross is not None:
+            return cross.borders
         cache: dict[float, list[tuple[Lane, float, float]]] | None = self.__dict__.get("_all_borders")
         if cache is None:
             cache = self.__dict__["_all_borders"] = {}
@@ -1244,6 +1387,9 @@ class OpenDrive:
     # ---------------------------------------------------------------- basic queries
     def road(self, road_id: str) -> Road:
         """The road with ``road_id``; :class:`OpenDriveError` if there is none."""
+        road = self.roads.get(road_id)
+        if road is not None:
+            return road
         try:
             return self.roads[str(road_id)]
         except KeyError:
@@ -1312,6 +1458,11 @@ class OpenDrive:
             s = self._check_s(road, s)
         if lane_id == 0:
             return road.lane_offset(s)
+        cross = road.cross_at(s)
+        if cross is not None:
+            centre = cross.centres.get(lane_id)
+            if centre is not None:
+                return centre
         centers: dict[tuple[float, int], float] | None = road.__dict__.get("_centers")
         if centers is None:
             centers = road.__dict__["_centers"] = {}
@@ -1386,6 +1537,9 @@ class OpenDrive:
         """Ids of the lanes (not 0) with positive width at ``s``, right to left; optionally drivable ones only."""
         road = self.road(road_id)
         s = self._check_s(road, s)
+        cross = road.cross_at(s)
+        if cross is not None:
+            return list(cross.driving_ids if driving_only else cross.ids)
         out = []
         for lane, inner, outer in road.all_borders(s):
             if abs(outer - inner) <= 1e-9:
@@ -1539,14 +1693,17 @@ class OpenDrive:
         t = 0.0
         h = 0.0
         at = math.nan  # the s that h is the heading at
-        geometry_at = road.geometry_at
+        length = road.length
+        most = 2.0 * spacing + 1.0  # the longest Newton step either way
+        least = -2.0 * spacing - 1.0
+        g, lo, hi = road.geometry_span(s)
         for _ in range(30):
-            g = geometry_at(s)  # as road.reference_xyh(s) and road.curvature(s)
+            if not lo <= s < hi:  # left the record: as road.reference_xyh(s) and road.curvature(s)
+                g, lo, hi = road.geometry_span(s)
             ds = s - g.s
             ds = ds if ds >= 0.0 else 0.0
-            x, y, h = g.local(ds)
+            x, y, h, c, sn = g.frame(ds)
             at = s
-            c, sn = math.cos(h), math.sin(h)
             dx, dy = px - x, py - y
             along = dx * c + dy * sn
             t = -dx * sn + dy * c
@@ -1554,8 +1711,12 @@ class OpenDrive:
                 break
             denom = 1.0 - g.curvature(ds) * t
             step = along / denom if denom > 0.2 else along
-            step = max(-2.0 * spacing - 1.0, min(2.0 * spacing + 1.0, step))
-            s_new = min(max(s + step, 0.0), road.length)
+            # max(least, min(most, step)) and min(max(s + step, 0.0), length), without the calls
+            step = step if step < most else most
+            step = step if step > least else least
+            s_new = s + step
+            s_new = 0.0 if s_new < 0.0 else s_new
+            s_new = length if length < s_new else s_new
             if abs(s_new - s) < 1e-10:
                 break
             s = s_new
@@ -1641,20 +1802,35 @@ class OpenDrive:
         """Fast path for tracking a moving entity: project onto `road_id` from its previous `s`. Returns None
         (use :meth:`world_to_road`) when the point is not strictly inside a lane of that road, e.g. after it
         left the road or where roads overlap in a junction."""
+        near = self.near_lane(x, y, road_id, s_previous)
+        return None if near is None else _road_coordinates(self.roads[road_id].id, *near)
+
+    def near_lane(
+        self, x: float, y: float, road_id: str, s_previous: float
+    ) -> tuple[int, float, float, float, float] | None:
+        """`world_to_road_near` as a plain ``(lane_id, s, t, offset, heading)`` (for the per-step tracking)."""
         road = self.roads.get(road_id)
         if road is None or road.junction != "-1":
             return None
-        s, t, along, h = self._project(road, x, y, min(max(s_previous, 0.0), road.length), 2.0)
+        s0 = 0.0 if s_previous < 0.0 else s_previous  # min(max(s_previous, 0.0), road.length)
+        s0 = road.length if road.length < s0 else s0
+        s, t, along, h = self._project(road, x, y, s0, 2.0)
         if road.superelevations:
             t /= max(math.cos(road.roll(s)), 1e-6)
         if abs(along) > 1e-6:
             return None
+        cross = road.cross_at(s)
+        if cross is not None:
+            for lane_id, lo, hi, centre in cross.inside:
+                if lo <= t <= hi:
+                    return lane_id, s, t, t - centre, h
+            return None
         for lane, inner, outer in road.all_borders(s):
             if inner < outer:
                 if outer - inner > 1e-9 and inner <= t <= outer:
-                    return _road_coordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
+                    return lane.id, s, t, t - 0.5 * (inner + outer), h
             elif inner - outer > 1e-9 and outer <= t <= inner:
-                return _road_coordinates(road.id, lane.id, s, t, t - 0.5 * (inner + outer), h)
+                return lane.id, s, t, t - 0.5 * (inner + outer), h
         return None
 
 
