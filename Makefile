@@ -74,10 +74,12 @@ bench: install
 
 # Development only (the esmini corpus is not part of the project): the whole esmini corpus against its
 # reference trajectories (table + CSV/JSON under results/), then the speed bench. Give the corpus with
-# CORPUS=DIR or CARLOS_ESMINI_CORPUS=DIR; the default is the development machine's copy beside the checkout.
-CORPUS ?= $(or $(CARLOS_ESMINI_CORPUS),../shared/corpus/esmini)
-conformance: install
-	@test -d $(CORPUS)/resources || { echo "no esmini corpus at $(CORPUS): make conformance CORPUS=DIR"; exit 2; }
+# CORPUS=DIR or CARLOS_ESMINI_CORPUS=DIR (there is no default: the corpus is not in the repository).
+CORPUS ?= $(CARLOS_ESMINI_CORPUS)
+conformance:
+	@test -n "$(CORPUS)" && test -d "$(CORPUS)/resources" || { echo "no esmini corpus at '$(CORPUS)': make conformance CORPUS=DIR (a folder with resources/ and reference/)"; exit 2; }
+	@$(MAKE) --no-print-directory install
+
 	$(VENV)/bin/carlos conformance $(CORPUS)/resources --reference $(CORPUS)/reference --out results/conformance.csv -j $(NPROC)
 	$(PY) bench/conformance.py $(CORPUS)
 

@@ -5,6 +5,7 @@ errors a user sees. Scenarios run on the example highway, moved by the scenario 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -514,20 +515,12 @@ def test_a_signal_missing_from_the_road_network_is_warned_about(tmp_path: Path, 
 # --- collision ----------------------------------------------------------------------------------------------
 
 
-def test_collision_is_the_overlap_of_the_footprints_near_and_far() -> None:
-    """CollisionCondition holds when the footprints touch or overlap (within TOUCH_TOLERANCE), rotated or
-    not; boxes apart (a millimetre up to far away) do not collide, whether or not their footprints are built."""
-    import math
+def _bodies_world(bodies: dict[str, Any]) -> Any:
+    """The least of an engine the geometric conditions read: bodies by name, no road, a Measure."""
     from dataclasses import dataclass, field
 
-    from simcore.evaluation.metrics import TOUCH_TOLERANCE
-    from simcore.scenario import conditions
-    from simcore.scenario import model as m
     from simcore.scenario.measure import Measure
     from simcore.scenario.motion import Body
-
-    def car(name: str) -> m.Entity:
-        return m.Entity(name, "vehicle", "car", m.Box(1.4, 0.0, 0.75, 4.5, 1.8, 1.5), m.Performance())
 
     @dataclass
     class World:
@@ -542,10 +535,26 @@ def test_collision_is_the_overlap_of_the_footprints_near_and_far() -> None:
         def body(self, name: str) -> Body:
             return self.bodies[name]
 
+    return World(bodies)
+
+
+def test_collision_is_the_overlap_of_the_footprints_near_and_far() -> None:
+    """CollisionCondition holds when the footprints touch or overlap (within TOUCH_TOLERANCE), rotated or
+    not; boxes apart (a millimetre up to far away) do not collide, whether or not their footprints are built."""
+    import math
+
+    from simcore.evaluation.metrics import TOUCH_TOLERANCE
+    from simcore.scenario import conditions
+    from simcore.scenario import model as m
+    from simcore.scenario.motion import Body
+
+    def car(name: str) -> m.Entity:
+        return m.Entity(name, "vehicle", "car", m.Box(1.4, 0.0, 0.75, 4.5, 1.8, 1.5), m.Performance())
+
     def collides(dx: float, dy: float, heading: float = 0.0) -> bool:
         ego = Body(car("Ego"))
         other = Body(car("Other"), x=dx, y=dy, heading=heading)
-        world = World({"Ego": ego, "Other": other})
+        world = _bodies_world({"Ego": ego, "Other": other})
         return conditions.collision(m.CollisionCondition("Other"), world, ego)  # type: ignore[arg-type]
 
     assert collides(4.5, 0.0)  # bumper to bumper: touching
@@ -565,28 +574,14 @@ def test_relative_distance_decided_by_bounds_agrees_with_the_measured_distance()
     the measured distance gives, for every rule, near and far, in front, beside and behind, turned or not."""
     import itertools
     import math
-    from dataclasses import dataclass, field
 
     from simcore.scenario import conditions
     from simcore.scenario import model as m
-    from simcore.scenario.measure import LARGE, Measure
+    from simcore.scenario.measure import LARGE
     from simcore.scenario.motion import Body
 
     def car(name: str, length: float = 4.5) -> m.Entity:
         return m.Entity(name, "vehicle", "car", m.Box(1.4, 0.2, 0.75, length, 1.8, 1.5), m.Performance())
-
-    @dataclass
-    class World:
-        bodies: dict[str, Body]
-        road: None = None
-        step_index: int = 0
-        measure: Measure = field(init=False)
-
-        def __post_init__(self) -> None:
-            self.measure = Measure(self)
-
-        def body(self, name: str) -> Body:
-            return self.bodies[name]
 
     rules = ("greaterThan", "lessThan", "equalTo", "greaterOrEqual", "lessOrEqual", "notEqualTo")
     kinds = (("entity", "longitudinal"), ("entity", "lateral"), ("entity", "euclidianDistance"))
@@ -594,7 +589,7 @@ def test_relative_distance_decided_by_bounds_agrees_with_the_measured_distance()
     for dx, dy, heading in itertools.product((-30.0, -6.0, 0.0, 3.0, 12.5, 40.0), (0.0, 3.5), (0.0, 0.4)):
         ego = Body(car("Ego"))
         other = Body(car("Other", 12.0), x=dx, y=dy, heading=heading)
-        world = World({"Ego": ego, "Other": other})
+        world = _bodies_world({"Ego": ego, "Other": other})
         for (system, kind), rule, value in itertools.product(kinds, rules, (0.0, 2.0, 8.0, 15.0, 60.0)):
             measured = world.measure.to_entity(ego, other, system, kind, True)
             expected = conditions.compare(rule, LARGE if measured is None else abs(measured), value)

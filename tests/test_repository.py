@@ -1,4 +1,5 @@
-"""The repository is self-contained: nothing refers to files outside it (a fresh clone has no `../shared`),
+"""The repository is self-contained: nothing refers to files outside it (a fresh clone has no development
+folder beside the checkout),
 and the tools it fetches (helm, tools/get_helm.py) are pinned and checksum-verified."""
 
 from __future__ import annotations
@@ -14,9 +15,11 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 #: references to the development machine's folder beside the checkout
-OUTSIDE = re.compile(r"\.\./shared|/work/shared|parent\s*/\s*\"shared\"")
-#: where an optional development aid may name it, saying so: the corpus helper and `make conformance`
-ALLOWED = {"tests/tooling.py": 1, "Makefile": 1, "tests/test_repository.py": 3}
+SHARED = "shared"
+OUTSIDE = re.compile(rf"\.\./{SHARED}|/work/{SHARED}|parent\s*/\s*\"{SHARED}\"")
+#: where an optional development aid may name it, saying so: the corpus helper of the tests (which skip
+#: without it)
+ALLOWED = {"tests/tooling.py": 1}
 
 
 def tracked_files() -> list[str]:
@@ -45,10 +48,23 @@ def test_nothing_refers_to_files_outside_the_repository() -> None:
         if count:
             found[name] = count
     unexpected = {name: n for name, n in found.items() if n > ALLOWED.get(name, 0)}
-    assert not unexpected, f"references to ../shared (a fresh clone has none): {unexpected}"
-    makefile = (ROOT / "Makefile").read_text()
-    line = next(x for x in makefile.splitlines() if OUTSIDE.search(x))
-    assert line.startswith("CORPUS ?=") and "Development only" in makefile
+    assert not unexpected, f"references to the development folder (a fresh clone has none): {unexpected}"
+
+
+def test_make_conformance_without_a_corpus_says_so_in_one_line() -> None:
+    """The development-only target needs the corpus named; without it: one line and exit 2, nothing run."""
+    env = {k: v for k, v in os.environ.items() if k not in ("CARLOS_ESMINI_CORPUS", "CORPUS", "MAKEFLAGS")}
+    result = subprocess.run(
+        ["make", "--no-print-directory", "-C", str(ROOT), "conformance"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert result.stdout.splitlines() == [
+        "no esmini corpus at '': make conformance CORPUS=DIR (a folder with resources/ and reference/)"
+    ]
 
 
 def _get_helm() -> ModuleType:

@@ -230,15 +230,20 @@ def nearest_lane(
             return _nearest_after(shapes, x, y, hints, near, on, gaps)
     best: tuple[LaneShape, OnLane] | None = None
     for shape in shapes:
-        lane_id = shape.lane_id
-        on = locate_on(shape, x, y, hints.get(lane_id))
-        if on is None:
-            hints.pop(lane_id, None)
-            continue
-        hints[lane_id] = on.segment
-        if best is None or on.distance < best[1].distance:
-            best = (shape, on)
+        best = _kept(best, shape, locate_on(shape, x, y, hints.get(shape.lane_id)), hints)
     return best
+
+
+def _kept(
+    best: tuple[LaneShape, OnLane] | None, shape: LaneShape, on: OnLane | None, hints: dict[str, int]
+) -> tuple[LaneShape, OnLane] | None:
+    """One lane's walk taken into nearest_lane's answer: its hint updated (dropped when the walk found
+    nothing) and the nearer of `best` and it kept (the first on a tie)."""
+    if on is None:
+        hints.pop(shape.lane_id, None)
+        return best
+    hints[shape.lane_id] = on.segment
+    return (shape, on) if best is None or on.distance < best[1].distance else best
 
 
 def _nearest_after(
@@ -282,10 +287,5 @@ def _nearest_after(
                         hints[lane_id] = j
                         continue
             on = locate_on(shape, x, y, hint)
-        if on is None:
-            hints.pop(lane_id, None)
-            continue
-        hints[lane_id] = on.segment
-        if best is None or on.distance < best[1].distance:
-            best = (shape, on)
+        best = _kept(best, shape, on, hints)
     return best
