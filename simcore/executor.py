@@ -36,7 +36,10 @@ from simcore.transport.bus import Bus
 if TYPE_CHECKING:
     from concurrent.futures import Future, ProcessPoolExecutor
 
+#: wall seconds between two looks at the workers' progress queue
+DRAIN_INTERVAL_S = 0.2
 _progress_queue: Any = None
+_worker_settings: Any = None  # Settings of this pool worker (_init_worker)
 
 
 @dataclass
@@ -55,10 +58,16 @@ def make_store(url: str, settings: Settings) -> Store:
     return open_store(url, endpoint=settings.endpoint, region=settings.region)
 
 
-def _init_worker(progress: Any, parent_pid: int) -> None:
-    global _progress_queue
+def _init_worker(progress: Any, parent_pid: int, settings: Settings) -> None:
+    global _progress_queue, _worker_settings
     die_with_parent(parent_pid)
     _progress_queue = progress
+    _worker_settings = settings  # sent once per worker, not with every index
+
+
+def _work_in_pool(index: int, attempt: int, final_attempt: bool) -> RunOutcome:
+    assert _worker_settings is not None, "a pool worker starts with _init_worker"
+    return _work(_worker_settings, index, attempt, final_attempt)
 
 
 def _report(index: int, sim_time: float) -> None:
@@ -261,14 +270,19 @@ def _in_pool(sweep: _Sweep, workers: int) -> None:
             max_workers=workers,
             mp_context=context,
             initializer=_init_worker,
-            initargs=(progress, os.getpid()),
+            initargs=(progress, os.getpid(), sweep.settings),
         ) as pool:
             in_flight: dict[Future[RunOutcome], int] = {}
             broken = False
             _submit(pool, sweep, in_flight, workers * 2)
+            next_drain = 0.0
             while in_flight:
-                done, _ = wait(list(in_flight), timeout=0.2, return_when=FIRST_COMPLETED)
-                _drain(progress, sweep.events)
+                done, _ = wait(list(in_flight), timeout=DRAIN_INTERVAL_S, return_when=FIRST_COMPLETED)
+                if not done or time.monotonic() >= next_drain:
+                    # progress reports come at most every PROGRESS_INTERVAL_S per run: polling the queue
+                    # (a selector each time) after every finished index of a quick sweep would cost more
+                    _drain(progress, sweep.events)
+                    next_drain = time.monotonic() + DRAIN_INTERVAL_S
                 for future in done:
                     index = in_flight.pop(future)
                     try:
@@ -350,7 +364,7 @@ def _submit(
         index = sweep.pending.pop(0)
         sweep.attempts[index] += 1
         final = sweep.attempts[index] >= sweep.max_attempts
-        in_flight[pool.submit(_work, sweep.settings, index, sweep.attempts[index], final)] = index
+        in_flight[pool.submit(_work_in_pool, index, sweep.attempts[index], final)] = index
 
 
 def _drain(progress: Any, events: Events) -> None:
