@@ -6,7 +6,8 @@
 (b) sweep: a BENCH_SWEEP-run (default 200) sweep of examples/scenarios/cut-in.xosc (EgoSpeed × CutInGap ×
     AdversarySpeed, recording off) through `carlos run --parallel 2` vs as many esmini processes two at a
     time, each on a copy of the file with that run's parameter values (esmini drives Ego by its script where
-    CARLOS hands it to SUMO, as the file asks).
+    CARLOS hands it to SUMO, as the file asks). Each of BENCH_SWEEP_ROUNDS rounds (default 1) runs carlos,
+    esmini, esmini, carlos, so that a drift of the host's speed weighs on both sides alike; means are shown.
 (c) simulated seconds per wall second per core, warm, in this process: the run pipeline
     (`simcore.runner.simulate`, what `carlos run` workers and the simcore pod call) vs the bare engine
     (`ScenarioEngine.advance` in a loop) on the corpus cut-in.
@@ -47,6 +48,7 @@ sys.path.insert(0, str(ROOT))
 REPEAT = int(os.environ.get("BENCH_REPEAT", "3"))
 SWEEP = int(os.environ.get("BENCH_SWEEP", "200"))
 PASSES = int(os.environ.get("BENCH_PASSES", "10"))
+SWEEP_ROUNDS = int(os.environ.get("BENCH_SWEEP_ROUNDS", "1"))
 BEFORE = Path(os.environ["BENCH_BEFORE"]).resolve() if os.environ.get("BENCH_BEFORE") else None
 CORPUS = Path(os.environ.get("CARLOS_ESMINI_CORPUS", ""))
 CARLOS = Path(sys.executable).parent / "carlos"
@@ -230,17 +232,26 @@ def main() -> None:
             with ThreadPoolExecutor(max_workers=2) as pool:
                 list(pool.map(lambda p: timed(esmini_command(binary, p), esmini_dir), variants))
 
+        def carlos_sweep(env: dict[str, str]) -> None:
+            timed([str(CARLOS), "run", str(sweep), "--fresh", "--parallel", "2"], work, env)
+
         for label, env in envs.items():
-            wall, cpu = measured(
-                lambda env=env: timed(
-                    [str(CARLOS), "run", str(sweep), "--fresh", "--parallel", "2"], work, env
-                )
-            )
+            # rounds of carlos, esmini, esmini, carlos (ABBA): a drift of the host's speed during the
+            # rounds weighs on both sides alike; the figures are the means of the rounds
+            sides: dict[str, list[tuple[float, float]]] = {"carlos": [], "esmini": []}
+            for _ in range(SWEEP_ROUNDS):
+                order = ["carlos", "esmini", "esmini", "carlos"] if binary is not None else ["carlos"]
+                for side in order:
+                    if side == "carlos":
+                        sides[side].append(measured(lambda env=env: carlos_sweep(env)))
+                    else:
+                        sides[side].append(measured(esmini_sweep))
+            wall, cpu = (statistics.fmean(v) for v in zip(*sides["carlos"], strict=True))
             figures[f"sweep_{label}_s"] = round(wall, 2)
             figures[f"sweep_{label}_cpu_s"] = round(cpu, 2)
             figures[f"sweep_{label}_runs_per_s"] = round(runs / wall, 2)
-            if binary is not None:  # esmini right after each, on the same load
-                e_wall, e_cpu = measured(esmini_sweep)
+            if sides["esmini"]:
+                e_wall, e_cpu = (statistics.fmean(v) for v in zip(*sides["esmini"], strict=True))
                 figures[f"sweep_esmini_next_to_{label}_s"] = round(e_wall, 2)
                 figures[f"sweep_esmini_next_to_{label}_cpu_s"] = round(e_cpu, 2)
                 figures[f"sweep_{label}_throughput_over_esmini"] = round(e_wall / wall, 2)
