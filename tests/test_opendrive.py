@@ -1012,3 +1012,24 @@ def test_a_newton_step_on_a_straight_record_is_its_along_track_error() -> None:
                 assert repr(od._project(od.roads["1"], px, py, s0, 2.0)) == repr(
                     general._project(road, px, py, s0, 2.0)
                 ), (s0, s, t, px, py)
+
+
+def test_fresnel_small_arguments_are_the_polynomials_by_horner_loops() -> None:
+    """The small-argument Fresnel branch (every road spiral's) is `_polevl`/`_p1evl` written out: the same
+    floats to the bit, signs of zero included."""
+    import random
+
+    from simcore.world import opendrive as od
+
+    def looped(xxa: float) -> tuple[float, float]:
+        x = abs(xxa)
+        x2 = x * x
+        t = x2 * x2
+        ss = x * x2 * od._polevl(t, od._FRESNEL_SN) / od._p1evl(t, od._FRESNEL_SD)
+        cc = x * od._polevl(t, od._FRESNEL_CN) / od._polevl(t, od._FRESNEL_CD)
+        return (-ss, -cc) if xxa < 0.0 else (ss, cc)
+
+    rng = random.Random(5)
+    xs = [rng.uniform(-1.6, 1.6) for _ in range(20000)] + [10 ** rng.uniform(-300, 0.2) for _ in range(2000)]
+    for x in [*xs, 0.0, -0.0, 1.6, -1.6, 5e-324, -5e-324]:
+        assert repr(od._fresnel(x)) == repr(looped(x)), x

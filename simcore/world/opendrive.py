@@ -410,10 +410,19 @@ def _fresnel(xxa: float) -> tuple[float, float]:
     else:
         x = abs(xxa)
         x2 = x * x
-        if x2 < 2.5625:
+        if x2 < 2.5625:  # every spiral of a road's size: `_polevl`/`_p1evl` written out (the same operations)
             t = x2 * x2
-            ss = x * x2 * _polevl(t, _FRESNEL_SN) / _p1evl(t, _FRESNEL_SD)
-            cc = x * _polevl(t, _FRESNEL_CN) / _polevl(t, _FRESNEL_CD)
+            sn0, sn1, sn2, sn3, sn4, sn5 = _FRESNEL_SN
+            sd0, sd1, sd2, sd3, sd4, sd5 = _FRESNEL_SD
+            cn0, cn1, cn2, cn3, cn4, cn5 = _FRESNEL_CN
+            cd0, cd1, cd2, cd3, cd4, cd5, cd6 = _FRESNEL_CD
+            sn = ((((sn0 * t + sn1) * t + sn2) * t + sn3) * t + sn4) * t + sn5
+            sd = ((((t + sd0) * t + sd1) * t + sd2) * t + sd3) * t + sd4
+            sd = sd * t + sd5
+            cn = ((((cn0 * t + cn1) * t + cn2) * t + cn3) * t + cn4) * t + cn5
+            cd = (((((cd0 * t + cd1) * t + cd2) * t + cd3) * t + cd4) * t + cd5) * t + cd6
+            ss = x * x2 * sn / sd
+            cc = x * cn / cd
         elif x > 36974.0:
             cc = 0.5 + 1 / (math.pi * x) * _sinpi(x * x / 2)
             ss = 0.5 - 1 / (math.pi * x) * _cospi(x * x / 2)
