@@ -61,3 +61,34 @@ def test_a_side_with_a_lane_narrowing_to_nothing_is_not_plain() -> None:
     car = _body("1", -2, 60.0, 10.0)
     advance_on_road(od, car, 20.0, 1.0)
     assert (car.lane_id, car.offset, car.y) == (-1, 0.0, -1.75)  # left for the next inner lane
+
+
+def test_moving_along_a_road_gives_what_the_per_s_lane_borders_give() -> None:
+    """`advance_on_road` and `update_pose_from_road` take the lane centre from the road's lane tables: to
+    the bit the poses that the borders summed at each s give (the tables switched off), on a curved road,
+    across a lane section change, in a lane change and at the road's end."""
+    xodr = (
+        "<?xml version='1.0'?><OpenDRIVE><header revMajor='1' revMinor='6'/>"
+        "<road id='1' length='200' junction='-1'><link/><planView>"
+        "<geometry s='0' x='0' y='0' hdg='0.1' length='80'><line/></geometry>"
+        "<geometry s='80' x='79.6' y='7.98' hdg='0.1' length='120'><arc curvature='0.004'/></geometry>"
+        "</planView><lanes>"
+        + _section(0, _lane(-1, CONST, "<successor id='-1'/>") + _lane(-2, CONST), _lane(1, CONST))
+        + _section(100, _lane(-1, CONST, "<predecessor id='-1'/>") + _lane(-2, CONST), _lane(1, CONST))
+        + "</lanes></road></OpenDRIVE>"
+    )
+
+    def drive(tables: bool) -> list[str]:
+        od = OpenDrive.from_string(xodr, "curve.xodr")
+        if not tables:
+            od.roads["1"]._crosses = [None] * (len(od.roads["1"]._cross_starts) + 1)
+        car = _body("1", -1, 3.0, 30.0)
+        car.offset, car.lateral_velocity = -0.3, -0.7
+        out = []
+        for step in range(90):
+            advance_on_road(od, car, 30.0 * 0.05 * (1 + step % 3), step * 0.05)
+            car.offset -= 0.01
+            out.append(repr((car.road_id, car.lane_id, car.s, car.x, car.y, car.z, car.heading, car.speed)))
+        return out
+
+    assert drive(True) == drive(False)

@@ -959,3 +959,77 @@ def test_a_param_poly3_answers_the_same_whatever_it_was_asked_before() -> None:
         fresh = record()
         assert kept.local(ds) == fresh.local(ds) and kept.curvature(ds) == record().curvature(ds), ds
         assert kept.curvature(ds) == fresh.curvature(ds) and kept.local(ds) == record().local(ds), ds
+
+
+@pytest.mark.parametrize("second", [True, False])
+def test_lane_point_is_the_lane_centre_and_the_lane_at_its_t(second: bool) -> None:
+    """`motion.lane_point` (one look-up of the lane table for a body's state) gives to the bit what
+    `lane_center_t` + offset and `lane_at_t` at that t give, with the tables on and off, and raises where
+    they raise."""
+    from simcore.scenario.motion import lane_at_t, lane_point
+
+    def answers(od: OpenDrive, use: str) -> list[str]:
+        out = []
+        for s in [k * 0.37 for k in range(325)] + [-0.0005, -0.0, 0.0, 59.999999999, 60.0, 120.0, 120.0005]:
+            for lane_id in (-3, -2, -1, 0, 1):
+                for offset in (0.0, -0.0, 0.4, -2.1, 5.0, math.nan):
+                    try:
+                        if use == "fused":
+                            out.append(repr(lane_point(od, "1", lane_id, s, offset)))
+                        else:
+                            t = od.lane_center_t("1", lane_id, s) + offset
+                            out.append(repr((t, *lane_at_t(od, "1", s, t))))
+                    except OpenDriveError as e:
+                        out.append(str(e))
+        return out
+
+    fast = _two_section_road("", second=second)
+    slow = _two_section_road("", second=second)
+    slow.roads["1"]._crosses = [None] * (len(slow.roads["1"]._cross_starts) + 1)
+    expected = answers(fast, "two calls")
+    assert answers(fast, "fused") == expected and answers(slow, "fused") == expected
+    assert answers(slow, "two calls") == expected
+
+
+def test_a_newton_step_on_a_straight_record_is_its_along_track_error() -> None:
+    """`_project` steps by the along-track error on a line (no curvature asked): what the general step
+    gives there, to the bit."""
+    from simcore.world.opendrive import Line
+
+    class Bent(Line):  # a line taken for a curve: the general Newton step
+        straight = False
+
+    od = _two_section_road("")
+    general = _two_section_road("")
+    road = general.roads["1"]
+    road.geometries[0] = bent = Bent(0.0, 0.0, 0.0, 0.2, 40.0)
+    road._gspans[0] = (bent, *road._gspans[0][1:])
+    assert od.roads["1"].geometries[0].straight and not bent.straight
+    for s0 in (0.0, 3.0, 17.5, 39.0, 41.0):
+        for s, t in ((5.0, -2.0), (20.0, 3.3), (38.5, -7.0), (0.0, 0.1), (45.0, 1.0)):
+            x, y, _, _ = od.road_xyzh("1", s, t)
+            for px, py in ((x, y), (x + 1e-7, y), (x + 1e5, y), (x, math.inf), (math.nan, y)):
+                assert repr(od._project(od.roads["1"], px, py, s0, 2.0)) == repr(
+                    general._project(road, px, py, s0, 2.0)
+                ), (s0, s, t, px, py)
+
+
+def test_fresnel_small_arguments_are_the_polynomials_by_horner_loops() -> None:
+    """The small-argument Fresnel branch (every road spiral's) is `_polevl`/`_p1evl` written out: the same
+    floats to the bit, signs of zero included."""
+    import random
+
+    from simcore.world import opendrive as od
+
+    def looped(xxa: float) -> tuple[float, float]:
+        x = abs(xxa)
+        x2 = x * x
+        t = x2 * x2
+        ss = x * x2 * od._polevl(t, od._FRESNEL_SN) / od._p1evl(t, od._FRESNEL_SD)
+        cc = x * od._polevl(t, od._FRESNEL_CN) / od._polevl(t, od._FRESNEL_CD)
+        return (-ss, -cc) if xxa < 0.0 else (ss, cc)
+
+    rng = random.Random(5)
+    xs = [rng.uniform(-1.6, 1.6) for _ in range(20000)] + [10 ** rng.uniform(-300, 0.2) for _ in range(2000)]
+    for x in [*xs, 0.0, -0.0, 1.6, -1.6, 5e-324, -5e-324]:
+        assert repr(od._fresnel(x)) == repr(looped(x)), x

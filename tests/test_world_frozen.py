@@ -45,3 +45,20 @@ def test_a_class_it_cannot_build_is_its_own_constructor() -> None:
             self.a = a
 
     assert builder(Plain) is Plain
+
+
+def test_the_constructor_takes_every_field_positionally() -> None:
+    build = builder(LaneCoordinates)
+    assert build is not LaneCoordinates
+    with pytest.raises(TypeError):
+        build("1", -2, 12.5, -5.25)  # every field, none defaulted
+    built = build("1", -2, 12.5, -5.25, -0.0)
+    assert type(built) is LaneCoordinates and repr(built) == repr(LaneCoordinates("1", -2, 12.5, -5.25, -0.0))
+
+
+def test_a_dataclass_whose_field_names_it_cannot_spell_is_its_own_constructor() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class Hidden:
+        _cls: int  # would shadow the generated constructor's own name
+
+    assert builder(Hidden) is Hidden

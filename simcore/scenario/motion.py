@@ -101,15 +101,10 @@ def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, f
     r = road.roads.get(road_id) or road.road(road_id)
     s = 0.0 if s < 0.0 else s  # min(max(s, 0.0), r.length)
     s = r.length if r.length < s else s
-    best_lane, best_offset, best = 0, t, math.inf
     cross = r.cross_at(s)
     if cross is not None:  # the same borders over a stretch of road: its table of them, made once
-        for lane_id, lo, hi, centre in cross.around:
-            if lo <= t <= hi:
-                return lane_id, t - centre
-            if abs(t - centre) < best:
-                best, best_lane, best_offset = abs(t - centre), lane_id, t - centre
-        return best_lane, best_offset
+        return cross.lane_at(t)
+    best_lane, best_offset, best = 0, t, math.inf
     for lane, inner, outer in r.all_borders(s):
         if lane.id == 0 or inner == outer:
             continue
@@ -122,6 +117,27 @@ def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, f
     return best_lane, best_offset
 
 
+def lane_point(
+    road: OpenDrive, road_id: str, lane_id: int, s: float, offset: float
+) -> tuple[float, int, float]:
+    """Where a body in lane `lane_id`, `offset` from its centre at `s`, is across the road: ``(t, lane, offset
+    from that lane's centre)`` with ``t = lane_center_t(road_id, lane_id, s) + offset`` and the lane
+    `lane_at_t` finds at ``t`` (the lane changes mid lane change). The same floats as those two calls, with
+    one look-up of the lane borders at `s` where they are the same over a stretch of road."""
+    r = road.roads.get(road_id)
+    if r is not None and lane_id != 0 and 0.0 <= s <= r.length:  # as lane_center_t and lane_at_t take s
+        cross = r.cross_at(s)
+        if cross is not None:
+            centre = cross.centres.get(lane_id)
+            if centre is not None:
+                t = centre + offset
+                found, off = cross.lane_at(t)
+                return t, found, off
+    t = road.lane_center_t(road_id, lane_id, s) + offset
+    found, off = lane_at_t(road, road_id, s, t)
+    return t, found, off
+
+
 def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) -> None:
     """Move a road-following body `distance` metres along its lane, across road links; pose updated."""
     assert body.road_id is not None
@@ -131,9 +147,10 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
     roads = road.roads
     for _ in range(16):  # at most this many road changes in one step
         road_id, lane_id, s = body.road_id, body.lane_id, body.s
-        t = road.lane_center_t(road_id, lane_id, s) + body.offset
-        # metres along the lane per unit of s (curvature makes lanes longer or shorter than the reference line)
         r = roads.get(road_id) or road.road(road_id)
+        centre = r.centre_t(lane_id, s)  # road.lane_center_t(road_id, lane_id, s) where the table has it
+        t = (road.lane_center_t(road_id, lane_id, s) if centre is None else centre) + body.offset
+        # metres along the lane per unit of s (curvature makes lanes longer or shorter than the reference line)
         length = r.length
         # a curve parallel to the reference line at distance t has length (1 - κ t) per unit of s
         on = 0.0 if s < 0.0 else s  # min(max(s, 0.0), length), without the calls
@@ -306,8 +323,14 @@ def along_lane(
 def update_pose_from_road(road: OpenDrive, body: Body) -> None:
     road_id, s = body.road_id, body.s
     assert road_id is not None
-    t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
-    body.x, body.y, body.z, heading = road.road_xyzh(road_id, s, t)
+    r = road.roads.get(road_id)
+    if r is not None and 0.0 <= s <= r.length:  # road.road_xyzh's road and s: ask the road itself
+        centre = r.centre_t(body.lane_id, s)  # road.lane_center_t where the table has it
+        t = (road.lane_center_t(road_id, body.lane_id, s) if centre is None else centre) + body.offset
+        body.x, body.y, body.z, heading = r.world_xyz(s, t)
+    else:
+        t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
+        body.x, body.y, body.z, heading = road.road_xyzh(road_id, s, t)
     road_heading = heading if body.direction > 0 else heading + math.pi
     drift = 0.0
     speed = body.speed

@@ -241,7 +241,12 @@ def _nearest_road_point(road: OpenDrive, body: Body) -> tuple[str, int, float, f
         near = road.near_lane(body.x, body.y, road_id, body.s)
         if near is not None:
             return (road_id, *near)
-    rc = road.world_to_road(body.x, body.y, None, road_hint=road_id)
+    return _road_point_anywhere(road, body)
+
+
+def _road_point_anywhere(road: OpenDrive, body: Body) -> tuple[str, int, float, float, float, float] | None:
+    """`_nearest_road_point` searched on every road (its last road preferred where roads overlap)."""
+    rc = road.world_to_road(body.x, body.y, None, road_hint=body.road_id)
     return None if rc is None else (rc.road_id, rc.lane_id, rc.s, rc.t, rc.offset, rc.heading)
 
 
@@ -249,12 +254,19 @@ def locate(road: OpenDrive | None, body: Body) -> None:
     """Road coordinates (road, lane, s, offset, direction, z) of a body moved in world coordinates."""
     if road is None:
         return
-    point = _nearest_road_point(road, body)
-    if point is not None:
+    last = body.road_id
+    near = None if last is None else road.near_lane(body.x, body.y, last, body.s)
+    if last is not None and near is not None:  # on its road still (`_nearest_road_point`, without a tuple)
+        road_id = last
+        lane_id, s, t, offset, heading = near
+    else:
+        point = _road_point_anywhere(road, body)
+        if point is None:
+            return
         road_id, lane_id, s, t, offset, heading = point
-        body.road_id, body.lane_id, body.s, body.offset = road_id, lane_id, s, offset
-        body.direction = 1 if math.cos(body.heading - heading) >= 0 else -1
-        body.z = road.road_z(road_id, s, t)
+    body.road_id, body.lane_id, body.s, body.offset = road_id, lane_id, s, offset
+    body.direction = 1 if math.cos(body.heading - heading) >= 0 else -1
+    body.z = road.road_z(road_id, s, t)
 
 
 def track(road: OpenDrive | None, body: Body, lock_lane: bool = False) -> None:

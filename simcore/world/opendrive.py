@@ -234,6 +234,8 @@ class Geometry:
     """One planView geometry record. ``local(ds)`` gives ``(x, y, heading)`` at ``ds`` in ``[0, length]``."""
 
     kind = "geometry"
+    #: zero curvature at every ``ds`` (`curvature` gives 0.0): a Newton step on it is the along-track error
+    straight = False
 
     def __init__(self, s: float, x: float, y: float, hdg: float, length: float) -> None:
         self.s = s
@@ -260,6 +262,7 @@ class Line(Geometry):
     """A straight line."""
 
     kind = "line"
+    straight = True
 
     def __init__(self, s: float, x: float, y: float, hdg: float, length: float) -> None:
         super().__init__(s, x, y, hdg, length)
@@ -407,10 +410,19 @@ def _fresnel(xxa: float) -> tuple[float, float]:
     else:
         x = abs(xxa)
         x2 = x * x
-        if x2 < 2.5625:
+        if x2 < 2.5625:  # every spiral of a road's size: `_polevl`/`_p1evl` written out (the same operations)
             t = x2 * x2
-            ss = x * x2 * _polevl(t, _FRESNEL_SN) / _p1evl(t, _FRESNEL_SD)
-            cc = x * _polevl(t, _FRESNEL_CN) / _polevl(t, _FRESNEL_CD)
+            sn0, sn1, sn2, sn3, sn4, sn5 = _FRESNEL_SN
+            sd0, sd1, sd2, sd3, sd4, sd5 = _FRESNEL_SD
+            cn0, cn1, cn2, cn3, cn4, cn5 = _FRESNEL_CN
+            cd0, cd1, cd2, cd3, cd4, cd5, cd6 = _FRESNEL_CD
+            sn = ((((sn0 * t + sn1) * t + sn2) * t + sn3) * t + sn4) * t + sn5
+            sd = ((((t + sd0) * t + sd1) * t + sd2) * t + sd3) * t + sd4
+            sd = sd * t + sd5
+            cn = ((((cn0 * t + cn1) * t + cn2) * t + cn3) * t + cn4) * t + cn5
+            cd = (((((cd0 * t + cd1) * t + cd2) * t + cd3) * t + cd4) * t + cd5) * t + cd6
+            ss = x * x2 * sn / sd
+            cc = x * cn / cd
         elif x > 36974.0:
             cc = 0.5 + 1 / (math.pi * x) * _sinpi(x * x / 2)
             ss = 0.5 - 1 / (math.pi * x) * _cospi(x * x / 2)
@@ -740,6 +752,17 @@ class LaneCross:
             sorted(lane_id for lane_id, kind in wide if kind.lower() in DRIVING_LANE_TYPES)
         )
 
+    def lane_at(self, t: float) -> tuple[int, float]:
+        """The lane containing lateral position ``t`` (else the one with the closest centre) and the offset
+        from its centre: `simcore.scenario.motion.lane_at_t` on this stretch of road."""
+        best_lane, best_offset, best = 0, t, math.inf
+        for lane_id, lo, hi, centre in self.around:
+            if lo <= t <= hi:
+                return lane_id, t - centre
+            if abs(t - centre) < best:
+                best, best_lane, best_offset = abs(t - centre), lane_id, t - centre
+        return best_lane, best_offset
+
 
 @dataclass
 class Road:
@@ -948,6 +971,19 @@ class Road:
             return uniform
         # index 0: before every section start; k + 1: from the k-th start (as section_at's s + 1e-9)
         return crosses[bisect.bisect_right(self._cross_starts, s + 1e-9)]
+
+    def centre_t(self, lane_id: int, s: float) -> float | None:
+        """``t`` of the centre of lane `lane_id` (not 0) at ``s`` in ``[0, length]`` from the lane borders'
+        table of the stretch of road around ``s`` (`cross_at`); None where there is none: the caller asks
+        `OpenDrive.lane_center_t`, which gives the same float here."""
+        if lane_id == 0 or not 0.0 <= s <= self.length:
+            return None
+        cross = self._uniform
+        if cross is None:
+            cross = self.cross_at(s)
+            if cross is None:
+                return None
+        return cross.centres.get(lane_id)
 
     def _build_crosses(self) -> list[LaneCross | None]:
         def index(key: int, q: float) -> int:  # as section_at
@@ -1456,13 +1492,11 @@ class OpenDrive:
             road = self.road(road_id)
         if not 0.0 <= s <= road.length:
             s = self._check_s(road, s)
+        centre = road.centre_t(lane_id, s)
+        if centre is not None:
+            return centre
         if lane_id == 0:
             return road.lane_offset(s)
-        cross = road.cross_at(s)
-        if cross is not None:
-            centre = cross.centres.get(lane_id)
-            if centre is not None:
-                return centre
         centers: dict[tuple[float, int], float] | None = road.__dict__.get("_centers")
         if centers is None:
             centers = road.__dict__["_centers"] = {}
@@ -1697,27 +1731,32 @@ class OpenDrive:
         most = 2.0 * spacing + 1.0  # the longest Newton step either way
         least = -2.0 * spacing - 1.0
         g, lo, hi = road.geometry_span(s)
+        g_s, frame, straight = g.s, g.frame, g.straight  # the record's, asked again only on leaving it
         for _ in range(30):
             if not lo <= s < hi:  # left the record: as road.reference_xyh(s) and road.curvature(s)
                 g, lo, hi = road.geometry_span(s)
-            ds = s - g.s
-            ds = ds if ds >= 0.0 else 0.0
-            x, y, h, c, sn = g.frame(ds)
+                g_s, frame, straight = g.s, g.frame, g.straight
+            ds = s - g_s
+            x, y, h, c, sn = frame(ds if ds >= 0.0 else 0.0)
             at = s
             dx, dy = px - x, py - y
             along = dx * c + dy * sn
             t = -dx * sn + dy * c
-            if abs(along) < 1e-9:
+            if -1e-9 < along < 1e-9:  # abs(along) < 1e-9 (False for NaN either way)
                 break
-            denom = 1.0 - g.curvature(ds) * t
-            step = along / denom if denom > 0.2 else along
+            if straight:  # 1.0 - 0.0 * t is 1.0 (or NaN where t is not finite): either way the step is along
+                step = along
+            else:
+                denom = 1.0 - g.curvature(ds if ds >= 0.0 else 0.0) * t
+                step = along / denom if denom > 0.2 else along
             # max(least, min(most, step)) and min(max(s + step, 0.0), length), without the calls
             step = step if step < most else most
             step = step if step > least else least
             s_new = s + step
             s_new = 0.0 if s_new < 0.0 else s_new
             s_new = length if length < s_new else s_new
-            if abs(s_new - s) < 1e-10:
+            moved = s_new - s
+            if -1e-10 < moved < 1e-10:  # abs(s_new - s) < 1e-10
                 break
             s = s_new
         if at != s:
@@ -1817,7 +1856,7 @@ class OpenDrive:
         s, t, along, h = self._project(road, x, y, s0, 2.0)
         if road.superelevations:
             t /= max(math.cos(road.roll(s)), 1e-6)
-        if abs(along) > 1e-6:
+        if along > 1e-6 or along < -1e-6:  # abs(along) > 1e-6 (False for NaN either way)
             return None
         cross = road.cross_at(s)
         if cross is not None:
