@@ -24,7 +24,7 @@ from simcore.scenario.motion import (
     Body,
     advance_on_road,
     align_trailer,
-    lane_at_t,
+    lane_point,
     pull_trailer,
     update_pose_from_road,
     wrap_angle,
@@ -627,8 +627,7 @@ class ScenarioEngine:
             road = self.road
             if road is not None:
                 s = body.s
-                t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
-                lane_id, offset = lane_at_t(road, road_id, s, t)
+                t, lane_id, offset = lane_point(road, road_id, body.lane_id, s, body.offset)
                 lane = lane_coordinates(road_id, lane_id, s, t, offset)
         return entity_state(
             fixed[3],
