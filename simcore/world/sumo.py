@@ -18,6 +18,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -161,8 +162,22 @@ class SumoWorld:
 
     def __init__(self, network: Path, step_seconds: float, seed: int) -> None:
         import libsumo  # heavy import: only where a run really starts
+        from libsumo import _libsumo
 
         self._sumo: Any = libsumo
+        # the calls of every step go to libsumo's SWIG functions, bound once: the `libsumo.vehicle` and
+        # `libsumo.simulation` methods only forward to them (a Python call more each), and `simulationStep`
+        # also runs traci's step listeners, which CARLOS never registers. Errors are the same
+        # `libsumo.TraCIException`.
+        self._simulation_step: Callable[[float], None] = _libsumo.simulation_step
+        self._set_speed: Callable[[str, float], None] = _libsumo.vehicle_setSpeed
+        self._move_to: Callable[[str, str, float], None] = _libsumo.vehicle_moveTo
+        self._move_to_xy: Callable[..., None] = _libsumo.vehicle_moveToXY
+        self._vehicle_ids: Callable[[], tuple[str, ...]] = _libsumo.vehicle_getIDList
+        self._lane_id: Callable[[str], str] = _libsumo.vehicle_getLaneID
+        self._position: Callable[[str, bool], tuple[float, float]] = _libsumo.vehicle_getPosition
+        self._angle: Callable[[str], float] = _libsumo.vehicle_getAngle
+        self._speed: Callable[[str], float] = _libsumo.vehicle_getSpeed
         self.step_seconds = step_seconds
         self._front: dict[str, float] = {}  # reference point → front bumper distance
         self._scripted: set[str] = set()
@@ -296,7 +311,7 @@ class SumoWorld:
         try:
             if name in self._scripted:
                 speed = 0.0 if speed < 0.0 else speed  # max(speed, 0.0), without the builtin's call cost
-                self._sumo.vehicle.setSpeed(name, speed)
+                self._set_speed(name, speed)
                 self._targets[name] = (fx, fy, heading, speed)  # SUMO's angle only if SUMO searches
             else:
                 self._move_xy(name, fx, fy, _sumo_angle(heading))
@@ -306,7 +321,7 @@ class SumoWorld:
     def _move_xy(self, name: str, fx: float, fy: float, angle: float) -> None:
         """SUMO's own search for the place of a front bumper at (fx, fy); the vehicle is there at the end of
         the next step (remote control: it does not move by itself in that step)."""
-        move = self._sumo.vehicle.moveToXY
+        move = self._move_to_xy
         try:  # on a lane of its route: matched against the route's lanes only (half the cost)
             move(name, "", -1, fx, fy, angle, keepRoute=1, matchThreshold=ON_ROUTE_MATCH_M)
         except self._sumo.TraCIException:  # anywhere else: any lane nearby, and a new route
@@ -360,7 +375,6 @@ class SumoWorld:
         """One SUMO step; afterwards each scripted vehicle is where it was last placed. One that stays on a
         lane of its edge is put there with `moveTo` after the step (as cheap as a step); any other is left
         to SUMO's `moveToXY` search before it."""
-        sumo = self._sumo
         after: list[tuple[str, str, float]] = []
         searched: list[str] = []
         try:
@@ -375,15 +389,15 @@ class SumoWorld:
             raise SimulationError(f"SUMO could not place {name!r}: {exc}") from exc
         self._targets.clear()
         try:
-            sumo.simulationStep()
+            self._simulation_step(0.0)
             for name, lane, pos in after:
-                sumo.vehicle.moveTo(name, lane, pos)
+                self._move_to(name, lane, pos)
                 self._lane_of[name] = lane
             for name in searched:
                 self._hints.pop(name, None)
                 try:
-                    self._lane_of[name] = sumo.vehicle.getLaneID(name)
-                except sumo.TraCIException:  # not in the network (yet): SUMO searches next time too
+                    self._lane_of[name] = self._lane_id(name)
+                except self._sumo.TraCIException:  # not in the network (yet): SUMO searches next time too
                     self._lane_of.pop(name, None)
         except Exception as exc:
             raise SimulationError(f"SUMO step failed: {exc}") from exc
@@ -391,14 +405,13 @@ class SumoWorld:
     def read(self, name: str) -> SumoVehicleState | None:
         """A vehicle's pose and speed after the last step; None once it left the network (or before SUMO
         inserted it)."""
-        vehicle = self._sumo.vehicle
-        if name not in vehicle.getIDList():
+        if name not in self._vehicle_ids():
             return None
-        fx, fy = vehicle.getPosition(name)
-        heading = _heading(vehicle.getAngle(name))
+        fx, fy = self._position(name, False)
+        heading = _heading(self._angle(name))
         front = self._front[name]
         return SumoVehicleState(
-            fx - front * math.cos(heading), fy - front * math.sin(heading), heading, vehicle.getSpeed(name)
+            fx - front * math.cos(heading), fy - front * math.sin(heading), heading, self._speed(name)
         )
 
 
