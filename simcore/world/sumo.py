@@ -11,6 +11,7 @@ happens only here, when a run starts, never at operator import time.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import functools
 import hashlib
 import math
@@ -139,6 +140,31 @@ def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
     return target
 
 
+#: Xerces-C++ 3.2's `XMLPlatformUtils::Initialize(locale, nlsHome, panicHandler, memoryManager)` (C++ name)
+_XERCES_INITIALIZE = (
+    "_ZN11xercesc_3_216XMLPlatformUtils10InitializeEPKcS2_PNS_12PanicHandlerEPNS_13MemoryManagerE"
+)
+
+
+@functools.cache  # once per process
+def keep_xml_parser_initialized(libsumo_library: str) -> bool:
+    """Xerces-C++, the XML parser libsumo loads, initialised for the life of the process. libsumo initialises
+    it at every start (`XMLPlatformUtils::Initialize`, building the parser's static tables: ~40% of a start)
+    and terminates it at every close. Xerces counts these calls: only the first Initialize and the matching
+    last Terminate do any work. One Initialize of our own, never terminated, lets every later start and close
+    skip that work; what SUMO parses and simulates is the same. False (nothing done) when the library has no
+    such function (another Xerces version in another SUMO wheel)."""
+    try:
+        # the loaded library's handle: the symbol is looked up in it and in the libraries it loaded
+        initialize = getattr(ctypes.CDLL(libsumo_library), _XERCES_INITIALIZE)
+    except (OSError, AttributeError):
+        return False
+    initialize.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_void_p, ctypes.c_void_p]
+    initialize.restype = None
+    initialize(b"en_US", None, None, None)  # the C++ default arguments (XMLUni::fgXercescDefaultLocale)
+    return True
+
+
 class SumoVehicleState(NamedTuple):
     """A SUMO-driven vehicle after a step (read every step: a tuple is the cheapest record)."""
 
@@ -209,6 +235,7 @@ class SumoWorld:
             "--default.action-step-length",
             repr(step_seconds),
         ]
+        keep_xml_parser_initialized(_libsumo.__file__)
         try:
             self._sumo.start(args)
         except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError
