@@ -17,6 +17,7 @@ import hashlib
 import math
 import os
 import shutil
+import stat
 import subprocess
 import tempfile
 from collections.abc import Callable
@@ -97,21 +98,62 @@ def check_network_xml(path: Path) -> None:
         raise BadInput(f"root element is <{root_tag}>, expected <net> (a SUMO network)", file=str(path))
 
 
-def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
-    """The SUMO network for an OpenDRIVE file (converted once, cached by content hash) or a `.net.xml`."""
-    if not road_file.is_file():
-        raise BadInput("road network file not found", file=str(road_file))
-    if road_file.name.endswith(".net.xml"):
-        check_network_xml(road_file)
-        return road_file
-    if road_file.suffix != ".xodr":
-        raise BadInput("road network must be OpenDRIVE (.xodr) or SUMO (.net.xml)", file=str(road_file))
+#: a version of a file: its path, size, modification and status-change times (ns) and inode; an edit or an
+#: atomic replace changes it
+FileVersion = tuple[str, int, int, int, int]
+
+
+def file_version(path: Path) -> FileVersion | None:
+    """The version of the regular file at `path`; None when there is none."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    return (str(path.absolute()), st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino)
+
+
+#: what a warm worker (one road file, run after run) knows of its road files: the network name of each
+#: OpenDRIVE file version (its content hashed once) and the `.net.xml` versions check_network_xml passed
+_NETWORK_NAMES: dict[FileVersion, str] = {}
+_CHECKED_NETWORKS: set[FileVersion] = set()
+MAX_CACHED_FILES = 64
+
+
+def _network_name(road_file: Path) -> str:
+    """The SUMO network's file name for an OpenDRIVE file: its content, netconvert's options and SUMO's
+    version hashed."""
     digest = hashlib.sha256()
     digest.update(road_file.read_bytes())
     digest.update(" ".join(NETCONVERT_OPTIONS).encode())
     digest.update(sumo_version().encode())
+    return f"{road_file.stem}-{digest.hexdigest()[:16]}.net.xml"
+
+
+def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
+    """The SUMO network for an OpenDRIVE file (converted once, cached by content hash) or a `.net.xml`
+    (checked once per file version)."""
+    version = file_version(road_file)
+    if version is None:
+        raise BadInput("road network file not found", file=str(road_file))
+    if road_file.name.endswith(".net.xml"):
+        if version not in _CHECKED_NETWORKS:
+            check_network_xml(road_file)
+            if len(_CHECKED_NETWORKS) >= MAX_CACHED_FILES:
+                _CHECKED_NETWORKS.clear()
+            _CHECKED_NETWORKS.add(version)
+        return road_file
+    if road_file.suffix != ".xodr":
+        raise BadInput("road network must be OpenDRIVE (.xodr) or SUMO (.net.xml)", file=str(road_file))
+    name = _NETWORK_NAMES.get(version)
+    if name is None:
+        name = _network_name(road_file)
+        if len(_NETWORK_NAMES) >= MAX_CACHED_FILES:
+            _NETWORK_NAMES.clear()
+        _NETWORK_NAMES[version] = name
     cache_dir = cache_dir or default_cache_dir()
-    target = cache_dir / f"{road_file.stem}-{digest.hexdigest()[:16]}.net.xml"
+    target = cache_dir / name
     if target.is_file():
         return target
     cache_dir.mkdir(parents=True, exist_ok=True)
@@ -183,6 +225,24 @@ def _heading(angle: float) -> float:
     return math.radians(90.0 - angle)
 
 
+#: per network file version, each lane looked up so far → the lanes of its edge (None: a junction's lane): a
+#: loaded network never changes, so a warm worker's runs on one network share them
+_EDGES_OF_LANES: dict[FileVersion, dict[str, EdgeLanes | None]] = {}
+
+
+def _edges_of_lanes(version: FileVersion | None, loaded: FileVersion | None) -> dict[str, EdgeLanes | None]:
+    """The lanes known for a network whose file had `version` before SUMO loaded it and `loaded` after (the
+    same: SUMO loaded that version); a map of this run's own otherwise."""
+    if version is None or version != loaded:
+        return {}
+    known = _EDGES_OF_LANES.get(version)
+    if known is None:
+        if len(_EDGES_OF_LANES) >= MAX_CACHED_FILES:
+            _EDGES_OF_LANES.clear()
+        known = _EDGES_OF_LANES[version] = {}
+    return known
+
+
 class SumoWorld:
     """One libsumo simulation. Time advances only through `step()`."""
 
@@ -207,13 +267,11 @@ class SumoWorld:
         self.step_seconds = step_seconds
         self._front: dict[str, float] = {}  # reference point → front bumper distance
         self._scripted: set[str] = set()
-        self._departed: set[str] = set()
         # scripted vehicles: the place each is to have at the end of the next step (front x, y, heading,
         # speed), the lane it is on after the last step, and per lane the polyline segment it was on
         self._targets: dict[str, tuple[float, float, float, float]] = {}
         self._lane_of: dict[str, str] = {}
         self._hints: dict[str, dict[str, int]] = {}
-        self._edge_of_lane: dict[str, EdgeLanes | None] = {}
         args = [
             "sumo",
             "-n",
@@ -236,10 +294,12 @@ class SumoWorld:
             repr(step_seconds),
         ]
         keep_xml_parser_initialized(_libsumo.__file__)
+        version = file_version(network)
         try:
             self._sumo.start(args)
         except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError
             raise SimulationError(f"SUMO did not start: {exc}") from exc
+        self._edge_of_lane = _edges_of_lanes(version, file_version(network))
 
     def close(self) -> None:
         with contextlib.suppress(Exception):  # already closed or never started: nothing to release
