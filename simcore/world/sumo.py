@@ -216,6 +216,10 @@ class SumoVehicleState(NamedTuple):
     speed: float
 
 
+#: SumoVehicleState((x, y, heading, speed)) without the Python-level __new__ of a NamedTuple (every step)
+_vehicle_state = functools.partial(tuple.__new__, SumoVehicleState)
+
+
 def _sumo_angle(heading: float) -> float:
     """ENU heading (rad, CCW from +x) → SUMO angle (deg, clockwise from north)."""
     return (90.0 - math.degrees(heading)) % 360.0
@@ -497,8 +501,8 @@ class SumoWorld:
         fx, fy = self._position(name, False)
         heading = _heading(self._angle(name))
         front = self._front[name]
-        return SumoVehicleState(
-            fx - front * math.cos(heading), fy - front * math.sin(heading), heading, self._speed(name)
+        return _vehicle_state(
+            (fx - front * math.cos(heading), fy - front * math.sin(heading), heading, self._speed(name))
         )
 
 
