@@ -74,6 +74,7 @@ class SumoBridge:
                 if body.end_of_road_since is None:
                     body.end_of_road_since = now
                 continue
-            body.odometer += math.hypot(state.x - body.x, state.y - body.y)
-            body.x, body.y, body.heading, body.speed = state.x, state.y, state.heading, state.speed
+            x, y, body.heading, body.speed = state
+            body.odometer += math.hypot(x - body.x, y - body.y)
+            body.x, body.y = x, y
             locate(body)

@@ -11,13 +11,16 @@ happens only here, when a run starts, never at operator import time.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import functools
 import hashlib
 import math
 import os
 import shutil
+import stat
 import subprocess
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -95,21 +98,62 @@ def check_network_xml(path: Path) -> None:
         raise BadInput(f"root element is <{root_tag}>, expected <net> (a SUMO network)", file=str(path))
 
 
-def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
-    """The SUMO network for an OpenDRIVE file (converted once, cached by content hash) or a `.net.xml`."""
-    if not road_file.is_file():
-        raise BadInput("road network file not found", file=str(road_file))
-    if road_file.name.endswith(".net.xml"):
-        check_network_xml(road_file)
-        return road_file
-    if road_file.suffix != ".xodr":
-        raise BadInput("road network must be OpenDRIVE (.xodr) or SUMO (.net.xml)", file=str(road_file))
+#: a version of a file: its path, size, modification and status-change times (ns) and inode; an edit or an
+#: atomic replace changes it
+FileVersion = tuple[str, int, int, int, int]
+
+
+def file_version(path: Path) -> FileVersion | None:
+    """The version of the regular file at `path`; None when there is none."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    return (str(path.absolute()), st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino)
+
+
+#: what a warm worker (one road file, run after run) knows of its road files: the network name of each
+#: OpenDRIVE file version (its content hashed once) and the `.net.xml` versions check_network_xml passed
+_NETWORK_NAMES: dict[FileVersion, str] = {}
+_CHECKED_NETWORKS: set[FileVersion] = set()
+MAX_CACHED_FILES = 64
+
+
+def _network_name(road_file: Path) -> str:
+    """The SUMO network's file name for an OpenDRIVE file: its content, netconvert's options and SUMO's
+    version hashed."""
     digest = hashlib.sha256()
     digest.update(road_file.read_bytes())
     digest.update(" ".join(NETCONVERT_OPTIONS).encode())
     digest.update(sumo_version().encode())
+    return f"{road_file.stem}-{digest.hexdigest()[:16]}.net.xml"
+
+
+def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
+    """The SUMO network for an OpenDRIVE file (converted once, cached by content hash) or a `.net.xml`
+    (checked once per file version)."""
+    version = file_version(road_file)
+    if version is None:
+        raise BadInput("road network file not found", file=str(road_file))
+    if road_file.name.endswith(".net.xml"):
+        if version not in _CHECKED_NETWORKS:
+            check_network_xml(road_file)
+            if len(_CHECKED_NETWORKS) >= MAX_CACHED_FILES:
+                _CHECKED_NETWORKS.clear()
+            _CHECKED_NETWORKS.add(version)
+        return road_file
+    if road_file.suffix != ".xodr":
+        raise BadInput("road network must be OpenDRIVE (.xodr) or SUMO (.net.xml)", file=str(road_file))
+    name = _NETWORK_NAMES.get(version)
+    if name is None:
+        name = _network_name(road_file)
+        if len(_NETWORK_NAMES) >= MAX_CACHED_FILES:
+            _NETWORK_NAMES.clear()
+        _NETWORK_NAMES[version] = name
     cache_dir = cache_dir or default_cache_dir()
-    target = cache_dir / f"{road_file.stem}-{digest.hexdigest()[:16]}.net.xml"
+    target = cache_dir / name
     if target.is_file():
         return target
     cache_dir.mkdir(parents=True, exist_ok=True)
@@ -138,6 +182,31 @@ def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
     return target
 
 
+#: Xerces-C++ 3.2's `XMLPlatformUtils::Initialize(locale, nlsHome, panicHandler, memoryManager)` (C++ name)
+_XERCES_INITIALIZE = (
+    "_ZN11xercesc_3_216XMLPlatformUtils10InitializeEPKcS2_PNS_12PanicHandlerEPNS_13MemoryManagerE"
+)
+
+
+@functools.cache  # once per process
+def keep_xml_parser_initialized(libsumo_library: str) -> bool:
+    """Xerces-C++, the XML parser libsumo loads, initialised for the life of the process. libsumo initialises
+    it at every start (`XMLPlatformUtils::Initialize`, building the parser's static tables: ~40% of a start)
+    and terminates it at every close. Xerces counts these calls: only the first Initialize and the matching
+    last Terminate do any work. One Initialize of our own, never terminated, lets every later start and close
+    skip that work; what SUMO parses and simulates is the same. False (nothing done) when the library has no
+    such function (another Xerces version in another SUMO wheel)."""
+    try:
+        # the loaded library's handle: the symbol is looked up in it and in the libraries it loaded
+        initialize = getattr(ctypes.CDLL(libsumo_library), _XERCES_INITIALIZE)
+    except (OSError, AttributeError):
+        return False
+    initialize.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_void_p, ctypes.c_void_p]
+    initialize.restype = None
+    initialize(b"en_US", None, None, None)  # the C++ default arguments (XMLUni::fgXercescDefaultLocale)
+    return True
+
+
 class SumoVehicleState(NamedTuple):
     """A SUMO-driven vehicle after a step (read every step: a tuple is the cheapest record)."""
 
@@ -145,6 +214,10 @@ class SumoVehicleState(NamedTuple):
     y: float
     heading: float
     speed: float
+
+
+#: SumoVehicleState((x, y, heading, speed)) without the Python-level __new__ of a NamedTuple (every step)
+_vehicle_state = functools.partial(tuple.__new__, SumoVehicleState)
 
 
 def _sumo_angle(heading: float) -> float:
@@ -156,23 +229,53 @@ def _heading(angle: float) -> float:
     return math.radians(90.0 - angle)
 
 
+#: per network file version, each lane looked up so far → the lanes of its edge (None: a junction's lane): a
+#: loaded network never changes, so a warm worker's runs on one network share them
+_EDGES_OF_LANES: dict[FileVersion, dict[str, EdgeLanes | None]] = {}
+
+
+def _edges_of_lanes(version: FileVersion | None, loaded: FileVersion | None) -> dict[str, EdgeLanes | None]:
+    """The lanes known for a network whose file had `version` before SUMO loaded it and `loaded` after (the
+    same: SUMO loaded that version); a map of this run's own otherwise."""
+    if version is None or version != loaded:
+        return {}
+    known = _EDGES_OF_LANES.get(version)
+    if known is None:
+        if len(_EDGES_OF_LANES) >= MAX_CACHED_FILES:
+            _EDGES_OF_LANES.clear()
+        known = _EDGES_OF_LANES[version] = {}
+    return known
+
+
 class SumoWorld:
     """One libsumo simulation. Time advances only through `step()`."""
 
     def __init__(self, network: Path, step_seconds: float, seed: int) -> None:
         import libsumo  # heavy import: only where a run really starts
+        from libsumo import _libsumo
 
         self._sumo: Any = libsumo
+        # the calls of every step go to libsumo's SWIG functions, bound once: the `libsumo.vehicle` and
+        # `libsumo.simulation` methods only forward to them (a Python call more each), and `simulationStep`
+        # also runs traci's step listeners, which CARLOS never registers. Errors are the same
+        # `libsumo.TraCIException`.
+        self._simulation_step: Callable[[float], None] = _libsumo.simulation_step
+        self._set_speed: Callable[[str, float], None] = _libsumo.vehicle_setSpeed
+        self._move_to: Callable[[str, str, float], None] = _libsumo.vehicle_moveTo
+        self._move_to_xy: Callable[..., None] = _libsumo.vehicle_moveToXY
+        self._vehicle_ids: Callable[[], tuple[str, ...]] = _libsumo.vehicle_getIDList
+        self._lane_id: Callable[[str], str] = _libsumo.vehicle_getLaneID
+        self._position: Callable[[str, bool], tuple[float, float]] = _libsumo.vehicle_getPosition
+        self._angle: Callable[[str], float] = _libsumo.vehicle_getAngle
+        self._speed: Callable[[str], float] = _libsumo.vehicle_getSpeed
         self.step_seconds = step_seconds
         self._front: dict[str, float] = {}  # reference point → front bumper distance
         self._scripted: set[str] = set()
-        self._departed: set[str] = set()
         # scripted vehicles: the place each is to have at the end of the next step (front x, y, heading,
         # speed), the lane it is on after the last step, and per lane the polyline segment it was on
         self._targets: dict[str, tuple[float, float, float, float]] = {}
         self._lane_of: dict[str, str] = {}
         self._hints: dict[str, dict[str, int]] = {}
-        self._edge_of_lane: dict[str, EdgeLanes | None] = {}
         args = [
             "sumo",
             "-n",
@@ -194,10 +297,13 @@ class SumoWorld:
             "--default.action-step-length",
             repr(step_seconds),
         ]
+        keep_xml_parser_initialized(_libsumo.__file__)
+        version = file_version(network)
         try:
             self._sumo.start(args)
         except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError
             raise SimulationError(f"SUMO did not start: {exc}") from exc
+        self._edge_of_lane = _edges_of_lanes(version, file_version(network))
 
     def close(self) -> None:
         with contextlib.suppress(Exception):  # already closed or never started: nothing to release
@@ -296,7 +402,7 @@ class SumoWorld:
         try:
             if name in self._scripted:
                 speed = 0.0 if speed < 0.0 else speed  # max(speed, 0.0), without the builtin's call cost
-                self._sumo.vehicle.setSpeed(name, speed)
+                self._set_speed(name, speed)
                 self._targets[name] = (fx, fy, heading, speed)  # SUMO's angle only if SUMO searches
             else:
                 self._move_xy(name, fx, fy, _sumo_angle(heading))
@@ -306,7 +412,7 @@ class SumoWorld:
     def _move_xy(self, name: str, fx: float, fy: float, angle: float) -> None:
         """SUMO's own search for the place of a front bumper at (fx, fy); the vehicle is there at the end of
         the next step (remote control: it does not move by itself in that step)."""
-        move = self._sumo.vehicle.moveToXY
+        move = self._move_to_xy
         try:  # on a lane of its route: matched against the route's lanes only (half the cost)
             move(name, "", -1, fx, fy, angle, keepRoute=1, matchThreshold=ON_ROUTE_MATCH_M)
         except self._sumo.TraCIException:  # anywhere else: any lane nearby, and a new route
@@ -360,7 +466,6 @@ class SumoWorld:
         """One SUMO step; afterwards each scripted vehicle is where it was last placed. One that stays on a
         lane of its edge is put there with `moveTo` after the step (as cheap as a step); any other is left
         to SUMO's `moveToXY` search before it."""
-        sumo = self._sumo
         after: list[tuple[str, str, float]] = []
         searched: list[str] = []
         try:
@@ -375,15 +480,15 @@ class SumoWorld:
             raise SimulationError(f"SUMO could not place {name!r}: {exc}") from exc
         self._targets.clear()
         try:
-            sumo.simulationStep()
+            self._simulation_step(0.0)
             for name, lane, pos in after:
-                sumo.vehicle.moveTo(name, lane, pos)
+                self._move_to(name, lane, pos)
                 self._lane_of[name] = lane
             for name in searched:
                 self._hints.pop(name, None)
                 try:
-                    self._lane_of[name] = sumo.vehicle.getLaneID(name)
-                except sumo.TraCIException:  # not in the network (yet): SUMO searches next time too
+                    self._lane_of[name] = self._lane_id(name)
+                except self._sumo.TraCIException:  # not in the network (yet): SUMO searches next time too
                     self._lane_of.pop(name, None)
         except Exception as exc:
             raise SimulationError(f"SUMO step failed: {exc}") from exc
@@ -391,14 +496,13 @@ class SumoWorld:
     def read(self, name: str) -> SumoVehicleState | None:
         """A vehicle's pose and speed after the last step; None once it left the network (or before SUMO
         inserted it)."""
-        vehicle = self._sumo.vehicle
-        if name not in vehicle.getIDList():
+        if name not in self._vehicle_ids():
             return None
-        fx, fy = vehicle.getPosition(name)
-        heading = _heading(vehicle.getAngle(name))
+        fx, fy = self._position(name, False)
+        heading = _heading(self._angle(name))
         front = self._front[name]
-        return SumoVehicleState(
-            fx - front * math.cos(heading), fy - front * math.sin(heading), heading, vehicle.getSpeed(name)
+        return _vehicle_state(
+            (fx - front * math.cos(heading), fy - front * math.sin(heading), heading, self._speed(name))
         )
 
 
