@@ -55,12 +55,18 @@ class StoryRun:
             if len(nodes) > 1:
                 nodes.sort(key=lambda n: self.action_order.get(id(n), 0))
             self._stepped = nodes
+        world = self.world
         for node in nodes:
-            runtimes: list[Runtime] = node.runtime or []
+            runtimes: list[Runtime] | None = node.runtime
+            if not runtimes:
+                continue
             for runtime in runtimes:
-                self.world.owner = runtime.actor
+                world.owner = runtime.actor
                 runtime.step(dt)
-            if runtimes and all(r.done for r in runtimes):
+            for runtime in runtimes:
+                if not runtime.done:
+                    break
+            else:  # all done
                 self.release(node)
                 self.set(node, Transition.END, State.COMPLETE)
         self.complete_elements()
@@ -221,11 +227,12 @@ class StoryRun:
                             if event.state != State.STANDBY:
                                 continue
                             ev: m.Event = event.definition
-                            triggering: list[str] = []
+                            gdef: m.ManeuverGroup = group.definition
+                            # the entities that trigger it, where they are the actors
+                            triggering: list[str] | None = [] if gdef.select_triggering_entities else None
                             if ev.start_trigger is None or self.triggers.fire(ev.start_trigger, triggering):
-                                gdef: m.ManeuverGroup = group.definition
                                 actors = gdef.actors
-                                if gdef.select_triggering_entities and triggering:
+                                if triggering:
                                     actors = tuple(dict.fromkeys(triggering))
                                 self.start_event(event, actors)
 
