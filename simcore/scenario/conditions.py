@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import operator
 from collections.abc import Callable
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from simcore.errors import BadInput
@@ -41,6 +42,8 @@ def compare(rule: str, a: Any, b: Any) -> bool:
 #: a condition's value now, bound to one run (see `bind`); an entity condition adds the entities that fulfil
 #: it to the list given (None: nobody asks which)
 Bound = Callable[[list[str] | None], bool]
+#: an entity condition bound to one run, evaluated for one triggering entity
+EntityTest = Callable[["Body"], bool]
 
 
 def holds(cond: m.Condition, world: ScenarioWorld, triggering: list[str] | None) -> bool:
@@ -62,9 +65,21 @@ def bind(cond: m.Condition, world: ScenarioWorld) -> Bound:
         return lambda triggering: evaluate_value(c, world)
     condition = cond.entity_condition
     assert condition is not None
+    return _for_entities(cond, world, _bind_entity(condition, world))
+
+
+def _bind_entity(condition: m.EntityCondition, world: ScenarioWorld) -> EntityTest:
+    binder = ENTITY_BINDERS.get(type(condition))
+    if binder is not None:
+        return binder(condition, world)
     evaluate = ENTITY_CONDITIONS.get(type(condition))
     if evaluate is None:
         raise BadInput(f"condition {type(condition).__name__} is not supported", file=world.source)
+    return partial(evaluate, condition, world)
+
+
+def _for_entities(cond: m.Condition, world: ScenarioWorld, evaluate: EntityTest) -> Bound:
+    """An entity condition over its triggering entities."""
     names = cond.triggering_entities
     if len(names) == 1:
         # one entity: "any" and "all" alike hold when it is in the world and fulfils the condition
@@ -74,7 +89,7 @@ def bind(cond: m.Condition, world: ScenarioWorld) -> Bound:
             body = world.body(name)
             if body.gone:
                 return False
-            result = evaluate(condition, world, body)
+            result = evaluate(body)
             if result and triggering is not None:
                 triggering.append(name)
             return result
@@ -91,7 +106,7 @@ def bind(cond: m.Condition, world: ScenarioWorld) -> Bound:
             body = world.body(name)
             if body.gone:
                 continue
-            result = evaluate(condition, world, body)
+            result = evaluate(body)
             if result:
                 hits.append(name)
                 if not every:
@@ -245,18 +260,36 @@ APART = 1e-3
 
 
 def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool:
-    others = [world.body(c.entity)] if c.entity else [b for b in world.bodies.values() if b is not body]
+    return bind_collision(c, world)(body)
+
+
+def bind_collision(c: m.CollisionCondition, world: ScenarioWorld) -> EntityTest:
     # the footprints this step (the ones `EntityState.corners()` gives, without building the states)
-    measure = world.measure
-    mine = None
-    for other in others:
-        if measure.box_distance_lower_bound(body, other) > APART:
-            continue
-        if mine is None:
-            mine = measure.box(body)
-        if boxes_overlap(mine, measure.box(other)):
-            return True
-    return False
+    name = c.entity
+    if name:
+
+        def with_entity(body: Body) -> bool:
+            other = world.body(name)
+            measure = world.measure
+            if measure.box_distance_lower_bound(body, other) > APART:
+                return False
+            return boxes_overlap(measure.box(body), measure.box(other))
+
+        return with_entity
+
+    def with_any(body: Body) -> bool:
+        measure = world.measure
+        mine = None
+        for other in world.bodies.values():
+            if other is body or measure.box_distance_lower_bound(body, other) > APART:
+                continue
+            if mine is None:
+                mine = measure.box(body)
+            if boxes_overlap(mine, measure.box(other)):
+                return True
+        return False
+
+    return with_any
 
 
 REACH_ANGLE_TOLERANCE = 1e-6  # rad: esmini's ReachPosition with an Orientation wants the heading itself
@@ -408,6 +441,7 @@ def relative_clearance(c: m.RelativeClearanceCondition, world: ScenarioWorld, bo
 ValueEvaluator = Callable[[Any, "ScenarioWorld"], bool]
 EntityEvaluator = Callable[[Any, "ScenarioWorld", "Body"], bool]
 ValueBinder = Callable[[Any, "ScenarioWorld"], Bound]
+EntityBinder = Callable[[Any, "ScenarioWorld"], EntityTest]
 
 #: value condition type → its evaluation
 VALUE_CONDITIONS: dict[type, ValueEvaluator] = {
@@ -418,6 +452,12 @@ VALUE_CONDITIONS: dict[type, ValueEvaluator] = {
     m.TrafficSignalCondition: traffic_signal,
     m.TrafficSignalControllerCondition: traffic_signal_controller,
     m.UnsupportedCondition: unsupported,
+}
+
+#: entity condition type → its evaluation for one triggering entity, bound to one run, where binding saves
+#: work at every evaluation
+ENTITY_BINDERS: dict[type, EntityBinder] = {
+    m.CollisionCondition: bind_collision,
 }
 
 #: value condition type → its evaluation bound to one run, where binding saves work at every evaluation

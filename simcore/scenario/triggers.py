@@ -38,8 +38,21 @@ class ConditionState:
 
     def _first(self, triggering: list[str] | None) -> bool:
         self.value = bind(self.condition, self.world)
-        self.check = self.value if self.edge == "none" and self.delay <= 0 else self._edged
+        undelayed = self.delay <= 0
+        if undelayed and self.edge == "none":
+            self.check = self.value
+        elif undelayed and self.edge == "rising":
+            self.check = self._rising
+        else:
+            self.check = self._edged
         return self.check(triggering)
+
+    def _rising(self, triggering: list[str] | None) -> bool:
+        """`_edged` for the commonest edged condition: rising, without delay."""
+        value = self.value(triggering)
+        previous = self.previous
+        self.previous = value
+        return value and not (value if previous is None else previous)
 
     def _edged(self, triggering: list[str] | None) -> bool:
         value = self.value(triggering)
