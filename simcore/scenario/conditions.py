@@ -19,7 +19,7 @@ from simcore.scenario import model as m
 from simcore.scenario.measure import LARGE, directional
 from simcore.scenario.motion import lane_shift, wrap_angle
 from simcore.scenario.positions import fixed_point
-from simcore.scenario.storyboard import transition_of
+from simcore.scenario.storyboard import state_of, transition_of
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
@@ -163,27 +163,26 @@ def bind_storyboard_element_state(c: m.StoryboardElementStateCondition, world: S
         )
     transition = transition_of(c.state)
     if transition is None:
-        state = c.state
+        state = state_of(c.state)  # (None: a name of neither, which no element matches)
 
         def in_state(triggering: list[str] | None) -> bool:
-            step = world.step_index
-            return any(node.is_(state, step) for node in nodes)
+            return any(node.state is state for node in nodes)
 
         bound = in_state
     else:
         # a transition holds when the element went through it since this condition was last evaluated
         # (every transition counts once for each condition, however late it looks; as esmini): per element,
         # how many of those transitions this condition has seen
-        seen: dict[int, int] = {}
-        kind = transition
+        name = transition.value
+        seen = [0] * len(nodes)
 
         def went_through(triggering: list[str] | None) -> bool:
             happened = False
-            for node in nodes:
-                count = node.counts.get(kind, 0)
-                if count > seen.get(id(node), 0):
+            for i, node in enumerate(nodes):
+                count = node.counts.get(name, 0)
+                if count > seen[i]:
                     happened = True
-                    seen[id(node)] = count
+                    seen[i] = count
             return happened
 
         bound = went_through
