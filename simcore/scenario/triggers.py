@@ -101,11 +101,10 @@ class Triggers:
         return state
 
     def _groups_of(self, trigger: m.Trigger) -> tuple[tuple[ConditionState, ...], ...]:
-        entry = self._groups.get(id(trigger))
-        if entry is None or entry[0] is not trigger:
-            groups = tuple(tuple(self._state(c) for c in group) for group in trigger.groups)
-            entry = self._groups[id(trigger)] = (trigger, groups)
-        return entry[1]
+        """The condition states of a trigger fired for the first time."""
+        groups = tuple(tuple(self._state(c) for c in group) for group in trigger.groups)
+        self._groups[id(trigger)] = (trigger, groups)
+        return groups
 
     def fire(self, trigger: m.Trigger | None, triggering: list[str] | None = None) -> bool:
         """OR over groups, AND within a group (as esmini: every group is evaluated; within a group, once a
@@ -114,7 +113,8 @@ class Triggers:
         The entities that fulfil the entity conditions of the groups that hold are added to `triggering`."""
         if trigger is None:
             return False
-        groups = self._groups_of(trigger)
+        entry = self._groups.get(id(trigger))
+        groups = entry[1] if entry is not None and entry[0] is trigger else self._groups_of(trigger)
         fired = False
         for group in groups:
             # the entities a group adds are taken back when the group does not hold
