@@ -56,16 +56,6 @@ class Node:
         self.counts[name] = self.counts.get(name, 0) + 1
         log.append(f"{time:8.3f} {self.kind} {self.name}: {name} → {state.value}")
 
-    def is_(self, state_name: str, step: int) -> bool:
-        """Does the element match `state_name` (a state, or a transition seen this step or the previous one)?"""
-        state = _STATES.get(state_name)
-        if state is not None:
-            return self.state is state
-        transition = _TRANSITIONS.get(state_name)
-        return (
-            transition is not None and self.last_transition is transition and self.transition_step >= step - 1
-        )
-
     def walk(self) -> list[Node]:
         nodes = [self]
         for child in self.children:
