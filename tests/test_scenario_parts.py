@@ -117,6 +117,102 @@ def test_an_unknown_condition_type_is_bad_input_naming_it() -> None:
         holds(condition, world, [])
 
 
+def test_a_group_that_does_not_hold_adds_no_triggering_entity() -> None:
+    """The entities of a group are the trigger's only when the whole group holds (AND within it), and those
+    of every group that holds are (OR over groups, in their order)."""
+    stand_in, world = _world("A", "B", "C")
+    stand_in.bodies["A"].speed = 20.0
+    stand_in.bodies["C"].speed = 30.0
+    held_not = (_faster_than(10.0, "A"), _faster_than(10.0, "B"))  # A holds, B does not
+    trigger = m.Trigger((held_not, (_faster_than(10.0, "C"),), (_faster_than(10.0, "A", "B"),)))
+    triggering: list[str] = ["earlier"]
+    assert Triggers(world).fire(trigger, triggering)
+    assert triggering == ["earlier", "C", "A"]
+    triggering = []
+    assert not Triggers(world).fire(m.Trigger((held_not,)), triggering) and triggering == []
+
+
+def test_a_rising_edge_without_delay_fires_as_the_edge_and_delay_rules_say() -> None:
+    """The shortcut of the commonest edged condition (rising, no delay) against the general rule, on every
+    sequence of five values, and after the trigger fired (its edges start over)."""
+    import itertools
+
+    from simcore.scenario.triggers import ConditionState
+
+    for values in itertools.product((False, True), repeat=5):
+        fired = {}
+        for general in (False, True):
+            stand_in, world = _world("A")
+            state = ConditionState(_faster_than(10.0, "A", edge="rising"), world)
+            stand_in.bodies["A"].speed = 0.0
+            state.check(None)  # bound now
+            assert state.check == state._rising
+            if general:
+                state.check = state._edged
+            state.previous = None
+            seen = []
+            for i, value in enumerate(values):
+                stand_in.bodies["A"].speed = 20.0 if value else 0.0
+                if i == 3:
+                    state.previous = None  # as after the trigger fired
+                seen.append(state.check(None))
+            fired[general] = seen
+        assert fired[False] == fired[True], values
+
+
+def test_an_element_state_condition_sees_each_transition_once_however_it_is_evaluated() -> None:
+    """A StoryboardElementStateCondition keeps one count of the transitions it has seen per run, shared by
+    its triggers and `holds`."""
+    from simcore.scenario.storyboard import Node, Registry, State, Transition
+
+    root = Node("storyboard", "storyboard", None)
+    event = Node("event", "E", None, root)
+    root.children.append(event)
+    stand_in, world = _world("A")
+    stand_in.registry = Registry(root)  # type: ignore[attr-defined]
+    stand_in.step_index = 0  # type: ignore[attr-defined]
+    cond = m.Condition(
+        "ended",
+        0.0,
+        "none",
+        value_condition=m.StoryboardElementStateCondition("event", "E", "endTransition"),
+    )
+    triggers = Triggers(world)
+    trigger = m.Trigger(((cond,),))
+    assert not triggers.fire(trigger)
+    event.transition(Transition.END, State.COMPLETE, 1, [], 0.1)
+    assert holds(cond, world, None)  # seen here ...
+    assert not triggers.fire(trigger)  # ... so not again
+    event.transition(Transition.END, State.COMPLETE, 2, [], 0.2)
+    assert triggers.fire(trigger)
+    assert not holds(cond, world, None)
+
+
+def test_collision_with_any_entity_is_collision_with_one_of_them() -> None:
+    import math
+
+    from simcore.scenario.conditions import bind_collision
+    from simcore.scenario.measure import Measure
+
+    for dx, dy, heading in (
+        (4.5, 0.0, 0.0),
+        (4.5 + 1e-4, 0.0, 0.0),
+        (0.0, 1.8, 0.0),
+        (4.54, -1.4, math.pi / 2),
+    ):
+        stand_in, world = _world("Ego", "Other", "Far")
+        stand_in.step_index = 0  # type: ignore[attr-defined]
+        stand_in.road = None  # type: ignore[attr-defined]
+        stand_in.measure = Measure(stand_in)  # type: ignore[attr-defined,arg-type]
+        other = stand_in.bodies["Other"]
+        other.x, other.y, other.heading = dx, dy, heading
+        stand_in.bodies["Far"].x = 100.0
+        ego = stand_in.bodies["Ego"]
+        expected = bind_collision(m.CollisionCondition("Other"), world)(ego)
+        assert bind_collision(m.CollisionCondition(None), world)(ego) == expected
+        assert not bind_collision(m.CollisionCondition("Far"), world)(ego)
+
+
 def test_a_scenario_file_is_parsed_once_per_version_and_loaded_with_each_load_s_values(
     tmp_path: Path,
 ) -> None:

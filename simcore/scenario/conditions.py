@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import operator
 from collections.abc import Callable
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from simcore.errors import BadInput
@@ -18,7 +19,7 @@ from simcore.scenario import model as m
 from simcore.scenario.measure import LARGE, directional
 from simcore.scenario.motion import lane_shift, wrap_angle
 from simcore.scenario.positions import fixed_point
-from simcore.scenario.storyboard import Node, Transition, transition_of
+from simcore.scenario.storyboard import state_of, transition_of
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
@@ -38,78 +39,155 @@ def compare(rule: str, a: Any, b: Any) -> bool:
     return bool(_COMPARE[rule](a, b))
 
 
-def holds(cond: m.Condition, world: ScenarioWorld, triggering: list[str]) -> bool:
+#: a condition's value now, bound to one run (see `bind`); an entity condition adds the entities that fulfil
+#: it to the list given (None: nobody asks which)
+Bound = Callable[[list[str] | None], bool]
+#: an entity condition bound to one run, evaluated for one triggering entity
+EntityTest = Callable[["Body"], bool]
+
+
+def holds(cond: m.Condition, world: ScenarioWorld, triggering: list[str] | None) -> bool:
     """Whether a condition's value holds now (before its edge and delay); the entities that fulfil an
     entity condition are added to `triggering`."""
+    return bind(cond, world)(triggering)
+
+
+def bind(cond: m.Condition, world: ScenarioWorld) -> Bound:
+    """A condition's evaluation in `world`, with what does not change during the run looked up once (the
+    evaluator of its type, its entities, its rule). Raises what evaluating it would raise (an entity
+    condition of a type not supported, a storyboard element that does not exist): bind when evaluating."""
     if cond.value_condition is not None:
         c = cond.value_condition
-        return VALUE_CONDITIONS[type(c)](c, world)
+        binder = VALUE_BINDERS.get(type(c))
+        if binder is not None:
+            return binder(c, world)
+        evaluate_value = VALUE_CONDITIONS[type(c)]
+        return lambda triggering: evaluate_value(c, world)
     condition = cond.entity_condition
     assert condition is not None
+    return _for_entities(cond, world, _bind_entity(condition, world))
+
+
+def _bind_entity(condition: m.EntityCondition, world: ScenarioWorld) -> EntityTest:
+    binder = ENTITY_BINDERS.get(type(condition))
+    if binder is not None:
+        return binder(condition, world)
     evaluate = ENTITY_CONDITIONS.get(type(condition))
     if evaluate is None:
         raise BadInput(f"condition {type(condition).__name__} is not supported", file=world.source)
-    # entities not in the world are skipped; "any" stops at the first entity that fulfils it (the one
-    # that triggers), "all" at the first that does not (as esmini)
+    return partial(evaluate, condition, world)
+
+
+def _for_entities(cond: m.Condition, world: ScenarioWorld, evaluate: EntityTest) -> Bound:
+    """An entity condition over its triggering entities."""
+    names = cond.triggering_entities
+    if len(names) == 1:
+        # one entity: "any" and "all" alike hold when it is in the world and fulfils the condition
+        name = names[0]
+
+        def one(triggering: list[str] | None) -> bool:
+            body = world.body(name)
+            if body.gone:
+                return False
+            result = evaluate(body)
+            if result and triggering is not None:
+                triggering.append(name)
+            return result
+
+        return one
     every = cond.triggering_rule == "all"
-    result = False
-    hits: list[str] = []
-    for name in cond.triggering_entities:
-        body = world.body(name)
-        if body.gone:
-            continue
-        result = evaluate(condition, world, body)
-        if result:
-            hits.append(name)
-            if not every:
-                break
-        elif every:
-            return False
-    if result:
-        triggering.extend(hits)
-    return result
+
+    def each(triggering: list[str] | None) -> bool:
+        # entities not in the world are skipped; "any" stops at the first entity that fulfils it (the one
+        # that triggers), "all" at the first that does not (as esmini)
+        result = False
+        hits: list[str] = []
+        for name in names:
+            body = world.body(name)
+            if body.gone:
+                continue
+            result = evaluate(body)
+            if result:
+                hits.append(name)
+                if not every:
+                    break
+            elif every:
+                return False
+        if result and triggering is not None:
+            triggering.extend(hits)
+        return result
+
+    return each
 
 
 # --- value conditions -------------------------------------------------------------------------------------
 
 
 def simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> bool:
+    return bind_simulation_time(c, world)(None)
+
+
+def bind_simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> Bound:
     # to a nanosecond: step 3 of 0.05 s is at 0.15000000000000002 s, which is not "greater than 0.15" (esmini
     # holds a condition "t > k·dt" from step k + 1 on, for every k)
     # (rounding to digits is slow: the condition's value is rounded once; the clock only near it, where the
     # rounding decides: more than a microsecond away, rounding by at most half a nanosecond changes no order)
-    value = world.memo.get(("simulation_time", id(c)))
-    if value is None:
-        value = world.memo[("simulation_time", id(c))] = round(c.value, 9)
-    now = world.time
-    return compare(c.rule, now if abs(now - value) > 1e-6 else round(now, 9), value)
+    value = round(c.value, 9)
+    op = _COMPARE.get(c.rule)
+    if op is None:
+        return lambda triggering: compare(c.rule, world.time, value)  # raises as `compare` does
+
+    def now_holds(triggering: list[str] | None) -> bool:
+        now = world.time
+        return bool(op(now if abs(now - value) > 1e-6 else round(now, 9), value))
+
+    return now_holds
 
 
 def storyboard_element_state(c: m.StoryboardElementStateCondition, world: ScenarioWorld) -> bool:
-    # per condition, found once: the elements, the transition it names (None: a state) and, per element, how
-    # many of those transitions this condition has seen
+    return bind_storyboard_element_state(c, world)(None)
+
+
+def bind_storyboard_element_state(c: m.StoryboardElementStateCondition, world: ScenarioWorld) -> Bound:
+    """The condition's evaluation, made once per run (kept in `world.memo`: it counts the transitions it has
+    seen, whichever way it is evaluated)."""
     key = ("element_state", id(c))
-    found: tuple[list[Node], Transition | None, dict[int, int]] | None = world.memo.get(key)
-    if found is None:
-        nodes = world.registry.find(c.element_type, c.element_ref)
-        if not nodes:
-            raise BadInput(
-                f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
-                file=world.source,
-            )
-        found = world.memo[key] = (nodes, transition_of(c.state), {})
-    nodes, transition, seen = found
+    bound: Bound | None = world.memo.get(key)
+    if bound is not None:
+        return bound
+    nodes = world.registry.find(c.element_type, c.element_ref)
+    if not nodes:
+        raise BadInput(
+            f"StoryboardElementStateCondition refers to {c.element_type} {c.element_ref!r}, which does not exist",
+            file=world.source,
+        )
+    transition = transition_of(c.state)
     if transition is None:
-        return any(node.is_(c.state, world.step_index) for node in nodes)
-    # a transition holds when the element went through it since this condition was last evaluated
-    # (every transition counts once for each condition, however late it looks; as esmini)
-    happened = False
-    for node in nodes:
-        count = node.counts.get(transition, 0)
-        if count > seen.get(id(node), 0):
-            happened = True
-            seen[id(node)] = count
-    return happened
+        state = state_of(c.state)  # (None: a name of neither, which no element matches)
+
+        def in_state(triggering: list[str] | None) -> bool:
+            return any(node.state is state for node in nodes)
+
+        bound = in_state
+    else:
+        # a transition holds when the element went through it since this condition was last evaluated
+        # (every transition counts once for each condition, however late it looks; as esmini): per element,
+        # how many of those transitions this condition has seen
+        name = transition.value
+        seen = [0] * len(nodes)
+
+        def went_through(triggering: list[str] | None) -> bool:
+            happened = False
+            for i, node in enumerate(nodes):
+                count = node.counts.get(name, 0)
+                if count > seen[i]:
+                    happened = True
+                    seen[i] = count
+            return happened
+
+        bound = went_through
+    world.memo[key] = bound
+    return bound
 
 
 def traffic_signal(c: m.TrafficSignalCondition, world: ScenarioWorld) -> bool:
@@ -181,18 +259,36 @@ APART = 1e-3
 
 
 def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool:
-    others = [world.body(c.entity)] if c.entity else [b for b in world.bodies.values() if b is not body]
+    return bind_collision(c, world)(body)
+
+
+def bind_collision(c: m.CollisionCondition, world: ScenarioWorld) -> EntityTest:
     # the footprints this step (the ones `EntityState.corners()` gives, without building the states)
-    measure = world.measure
-    mine = None
-    for other in others:
-        if measure.box_distance_lower_bound(body, other) > APART:
-            continue
-        if mine is None:
-            mine = measure.box(body)
-        if boxes_overlap(mine, measure.box(other)):
-            return True
-    return False
+    name = c.entity
+    if name:
+
+        def with_entity(body: Body) -> bool:
+            other = world.body(name)
+            measure = world.measure
+            if measure.box_distance_lower_bound(body, other) > APART:
+                return False
+            return boxes_overlap(measure.box(body), measure.box(other))
+
+        return with_entity
+
+    def with_any(body: Body) -> bool:
+        measure = world.measure
+        mine = None
+        for other in world.bodies.values():
+            if other is body or measure.box_distance_lower_bound(body, other) > APART:
+                continue
+            if mine is None:
+                mine = measure.box(body)
+            if boxes_overlap(mine, measure.box(other)):
+                return True
+        return False
+
+    return with_any
 
 
 REACH_ANGLE_TOLERANCE = 1e-6  # rad: esmini's ReachPosition with an Orientation wants the heading itself
@@ -343,6 +439,8 @@ def relative_clearance(c: m.RelativeClearanceCondition, world: ScenarioWorld, bo
 
 ValueEvaluator = Callable[[Any, "ScenarioWorld"], bool]
 EntityEvaluator = Callable[[Any, "ScenarioWorld", "Body"], bool]
+ValueBinder = Callable[[Any, "ScenarioWorld"], Bound]
+EntityBinder = Callable[[Any, "ScenarioWorld"], EntityTest]
 
 #: value condition type → its evaluation
 VALUE_CONDITIONS: dict[type, ValueEvaluator] = {
@@ -353,6 +451,18 @@ VALUE_CONDITIONS: dict[type, ValueEvaluator] = {
     m.TrafficSignalCondition: traffic_signal,
     m.TrafficSignalControllerCondition: traffic_signal_controller,
     m.UnsupportedCondition: unsupported,
+}
+
+#: entity condition type → its evaluation for one triggering entity, bound to one run, where binding saves
+#: work at every evaluation
+ENTITY_BINDERS: dict[type, EntityBinder] = {
+    m.CollisionCondition: bind_collision,
+}
+
+#: value condition type → its evaluation bound to one run, where binding saves work at every evaluation
+VALUE_BINDERS: dict[type, ValueBinder] = {
+    m.SimulationTimeCondition: bind_simulation_time,
+    m.StoryboardElementStateCondition: bind_storyboard_element_state,
 }
 
 #: entity condition type → its evaluation for one triggering entity

@@ -344,17 +344,23 @@ def _extent_along(body: Body, front: bool) -> float:
 def axis_gaps(a: Box, b: Box) -> Point:
     """Gaps between the boxes' projections on a's forward and left axes: positive when b is ahead (left),
     negative behind (right), 0 where the projections overlap."""
-    out = []
-    for ax, ay in a.axes:
-        pa = [x * ax + y * ay for x, y in a.corners]
-        pb = [x * ax + y * ay for x, y in b.corners]
-        if max(pa) < min(pb) - SMALL:
-            out.append(min(pb) - max(pa))
-        elif min(pa) > max(pb) + SMALL:
-            out.append(max(pb) - min(pa))
-        else:
-            out.append(0.0)
-    return out[0], out[1]
+    (fx, fy), (lx, ly) = a.axes
+    return _projection_gap(a, b, fx, fy), _projection_gap(a, b, lx, ly)
+
+
+def _projection_gap(a: Box, b: Box, ax: float, ay: float) -> float:
+    # (unrolled: builtin min and max of the same four values, in the same order, as of a list of them)
+    (a0x, a0y), (a1x, a1y), (a2x, a2y), (a3x, a3y) = a.corners
+    (b0x, b0y), (b1x, b1y), (b2x, b2y), (b3x, b3y) = b.corners
+    p0, p1, p2, p3 = a0x * ax + a0y * ay, a1x * ax + a1y * ay, a2x * ax + a2y * ay, a3x * ax + a3y * ay
+    q0, q1, q2, q3 = b0x * ax + b0y * ay, b1x * ax + b1y * ay, b2x * ax + b2y * ay, b3x * ax + b3y * ay
+    a_min, a_max = min(p0, p1, p2, p3), max(p0, p1, p2, p3)
+    b_min, b_max = min(q0, q1, q2, q3), max(q0, q1, q2, q3)
+    if a_max < b_min - SMALL:
+        return b_min - a_max
+    if a_min > b_max + SMALL:
+        return b_max - a_min
+    return 0.0
 
 
 def _point_gaps(box: Box, heading: float, x: float, y: float) -> tuple[float, float, float]:

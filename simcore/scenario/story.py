@@ -19,6 +19,13 @@ if TYPE_CHECKING:
     from simcore.scenario.triggers import Triggers
 
 
+# the states and transitions as module globals: a member read from its Enum class (`State.RUNNING`) goes
+# through a descriptor written in Python on Python 3.11, some 20 times slower, and the storyboard's states
+# are read at every step
+STANDBY, RUNNING, COMPLETE = State.STANDBY, State.RUNNING, State.COMPLETE
+START, END, STOP, SKIP = Transition.START, Transition.END, Transition.STOP, Transition.SKIP
+
+
 class StoryWorld(ActionWorld, Protocol):
     owner: Body | None  # the actor whose action runs now ("$owner")
     init_runtimes: list[Runtime]  # the Init actions still running
@@ -42,9 +49,9 @@ class StoryRun:
 
     def begin(self) -> None:
         """The storyboard and its stories start running (after Init)."""
-        self.root.transition(Transition.START, State.RUNNING, 0, self.world.log, 0.0)
+        self.root.transition(START, RUNNING, 0, self.world.log, 0.0)
         for story in self.root.children:
-            story.transition(Transition.START, State.RUNNING, 0, self.world.log, 0.0)
+            story.transition(START, RUNNING, 0, self.world.log, 0.0)
 
     def step_actions(self, dt: float) -> None:
         """Step the running actions in the storyboard's order (as esmini, not in the order they started);
@@ -55,14 +62,20 @@ class StoryRun:
             if len(nodes) > 1:
                 nodes.sort(key=lambda n: self.action_order.get(id(n), 0))
             self._stepped = nodes
+        world = self.world
         for node in nodes:
-            runtimes: list[Runtime] = node.runtime or []
+            runtimes: list[Runtime] | None = node.runtime
+            if not runtimes:
+                continue
             for runtime in runtimes:
-                self.world.owner = runtime.actor
+                world.owner = runtime.actor
                 runtime.step(dt)
-            if runtimes and all(r.done for r in runtimes):
+            for runtime in runtimes:
+                if not runtime.done:
+                    break
+            else:  # all done
                 self.release(node)
-                self.set(node, Transition.END, State.COMPLETE)
+                self.set(node, END, COMPLETE)
         self.complete_elements()
 
     def end_finished_actions(self) -> None:
@@ -71,7 +84,7 @@ class StoryRun:
             runtimes = node.runtime or []
             if runtimes and all(r.done for r in runtimes):
                 self.release(node)
-                self.set(node, Transition.END, State.COMPLETE)
+                self.set(node, END, COMPLETE)
         self.complete_elements()
 
     def stop_action_of(self, actor: str, domain: str) -> None:
@@ -79,7 +92,7 @@ class StoryRun:
         running = self.running.get((actor, domain))
         if running is not None:
             self.release(running)
-            self.set(running, Transition.STOP, State.COMPLETE)
+            self.set(running, STOP, COMPLETE)
 
     def build(self) -> Node:
         root = Node("storyboard", "storyboard", None)
@@ -110,12 +123,12 @@ class StoryRun:
 
     def stop(self, node: Node) -> None:
         for child in node.children:
-            if child.state != State.COMPLETE:
+            if child.state != COMPLETE:
                 self.stop(child)
         if node.kind == "action":
             self.release(node)
-        if node.state != State.COMPLETE:
-            self.set(node, Transition.STOP, State.COMPLETE)
+        if node.state != COMPLETE:
+            self.set(node, STOP, COMPLETE)
 
     def release(self, node: Node) -> None:
         for key, running in list(self.running.items()):
@@ -125,32 +138,32 @@ class StoryRun:
         node.runtime = None
 
     def start_group(self, group: Node) -> None:
-        self.set(group, Transition.START, State.RUNNING)
+        self.set(group, START, RUNNING)
         for maneuver in group.children:
-            maneuver.state = State.STANDBY
+            maneuver.state = STANDBY
             maneuver.executions = 0
-            self.set(maneuver, Transition.START, State.RUNNING)
+            self.set(maneuver, START, RUNNING)
             for event in maneuver.children:
-                event.state = State.STANDBY
+                event.state = STANDBY
                 event.executions = 0
                 for action in event.children:
-                    action.state = State.STANDBY
+                    action.state = STANDBY
 
     def start_event(self, event: Node, actors: tuple[str, ...]) -> None:
         definition: m.Event = event.definition
         maneuver = event.parent
         assert maneuver is not None
-        others = [e for e in maneuver.children if e is not event and e.state == State.RUNNING]
+        others = [e for e in maneuver.children if e is not event and e.state == RUNNING]
         if definition.priority == "skip" and others:
-            self.set(event, Transition.SKIP, State.STANDBY)
+            self.set(event, SKIP, STANDBY)
             return
         if definition.priority in ("override", "overwrite"):
             for other in others:
                 self.stop(other)
                 other.executions += 1
-        self.set(event, Transition.START, State.RUNNING)
+        self.set(event, START, RUNNING)
         for action in event.children:
-            self.set(action, Transition.START, State.RUNNING)
+            self.set(action, START, RUNNING)
             self.start_action(action, actors)
 
     def start_action(self, node: Node, actors: tuple[str, ...]) -> None:
@@ -158,7 +171,7 @@ class StoryRun:
         if action.private is None:
             if action.global_action is not None:
                 global_actions.run(self.world, action.global_action)
-            self.set(node, Transition.END, State.COMPLETE)
+            self.set(node, END, COMPLETE)
             return
         runtimes = []
         for actor_name in actors:
@@ -170,7 +183,7 @@ class StoryRun:
             if previous is not None and previous is not node:
                 # a new action of the same domain on the same actor overrides the running one
                 self.release(previous)
-                self.set(previous, Transition.STOP, State.COMPLETE)
+                self.set(previous, STOP, COMPLETE)
             self.running[key] = node
             self._stepped = None
             # an Init action still running in this domain (a distance kept from the start) is overridden too
@@ -182,7 +195,7 @@ class StoryRun:
         node.runtime = runtimes
         if all(r.done for r in runtimes):
             self.release(node)
-            self.set(node, Transition.END, State.COMPLETE)
+            self.set(node, END, COMPLETE)
 
     def check_stop(self) -> bool:
         """The storyboard's StopTrigger: when it fires, every element stops."""
@@ -196,36 +209,37 @@ class StoryRun:
         for story in self.root.children:
             for act in story.children:
                 definition: m.Act = act.definition
-                if act.state == State.STANDBY:
+                if act.state == STANDBY:
                     if definition.start_trigger is None or self.triggers.fire(definition.start_trigger):
-                        self.set(act, Transition.START, State.RUNNING)
+                        self.set(act, START, RUNNING)
                         for group in act.children:
                             self.start_group(group)
                 elif (
-                    act.state == State.RUNNING
+                    act.state == RUNNING
                     and definition.stop_trigger is not None
                     and self.triggers.fire(definition.stop_trigger)
                 ):
                     self.stop(act)
                     continue
-                if act.state != State.RUNNING:
+                if act.state != RUNNING:
                     continue
                 # (each element's state is read when it is reached: starting an event may stop others)
                 for group in act.children:
-                    if group.state != State.RUNNING:
+                    if group.state != RUNNING:
                         continue
                     for maneuver in group.children:
-                        if maneuver.state != State.RUNNING:
+                        if maneuver.state != RUNNING:
                             continue
                         for event in maneuver.children:
-                            if event.state != State.STANDBY:
+                            if event.state != STANDBY:
                                 continue
                             ev: m.Event = event.definition
-                            triggering: list[str] = []
+                            gdef: m.ManeuverGroup = group.definition
+                            # the entities that trigger it, where they are the actors
+                            triggering: list[str] | None = [] if gdef.select_triggering_entities else None
                             if ev.start_trigger is None or self.triggers.fire(ev.start_trigger, triggering):
-                                gdef: m.ManeuverGroup = group.definition
                                 actors = gdef.actors
-                                if gdef.select_triggering_entities and triggering:
+                                if triggering:
                                     actors = tuple(dict.fromkeys(triggering))
                                 self.start_event(event, actors)
 
@@ -239,33 +253,31 @@ class StoryRun:
                 for group in _running(act.children):
                     for maneuver in _running(group.children):
                         for event in maneuver.children:
-                            if event.state == State.RUNNING and all(
-                                a.state == State.COMPLETE for a in event.children
-                            ):
+                            if event.state == RUNNING and all(a.state == COMPLETE for a in event.children):
                                 event.executions += 1
                                 if event.executions < event.definition.maximum_execution_count:
-                                    self.set(event, Transition.END, State.STANDBY)
+                                    self.set(event, END, STANDBY)
                                     for action in event.children:
-                                        action.state = State.STANDBY
+                                        action.state = STANDBY
                                 else:
-                                    self.set(event, Transition.END, State.COMPLETE)
+                                    self.set(event, END, COMPLETE)
                         if all(
-                            e.state == State.COMPLETE or e.executions >= e.definition.maximum_execution_count
+                            e.state == COMPLETE or e.executions >= e.definition.maximum_execution_count
                             for e in maneuver.children
                         ):
-                            self.set(maneuver, Transition.END, State.COMPLETE)
-                    if all(mv.state == State.COMPLETE for mv in group.children):
+                            self.set(maneuver, END, COMPLETE)
+                    if all(mv.state == COMPLETE for mv in group.children):
                         group.executions += 1
                         if group.executions < group.definition.maximum_execution_count:
                             self.start_group(group)
                         else:
-                            self.set(group, Transition.END, State.COMPLETE)
-                if all(g.state == State.COMPLETE for g in act.children):
-                    self.set(act, Transition.END, State.COMPLETE)
-            if story.state == State.RUNNING and all(a.state == State.COMPLETE for a in story.children):
-                self.set(story, Transition.END, State.COMPLETE)
+                            self.set(group, END, COMPLETE)
+                if all(g.state == COMPLETE for g in act.children):
+                    self.set(act, END, COMPLETE)
+            if story.state == RUNNING and all(a.state == COMPLETE for a in story.children):
+                self.set(story, END, COMPLETE)
 
 
 def _running(nodes: list[Node]) -> Iterator[Node]:
     """The nodes that are running when reached (their states may change while the caller goes through them)."""
-    return (node for node in nodes if node.state == State.RUNNING)
+    return (node for node in nodes if node.state == RUNNING)

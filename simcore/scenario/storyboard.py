@@ -43,7 +43,8 @@ class Node:
     transition_step: int = -10
     runtime: Any = None  # action runtime while running
     actors: tuple[str, ...] = ()
-    counts: dict[Transition, int] = field(default_factory=dict)  # transitions so far, by kind
+    # transitions so far, by name (an Enum member hashes in Python: conditions read these at every step)
+    counts: dict[str, int] = field(default_factory=dict)
 
     def transition(
         self, transition: Transition, state: State, step: int, log: list[str], time: float
@@ -51,24 +52,20 @@ class Node:
         self.state = state
         self.last_transition = transition
         self.transition_step = step
-        self.counts[transition] = self.counts.get(transition, 0) + 1
-        log.append(f"{time:8.3f} {self.kind} {self.name}: {transition.value} → {state.value}")
-
-    def is_(self, state_name: str, step: int) -> bool:
-        """Does the element match `state_name` (a state, or a transition seen this step or the previous one)?"""
-        state = _STATES.get(state_name)
-        if state is not None:
-            return self.state is state
-        transition = _TRANSITIONS.get(state_name)
-        return (
-            transition is not None and self.last_transition is transition and self.transition_step >= step - 1
-        )
+        name = transition.value
+        self.counts[name] = self.counts.get(name, 0) + 1
+        log.append(f"{time:8.3f} {self.kind} {self.name}: {name} → {state.value}")
 
     def walk(self) -> list[Node]:
         nodes = [self]
         for child in self.children:
             nodes.extend(child.walk())
         return nodes
+
+
+def state_of(state_name: str) -> State | None:
+    """The state a StoryboardElementStateCondition names (None: it names a transition, or nothing)."""
+    return _STATES.get(state_name)
 
 
 def transition_of(state_name: str) -> Transition | None:

@@ -4,9 +4,9 @@ condition values themselves come from `simcore.scenario.conditions`)."""
 from __future__ import annotations
 
 from collections import deque
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from simcore.scenario.conditions import VALUE_CONDITIONS, ValueEvaluator, holds
+from simcore.scenario.conditions import Bound, bind
 
 if TYPE_CHECKING:
     from simcore.scenario import model as m
@@ -14,23 +14,75 @@ if TYPE_CHECKING:
 
 
 class ConditionState:
-    """Edge and delay bookkeeping of one condition instance, and its evaluation (found once: a value
-    condition's evaluator is called directly, an entity condition goes through `holds`)."""
+    """Edge and delay bookkeeping of one condition instance, and its evaluation: `check` gives whether it
+    fires now. The condition is bound to the world (`conditions.bind`) at its first evaluation, which raises
+    what evaluating it would; a condition without edge and delay is then checked by its value itself."""
 
-    __slots__ = ("condition", "delay", "edge", "evaluate", "history", "previous", "value_condition")
+    __slots__ = ("check", "condition", "delay", "edge", "history", "previous", "value", "world")
 
-    def __init__(self, condition: m.Condition) -> None:
+    def __init__(self, condition: m.Condition, world: ScenarioWorld) -> None:
         self.condition = condition
+        self.world = world
         self.edge = condition.edge
         self.delay = condition.delay
         self.previous: bool | None = None
         # the times at which the condition fired, until its delay has passed (a delayed condition fires
         # then; the times it did not fire need no keeping)
         self.history: deque[float] = deque()
-        self.value_condition: Any = condition.value_condition
-        self.evaluate: ValueEvaluator | None = (
-            VALUE_CONDITIONS.get(type(self.value_condition)) if self.value_condition is not None else None
-        )
+        self.value: Bound = self._unbound
+        self.check: Bound = self._first
+
+    @staticmethod
+    def _unbound(triggering: list[str] | None) -> bool:
+        raise AssertionError("a condition's value is read after its first check")
+
+    def _first(self, triggering: list[str] | None) -> bool:
+        self.value = bind(self.condition, self.world)
+        undelayed = self.delay <= 0
+        if undelayed and self.edge == "none":
+            self.check = self.value
+        elif undelayed and self.edge == "rising":
+            self.check = self._rising
+        else:
+            self.check = self._edged
+        return self.check(triggering)
+
+    def _rising(self, triggering: list[str] | None) -> bool:
+        """`_edged` for the commonest edged condition: rising, without delay."""
+        value = self.value(triggering)
+        previous = self.previous
+        self.previous = value
+        return value and not (value if previous is None else previous)
+
+    def _edged(self, triggering: list[str] | None) -> bool:
+        value = self.value(triggering)
+        # an edge needs a change: the first evaluation only records the value (as esmini does)
+        previous = self.previous
+        if previous is None:
+            previous = value
+        self.previous = value
+        edge = self.edge
+        if edge == "rising":
+            fired = value and not previous
+        elif edge == "falling":
+            fired = previous and not value
+        elif edge == "risingOrFalling":
+            fired = value != previous
+        else:
+            fired = value
+        delay = self.delay
+        if delay <= 0:
+            return fired
+        now = self.world.time
+        history = self.history
+        if fired:
+            history.append(now)
+        result = False
+        due = now - delay + 1e-9
+        while history and history[0] <= due:
+            history.popleft()
+            result = True
+        return result
 
 
 class Triggers:
@@ -45,69 +97,36 @@ class Triggers:
     def _state(self, cond: m.Condition) -> ConditionState:
         state = self.states.get(id(cond))
         if state is None or state.condition is not cond:
-            state = self.states[id(cond)] = ConditionState(cond)
+            state = self.states[id(cond)] = ConditionState(cond, self.world)
         return state
 
     def _groups_of(self, trigger: m.Trigger) -> tuple[tuple[ConditionState, ...], ...]:
-        entry = self._groups.get(id(trigger))
-        if entry is None or entry[0] is not trigger:
-            groups = tuple(tuple(self._state(c) for c in group) for group in trigger.groups)
-            entry = self._groups[id(trigger)] = (trigger, groups)
-        return entry[1]
-
-    def _condition(self, state: ConditionState, triggering: list[str]) -> bool:
-        evaluate = state.evaluate
-        if evaluate is not None:
-            value = evaluate(state.value_condition, self.world)
-        else:
-            value = holds(state.condition, self.world, triggering)
-        edge, delay = state.edge, state.delay
-        if edge == "none" and delay <= 0:
-            return value  # no edge, no delay: nothing to remember
-        # an edge needs a change: the first evaluation only records the value (as esmini does)
-        previous = state.previous
-        if previous is None:
-            previous = value
-        state.previous = value
-        if edge == "rising":
-            fired = value and not previous
-        elif edge == "falling":
-            fired = previous and not value
-        elif edge == "risingOrFalling":
-            fired = value != previous
-        else:
-            fired = value
-        if delay <= 0:
-            return fired
-        now = self.world.time
-        history = state.history
-        if fired:
-            history.append(now)
-        result = False
-        due = now - delay + 1e-9
-        while history and history[0] <= due:
-            history.popleft()
-            result = True
-        return result
+        """The condition states of a trigger fired for the first time."""
+        groups = tuple(tuple(self._state(c) for c in group) for group in trigger.groups)
+        self._groups[id(trigger)] = (trigger, groups)
+        return groups
 
     def fire(self, trigger: m.Trigger | None, triggering: list[str] | None = None) -> bool:
         """OR over groups, AND within a group (as esmini: every group is evaluated; within a group, once a
         condition does not hold only the conditions with a delay are evaluated, their timers run on). When
-        the trigger fires, its edge conditions start over (the next evaluation only records the value)."""
+        the trigger fires, its edge conditions start over (the next evaluation only records the value).
+        The entities that fulfil the entity conditions of the groups that hold are added to `triggering`."""
         if trigger is None:
             return False
-        groups = self._groups_of(trigger)
+        entry = self._groups.get(id(trigger))
+        groups = entry[1] if entry is not None and entry[0] is trigger else self._groups_of(trigger)
         fired = False
         for group in groups:
-            group_entities: list[str] = []
+            # the entities a group adds are taken back when the group does not hold
+            mark = 0 if triggering is None else len(triggering)
             ok = True
             for state in group:
                 if ok or state.delay > 0:
-                    ok = self._condition(state, group_entities) and ok
+                    ok = state.check(triggering) and ok
             if ok:
                 fired = True
-                if triggering is not None:
-                    triggering.extend(group_entities)
+            elif triggering is not None:
+                del triggering[mark:]
         if fired:
             for group in groups:
                 for state in group:
