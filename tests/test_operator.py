@@ -227,7 +227,14 @@ def test_invalid_spec_is_not_accepted(env: tuple[Cluster, Kube], s3_server: S3Se
         assert accepted["status"] == "False" and accepted["reason"] == "InvalidSpec"
         assert words in accepted["message"]
     assert c.objects("jobs") == [] and c.objects("configmaps") == []
-    assert any(e.get("reason") == "InvalidSpec" and e.get("type") == "Warning" for e in c.objects("events"))
+    # the Warning event is posted after the status (kopf's event poster runs on its own): wait for it
+    wait_for(
+        lambda: any(
+            e.get("reason") == "InvalidSpec" and e.get("type") == "Warning" for e in c.objects("events")
+        ),
+        30,
+        "the InvalidSpec Warning event",
+    )
     # the run in a namespace the operator does not serve is left alone
     raw = kube.custom.get_namespaced_custom_object(GROUP, VERSION, "elsewhere", PLURAL, "e2e-elsewhere")
     assert not raw.get("status")
