@@ -17,6 +17,7 @@ import defusedxml.ElementTree as SafeET
 from defusedxml import DefusedXmlException
 
 from simcore.errors import BadInput
+from simcore.file_version import FileVersion, file_version
 from simcore.scenario import model as m
 from simcore.scenario.parameters import Declaration, ParameterError, ParamValue, convert, declare, resolve
 
@@ -239,7 +240,7 @@ class _Reader:
 
 #: parsed scenario files (the XML tree and its element lines, which no parameter changes) by path and file
 #: identity (size, mtime, ctime, inode): a sweep's points load the same file with other parameter values
-_PARSED: dict[tuple[str, int, int, int, int], tuple[ET.Element, dict[int, int]]] = {}
+_PARSED: dict[FileVersion, tuple[ET.Element, dict[int, int]]] = {}
 _PARSED_MAX = 8
 
 
@@ -248,11 +249,9 @@ def _parsed_scenario(path: Path) -> tuple[ET.Element, dict[int, int]]:
     The tree is shared between loads and only read (`_Reader` never changes it); an entry is replaced when
     the file's size, modification or status-change time or inode changes (an edit, an atomic replace)."""
     lines: dict[int, int] = {}
-    try:
-        st = path.stat()
-    except OSError:  # read_xml says what is wrong
+    key = file_version(path)
+    if key is None:  # read_xml says what is wrong
         return read_xml(path, what="OpenSCENARIO file", lines=lines), lines
-    key = (str(path.absolute()), st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino)
     hit = _PARSED.get(key)
     if hit is None:
         hit = (read_xml(path, what="OpenSCENARIO file", lines=lines), lines)

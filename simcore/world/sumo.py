@@ -17,7 +17,6 @@ import hashlib
 import math
 import os
 import shutil
-import stat
 import subprocess
 import tempfile
 from collections.abc import Callable
@@ -25,6 +24,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from simcore.errors import BadInput, SimulationError
+from simcore.file_version import FileVersion, file_version
 from simcore.world.sumo_lanes import EdgeLanes, edge_lanes, nearest_lane
 
 NETCONVERT_OPTIONS = (
@@ -96,22 +96,6 @@ def check_network_xml(path: Path) -> None:
         raise BadInput(f"SUMO network is not well-formed XML: {exc}", file=str(path)) from None
     if root_tag != "net":
         raise BadInput(f"root element is <{root_tag}>, expected <net> (a SUMO network)", file=str(path))
-
-
-#: a version of a file: its path, size, modification and status-change times (ns) and inode; an edit or an
-#: atomic replace changes it
-FileVersion = tuple[str, int, int, int, int]
-
-
-def file_version(path: Path) -> FileVersion | None:
-    """The version of the regular file at `path`; None when there is none."""
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    if not stat.S_ISREG(st.st_mode):
-        return None
-    return (str(path.absolute()), st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino)
 
 
 #: what a warm worker (one road file, run after run) knows of its road files: the network name of each
