@@ -180,10 +180,10 @@ def test_an_element_state_condition_sees_each_transition_once_however_it_is_eval
     triggers = Triggers(world)
     trigger = m.Trigger(((cond,),))
     assert not triggers.fire(trigger)
-    event.transition(Transition.END, State.COMPLETE, 1, [], 0.1)
+    event.transition(Transition.END, State.COMPLETE, [], 0.1)
     assert holds(cond, world, None)  # seen here ...
     assert not triggers.fire(trigger)  # ... so not again
-    event.transition(Transition.END, State.COMPLETE, 2, [], 0.2)
+    event.transition(Transition.END, State.COMPLETE, [], 0.2)
     assert triggers.fire(trigger)
     assert not holds(cond, world, None)
 

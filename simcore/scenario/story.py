@@ -49,9 +49,9 @@ class StoryRun:
 
     def begin(self) -> None:
         """The storyboard and its stories start running (after Init)."""
-        self.root.transition(START, RUNNING, 0, self.world.log, 0.0)
+        self.root.transition(START, RUNNING, self.world.log, 0.0)
         for story in self.root.children:
-            story.transition(START, RUNNING, 0, self.world.log, 0.0)
+            story.transition(START, RUNNING, self.world.log, 0.0)
 
     def step_actions(self, dt: float) -> None:
         """Step the running actions in the storyboard's order (as esmini, not in the order they started);
@@ -118,7 +118,7 @@ class StoryRun:
         return root
 
     def set(self, node: Node, transition: Transition, state: State) -> None:
-        node.transition(transition, state, self.world.step_index, self.world.log, self.world.time)
+        node.transition(transition, state, self.world.log, self.world.time)
         self._transitions += 1
 
     def stop(self, node: Node) -> None:

@@ -39,19 +39,13 @@ class Node:
     children: list[Node] = field(default_factory=list)
     state: State = State.STANDBY
     executions: int = 0  # completed executions (events and maneuver groups)
-    last_transition: Transition | None = None
-    transition_step: int = -10
     runtime: Any = None  # action runtime while running
     actors: tuple[str, ...] = ()
     # transitions so far, by name (an Enum member hashes in Python: conditions read these at every step)
     counts: dict[str, int] = field(default_factory=dict)
 
-    def transition(
-        self, transition: Transition, state: State, step: int, log: list[str], time: float
-    ) -> None:
+    def transition(self, transition: Transition, state: State, log: list[str], time: float) -> None:
         self.state = state
-        self.last_transition = transition
-        self.transition_step = step
         name = transition.value
         self.counts[name] = self.counts.get(name, 0) + 1
         log.append(f"{time:8.3f} {self.kind} {self.name}: {name} → {state.value}")
