@@ -660,11 +660,55 @@ def schema() -> None:
 
 
 @app.command()
-def docs() -> None:
-    """Print the SimulationRun field reference (Markdown, generated from the spec models)."""
-    from simcore.docs import reference
+def docs(
+    page: Annotated[
+        str,
+        typer.Argument(
+            help="fields (docs/simulationrun.md), cli (docs/reference/cli.md) or topics (docs/reference/topics.md)."
+        ),
+    ] = "fields",
+) -> None:
+    """Print a reference page generated from the code (Markdown): the SimulationRun fields from the spec models,
+    the command line from this program's commands, or the topics and message types."""
+    if page == "fields":
+        from simcore.docs import reference
 
-    sys.stdout.write(reference())
+        sys.stdout.write(reference())
+    elif page == "cli":
+        from simcore.reference import cli_reference
+
+        sys.stdout.write(cli_reference(app))
+    elif page == "topics":
+        from simcore.reference import topics_reference
+
+        sys.stdout.write(topics_reference())
+    else:
+        raise _fail(BadInput(f"unknown page {shorten(page)!r}: fields, cli or topics", field="PAGE"))
+
+
+@app.command()
+def examples(
+    directory: Annotated[
+        Path, typer.Argument(help="Where to write: the files go to DIRECTORY/examples/.")
+    ] = Path("."),
+    force: Annotated[bool, typer.Option(help="Overwrite example files you changed.")] = False,
+) -> None:
+    """Write the example manifests, scenarios, maps and nodes (examples/) from the installed package, so that
+    `carlos run examples/runs/prototyping.yaml` works from DIRECTORY. Unchanged files are kept; a changed one
+    is refused (exit 2) unless --force."""
+    from simcore.examples import write_examples
+
+    try:
+        result = write_examples(directory, force=force)
+    except CarlosError as exc:
+        raise _fail(exc) from None
+    target = directory / "examples"
+    out.print(
+        Text(f"{target}: {len(result.write)} files written, {len(result.unchanged)} unchanged"),
+        highlight=False,
+    )
+    where = "" if directory == Path(".") else f"cd {directory} && "
+    out.print(Text(f"next: {where}carlos run examples/runs/prototyping.yaml"), highlight=False)
 
 
 @app.command()

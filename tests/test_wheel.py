@@ -14,8 +14,12 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-#: source directory → its import name in the wheel (operator/ is not a package: it holds carlos_operator)
-PACKAGE_ROOTS = {ROOT / "simcore": "simcore", ROOT / "operator" / "carlos_operator": "carlos_operator"}
+#: source directory → its path in the wheel (operator/ is not a package: it holds carlos_operator)
+PACKAGE_ROOTS = {
+    ROOT / "simcore": "simcore",
+    ROOT / "operator" / "carlos_operator": "carlos_operator",
+    ROOT / "examples": "simcore/_examples",  # package data: `carlos examples DIR` writes it out
+}
 
 
 def build_wheel(out: Path) -> Path:
