@@ -9,7 +9,7 @@ SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 TEST_SYSTEM_PACKAGES := chromium
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck wheel wheel-check bench conformance differential crds helm lint-chart images clean
+.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck docs reference wheel wheel-check bench conformance differential crds helm lint-chart images clean
 
 
 install: $(STAMP)
@@ -58,6 +58,18 @@ lint: install
 
 typecheck: install
 	$(VENV)/bin/mypy
+
+# the documentation site (mkdocs.yml, pages under docs/) into site/ (git-ignored); --strict: a broken link or
+# anchor fails the build
+docs: install
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
+# the reference pages generated from the code (tests/test_docs.py and tests/test_reference.py check drift)
+reference: install
+	mkdir -p docs/reference
+	$(VENV)/bin/carlos docs fields > docs/simulationrun.md
+	$(VENV)/bin/carlos docs cli > docs/reference/cli.md
+	$(VENV)/bin/carlos docs topics > docs/reference/topics.md
 
 # the wheel (dist/carlos-VERSION-py3-none-any.whl), built from a clean copy of the sources
 wheel:
@@ -122,4 +134,4 @@ images:
 	done
 
 clean:
-	rm -rf $(VENV) results dist build .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) results dist build site .pytest_cache .mypy_cache .ruff_cache

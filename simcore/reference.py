@@ -204,6 +204,16 @@ def topics_reference() -> str:
         "|---|---|---|",
     ]
     lines += [f"| `{topic}` | `{typename}` | {text} |" for topic, typename, text in topic_rows()]
+    from simcore.sensors.lidar import POINT_DTYPE
+
+    names = POINT_DTYPE.names or ()
+    typed = ", ".join(f"`{n}` {POINT_DTYPE[n].name}" for n in names)
+    lines += [
+        "",
+        f"Lidar points: sensor_msgs/PointCloud2 ({', '.join(names)}); per point {typed}. `object_id` is 1 + the "
+        "entity's index in `/carlos/objects` (0 = road), `label` a class id (names on `…/label_info`), "
+        "`time` the firing time within the sweep.",
+    ]
     lines += [
         "",
         "## Message packages shipped with CARLOS",

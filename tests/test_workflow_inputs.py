@@ -102,14 +102,16 @@ def test_closed_loop_example_python_path_comment_names_the_folder_of_the_example
     assert (RUNS / match.group(1) / "examples" / "controller" / "__init__.py").is_file()
 
 
-def test_readme_lists_every_lidar_point_field() -> None:
+def test_docs_list_every_lidar_point_field() -> None:
     from simcore.sensors.lidar import POINT_DTYPE
 
-    readme = (ROOT / "README.md").read_text()
+    topics = (ROOT / "docs" / "reference" / "topics.md").read_text()
     fields = ", ".join(POINT_DTYPE.names or ())
-    assert f"sensor_msgs/PointCloud2 ({fields})" in readme
-    for wording in ("this session", "The issue's", "session before"):
-        assert wording not in readme
+    assert f"sensor_msgs/PointCloud2 ({fields})" in topics
+    for page in [ROOT / "README.md", *(ROOT / "docs").rglob("*.md")]:
+        text = page.read_text()
+        for wording in ("this session", "The issue's", "session before", "previous release"):
+            assert wording not in text, (page, wording)
 
 
 def test_closed_loop_startup_timeout_is_reported_with_its_own_cause(tmp_path: Path) -> None:
