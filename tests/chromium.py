@@ -79,8 +79,9 @@ def _collect(message: dict[str, Any], result: PageLoad) -> None:
         result.errors.append(str(params["entry"].get("text"))[:500])
 
 
-def load_page(path: Path, probe: str, *, width: int = 1200, height: int = 900) -> PageLoad:
-    """Open `path` (file://) in a fresh headless Chromium and return what `_session` gathered."""
+def load_page(path: Path | str, probe: str, *, width: int = 1200, height: int = 900) -> PageLoad:
+    """Open `path` (a file, as file://; or a URL string) in a fresh headless Chromium and return what
+    `_session` gathered."""
     import urllib.request
 
     binary = find_chromium()
@@ -110,7 +111,13 @@ def load_page(path: Path, probe: str, *, width: int = 1200, height: int = 900) -
             with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as response:
                 pages = [t for t in json.load(response) if t.get("type") == "page"]
             return asyncio.run(
-                _session(pages[0]["webSocketDebuggerUrl"], path.as_uri(), probe, width, height)
+                _session(
+                    pages[0]["webSocketDebuggerUrl"],
+                    path.as_uri() if isinstance(path, Path) else path,
+                    probe,
+                    width,
+                    height,
+                )
             )
         finally:
             proc.terminate()
