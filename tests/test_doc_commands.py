@@ -33,7 +33,7 @@ EXCLUDED = {
     "helm install": "needs a Kubernetes cluster (tests/test_helm.py renders the chart)",
     "kubectl": "needs a Kubernetes cluster",
     ".venv/bin/carlos submit": "needs a Kubernetes cluster (tests/test_submit.py against the emulator)",
-    ".venv/bin/carlos watch automated-testing -n": "needs a Kubernetes cluster",
+    ".venv/bin/carlos watch automated-testing": "needs a Kubernetes cluster (a run name, not a results URL)",
 }
 SLOW = {"make demo"}
 
