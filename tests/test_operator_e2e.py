@@ -1,6 +1,6 @@
 """Opt-in end-to-end test against a real cluster (kind, k3d…): skipped unless CARLOS_E2E_KUBECONFIG is set.
 
-Needs (see README, "Run on a cluster (operator)"):
+Needs (see docs/kubernetes/walkthrough.md, step 6):
 - CARLOS_E2E_KUBECONFIG: kubeconfig of the cluster (the test installs the CRD and uses namespace
   CARLOS_E2E_NAMESPACE, default `carlos-e2e`, creating it when missing);
 - the CARLOS images loadable by the cluster: CARLOS_IMAGE_SIMCORE, CARLOS_IMAGE_BRIDGE, CARLOS_IMAGE_RECORDER
