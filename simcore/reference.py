@@ -176,6 +176,30 @@ def topic_rows() -> list[tuple[str, str, str]]:
     return [(_placeholders(topic), typename, text) for topic, typename, text in rows]
 
 
+def topic_frames() -> dict[str, str]:
+    """The frame (`header.frame_id`; for transforms parent → child) of each topic that has one, from the
+    frame-name functions of the code."""
+    from simcore.sensors import ros
+    from simcore.transport import messages as m
+
+    base = m.base_link(ENTITY)
+    lidar = ros.sensor_frame(ENTITY, SENSOR)
+    optical = ros.optical_frame(ENTITY, SENSOR)
+    unit = ros.sensor_frame(UNIT, SENSOR)
+    frames = {
+        m.TF_TOPIC: f"`{m.MAP_FRAME}` → `{base}`",
+        ros.TF_STATIC_TOPIC: f"`{base}` → `{lidar}` (a unit's: `{m.MAP_FRAME}` → `{unit}`)",
+        m.odometry_topic(ENTITY): f"`{m.MAP_FRAME}`, child `{base}`",
+        m.OBJECTS_TOPIC: f"`{m.MAP_FRAME}`",
+    }
+    for leaf in ("points", "objects", "objects/info", "label_info"):
+        frames[ros.sensor_topic(ENTITY, SENSOR, leaf)] = f"`{lidar}`"
+        frames[f"/carlos/infrastructure/{UNIT}/{SENSOR}/{leaf}"] = f"`{unit}`"
+    for leaf in ("image", "labels", "camera_info"):
+        frames[ros.sensor_topic(ENTITY, SENSOR, leaf)] = f"`{optical}`"
+    return {_placeholders(topic): _placeholders(frame) for topic, frame in frames.items()}
+
+
 def message_packages() -> list[tuple[str, int, list[str]]]:
     """(package, number of types, top-level types used on topics) of the message definitions CARLOS ships
     beside ROS 2 jazzy's own (simcore/transport/msg)."""
@@ -200,10 +224,14 @@ def topics_reference() -> str:
         "ROS 2 name token, `<sensor>` the sensor's name, `<unit>` the roadside unit's. Frames follow "
         "REP-103/105: `map`, `<entity>/base_link` (the reference point, rear axle), `<entity>/<sensor>`.",
         "",
-        "| topic | type | carries |",
-        "|---|---|---|",
+        "| topic | type | frame | carries |",
+        "|---|---|---|---|",
     ]
-    lines += [f"| `{topic}` | `{typename}` | {text} |" for topic, typename, text in topic_rows()]
+    frames = topic_frames()
+    lines += [
+        f"| `{topic}` | `{typename}` | {frames.get(topic, '')} | {text} |"
+        for topic, typename, text in topic_rows()
+    ]
     from simcore.sensors.lidar import POINT_DTYPE
 
     names = POINT_DTYPE.names or ()
