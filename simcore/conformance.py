@@ -186,35 +186,34 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
         result.message = f"{result.kind} file, not a scenario"
         return result, trace
     started = time.perf_counter()
-    parts = None
     try:
         from simcore import pipeline
         from simcore.plan import Plan
 
         run = conformance_run(path, cap_seconds)
+        every = round(REFERENCE_PERIOD / STEP_SECONDS)
+        offset = 0.0
 
         def loaded(scenario: Any) -> None:
             result.warnings = list(scenario.warnings)
             trace.controlled = uncompared_entities(scenario)
 
-        parts = pipeline.assemble(
-            run, Plan(run.spec)[0], path, path.parent, with_metrics=False, headless=True, on_loaded=loaded
-        )
-        result.loaded = True
-        every = round(REFERENCE_PERIOD / STEP_SECONDS)
-
         def sample(engine: Any) -> None:
+            nonlocal offset
+            if engine.step_index == 0:  # assembled: the scenario and its road loaded
+                result.loaded = True
+                offset = engine.output_time_offset
             if engine.step_index % every == 0:
-                _sample(trace, engine)
+                _sample(trace, engine, offset)
 
-        pipeline.drive(parts, observe=sample)
-        engine = parts.engine
-        result.sim_seconds = engine.time + getattr(engine, "output_time_offset", 0.0)
-        result.ended = engine.ended
-        result.status = "ended" if engine.ended else "capped"
-        if not engine.ended:
+        # the run pipeline as `carlos run` runs it (`simcore.runner`): only the recording is off
+        done = pipeline.simulate(run, Plan(run.spec)[0], path, path.parent, observe=sample, on_loaded=loaded)
+        result.sim_seconds = done.sim_seconds + done.scenario_time_offset  # on the scenario's time axis
+        result.ended = done.end_reason == "stopTrigger"
+        result.status = "ended" if result.ended else "capped"
+        if not result.ended:
             result.message = f"no end within {cap_seconds:g} s of simulated time"
-        result.warnings = list(parts.scenario.warnings) + list(engine.warnings)
+        result.warnings = list(done.warnings)
     except CarlosError as exc:
         result.status = "bad_input" if isinstance(exc, BadInput) and not result.loaded else "error"
         result.message = str(exc)
@@ -222,15 +221,12 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
         result.status = "error"
         where = traceback.extract_tb(exc.__traceback__)[-1]
         result.message = f"{type(exc).__name__}: {exc} ({Path(where.filename).name}:{where.lineno})"
-    finally:
-        if parts is not None:
-            parts.close()
     result.wall_seconds = time.perf_counter() - started
     return result, trace
 
 
-def _sample(trace: Trace, engine: Any) -> None:
-    t = round(engine.time + getattr(engine, "output_time_offset", 0.0), 6)  # on the reference's time axis
+def _sample(trace: Trace, engine: Any, offset: float) -> None:
+    t = round(engine.time + offset, 6)  # on the scenario's (the reference's) time axis
     for body in engine.bodies.values():
         if not getattr(body, "gone", False) and getattr(body, "placed", True):
             trace.add(t, body.name, body.x, body.y)
