@@ -229,6 +229,9 @@ def run_index(
             )
             metrics, end_reason, sim_seconds = result.metrics, result.end_reason, result.sim_seconds
             offset = result.scenario_time_offset
+            for warning in result.warnings:  # what the engine read leniently (file, element, what it did)
+                log.warning("%s", warning)
+                log_lines.append(f"warning: {warning}")
             log_lines.extend(result.log)
             results = evaluate(criteria, metrics)
         except CarlosError as exc:

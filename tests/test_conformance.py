@@ -331,3 +331,53 @@ def test_a_ghost_head_start_is_in_the_recording_and_the_summary_of_carlos_run(tm
         metadata = {m.name: m.metadata for m in make_reader(handle).iter_metadata()}
     assert metadata["carlos.run"]["scenarioTimeOffsetSeconds"] == "-1.5"
     _assert_same(recorded, trace)
+
+
+@pytest.mark.slow
+def test_every_corpus_scenario_that_agrees_through_conformance_agrees_through_carlos_run(
+    tmp_path: Path,
+) -> None:
+    """The whole esmini corpus: every scenario `carlos conformance` finds in agreement with esmini's
+    reference agrees too when run by `carlos run` (a fresh process, recording on) and read back from the
+    recording it wrote, FollowGhost (its head start) included."""
+    from simcore.scenario.xosc import load_scenario
+
+    corpus = corpus_dir()
+    reference = corpus / "reference"
+    agreed = [r for r in conformance.run_directory(corpus / "resources", reference, jobs=2) if r.agreed]
+    assert "follow_ghost.xosc" in {Path(r.file).name for r in agreed}
+    scenarios = ", ".join(f"{{name: s{i}, openscenario: {json.dumps(r.file)}}}" for i, r in enumerate(agreed))
+    manifest = tmp_path / "run.yaml"
+    out = tmp_path / "results"
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: corpus}\nspec:\n"
+        f"  scenarios: [{scenarios}]\n"
+        f"  simulation: {{stepSeconds: {conformance.STEP_SECONDS}, maxSeconds: {conformance.DEFAULT_CAP_SECONDS}, "
+        "seed: 1}\n"
+        f"  output: {{url: {json.dumps(out.as_uri())}}}\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "simcore.cli", "run", str(manifest), "-q", "-j", "2"],
+        capture_output=True,
+        text=True,
+        timeout=3600,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    ends = conformance.reference_end_times(reference)
+    by_name = {f"s{i}": r for i, r in enumerate(agreed)}
+    differing = []
+    for summary in sorted((out / "corpus").glob("*/summary.json")):
+        expected = by_name.pop(json.loads(summary.read_text())["scenario"])
+        path = Path(expected.file)
+        tracks = conformance.read_reference(reference / conformance.reference_name(path))
+        scenario = load_scenario(path, {})
+        names = {e.name for e in scenario.entities} | set(tracks)
+        result, trace = conformance.recorded_run(summary.parent, expected.file, frozenset(names))
+        ref_end = ends.get(conformance.reference_name(path))
+        conformance.compare(result, trace, tracks, ref_end, conformance.uncompared_entities(scenario))
+        if not result.agreed:
+            differing.append(
+                (path.name, result.status, result.sim_seconds, result.max_rmse, result.worst_entity)
+            )
+    assert not by_name, f"no result for {sorted(by_name)}"
+    assert not differing
