@@ -658,12 +658,17 @@ class ScenarioEngine:
         )
 
     def frame(self) -> WorldFrame:
-        """Every entity's state now (built once per step: `moved` forgets them)."""
+        """Every entity in the world now (built once per step: `moved` forgets them). An entity out of the
+        world (not placed yet, deleted) is in no frame — no topic, recording, sensor or metric sees it at a
+        stale position — except the ego, which metrics measure from."""
         states = self._states
         state_of = self._state_of
+        ego = self.ego
         if self.ghosts is None:
             entities = []
             for b in self.bodies.values():
+                if b.gone and b.name != ego:
+                    continue
                 state = states.get(b.name)
                 if state is None:
                     state = states[b.name] = state_of(b)
@@ -671,8 +676,9 @@ class ScenarioEngine:
             return world_frame(self.step_index, self.time, tuple(entities), self.ego, (), ())
         ghost_names = self.ghosts.names
         # a ghost is no object of the world (esmini shows it as a shadow): published apart
-        entities = [self.state_of(b) for b in self.bodies.values() if b.name not in ghost_names]
-        ghosts = tuple([self.state_of(b) for b in self.bodies.values() if b.name in ghost_names])
+        present = [b for b in self.bodies.values() if not b.gone or b.name == ego]
+        entities = [self.state_of(b) for b in present if b.name not in ghost_names]
+        ghosts = tuple([self.state_of(b) for b in present if b.name in ghost_names])
         return world_frame(self.step_index, self.time, tuple(entities), self.ego, (), ghosts)
 
     @property
