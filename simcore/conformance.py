@@ -406,6 +406,8 @@ def totals(results: list[ScenarioResult]) -> dict[str, Any]:
         "ended": len(ended),
         "with_reference": len(with_reference),
         "agreed": sum(r.agreed for r in with_reference),
+        # the catalogue rule: final positions within FINAL_LIMIT m, end within FINAL_END_LIMIT s
+        "agreed_final": sum(r.agreed_final for r in with_reference),
         # agreed scenarios in which no scripted entity was compared (every entity controller-driven): they
         # agree on the end time only
         "agreed_end_time_only": sum(
@@ -432,7 +434,8 @@ def totals_line(results: list[ScenarioResult]) -> str:
         f"{t['scenarios']} scenarios · loaded {t['loaded']} · ran to their own end {t['ended']} · "
         f"agreed {t['agreed']} of {t['with_reference']} with a reference "
         f"({t['agreed_end_time_only']} of them on the end time only: every entity controller-driven) "
-        f"(RMSE ≤ {RMSE_LIMIT} m, end ±{END_LIMIT} s) · {t['sim_seconds']:.0f} simulated s in "
+        f"(RMSE ≤ {RMSE_LIMIT} m, end ±{END_LIMIT} s) · agreed {t['agreed_final']} by final positions "
+        f"(≤ {FINAL_LIMIT} m, end ±{FINAL_END_LIMIT} s) · {t['sim_seconds']:.0f} simulated s in "
         f"{t['wall_seconds']:.1f} s · {t['warnings']} warnings"
     )
 
@@ -488,6 +491,8 @@ def write_results(results: list[ScenarioResult], out: Path, base: Path) -> None:
             "max_rmse_m",
             "worst_entity",
             "agreed",
+            "agreed_final",
+            "final_error_m",
             "wall_s",
             "warnings",
             "message",
@@ -507,6 +512,8 @@ def write_results(results: list[ScenarioResult], out: Path, base: Path) -> None:
                 "" if r.max_rmse is None else f"{r.max_rmse:.3f}",
                 r.worst_entity or "",
                 int(r.agreed),
+                int(r.agreed_final),
+                "" if r.final_error is None else f"{r.final_error:.3f}",
                 f"{r.wall_seconds:.3f}",
                 len(r.warnings),
                 r.message,
