@@ -381,3 +381,14 @@ def test_every_corpus_scenario_that_agrees_through_conformance_agrees_through_ca
             )
     assert not by_name, f"no result for {sorted(by_name)}"
     assert not differing
+
+
+def test_an_entity_of_an_external_controller_is_compared(tmp_path: Path) -> None:
+    """Without a command it holds as in esmini (in `carlos run` as in conformance), so its trajectory
+    decides agreement like a scripted one's."""
+    external = """<ObjectController><Controller name="ext"><Properties>
+      <Property name="esminiController" value="ExternalController"/></Properties></Controller></ObjectController>"""
+    from simcore.scenario.xosc import load_scenario
+
+    path = write_scenario(tmp_path, straight(controller=external), "external.xosc")
+    assert conformance.uncompared_entities(load_scenario(path, {})) == set()
