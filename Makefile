@@ -96,11 +96,19 @@ conformance:
 	$(PY) bench/conformance.py $(CORPUS)
 
 # Development only (esmini is not part of the project): generated scenarios of every feature type run by
-# CARLOS and by the esmini player ($ESMINI), agreement per type; PER_TYPE scenarios of each type
+# CARLOS and by the esmini player ($ESMINI), agreement per type; PER_TYPE scenarios of each type. Then the
+# public catalogues (Euro NCAP, ALKS, ASAM examples; PUBLIC_CORPUS=DIR with INDEX.tsv, default: the
+# development copy beside the checkout when there is one) through `carlos run` against esmini
+# (bench/catalogues.py); skipped when there is no such folder.
 PER_TYPE ?= 10
+DEV_SHARED := $(abspath $(CURDIR)/..)/shared
+PUBLIC_CORPUS ?= $(wildcard $(DEV_SHARED)/corpus/public)
 differential: install
 	@test -n "$$ESMINI" || { echo "no esmini player: make differential ESMINI=/path/to/esmini"; exit 2; }
 	$(PY) bench/differential.py --per-type $(PER_TYPE) -j $(NPROC)
+	@if [ -n "$(PUBLIC_CORPUS)" ] && [ -f "$(PUBLIC_CORPUS)/INDEX.tsv" ]; then \
+	  $(PY) bench/catalogues.py "$(PUBLIC_CORPUS)" -j $(NPROC); \
+	else echo "no public corpus (PUBLIC_CORPUS=DIR with INDEX.tsv): catalogues skipped"; fi
 
 # the SimulationRun CRD from simcore/spec.py, for kubectl and for the Helm chart (tests/test_crd.py checks drift)
 crds: install

@@ -786,16 +786,7 @@ def conformance(
     for row in conf.iter_rows(results, directory):
         table.add_row(*row)
     out.print(table)
-    t = conf.totals(results)
-    out.print(
-        f"{t['scenarios']} scenarios · loaded {t['loaded']} · ran to their own end {t['ended']} · "
-        f"agreed {t['agreed']} of {t['with_reference']} with a reference "
-        f"({t['agreed_end_time_only']} of them on the end time only: every entity controller-driven) "
-        f"(RMSE ≤ {conf.RMSE_LIMIT} m, end ±{conf.END_LIMIT} s) · {t['sim_seconds']:.0f} simulated s in "
-        f"{t['wall_seconds']:.1f} s · {t['warnings']} warnings",
-        highlight=False,
-        soft_wrap=True,
-    )
+    out.print(conf.totals_line(results), highlight=False, soft_wrap=True)
     if out_file is not None:
         conf.write_results(results, out_file, directory)
         if out_file.suffix != ".json":

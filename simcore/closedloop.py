@@ -262,11 +262,17 @@ class ClosedLoop:
                         )
                     self._lock.wait(remaining)
 
+    def has_input(self, entity: str) -> bool:
+        """`ExternalDriver`: whether a command for `entity` arrived (until then the engine holds it, as
+        esmini holds an ExternalController's entity that gets no input)."""
+        with self._lock:
+            return ros_name(entity) in self._commands
+
     def move(
         self, entity: m.Entity, x: float, y: float, heading: float, speed: float, dt: float
     ) -> tuple[float, float, float, float]:
-        """`ExternalDriver`: one step of the entity under its latest command (none yet: it brakes to a
-        stop at its maximum deceleration, wheels straight)."""
+        """`ExternalDriver`: one step of the entity under its latest command (the engine moves it here
+        only once a command arrived: `has_input`)."""
         name = ros_name(entity.name)
         vehicle = self._vehicles.get(name)
         if vehicle is None:

@@ -32,6 +32,11 @@ REFERENCE_PERIOD = 0.1
 DEFAULT_CAP_SECONDS = 1250.0
 RMSE_LIMIT = 0.5
 END_LIMIT = 0.1
+#: the catalogue rule (issue #25): every compared entity's final position within FINAL_LIMIT m of the
+#: reference's and the end time within FINAL_END_LIMIT s (`ScenarioResult.agreed_final`)
+FINAL_LIMIT = 1.0
+FINAL_END_LIMIT = 0.15
+Track = list[tuple[float, float, float]]  # (time on the scenario's time axis, x, y)
 
 
 @dataclass
@@ -40,6 +45,7 @@ class EntityResult:
     scripted: bool
     rmse: float | None  # None: not in the reference or no common samples
     samples: int
+    final_error: float | None = None  # distance at the last common sample time, m
 
 
 @dataclass
@@ -60,6 +66,7 @@ class ScenarioResult:
     message: str = ""
     reference_message: str = ""  # why the reference player gave no reference (differential runs)
     final_error: float | None = None  # largest distance between final positions of a compared entity, m
+    agreed_final: bool = False  # the catalogue rule: final positions within FINAL_LIMIT, end FINAL_END_LIMIT
     warnings: list[str] = field(default_factory=list)
     entities: list[EntityResult] = field(default_factory=list)
 
@@ -186,35 +193,34 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
         result.message = f"{result.kind} file, not a scenario"
         return result, trace
     started = time.perf_counter()
-    parts = None
     try:
         from simcore import pipeline
         from simcore.plan import Plan
 
         run = conformance_run(path, cap_seconds)
+        every = round(REFERENCE_PERIOD / STEP_SECONDS)
+        offset = 0.0
 
         def loaded(scenario: Any) -> None:
             result.warnings = list(scenario.warnings)
             trace.controlled = uncompared_entities(scenario)
 
-        parts = pipeline.assemble(
-            run, Plan(run.spec)[0], path, path.parent, with_metrics=False, headless=True, on_loaded=loaded
-        )
-        result.loaded = True
-        every = round(REFERENCE_PERIOD / STEP_SECONDS)
-
         def sample(engine: Any) -> None:
+            nonlocal offset
+            if engine.step_index == 0:  # assembled: the scenario and its road loaded
+                result.loaded = True
+                offset = engine.output_time_offset
             if engine.step_index % every == 0:
-                _sample(trace, engine)
+                _sample(trace, engine, offset)
 
-        pipeline.drive(parts, observe=sample)
-        engine = parts.engine
-        result.sim_seconds = engine.time + getattr(engine, "output_time_offset", 0.0)
-        result.ended = engine.ended
-        result.status = "ended" if engine.ended else "capped"
-        if not engine.ended:
+        # the run pipeline as `carlos run` runs it (`simcore.runner`): only the recording is off
+        done = pipeline.simulate(run, Plan(run.spec)[0], path, path.parent, observe=sample, on_loaded=loaded)
+        result.sim_seconds = done.sim_seconds + done.scenario_time_offset  # on the scenario's time axis
+        result.ended = done.end_reason == "stopTrigger"
+        result.status = "ended" if result.ended else "capped"
+        if not result.ended:
             result.message = f"no end within {cap_seconds:g} s of simulated time"
-        result.warnings = list(parts.scenario.warnings) + list(engine.warnings)
+        result.warnings = list(done.warnings)
     except CarlosError as exc:
         result.status = "bad_input" if isinstance(exc, BadInput) and not result.loaded else "error"
         result.message = str(exc)
@@ -222,28 +228,45 @@ def run_scenario(path: Path, cap_seconds: float = DEFAULT_CAP_SECONDS) -> tuple[
         result.status = "error"
         where = traceback.extract_tb(exc.__traceback__)[-1]
         result.message = f"{type(exc).__name__}: {exc} ({Path(where.filename).name}:{where.lineno})"
-    finally:
-        if parts is not None:
-            parts.close()
     result.wall_seconds = time.perf_counter() - started
     return result, trace
 
 
-def _sample(trace: Trace, engine: Any) -> None:
-    t = round(engine.time + getattr(engine, "output_time_offset", 0.0), 6)  # on the reference's time axis
+def _sample(trace: Trace, engine: Any, offset: float) -> None:
+    t = round(engine.time + offset, 6)  # on the scenario's (the reference's) time axis
     for body in engine.bodies.values():
         if not getattr(body, "gone", False) and getattr(body, "placed", True):
             trace.add(t, body.name, body.x, body.y)
 
 
+def track_error(ours: Track, theirs: Track) -> tuple[float | None, float | None, int]:
+    """(position RMSE over the sample times both tracks have, distance at the last of them, how many) of two
+    tracks sampled every REFERENCE_PERIOD s; (None, None, 0) when they share no sample time."""
+    by_time = {round(t / REFERENCE_PERIOD): (x, y) for t, x, y in ours}
+    total, count, last = 0.0, 0, 0.0
+    for t, x, y in theirs:
+        mine = by_time.get(round(t / REFERENCE_PERIOD))
+        if mine is None:
+            continue
+        last = (mine[0] - x) ** 2 + (mine[1] - y) ** 2
+        total += last
+        count += 1
+    if not count:
+        return None, None, 0
+    return math.sqrt(total / count), math.sqrt(last), count
+
+
 def compare(
     result: ScenarioResult,
     trace: Trace,
-    reference: dict[str, list[tuple[float, float, float]]],
+    reference: dict[str, Track],
     reference_end: float | None,
     controlled: set[str],
 ) -> None:
-    """Fill the comparison fields of `result` (RMSE per entity over the common time span, end time)."""
+    """Fill the comparison fields of `result`: per entity the RMSE over the common time span and the final
+    position error (`track_error`), the end time, and both agreement rules (`agreed`: RMSE ≤ RMSE_LIMIT and
+    end ±END_LIMIT; `agreed_final`: final positions ≤ FINAL_LIMIT and end ±FINAL_END_LIMIT). Entities in
+    `controlled` are reported but decide neither."""
     if reference_end is None:
         reference_end = max((row[0] for rows in reference.values() for row in rows), default=0.0)
     result.reference_end = reference_end
@@ -257,31 +280,31 @@ def compare(
         if theirs is None:
             result.entities.append(EntityResult(name, scripted, None, 0))
             continue
-        by_time = {round(t / REFERENCE_PERIOD): (x, y) for t, x, y in ours}
-        total, count, last = 0.0, 0, 0.0
-        for t, x, y in theirs:
-            mine = by_time.get(round(t / REFERENCE_PERIOD))
-            if mine is None:
-                continue
-            last = (mine[0] - x) ** 2 + (mine[1] - y) ** 2
-            total += last
-            count += 1
-        rmse = math.sqrt(total / count) if count else None
-        if scripted and count:
-            result.final_error = max(result.final_error or 0.0, math.sqrt(last))
-        result.entities.append(EntityResult(name, scripted, rmse, count))
+        rmse, final, count = track_error(ours, theirs)
+        if scripted and final is not None:
+            result.final_error = max(result.final_error or 0.0, final)
+        result.entities.append(EntityResult(name, scripted, rmse, count, final))
         if scripted and rmse is not None and (worst is None or rmse > worst[0]):
             worst = (rmse, name)
-    scripted_missing = [e for e in result.entities if e.scripted and e.rmse is None and e.name in reference]
+    # a scripted entity both runs have but at no common time disagrees
+    missing = [e.name for e in result.entities if e.scripted and e.rmse is None and e.name in reference]
     if worst is not None:
         result.max_rmse, result.worst_entity = worst
-    result.agreed = (
-        result.ended
+    ran = result.ended and result.end_error is not None and not missing
+    result.agreed = bool(
+        ran
         and result.end_error is not None
         and result.end_error <= END_LIMIT + 1e-9
-        and not scripted_missing
         and (worst is None or worst[0] <= RMSE_LIMIT)
     )
+    result.agreed_final = bool(
+        ran
+        and result.end_error is not None
+        and result.end_error <= FINAL_END_LIMIT + 1e-9
+        and (result.final_error is None or result.final_error <= FINAL_LIMIT)
+    )
+    if missing and not result.message:
+        result.message = f"not in CARLOS' run at the reference's times: {', '.join(sorted(missing))}"
 
 
 # --- the whole directory -----------------------------------------------------------------------------------
@@ -383,6 +406,8 @@ def totals(results: list[ScenarioResult]) -> dict[str, Any]:
         "ended": len(ended),
         "with_reference": len(with_reference),
         "agreed": sum(r.agreed for r in with_reference),
+        # the catalogue rule: final positions within FINAL_LIMIT m, end within FINAL_END_LIMIT s
+        "agreed_final": sum(r.agreed_final for r in with_reference),
         # agreed scenarios in which no scripted entity was compared (every entity controller-driven): they
         # agree on the end time only
         "agreed_end_time_only": sum(
@@ -409,7 +434,8 @@ def totals_line(results: list[ScenarioResult]) -> str:
         f"{t['scenarios']} scenarios · loaded {t['loaded']} · ran to their own end {t['ended']} · "
         f"agreed {t['agreed']} of {t['with_reference']} with a reference "
         f"({t['agreed_end_time_only']} of them on the end time only: every entity controller-driven) "
-        f"(RMSE ≤ {RMSE_LIMIT} m, end ±{END_LIMIT} s) · {t['sim_seconds']:.0f} simulated s in "
+        f"(RMSE ≤ {RMSE_LIMIT} m, end ±{END_LIMIT} s) · agreed {t['agreed_final']} by final positions "
+        f"(≤ {FINAL_LIMIT} m, end ±{FINAL_END_LIMIT} s) · {t['sim_seconds']:.0f} simulated s in "
         f"{t['wall_seconds']:.1f} s · {t['warnings']} warnings"
     )
 
@@ -465,6 +491,8 @@ def write_results(results: list[ScenarioResult], out: Path, base: Path) -> None:
             "max_rmse_m",
             "worst_entity",
             "agreed",
+            "agreed_final",
+            "final_error_m",
             "wall_s",
             "warnings",
             "message",
@@ -484,6 +512,8 @@ def write_results(results: list[ScenarioResult], out: Path, base: Path) -> None:
                 "" if r.max_rmse is None else f"{r.max_rmse:.3f}",
                 r.worst_entity or "",
                 int(r.agreed),
+                int(r.agreed_final),
+                "" if r.final_error is None else f"{r.final_error:.3f}",
                 f"{r.wall_seconds:.3f}",
                 len(r.warnings),
                 r.message,
@@ -507,3 +537,73 @@ def iter_rows(results: list[ScenarioResult], base: Path) -> Iterator[list[str]]:
 
 def _short(message: str) -> str:
     return (message[:90] + "…") if len(message) > 90 else message
+
+
+# --- what `carlos run` recorded ----------------------------------------------------------------------------
+
+
+def recording_offset(metadata: dict[str, dict[str, str]]) -> float:
+    """The scenario-time offset a recording's `carlos.run` metadata names (0 when absent: older recordings,
+    no FollowGhost)."""
+    try:
+        return float(metadata.get("carlos.run", {}).get("scenarioTimeOffsetSeconds", "0"))
+    except ValueError:
+        return 0.0
+
+
+def recording_tracks(mcap: Path, period: float = REFERENCE_PERIOD) -> tuple[dict[str, Track], float]:
+    """(ROS entity name → [(scenario time, x, y)] every `period` s, scenario-time offset) from the
+    `/carlos/<entity>/odometry` messages of a `carlos run` recording; scenario time = stamp + offset."""
+    from mcap.reader import make_reader
+
+    from simcore.transport.messages import deserialize
+
+    with mcap.open("rb") as handle:
+        reader = make_reader(handle)
+        metadata = {record.name: dict(record.metadata) for record in reader.iter_metadata()}
+        offset = recording_offset(metadata)
+        summary = reader.get_summary()
+        channels = summary.channels.values() if summary is not None else ()
+        topics = [c.topic for c in channels if c.topic.endswith("/odometry") and c.topic.count("/") == 3]
+        tracks: dict[str, Track] = {}
+        for schema, channel, message in reader.iter_messages(topics=topics) if topics else ():
+            topic = channel.topic
+            if schema is None:
+                continue
+            stamp = message.log_time / 1e9
+            if abs(stamp / period - round(stamp / period)) > 1e-6:
+                continue
+            position = deserialize(message.data, schema.name).pose.pose.position
+            name = topic.split("/")[2]
+            tracks.setdefault(name, []).append(
+                (round(stamp + offset, 6), float(position.x), float(position.y))
+            )
+    return tracks, offset
+
+
+def recorded_run(
+    index_dir: Path, file: str, names: set[str] | frozenset[str] = frozenset()
+) -> tuple[ScenarioResult, Trace]:
+    """What `carlos run` wrote for one index (`<output>/<run>/<index>/`: summary.json, recording.mcap) as a
+    conformance result and trace on the scenario's time axis: status, end time (simSeconds + the scenario-
+    time offset), and every entity's odometry, by its name in `names` where its ROS name matches one."""
+    from simcore.transport.messages import ros_name
+
+    result = ScenarioResult(file=file, kind="scenario")
+    trace = Trace()
+    summary = json.loads((index_dir / "summary.json").read_text())
+    if summary.get("error"):
+        result.status = "bad_input" if summary.get("badInput") else "error"
+        result.message = str(summary["error"])
+        return result, trace
+    recording = index_dir / "recording.mcap"
+    tracks, offset = recording_tracks(recording) if recording.is_file() else ({}, 0.0)
+    offset = float(summary.get("scenarioTimeOffsetSeconds", offset))
+    result.loaded = True
+    result.ended = summary.get("endReason") == "stopTrigger"
+    result.status = "ended" if result.ended else "capped"
+    result.sim_seconds = float(summary["simSeconds"]) + offset
+    result.wall_seconds = float(summary.get("wallSeconds", 0.0))
+    back = {ros_name(n): n for n in names}
+    trace.tracks = {back.get(k, k): v for k, v in tracks.items()}
+    return result, trace

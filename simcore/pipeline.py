@@ -53,6 +53,10 @@ class Outcome:
     end_reason: str  # stopTrigger | maxSeconds
     sim_seconds: float
     log: list[str]
+    #: scenario time = run time + this (negative when a FollowGhost's ghost got a head start: the run, its
+    #: recording and `sim_seconds` start at the ghost's start, ROS time cannot be negative)
+    scenario_time_offset: float = 0.0
+    warnings: tuple[str, ...] = ()
 
 
 @dataclass
@@ -154,7 +158,9 @@ def versions() -> dict[str, str]:
     return out
 
 
-def _metadata(run: SimulationRun, point: RunPoint, scenario: Scenario, scenario_file: Path) -> dict[str, Any]:
+def _metadata(
+    run: SimulationRun, point: RunPoint, scenario: Scenario, scenario_file: Path, offset: float = 0.0
+) -> dict[str, Any]:
     import yaml
 
     return {
@@ -170,6 +176,9 @@ def _metadata(run: SimulationRun, point: RunPoint, scenario: Scenario, scenario_
             "resolvedParameters": json.dumps(scenario.parameters, sort_keys=True, default=str),
             "seed": str(point.seed),
             "stepSeconds": repr(run.spec.simulation.step_seconds),
+            # scenario time = log time + this (docs/design.md): a FollowGhost's ghost starts before the
+            # scenario's time 0, the recording's clock at the ghost's start (ROS time is never negative)
+            "scenarioTimeOffsetSeconds": repr(offset),
         },
         "carlos.versions": versions(),
     }
@@ -184,13 +193,11 @@ def assemble(
     bus: Bus | None = None,
     base_dir: Path | None = None,
     with_metrics: bool = True,
-    headless: bool = False,
     on_loaded: Callable[[Scenario], None] | None = None,
 ) -> Assembly:
-    """Build the run of `point` (recording into `out_dir/recording.mcap` when the spec records). `headless`:
-    no system under test is attached, so externally driven entities stand still (as in the reference
-    player) instead of waiting for commands. `on_loaded` sees the scenario once parsed. On an error every
-    part started so far is released."""
+    """Build the run of `point` (recording into `out_dir/recording.mcap` when the spec records). Externally
+    driven entities stand still (as in the reference player) until a command for them arrives. `on_loaded`
+    sees the scenario once parsed. On an error every part started so far is released."""
     from simcore.scenario.engine import ScenarioEngine
     from simcore.scenario.xosc import load_scenario
 
@@ -206,7 +213,7 @@ def assemble(
         sumo = start_sumo(scenario, spec.simulation.step_seconds, point.seed)
         closed_loop = None
         control = spec.control
-        if control is not None or (not headless and any(e.driver == "external" for e in scenario.entities)):
+        if control is not None or (any(e.driver == "external" for e in scenario.entities)):
             from simcore.closedloop import ClosedLoop
 
             closed_loop = ClosedLoop(
@@ -249,7 +256,7 @@ def assemble(
                 out_dir / "recording.mcap",
                 topics=spec.recording.topics,
                 compression=spec.recording.compression,
-                metadata=_metadata(run, point, scenario, scenario_file),
+                metadata=_metadata(run, point, scenario, scenario_file, engine.output_time_offset),
             )
             _subscribe(bus, "*", _record_into(recorder), wants=recorder.wants)
         perceiving = spec.sensors or any(rsu.sensors for rsu in spec.infrastructure)
@@ -376,4 +383,30 @@ def outcome(parts: Assembly) -> Outcome:
         result.update(parts.perception.metrics())
         if parts.perception.failure is not None:
             log_lines.append(f"system under test failed: {parts.perception.failure}")
-    return Outcome(result, end_reason, engine.time, log_lines)
+    warnings = (*parts.scenario.warnings, *engine.warnings)
+    return Outcome(result, end_reason, engine.time, log_lines, engine.output_time_offset, warnings)
+
+
+def simulate(
+    run: SimulationRun,
+    point: RunPoint,
+    scenario_file: Path,
+    out_dir: Path,
+    *,
+    progress: Progress | None = None,
+    deadline: float | None = None,
+    bus: Bus | None = None,
+    base_dir: Path | None = None,
+    observe: Observer | None = None,
+    on_loaded: Callable[[Scenario], None] | None = None,
+) -> Outcome:
+    """Assemble, drive and close one run: what `carlos run` (`simcore.runner`) and `carlos conformance`
+    (`simcore.conformance.run_scenario`, which observes the engine every step) both do."""
+    parts = assemble(run, point, scenario_file, out_dir, bus=bus, base_dir=base_dir, on_loaded=on_loaded)
+    ok = False
+    try:
+        drive(parts, progress=progress, deadline=deadline, observe=observe)
+        ok = True
+    finally:
+        parts.close(ok=ok)
+    return outcome(parts)

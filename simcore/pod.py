@@ -277,10 +277,11 @@ def _run_dds_bridge(env: PodEnv, stop: threading.Event) -> int:
 
 
 def run_simcore(env: PodEnv) -> int:
+    from simcore import pipeline
     from simcore.evaluation.criteria import CriterionResult, evaluate
     from simcore.evaluation.report import index_summary
     from simcore.plan import Plan
-    from simcore.runner import resolve_scenario_file, simulate
+    from simcore.runner import resolve_scenario_file
 
     started = time.monotonic()
     run = _load(env)
@@ -315,6 +316,7 @@ def run_simcore(env: PodEnv) -> int:
     error: str | None = None
     end_reason = "error"
     sim_seconds = 0.0
+    offset = 0.0
     exit_code = ExitCode.PASSED
     log_lines = [
         f"carlos pod simcore: run {run.name} index {env.index} attempt {attempt}: "
@@ -345,7 +347,7 @@ def run_simcore(env: PodEnv) -> int:
                 scenario_file = resolve_scenario_file(
                     point, Path("/"), scratch, lambda url: _store(env, run, url)
                 )
-            metrics, end_reason, sim_seconds, storyboard = simulate(
+            ran = pipeline.simulate(
                 quiet,
                 point,
                 scenario_file,
@@ -353,7 +355,10 @@ def run_simcore(env: PodEnv) -> int:
                 deadline=started + spec.execution.timeout_seconds,
                 bus=_Borrowed(bus),
             )
-            log_lines.extend(storyboard)
+            metrics, end_reason, sim_seconds = ran.metrics, ran.end_reason, ran.sim_seconds
+            offset = ran.scenario_time_offset
+            log_lines.extend(f"warning: {warning}" for warning in ran.warnings)
+            log_lines.extend(ran.log)
             results = evaluate(criteria, metrics)
         except CarlosError as exc:
             error = str(exc)
@@ -377,6 +382,7 @@ def run_simcore(env: PodEnv) -> int:
         error=error,
         end_reason=end_reason if error is None else "error",  # type: ignore[arg-type]
         attempts=attempt,
+        scenario_time_offset=offset,
     )
     if error is None and summary["status"] == "failed":
         exit_code = ExitCode.FAILED

@@ -35,7 +35,7 @@ def find_esmini(explicit: Path | None = None) -> Path | None:
     """The esmini binary: `explicit`, else $ESMINI, else `esmini` on PATH; None when there is none."""
     for candidate in (explicit, os.environ.get(ENV) or None, shutil.which("esmini")):
         if candidate and Path(candidate).is_file() and os.access(candidate, os.X_OK):
-            return Path(candidate)
+            return Path(candidate).resolve()  # esmini runs in a scratch directory: a relative path must not
     return None
 
 
@@ -97,7 +97,7 @@ def run_esmini(esmini: Path, scenario: Path, *, step: float = 0.05, seed: int = 
     with tempfile.TemporaryDirectory(prefix="carlos-esmini-") as scratch:
         out = Path(scratch) / "out.csv"
         command = [
-            str(esmini),
+            str(esmini.resolve()),  # relative to the caller's directory, not to the scratch directory
             "--headless",
             "--fixed_timestep",
             f"{step:g}",

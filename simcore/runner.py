@@ -132,14 +132,9 @@ def simulate(
     Returns (metrics, end reason, simulated seconds, storyboard log)."""
     from simcore import pipeline
 
-    parts = pipeline.assemble(run, point, scenario_file, out_dir, bus=bus, base_dir=base_dir)
-    ok = False
-    try:
-        pipeline.drive(parts, progress=progress, deadline=deadline)
-        ok = True
-    finally:
-        parts.close(ok=ok)
-    result = pipeline.outcome(parts)
+    result = pipeline.simulate(
+        run, point, scenario_file, out_dir, progress=progress, deadline=deadline, bus=bus, base_dir=base_dir
+    )
     return result.metrics, result.end_reason, result.sim_seconds, result.log
 
 
@@ -210,6 +205,7 @@ def run_index(
     error: str | None = None
     end_reason = "error"
     sim_seconds = 0.0
+    offset = 0.0
     exit_code = ExitCode.PASSED
     log_lines: list[str] = [
         f"carlos run {run.name} index {index}: scenario {point.scenario.name}, seed {point.seed}"
@@ -219,7 +215,9 @@ def run_index(
     with _scratch(index, scratch_root, _writes_files(run, point)) as scratch:
         try:
             scenario_file = resolve_scenario_file(point, base_dir, scratch, store_factory)
-            metrics, end_reason, sim_seconds, storyboard_log = simulate(
+            from simcore import pipeline
+
+            result = pipeline.simulate(
                 run,
                 point,
                 scenario_file,
@@ -229,7 +227,12 @@ def run_index(
                 bus=bus,
                 base_dir=base_dir,
             )
-            log_lines.extend(storyboard_log)
+            metrics, end_reason, sim_seconds = result.metrics, result.end_reason, result.sim_seconds
+            offset = result.scenario_time_offset
+            for warning in result.warnings:  # what the engine read leniently (file, element, what it did)
+                log.warning("%s", warning)
+                log_lines.append(f"warning: {warning}")
+            log_lines.extend(result.log)
             results = evaluate(criteria, metrics)
         except CarlosError as exc:
             error = str(exc)
@@ -253,6 +256,7 @@ def run_index(
             error=error,
             end_reason=end_reason if error is None else "error",  # type: ignore[arg-type]
             attempts=attempt,
+            scenario_time_offset=offset,
         )
         if error is None and summary["status"] == "failed":
             exit_code = ExitCode.FAILED

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from simcore.scenario.parameters import Declaration, ParameterError, declare, evaluate_expression, resolve
@@ -93,3 +95,37 @@ def test_declared_values_must_be_finite() -> None:
         declare([Declaration("X", "double", "inf")], {})
     with pytest.raises(ParameterError, match=r"'N' \(integer\).*finite"):
         declare([Declaration("N", "integer", "nan")], {})
+
+
+def test_an_integer_parameter_with_a_decimal_value_is_read_as_the_number_with_one_warning(
+    tmp_path: Path,
+) -> None:
+    """Generators write `parameterType="integer" value="330.91…"` (used as a position): esmini reads the
+    number, so the engine does, with one warning naming the file and the parameter; the strict schema check
+    (`carlos validate --schema`) still reports it."""
+    from typer.testing import CliRunner
+
+    from simcore.cli_app import app
+    from simcore.scenario.xosc import load_scenario
+    from tests.xosc_fixtures import openscenario, private_actions, scenario_object, vehicle, write_scenario
+
+    text = openscenario(
+        minor=1,
+        parameters='<ParameterDeclarations><ParameterDeclaration name="StartX" parameterType="integer" '
+        'value="3.91248879161475"/></ParameterDeclarations>',
+        entities=scenario_object("Car", vehicle(z=0.8, width=2, max_speed=50, track_width=1.8)),
+        init=private_actions(
+            "Car",
+            '<PrivateAction><TeleportAction><Position><WorldPosition x="$StartX" y="0"/></Position>'
+            "</TeleportAction></PrivateAction>",
+        ),
+    )
+    path = write_scenario(tmp_path, text, "generated.xosc")
+    scenario = load_scenario(path, {})
+    assert scenario.parameters["StartX"] == pytest.approx(3.91248879161475)
+    warnings = [w for w in scenario.warnings if "StartX" in w]
+    assert len(warnings) == 1
+    assert str(path) in warnings[0] and "not an integer" in warnings[0]
+    done = CliRunner().invoke(app, ["validate", "--schema", str(path)])
+    assert done.exit_code != 0
+    assert "StartX" in done.output and "not an integer" in done.output

@@ -84,14 +84,10 @@ def _corpus_files() -> list[Path]:
 def test_every_corpus_scenario_conformance_runs_to_its_end_runs_the_same_through_carlos_run(
     tmp_path: Path, scenario: Path
 ) -> None:
-    from simcore.scenario.xosc import load_scenario
-
     result, trace = conformance.run_scenario(scenario)
     if result.status != "ended":
         pytest.skip(f"conformance does not run it to its end ({result.status}: {result.message})")
-    external = [e.name for e in load_scenario(scenario).entities if e.driver == "external"]
-    if external:  # headless, as the reference player; `carlos run` lets them drive freely without a system
-        pytest.skip(f"conformance holds the externally driven {', '.join(external)} still (headless)")
+    # externally driven entities included: without a command both hold them, as the reference player
     assert _same_trajectories(tmp_path, scenario, trace, conformance.DEFAULT_CAP_SECONDS) > 0
 
 

@@ -56,6 +56,7 @@ def index_summary(
     error: str | None,
     end_reason: EndReason,
     attempts: int = 1,
+    scenario_time_offset: float = 0.0,
 ) -> dict[str, Any]:
     """The per-index summary.json as a dict (DESIGN.md fields plus `endReason` and `attempts`).
 
@@ -69,7 +70,7 @@ def index_summary(
         raise ValueError(f"index must be >= 0, not {index}")
     if attempts < 1:
         raise ValueError(f"attempts must be >= 1, not {attempts}")
-    return {
+    summary: dict[str, Any] = {
         "index": index,
         "scenario": scenario,
         "parameters": dict(parameters),
@@ -95,6 +96,10 @@ def index_summary(
         "endReason": end_reason,
         "attempts": attempts,
     }
+    if scenario_time_offset:
+        # scenario time = simSeconds' time axis + this (a FollowGhost's ghost starts before time 0)
+        summary["scenarioTimeOffsetSeconds"] = _finite("scenarioTimeOffsetSeconds", scenario_time_offset)
+    return summary
 
 
 class _Aggregate:

@@ -63,6 +63,11 @@ class ExternalDriver(Protocol):
         self, entity: m.Entity, x: float, y: float, heading: float, speed: float, dt: float
     ) -> tuple[float, float, float, float]: ...
 
+    def has_input(self, entity: str) -> bool:
+        """Whether a command for `entity` has arrived (before the first one the entity is held as in
+        esmini, so a run without a system under test is the reference player's run)."""
+        ...
+
 
 class ScenarioEngine:
     """Runs one scenario. `step()` advances one fixed step and returns the new frame."""
@@ -183,7 +188,7 @@ class ScenarioEngine:
             driver.step(0.0)
             self._start_lane_change(driver)
         for body in self.bodies.values():
-            if body.external and self.external is None and not body.gone:
+            if body.external and not self._has_input(body) and not body.gone:
                 self._move_external(body, 0.0)  # that first frame rolls an interactive vehicle's speed down
         if self.trailer_of:
             self.align_trailers()
@@ -554,17 +559,22 @@ class ScenarioEngine:
 
     def _move_external(self, body: Body, dt: float) -> None:
         """An entity its external controller drives: moved by the control input; without one (no system
-        under test attached, as in a headless conformance run) it stands still, as in esmini."""
-        if self.external is None:
+        under test attached, or none that sent a command yet) it stands still, as in esmini: `carlos run`
+        and `carlos conformance` give the same trajectories for the same file."""
+        external = self.external
+        if external is None or not external.has_input(body.entity.name):
             if m.controller_type(body.entity.controller) == "InteractiveController":
                 self._coast(body, dt)
             else:
                 body.speed = 0.0
             return
-        x, y, heading, speed = self.external.move(body.entity, body.x, body.y, body.heading, body.speed, dt)
+        x, y, heading, speed = external.move(body.entity, body.x, body.y, body.heading, body.speed, dt)
         body.odometer += math.hypot(x - body.x, y - body.y)
         body.x, body.y, body.heading, body.speed = x, y, heading, speed
         self.locate(body)
+
+    def _has_input(self, body: Body) -> bool:
+        return self.external is not None and self.external.has_input(body.entity.name)
 
     def _coast(self, body: Body, dt: float) -> None:
         """esmini's InteractiveController with no key pressed (a headless run): its vehicle model rolls on,
@@ -648,12 +658,17 @@ class ScenarioEngine:
         )
 
     def frame(self) -> WorldFrame:
-        """Every entity's state now (built once per step: `moved` forgets them)."""
+        """Every entity in the world now (built once per step: `moved` forgets them). An entity out of the
+        world (not placed yet, deleted) is in no frame — no topic, recording, sensor or metric sees it at a
+        stale position — except the ego, which metrics measure from."""
         states = self._states
         state_of = self._state_of
+        ego = self.ego
         if self.ghosts is None:
             entities = []
             for b in self.bodies.values():
+                if b.gone and b.name != ego:
+                    continue
                 state = states.get(b.name)
                 if state is None:
                     state = states[b.name] = state_of(b)
@@ -661,8 +676,9 @@ class ScenarioEngine:
             return world_frame(self.step_index, self.time, tuple(entities), self.ego, (), ())
         ghost_names = self.ghosts.names
         # a ghost is no object of the world (esmini shows it as a shadow): published apart
-        entities = [self.state_of(b) for b in self.bodies.values() if b.name not in ghost_names]
-        ghosts = tuple([self.state_of(b) for b in self.bodies.values() if b.name in ghost_names])
+        present = [b for b in self.bodies.values() if not b.gone or b.name == ego]
+        entities = [self.state_of(b) for b in present if b.name not in ghost_names]
+        ghosts = tuple([self.state_of(b) for b in present if b.name in ghost_names])
         return world_frame(self.step_index, self.time, tuple(entities), self.ego, (), ghosts)
 
     @property

@@ -89,7 +89,8 @@ MODELLED_CONTROLLERS = (
     | FOLLOW_GHOST_CONTROLLERS
     | VEHICLE_CONTROLLERS
     | NATURAL_DRIVER_CONTROLLERS
-    | {"", "DefaultController"}
+    # esmini's ExternalController with no input holds its entity, as the engine does until a command arrives
+    | {"", "DefaultController", "ExternalController"}
 )
 
 

@@ -115,4 +115,34 @@ def check_openscenario(path: Path, max_issues: int = MAX_ISSUES) -> SchemaReport
                 reason=str(error.reason or error.message).strip(),
             )
         )
+    for issue in _integer_parameters(tree):
+        if len(report.issues) >= max_issues:
+            report.truncated = True
+            break
+        report.issues.append(issue)
     return report
+
+
+INTEGER_TYPES = ("integer", "int", "unsignedInt", "unsignedShort")
+
+
+def _integer_parameters(tree: Any) -> list[SchemaIssue]:
+    """Integer parameters declared with a value that is no integer (`330.91`): the XSD types every value as
+    a string, the standard's types do not allow it (`carlos run` reads the number, as esmini, and warns)."""
+    issues = []
+    for element in tree.iter("ParameterDeclaration"):
+        kind, value = element.get("parameterType", ""), element.get("value", "")
+        if kind not in INTEGER_TYPES or value[:1] == "$":
+            continue
+        try:
+            int(value.strip())
+        except ValueError:
+            issues.append(
+                SchemaIssue(
+                    line=element.sourceline,
+                    path=tree.getpath(element),
+                    reason=f"parameter {element.get('name')!r} is declared {kind} but its value {value!r} "
+                    "is not an integer",
+                )
+            )
+    return issues

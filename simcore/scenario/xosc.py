@@ -152,13 +152,23 @@ class _Reader:
                 value = item.get("value", "")
                 if kind in ("double", "integer", "int", "unsignedInt", "unsignedShort") and value[:1] != "$":
                     try:
-                        float(value)
+                        number = float(value)
                     except ValueError:
                         self.warn(
                             f"parameter {name!r} is declared {kind} but its value {value!r} is not a number: kept as a string",
                             item,
                         )
                         kind = "string"
+                    else:
+                        if kind != "double" and math.isfinite(number) and number != int(number):
+                            # generators write decimals into integer parameters; esmini reads the number
+                            # (`carlos validate --schema` reports it)
+                            self.warn(
+                                f"parameter {name!r} is declared {kind} but its value {value!r} is not an "
+                                "integer: read as the number, as esmini does",
+                                item,
+                            )
+                            kind = "double"
                 declarations.append(Declaration(name=name, type=kind, value=value))
         try:
             self.scopes.append(declare(declarations, self.values, overrides))
