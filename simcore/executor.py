@@ -220,8 +220,9 @@ def execute(
     name = run.name
     spec_bytes = _dump_spec(record or run)
     previous: dict[int, dict[str, Any]] = {}
-    if store.exists(f"{name}/run.yaml") and not fresh:
-        if store.get_bytes(f"{name}/run.yaml") != spec_bytes:
+    written_spec = store.get_bytes(f"{name}/run.yaml") if store.exists(f"{name}/run.yaml") else None
+    if written_spec is not None and not fresh:
+        if written_spec != spec_bytes:
             raise BadInput(
                 f"results for run {name!r} already exist at {store.url_for(name)} with a different spec: "
                 "change metadata.name, or pass --fresh to replace them",
@@ -231,8 +232,10 @@ def execute(
             kept = _written_summary(store, f"{name}/{index}/summary.json")
             if kept is not None and kept_on_resume(kept):
                 previous[index] = in_manifest_order(kept, list(plan[index].parameters))
-    # a partial run (--index) merges into the run's results: the indexes it does not run keep theirs
-    others = {} if indexes is None or fresh else _other_results(store, plan, name, set(wanted))
+    # a partial run (--index, also with --fresh) merges into the results of the same spec: the indexes it
+    # does not run keep theirs
+    merging = indexes is not None and written_spec == spec_bytes
+    others = _other_results(store, plan, name, set(wanted)) if merging else {}
     store.put_bytes(f"{name}/run.yaml", spec_bytes)
     store.sync()
     todo = [i for i in wanted if i not in previous]
