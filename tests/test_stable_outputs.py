@@ -265,3 +265,23 @@ def test_cli_and_cli_app_do_not_import_each_other() -> None:
         elif isinstance(node, ast.Import):
             imported.update(a.name for a in node.names)
     assert "simcore.cli" not in imported
+
+
+def test_an_entity_selection_is_reported_on_its_own_line(tmp_path: Path) -> None:
+    text = CUT_IN.read_text()
+    at = text.index("</Entities>")
+    text = (
+        text[:at] + '  <EntitySelection name="all">\n      <Members/>\n    </EntitySelection>\n  ' + text[at:]
+    )
+    line = text[: text.index("<EntitySelection")].count("\n") + 1
+    scenario = tmp_path / "selection.xosc"
+    scenario.write_text(text.replace('filepath="../maps/', f'filepath="{CUT_IN.parent.parent}/maps/'))
+    manifest = tmp_path / "selection.yaml"
+    manifest.write_text(
+        _RUN.format(
+            name="sel", scenario=json.dumps(str(scenario)), simulation="", url=(tmp_path / "o").as_uri()
+        )
+    )
+    result = carlos_in_process("validate", manifest)
+    assert result.exit_code == 2
+    assert f"selection.xosc:{line}: EntitySelection: EntitySelection is not supported yet" in result.stderr
