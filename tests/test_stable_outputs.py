@@ -140,7 +140,7 @@ def _broken(tmp_path: Path, case: str) -> tuple[Path, str]:
     scenario = CUT_IN.read_text().replace('filepath="../maps/', f'filepath="{CUT_IN.parent.parent}/maps/')
     simulation = ""
     expected = {
-        "lane": "no lane id=-7 at s=50.000",
+        "lane": "lane.xosc:96: LanePosition: ",
         "ego": "ego entity 'Nobody' is not in the scenario",
         "param": "parameter(s) Nope not declared",
         "entity": "not declared in <Entities>",
@@ -173,6 +173,8 @@ def test_validate_rejects_what_run_rejects(case: str, tmp_path: Path) -> None:
     said = validated.stderr.strip()
     assert said.count("\n") == 0 and expected in said, said
     assert expected in ran.stdout + ran.stderr
+    if case == "lane":
+        assert "no lane id=-7 at s=50.000" in said
     index = tmp_path / "out" / case / "0" / "summary.json"
     if index.exists():  # rejected by the run itself: an error of bad input, never a test failure
         summary = json.loads(index.read_text())
