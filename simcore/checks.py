@@ -57,3 +57,24 @@ def check_system_under_test(spec: SimulationRunSpec, base_dir: Path, file: str) 
         system_under_test_class(sut, base_dir)
     except BadInput as exc:
         raise BadInput(exc.detail, file=file, field=exc.field) from None
+
+
+def check_controller_reachable(spec: SimulationRunSpec, transport: str, file: str) -> None:
+    """A lockstep closed loop (`spec.control`) needs a controller that can answer: one in this process
+    (`spec.systemUnderTest.module`) or one in another process over `--transport dds` / `loopback`. Without
+    either, every step would wait for a command nobody can send (`startupTimeoutSeconds`, then retries): bad
+    input at once instead."""
+    control = spec.control
+    if control is None or control.mode != "lockstep" or transport != "none":
+        return
+    sut = spec.system_under_test
+    if sut is not None and sut.module is not None:
+        return
+    driven = ", ".join(control.entities) or "its externally controlled entities"
+    raise BadInput(
+        f"drives {driven} in lockstep, but no controller can reach this run: add --transport dds "
+        "(or --transport loopback) and start your controller in another process (e.g. `python -m "
+        "examples.controller --transport dds`), or set spec.systemUnderTest.module to run it in this process",
+        file=file,
+        field="spec.control",
+    )

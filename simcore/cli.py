@@ -1,38 +1,18 @@
-"""`carlos` — the command line (`main`; the commands are simcore.cli_app's typer app, also as `simcore.cli.app`).
+"""`carlos` — the command line (`main`; the commands are simcore.cli_app's typer app, also as `simcore.cli.app`,
+imported when first asked for: simcore.cli_app does not import this module, so there is no import circle).
 
 This module stays small: the worker processes `carlos run` spawns start by importing the program's main module
 (this one, or the `carlos` script importing `main` from it), and a worker needs none of the command line's
 imports (typer, rich: some 50 ms before its first run).
 """
 
-import gc
 import sys
 from typing import Any
 
 from simcore.errors import CarlosError
+from simcore.startup import pause_gc, resume_gc
 
-_gc_paused = False
-
-
-def pause_gc() -> None:
-    """Start-up (imports, the CLI, the spec's validators, the scenario) allocates some 10^5 objects that live as
-    long as the process and hardly any garbage; the cyclic collector would go through them again and again
-    (40-60 ms of `carlos run`). `carlos` pauses it from the start until resume_gc()."""
-    global _gc_paused
-    if gc.isenabled():
-        gc.disable()
-        _gc_paused = True
-
-
-def resume_gc() -> None:
-    """Collect again, once start-up is over, with what start-up allocated frozen (gc.freeze: never scanned
-    again). Only after pause_gc(): a process that did not pause the collector (tests calling the app, a
-    program importing simcore) is left as it is."""
-    global _gc_paused
-    if _gc_paused:
-        _gc_paused = False
-        gc.freeze()
-        gc.enable()
+__all__ = ["main", "pause_gc", "resume_gc"]
 
 
 def main() -> None:
@@ -55,7 +35,5 @@ def __getattr__(name: str) -> Any:
     return getattr(simcore.cli_app, name)
 
 
-if __name__ == "__main__":  # `python -m simcore.cli`: run the module proper (where resume_gc looks)
-    from simcore import cli
-
-    cli.main()
+if __name__ == "__main__":  # `python -m simcore.cli`
+    main()

@@ -18,7 +18,7 @@ from rich.table import Table
 from rich.text import Text
 from typer.core import TyperGroup
 
-from simcore import cli as entry  # the collector's pause (entry.resume_gc: looked up there, at each call)
+from simcore import startup as entry  # the collector's pause (entry.resume_gc: looked up there, at each call)
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError, shorten
 from simcore.workflow import commands as workflow
 
@@ -75,6 +75,11 @@ def _line(label: str, style: str, text: object) -> Text:
     """`label text` with the label styled and the text literal: file names, entity names and messages are
     user-controlled, so never read as rich markup (`[/x]`) or emoji codes (`:100:`)."""
     return Text.assemble((label, style), " ", str(text))
+
+
+def plural(count: int, word: str) -> str:
+    """`1 run`, `2 runs`, `0 runs` (pure)."""
+    return f"{count} {word}" if count == 1 else f"{count} {word}s"
 
 
 def _fail(exc: CarlosError) -> typer.Exit:
@@ -167,6 +172,9 @@ def run(
             raise BadInput(f"unknown transport {transport!r}: use none, loopback or dds", field="--transport")
         if ros_domain_id is not None and transport != "dds":
             raise BadInput("--ros-domain-id is for --transport dds", field="--ros-domain-id")
+        from simcore.checks import check_controller_reachable
+
+        check_controller_reachable(simulation_run.spec, transport, str(manifest))
         bus: Bus | None = None
         for flag, wanted in (("--live", live), ("--transport", transport != "none")):
             selected = len(set(index)) if index else total
@@ -224,7 +232,7 @@ def run(
                 lines.start(count, skipped)
             if skipped:
                 console.print(
-                    f"resuming: {skipped} of {count} runs already complete (use --fresh to rerun them)"
+                    f"resuming: {skipped} of {plural(count, 'run')} already complete (use --fresh to rerun them)"
                 )
 
         def on_progress(i: int, sim_time: float) -> None:
@@ -441,6 +449,18 @@ def _preflight_scenarios(simulation_run: Any, manifest: Path) -> None:
             check_road_file(parsed.road_file, scenario_file=str(path))
 
 
+def _initial_states(simulation_run: Any, manifest: Path) -> None:
+    """`carlos validate` goes on where a run would: each local scenario's initial state is built (nothing
+    stepped), so what a run rejects only there is rejected here too (simcore.preflight.check_initial_states).
+    A search's points are chosen while it runs: its scenarios are checked by their parse only."""
+    from simcore.preflight import check_initial_states
+
+    if simulation_run.spec.search is not None:
+        return
+    for position, _scenario, path in _local_scenarios(simulation_run, manifest):
+        check_initial_states(simulation_run, position, path, source=str(manifest))
+
+
 def _search(
     simulation_run: Any, manifest: Path, output: str | None, parallel: int | None, selective: bool
 ) -> Any:
@@ -463,13 +483,15 @@ def _search(
         output_url=output,
         parallel=parallel,
         on_round=lambda d: console.print(
-            f"round {d['rounds'][-1]['round']}: {d['runs']} runs, {d['failures']} failing", highlight=False
+            f"round {d['rounds'][-1]['round']}: {plural(d['runs'], 'run')}, {d['failures']} failing",
+            highlight=False,
         ),
     )
     document = result.document
     best = document["best"]
     out.print(
-        f"search: {document['runs']} runs in {len(document['rounds'])} rounds · {document['failures']} failing · "
+        f"search: {plural(document['runs'], 'run')} in {plural(len(document['rounds']), 'round')} · "
+        f"{document['failures']} failing · "
         f"best {document['objective']['metric']} "
         f"{'n/a' if best is None else format(best['objective'], '.3g')}"
         + (f" · failing points: {document['failingScenarios']}" if "failingScenarios" in document else ""),
@@ -512,7 +534,7 @@ def _print_report(report: object) -> None:
     out.print(
         Text.assemble(
             (status, f"bold {colour}"),
-            f" · {summary['counts']['total']} runs in {report.wall_seconds:.1f} s "
+            f" · {plural(summary['counts']['total'], 'run')} in {report.wall_seconds:.1f} s "
             f"({report.skipped} resumed) · results: {report.output_url}",
         ),
         highlight=False,
@@ -560,6 +582,7 @@ def validate(
     try:
         simulation_run = load_manifest(manifest)
         _preflight(simulation_run, manifest)
+        _initial_states(simulation_run, manifest)
         paths = [path for _, _, path in _local_scenarios(simulation_run, manifest)] if schema else []
     except CarlosError as exc:
         raise _fail(exc) from None
@@ -569,10 +592,10 @@ def validate(
     search = simulation_run.spec.search
     out.print(
         Text(
-            f"{manifest}: valid · {len(plan)} runs "
-            f"({len(simulation_run.spec.scenarios)} scenarios × {plan.per_scenario})"
+            f"{manifest}: valid · {plural(len(plan), 'run')} "
+            f"({plural(len(simulation_run.spec.scenarios), 'scenario')} × {plan.per_scenario})"
             if search is None
-            else f"{manifest}: valid · a {search.strategy} search of {search.budget} runs "
+            else f"{manifest}: valid · a {search.strategy} search of {plural(search.budget, 'run')} "
             f"in rounds of {search.batch_size}"
         ),
         highlight=False,

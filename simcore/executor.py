@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 from simcore.errors import BadInput, ExitCode
-from simcore.evaluation.report import junit_xml, run_summary
+from simcore.evaluation.report import in_manifest_order, junit_xml, run_summary
 from simcore.lifetime import die_with_parent, make_scratch_root
 from simcore.plan import Plan
 from simcore.runner import RunOutcome, error_outcome, run_index, summary_bytes
@@ -155,6 +155,24 @@ def _written_summary(store: Store, key: str) -> dict[str, Any] | None:
     return summary if isinstance(summary, dict) else None
 
 
+def _other_results(store: Store, plan: Plan, name: str, wanted: set[int]) -> dict[int, dict[str, Any]]:
+    """The summaries already written for the run's indexes outside `wanted` (parameters in the manifest's
+    order), by index: what a partial run (--index) keeps in the run-level results."""
+    found: dict[int, dict[str, Any]] = {}
+    prefix = f"{name}/"
+    for key in store.list(prefix):
+        parts = key[len(prefix) :].split("/")
+        if len(parts) != 2 or parts[1] != "summary.json" or not parts[0].isdigit():
+            continue
+        index = int(parts[0])
+        if index in wanted or index >= len(plan):
+            continue
+        summary = _written_summary(store, key)
+        if summary is not None and summary.get("index") == index:
+            found[index] = in_manifest_order(summary, list(plan[index].parameters))
+    return found
+
+
 def _exit_code_of(summary: dict[str, Any]) -> ExitCode:
     return ExitCode.PASSED if summary.get("status") == "passed" else ExitCode.FAILED
 
@@ -202,8 +220,9 @@ def execute(
     name = run.name
     spec_bytes = _dump_spec(record or run)
     previous: dict[int, dict[str, Any]] = {}
-    if store.exists(f"{name}/run.yaml") and not fresh:
-        if store.get_bytes(f"{name}/run.yaml") != spec_bytes:
+    written_spec = store.get_bytes(f"{name}/run.yaml") if store.exists(f"{name}/run.yaml") else None
+    if written_spec is not None and not fresh:
+        if written_spec != spec_bytes:
             raise BadInput(
                 f"results for run {name!r} already exist at {store.url_for(name)} with a different spec: "
                 "change metadata.name, or pass --fresh to replace them",
@@ -212,7 +231,11 @@ def execute(
         for index in wanted:
             kept = _written_summary(store, f"{name}/{index}/summary.json")
             if kept is not None and kept_on_resume(kept):
-                previous[index] = kept
+                previous[index] = in_manifest_order(kept, list(plan[index].parameters))
+    # a partial run (--index, also with --fresh) merges into the results of the same spec: the indexes it
+    # does not run keep theirs
+    merging = indexes is not None and written_spec == spec_bytes
+    others = _other_results(store, plan, name, set(wanted)) if merging else {}
     store.put_bytes(f"{name}/run.yaml", spec_bytes)
     store.sync()
     todo = [i for i in wanted if i not in previous]
@@ -233,14 +256,23 @@ def execute(
             _in_pool(sweep, workers)
         finally:
             shutil.rmtree(settings.scratch_root, ignore_errors=True)
+    # this invocation's verdict (its exit code, what it prints) is over the indexes it selected; what it
+    # writes covers every index of the run that has a result
     summary = run_summary(
         name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted), expected=set(wanted)
     )
     summary["outputUrl"] = store.url_for(name)
-    store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
-    store.put_bytes(f"{name}/summary.json", summary_bytes(summary))
+    merged = {**others, **outcomes}
+    results = [merged[i] for i in sorted(merged)]
+    written = summary
+    if others:
+        covered = set(merged) | set(wanted)  # a selected index without a result counts as missing
+        written = run_summary(name, results, total=len(covered), expected=covered)
+        written["outputUrl"] = summary["outputUrl"]
+    store.put_bytes(f"{name}/junit.xml", junit_xml(name, results).encode())
+    store.put_bytes(f"{name}/summary.json", summary_bytes(written))
     store.sync()
-    report_url, report_error = _html_report(store, run, summary, [outcomes[i] for i in sorted(outcomes)])
+    report_url, report_error = _html_report(store, run, written, results)
     return RunReport(
         run_name=name,
         output_url=store.url_for(name),
@@ -383,6 +415,7 @@ def _crashed(sweep: _Sweep, index: int) -> None:
     written = _written_summary(sweep.store, f"{sweep.settings.run.name}/{index}/summary.json")
     if written is not None and kept_on_resume(written) and written.get("attempts") == sweep.attempts[index]:
         # the worker finished this attempt (its summary is written last) and died before reporting it
+        written = in_manifest_order(written, list(Plan(sweep.settings.run.spec)[index].parameters))
         sweep.outcomes[index] = written
         sweep.events.on_done(RunOutcome(index=index, summary=written, exit_code=_exit_code_of(written)))
         return

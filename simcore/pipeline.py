@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from simcore.errors import BadInput, SimulationError
 from simcore.plan import RunPoint
-from simcore.spec import SimulationRun
+from simcore.spec import SimulationRun, SimulationRunSpec
 from simcore.transport.bus import Bus, InProcessBus, Message
 from simcore.transport.world import WorldPublisher
 
@@ -184,33 +184,18 @@ def _metadata(
     }
 
 
-def assemble(
-    run: SimulationRun,
-    point: RunPoint,
-    scenario_file: Path,
-    out_dir: Path,
-    *,
-    bus: Bus | None = None,
-    base_dir: Path | None = None,
-    with_metrics: bool = True,
-    on_loaded: Callable[[Scenario], None] | None = None,
-) -> Assembly:
-    """Build the run of `point` (recording into `out_dir/recording.mcap` when the spec records). Externally
-    driven entities stand still (as in the reference player) until a command for them arrives. `on_loaded`
-    sees the scenario once parsed. On an error every part started so far is released."""
+def start_engine(
+    spec: SimulationRunSpec, point: RunPoint, scenario: Scenario, bus: Bus
+) -> tuple[ScenarioEngine, OpenDrive | None, SumoWorld | None, ClosedLoop | None]:
+    """The scenario's engine in its initial state (every entity placed, nothing stepped), with the road, SUMO
+    (when it drives an entity) and the closed loop it uses: what a run builds before its first step, and
+    what `carlos validate` builds to reject the same bad input (a position on a lane the road does not
+    have, an ego that is no entity). SUMO is closed again on an error."""
     from simcore.scenario.engine import ScenarioEngine
-    from simcore.scenario.xosc import load_scenario
 
-    spec = run.spec
-    scenario = load_scenario(scenario_file, point.parameters)
-    if on_loaded is not None:
-        on_loaded(scenario)
     road = load_road(scenario)
-    bus = bus if bus is not None else InProcessBus()
-    sumo = None
-    parts: Assembly | None = None
+    sumo = start_sumo(scenario, spec.simulation.step_seconds, point.seed)
     try:
-        sumo = start_sumo(scenario, spec.simulation.step_seconds, point.seed)
         closed_loop = None
         control = spec.control
         if control is not None or (any(e.driver == "external" for e in scenario.entities)):
@@ -232,6 +217,41 @@ def assemble(
         )
         for name in control.entities if control is not None else ():
             engine.drive_externally(name)
+    except BaseException:
+        if sumo is not None:
+            sumo.close()
+        raise
+    return engine, road, sumo, closed_loop
+
+
+def assemble(
+    run: SimulationRun,
+    point: RunPoint,
+    scenario_file: Path,
+    out_dir: Path,
+    *,
+    bus: Bus | None = None,
+    base_dir: Path | None = None,
+    with_metrics: bool = True,
+    on_loaded: Callable[[Scenario], None] | None = None,
+) -> Assembly:
+    """Build the run of `point` (recording into `out_dir/recording.mcap` when the spec records). Externally
+    driven entities stand still (as in the reference player) until a command for them arrives. `on_loaded`
+    sees the scenario once parsed. On an error every part started so far is released."""
+    from simcore.scenario.xosc import load_scenario
+
+    spec = run.spec
+    scenario = load_scenario(scenario_file, point.parameters)
+    if on_loaded is not None:
+        on_loaded(scenario)
+    bus = bus if bus is not None else InProcessBus()
+    try:
+        engine, road, sumo, closed_loop = start_engine(spec, point, scenario, bus)
+    except BaseException:
+        bus.close()
+        raise
+    parts: Assembly | None = None
+    try:
         metrics = None
         if with_metrics:
             from simcore.evaluation.metrics import MetricsAccumulator

@@ -279,7 +279,7 @@ def _run_dds_bridge(env: PodEnv, stop: threading.Event) -> int:
 def run_simcore(env: PodEnv) -> int:
     from simcore import pipeline
     from simcore.evaluation.criteria import CriterionResult, evaluate
-    from simcore.evaluation.report import index_summary
+    from simcore.evaluation.report import index_summary, summary_json
     from simcore.plan import Plan
     from simcore.runner import resolve_scenario_file
 
@@ -393,7 +393,7 @@ def run_simcore(env: PodEnv) -> int:
         "error" if error is not None else "ended",
         sim_seconds,
         {
-            SUMMARY_KEY: json.dumps(summary, sort_keys=True),
+            SUMMARY_KEY: summary_json(summary).decode(),  # parameters in the manifest's order
             "log": "\n".join(log_lines) + "\n",
             "exitCode": str(int(exit_code)),
             "writeSummary": "true" if write_summary else "false",
@@ -516,9 +516,9 @@ def run_recorder(env: PodEnv) -> int:
             store.put_bytes(f"{prefix}/log.txt", verdict.get("log", "").encode())
             if verdict.get("writeSummary") == "true":
                 summary = json.loads(verdict[SUMMARY_KEY])
-                store.put_bytes(
-                    f"{prefix}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
-                )
+                from simcore.evaluation.report import summary_json
+
+                store.put_bytes(f"{prefix}/summary.json", summary_json(summary))
         else:
             store.put_bytes(
                 f"{prefix}/log.txt",

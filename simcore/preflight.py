@@ -8,9 +8,9 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
-from simcore.errors import BadInput
+from simcore.errors import BadInput, CarlosError, SimulationError
 from simcore.scenario.parameters import Declaration, ParameterError, ParamValue, convert
-from simcore.spec import SimulationRunSpec
+from simcore.spec import SimulationRun, SimulationRunSpec
 
 
 def _manifest_values(spec: SimulationRunSpec, position: int) -> Iterator[tuple[str, str, ParamValue]]:
@@ -64,3 +64,45 @@ def check_road_file(road_file: Path, *, scenario_file: str) -> None:
         from simcore.world.sumo import check_network_xml
 
         check_network_xml(road_file)
+
+
+#: sweep points of a scenario whose initial state `carlos validate` builds (each one costs a scenario load)
+INITIAL_STATES_CHECKED = 32
+
+
+def check_initial_states(run: SimulationRun, position: int, scenario_file: Path, *, source: str) -> None:
+    """Build the initial state of scenario `position` as a run does before its first step
+    (simcore.pipeline.start_engine: the road, SUMO when it drives an entity, every entity placed, the ego,
+    the closed loop), for its first INITIAL_STATES_CHECKED sweep points (only the first when SUMO drives
+    one: SUMO starts per point): the bad input a run would only meet there (a LanePosition on a lane the road
+    does not have, `spec.simulation.ego` naming no entity) is rejected the same way, with the manifest
+    named when the message names no file. Anything else going wrong is an infrastructure error (exit 3),
+    as it would be in the run."""
+    from simcore.pipeline import start_engine
+    from simcore.plan import Plan
+    from simcore.scenario.xosc import load_scenario
+    from simcore.transport.bus import InProcessBus
+
+    plan = Plan(run.spec)
+    name = run.spec.scenarios[position].name
+    for index in plan.indexes_of(name)[:INITIAL_STATES_CHECKED]:
+        point = plan.sweep_point(index)
+        scenario = load_scenario(scenario_file, point.parameters)
+        bus = InProcessBus()
+        try:
+            _engine, _road, sumo, _loop = start_engine(run.spec, point, scenario, bus)
+        except BadInput as exc:
+            if exc.file is None:
+                raise BadInput(exc.detail, file=source, field=exc.field) from None
+            raise
+        except CarlosError:
+            raise
+        except Exception as exc:  # as in a run: a fault of the simulator, not of the input
+            raise SimulationError(
+                f"{scenario_file}: building the initial state failed: {type(exc).__name__}: {exc}"
+            ) from None
+        finally:
+            bus.close()
+        if sumo is not None:
+            sumo.close()
+            break

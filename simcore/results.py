@@ -84,7 +84,25 @@ def open_results(url: str, *, field_name: str = "RESULTS_URL") -> RunResults:
         spec = None  # written by another version: the report works from the summaries alone
     name = spec.name if spec is not None else url.rsplit("/", 1)[-1]
     summaries.sort(key=lambda s: int(s["index"]))
+    if (
+        spec is not None and spec.spec.search is None
+    ):  # parameters in the manifest's order (summaries written before kept them sorted)
+        summaries = _in_manifest_order(spec, summaries)
     return RunResults(url=url, store=store, name=name, spec=spec, summary=summary, indexes=summaries)
+
+
+def _in_manifest_order(spec: SimulationRun, summaries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    from simcore.evaluation.report import in_manifest_order
+    from simcore.plan import Plan
+
+    plan = Plan(spec.spec)
+    ordered = []
+    for summary in summaries:
+        index = summary.get("index")
+        if isinstance(index, int) and 0 <= index < len(plan):
+            summary = in_manifest_order(summary, list(plan[index].parameters))
+        ordered.append(summary)
+    return ordered
 
 
 class PrefixedStore:

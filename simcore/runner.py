@@ -21,7 +21,7 @@ from typing import Any
 
 from simcore.errors import BadInput, CarlosError, ExitCode
 from simcore.evaluation.criteria import CriterionResult, evaluate
-from simcore.evaluation.report import index_summary
+from simcore.evaluation.report import index_summary, summary_json
 from simcore.pipeline import Progress, versions
 from simcore.plan import Plan, RunPoint
 from simcore.scenario.parameters import ParamValue
@@ -159,7 +159,7 @@ def error_outcome(run: SimulationRun, index: int, attempt: int, message: str) ->
 
 
 def summary_bytes(summary: dict[str, Any]) -> bytes:
-    return (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
+    return summary_json(summary)
 
 
 def _writes_files(run: SimulationRun, point: RunPoint) -> bool:
@@ -269,7 +269,5 @@ def run_index(
         store.put_bytes(f"{prefix}/log.txt", ("\n".join(log_lines) + "\n").encode())
         if exit_code == ExitCode.INFRASTRUCTURE and not final_attempt:
             return RunOutcome(index=index, summary=summary, exit_code=exit_code)
-        store.put_bytes(
-            f"{prefix}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
-        )
+        store.put_bytes(f"{prefix}/summary.json", summary_bytes(summary))
     return RunOutcome(index=index, summary=summary, exit_code=exit_code)

@@ -11,6 +11,7 @@ from typing import Annotated, Any, Literal, Self
 
 from pydantic import (
     AfterValidator,
+    AliasChoices,
     BaseModel,
     BeforeValidator,
     ConfigDict,
@@ -70,6 +71,11 @@ class Model(BaseModel):
                 if isinstance(value, bool) and _is_number_type(field.annotation):
                     raise ValueError(f"{key}: {str(value).lower()} is a boolean, not a number")
         return data
+
+
+# `v2x` as in the topics and metrics (`/carlos/<entity>/v2x/…`, `v2x.*`), not the camelCase generator's `v2X`,
+# which manifests written against the earlier CRD use (still read)
+_V2X_KEYS = AliasChoices("v2x", "v2X")
 
 
 def _is_number_type(annotation: Any) -> bool:
@@ -950,7 +956,9 @@ class Infrastructure(Model):
         ),
         max_length=16,
     )
-    v2x: RsuV2X | None = Field(None, description="Its V2X station. Default: none.")
+    v2x: RsuV2X | None = Field(
+        None, alias="v2x", validation_alias=_V2X_KEYS, description="Its V2X station. Default: none."
+    )
 
     @model_validator(mode="after")
     def _one_pose(self) -> Self:
@@ -1152,6 +1160,8 @@ class SimulationRunSpec(Model):
     )
     v2x: V2X | None = Field(
         None,
+        alias="v2x",
+        validation_alias=_V2X_KEYS,
         description=(
             "V2X: CAMs, CPMs and DENMs over a radio channel model, received per station on "
             "`/carlos/<entity>/v2x/{cam,cpm,denm}`, and the `v2x.*` metrics. Default: off."

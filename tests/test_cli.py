@@ -280,13 +280,13 @@ def test_results_go_to_s3_and_scenarios_come_from_s3(s3_server: object, tmp_path
 
 _GC_PROBE = """
 import gc, sys
-from simcore import cli
+from simcore import cli, startup
 seen = []
-resume = cli.resume_gc
+resume = startup.resume_gc
 def probe() -> None:
     seen.append(gc.isenabled())
     resume()
-cli.resume_gc = probe
+startup.resume_gc = probe
 sys.argv = ["carlos", *sys.argv[1:]]
 try:
     cli.main()

@@ -255,6 +255,9 @@ def test_carlos_run_of_a_search_prints_its_rounds_and_exit_code(tmp_path: Path) 
         result.stderr
     )  # 3 s ends before Ego closes in: minTimeToCollision is absent, every run fails
     assert "round 1: 4 runs" in result.stderr and "search: 4 runs in 2 rounds · 4 failing" in result.stdout
+    assert (
+        "(0 resumed)" in result.stdout
+    )  # a first search resumed nothing (each round resumes the ones before)
     document = json.loads((tmp_path / "out" / "s" / "search.json").read_text())
     assert [p["index"] for p in document["points"]] == [0, 1, 2, 3]
     assert (tmp_path / "out" / "s" / "search" / "failing.xosc").is_file()

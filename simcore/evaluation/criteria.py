@@ -46,6 +46,20 @@ def format_number(value: float) -> str:
     return repr(float(value))
 
 
+def format_measured(value: float, threshold: float | None = None, digits: int = 4) -> str:
+    """A measured value to `digits` significant digits (`0.9705` for 0.9705480511215439, `12.35` for
+    12.3456), exact integers as they are; with more digits when the short form would read as the `threshold`
+    it is compared with (1.99996 against `>= 2` shows `1.99996`, not `2`)."""
+    value = float(value)
+    if not math.isfinite(value) or (value.is_integer() and abs(value) < 1e15):
+        return format_number(value)
+    for precision in range(digits, 18):
+        text = f"{value:.{precision}g}"
+        if threshold is None or float(text) != threshold or value == threshold:
+            return text
+    return repr(value)
+
+
 @dataclass(frozen=True, slots=True)
 class CriterionResult:
     """One criterion's outcome. `expected` is the operator and threshold (`>= 2`); `actual` is the
@@ -83,7 +97,7 @@ def _evaluate_one(criterion: CriterionModel, metrics: Mapping[str, float]) -> Cr
         else:
             passed = _OPERATORS[criterion.operator](actual, criterion.value)
             verb = "holds" if passed else "does not hold"
-            message = f"{metric} = {format_number(actual)}: {expected} {verb}"
+            message = f"{metric} = {format_measured(actual, criterion.value)}: {expected} {verb}"
     return CriterionResult(
         name=criterion.label,
         metric=metric,

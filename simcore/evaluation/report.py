@@ -17,13 +17,14 @@ retry cannot fix that either), else 3 when a required index errored or an index 
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Collection, Iterable, Mapping, Sequence
 from typing import Any, Literal
 
-from simcore.evaluation.criteria import CriterionResult, format_number, verdict
+from simcore.evaluation.criteria import CriterionResult, format_measured, verdict
 
 EndReason = Literal["stopTrigger", "maxSeconds", "error"]
 END_REASONS: tuple[str, ...] = ("stopTrigger", "maxSeconds", "error")
@@ -235,6 +236,42 @@ def testcase_name(summary: Mapping[str, Any]) -> str:
     return name
 
 
+def _threshold(criterion: Mapping[str, Any]) -> float | None:
+    """The number of a criterion's `expected` (`>= 2` → 2.0), None when it has none."""
+    try:
+        return float(str(criterion.get("expected", "")).split()[-1])
+    except (IndexError, ValueError):
+        return None
+
+
+def summary_json(summary: Mapping[str, Any]) -> bytes:
+    """A summary.json's bytes: keys sorted (stable bytes), except a summary's `parameters`, which keep their
+    order (the manifest's: spec, scenario, matrix), as in junit.xml's testcase names."""
+    return (json.dumps(_sorted_except_parameters(summary), indent=2) + "\n").encode()
+
+
+def _sorted_except_parameters(value: Any, key: str = "") -> Any:
+    if isinstance(value, Mapping):
+        items = value.items() if key == "parameters" else sorted(value.items())
+        return {k: v if key == "parameters" else _sorted_except_parameters(v, k) for k, v in items}
+    if isinstance(value, list):
+        return [_sorted_except_parameters(v) for v in value]
+    return value
+
+
+def in_manifest_order(summary: dict[str, Any], order: Sequence[str]) -> dict[str, Any]:
+    """`summary` with its `parameters` in `order` (the plan's, i.e. the manifest's) and any others after them
+    as they were: summaries written before their order was kept have them sorted by name."""
+    parameters = summary.get("parameters")
+    if not isinstance(parameters, dict):
+        return summary
+    ordered = {name: parameters[name] for name in order if name in parameters}
+    ordered.update((name, value) for name, value in parameters.items() if name not in ordered)
+    if list(ordered) == list(parameters):
+        return summary
+    return {**summary, "parameters": ordered}
+
+
 def _failure_message(summary: Mapping[str, Any]) -> tuple[str, str]:
     """(one-line message, detailed text) for a failed index: its failed required criteria."""
     failed = [c for c in summary.get("criteria", []) if not c["passed"] and not c.get("optional", False)]
@@ -242,7 +279,7 @@ def _failure_message(summary: Mapping[str, Any]) -> tuple[str, str]:
         return "failed", "failed without a failed required criterion"
     parts = []
     for c in failed:
-        actual = "absent" if c["actual"] is None else format_number(float(c["actual"]))
+        actual = "absent" if c["actual"] is None else format_measured(float(c["actual"]), _threshold(c))
         parts.append(f"{c['name']}: expected {c['expected']}, actual {actual}")
     message = f"{len(failed)} criteria failed: " + "; ".join(parts) if len(failed) > 1 else parts[0]
     text = "\n".join(c.get("message") or c["name"] for c in failed)

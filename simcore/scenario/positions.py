@@ -139,7 +139,9 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
             pose = r.road_to_world(ref.road_id, ref.s + position.ds, t_ref + position.dt)
             return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
     except (KeyError, ValueError) as exc:
-        raise BadInput(f"{type(position).__name__}: {exc}", file=world.source) from None
+        # the position's own file:line when the scenario gave it one
+        where = getattr(position, "source", "") or world.source
+        raise BadInput(f"{type(position).__name__}: {exc}", file=where) from None
     raise BadInput(f"position {type(position).__name__} is not supported", file=world.source)
 
 

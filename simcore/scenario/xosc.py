@@ -557,8 +557,9 @@ def _entities(reader: _Reader, element: ET.Element, catalogs: dict[str, Path]) -
             entities.append(
                 reader.within(trailer, trailer_name, _entity, reader, trailer, trailer_name, catalogs)
             )
-    if element.find("EntitySelection") is not None:
-        raise reader.fail("EntitySelection is not supported yet", element)
+    selection = element.find("EntitySelection")
+    if selection is not None:  # its own line, not its <Entities>'
+        raise reader.fail("EntitySelection is not supported yet", selection)
     return entities
 
 

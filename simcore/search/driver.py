@@ -13,6 +13,7 @@ workers; earlier indexes are complete and kept), and the operator (one Indexed J
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import tempfile
 import time
@@ -263,6 +264,8 @@ def run_search(
         points_file = Path(scratch) / "points.xosc"
         log, points = load_state(run, store)
         report: RunReport | None = None
+        resumed: int | None = None  # runs resumed from an earlier invocation (the first round's)
+        begun = time.monotonic()
         timings: list[tuple[float, float]] = []
         while True:
             started = time.perf_counter()
@@ -282,6 +285,7 @@ def run_search(
                 events=events,
                 record=run,
             )
+            resumed = report.skipped if resumed is None else resumed
             if round_ is None:
                 break  # resumed after the last round: the run-level results are written again
             tell_round(run, round_, [report.outcomes[i] for i in round_.indexes], points)
@@ -291,4 +295,6 @@ def run_search(
             on_round(document_of(run, space, points))
         document = finish(run, store, space, points, scenario_file)
     assert report is not None
+    # each round resumes the rounds before it: the search resumed only what the first round found written
+    report = dataclasses.replace(report, skipped=resumed or 0, wall_seconds=time.monotonic() - begun)
     return SearchReport(run=report, document=document, timings=timings)
