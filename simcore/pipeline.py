@@ -222,6 +222,7 @@ def assemble(
             step_seconds=spec.simulation.step_seconds,
             ego=spec.simulation.ego,
             external=closed_loop,
+            seed=point.seed,
         )
         for name in control.entities if control is not None else ():
             engine.drive_externally(name)
