@@ -50,9 +50,7 @@ def road_pose(world: ScenarioWorld, body: Body) -> RoadPose | None:
     t, lane, offset = lane_point(road, body.road_id, body.lane_id, s, body.offset)
     h_road = r.reference_xyh(s)[2]
     c, sn = math.cos(h_road), math.sin(h_road)
-    vx, vy = body.vx, body.vy
-    if vx == 0.0 and vy == 0.0 and body.speed != 0.0:  # not moved yet: along its heading
-        vx, vy = body.speed * math.cos(body.heading), body.speed * math.sin(body.heading)
+    vx, vy = body.vx, body.vy  # over the last step (0 before the first, as esmini's)
     acc_s = body.acceleration * math.cos(body.heading - h_road)
     return RoadPose(
         road_id=body.road_id,
