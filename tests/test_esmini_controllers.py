@@ -340,3 +340,41 @@ def test_generated_alks_scenarios_agree_with_esmini(tmp_path: Path) -> None:
     # brakes one step later than esmini's (velocities before the first step: 0 here) and stops 1.3 m on
     assert len(disagreeing) <= 1, disagreeing
     assert all(rmse is not None and rmse < 1.5 for _, rmse, _, _ in disagreeing), disagreeing
+
+
+# --- InteractiveController assigned during the run (headless: no key pressed) ------------------------------
+
+
+def test_an_assigned_interactive_controller_on_the_lateral_domain_keeps_the_scripted_speed(
+    tmp_path: Path, road: OpenDrive
+) -> None:
+    assign = (
+        "<PrivateAction><ControllerAction><AssignControllerAction>"
+        '<Controller name="interactiveDriver"><Properties>'
+        '<Property name="esminiController" value="InteractiveController"/></Properties></Controller>'
+        "</AssignControllerAction></ControllerAction></PrivateAction>"
+    )
+    activate = (
+        "<PrivateAction><ControllerAction>"
+        '<ActivateControllerAction longitudinal="false" lateral="true"/></ControllerAction></PrivateAction>'
+    )
+    events = event("Assign", assign, sim_time("greaterThan", 1.0)) + event(
+        "Activate", activate, sim_time("greaterThan", 1.0)
+    )
+    path = tmp_path / "s.xosc"
+    path.write_text(
+        openscenario(
+            entities=scenario_object("Ego"),
+            init=gen.private("Ego", gen.teleport(gen.lane_position(50.0, -2)), gen.speed_to(15.0)),
+            stories=story(act(events)),
+            stop=sim_time("greaterThan", 6.0, name="stop"),
+            road=f'<RoadNetwork><LogicFile filepath="{HIGHWAY}"/></RoadNetwork>',
+        )
+    )
+    engine, speeds = run(path, road, 5.0)
+    ego = engine.bodies["Ego"]
+    assert ego.external  # the interactive controller drives it now
+    assert speeds[-1] == pytest.approx(
+        15.0
+    )  # the default controller's speed: no engine brake on lateral only
+    assert ego.s == pytest.approx(50.0 + 15.0 * 5.0, abs=0.2)  # it rolls on (it stood still before)

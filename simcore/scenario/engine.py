@@ -567,7 +567,8 @@ class ScenarioEngine:
         """An entity its external controller drives: moved by the control input; without one (no system
         under test attached, as in a headless conformance run) it stands still, as in esmini."""
         if self.external is None:
-            if m.controller_type(body.entity.controller) == "InteractiveController":
+            assigned = self.assigned_controller.get(body.name, body.entity.controller)
+            if m.controller_type(assigned) == "InteractiveController":
                 self._coast(body, dt)
             else:
                 body.speed = 0.0
@@ -581,10 +582,11 @@ class ScenarioEngine:
         """esmini's InteractiveController with no key pressed (a headless run): its vehicle model rolls on,
         the speed declining by 0.1 % a step and held within 1.2 × the default speed limit, wheels straight:
         along its heading when it steers too, along the road when it controls the speed only."""
-        limit = drivers.speed_limit(self, body)
-        body.speed = min(max(body.speed * (1.0 - 0.001), -1.2 * limit), 1.2 * limit)
+        _, longitudinal, lateral = self.controllers[body.name]
+        if longitudinal:  # on the lateral domain only, the speed stays the default controller's
+            limit = drivers.speed_limit(self, body)
+            body.speed = min(max(body.speed * (1.0 - 0.001), -1.2 * limit), 1.2 * limit)
         distance = body.speed * dt
-        _, _, lateral = self.controllers[body.name]
         if lateral or self.road is None or body.road_id is None:
             body.x += distance * math.cos(body.heading)
             body.y += distance * math.sin(body.heading)
