@@ -74,19 +74,19 @@ def alks_scenario(
     rate: float = 6.0,
     seconds: float = 12.0,
 ) -> str:
-    """Ego (the ALKS, lane -2 of the highway at s 50) and Target: `cutin` from lane -1 `gap` m ahead at
-    `at` s over `duration` s; `decelerate`: ahead in its lane, braking at `rate` from `at` s; `cutout`: ahead
+    """Ego (the ALKS, lane -2 of the highway at s 50) and Target: `cutin` from lane -1 (`cutin_right`: from
+    lane -3) `gap` m ahead at `at` s over `duration` s; `decelerate`: ahead in its lane, braking at `rate` from `at` s; `cutout`: ahead
     in its lane, leaving to lane -1 at `at` s, revealing a standing Third 60 m further."""
     ego = gen.private(
         "Ego", gen.teleport(gen.lane_position(50.0, -2)), gen.speed_to(ego_speed), ACTIVATE_LONG
     )
-    target_lane = -1 if kind == "cutin" else -2
+    target_lane = {"cutin": -1, "cutin_right": -3}.get(kind, -2)
     target = gen.private(
         "Target", gen.teleport(gen.lane_position(50.0 + gap, target_lane)), gen.speed_to(target_speed)
     )
     entities = scenario_object("Ego", vehicle(), controller) + scenario_object("Target")
     init = ego + target
-    if kind == "cutin":
+    if kind in ("cutin", "cutin_right"):
         action = lane_change(-2, duration)
     elif kind == "decelerate":
         action = gen.speed_to(0.0, "linear", "rate", rate)
@@ -300,6 +300,9 @@ def test_esmini_corpus_alks_scenarios_agree_with_esmini_reference() -> None:
         assert ego.rmse is not None and ego.rmse <= 0.5
 
 
+KINDS = ("cutin", "cutin_right", "decelerate", "cutout")
+
+
 def generated_alks(directory: Path, seed: int) -> list[Path]:
     """ALKS scenarios of every model and situation, their numbers drawn from `seed`."""
     rng = random.Random(seed)
@@ -313,7 +316,7 @@ def generated_alks(directory: Path, seed: int) -> list[Path]:
         alks("RSS"),
         alks("FSM"),
     ]
-    for i, (controller, kind) in enumerate(itertools.product(models, ("cutin", "decelerate", "cutout"))):
+    for i, (controller, kind) in enumerate(itertools.product(models, KINDS)):
         text = alks_scenario(
             kind,
             controller,
@@ -336,8 +339,8 @@ def test_generated_alks_scenarios_agree_with_esmini(tmp_path: Path) -> None:
     results = conformance.run_files(files, esmini=esmini, cap_seconds=30.0)
     disagreeing = [(Path(r.file).name, r.max_rmse, r.end_error, r.message) for r in results if not r.agreed]
     assert len(results) == len(files)
-    # measured 2026-11-28: 20 of 21 agree; alks_08 (a ReferenceDriver whose AEB fires in the first steps)
-    # brakes one step later than esmini's (velocities before the first step: 0 here) and stops 1.3 m on
+    # measured 2026-11-28: 28 of 28 agree with these draws (26/28 and 25/28 with seeds 23 and 37: a vehicle
+    # braked for or passed one or two steps apart from esmini); one such difference is tolerated here
     assert len(disagreeing) <= 1, disagreeing
     assert all(rmse is not None and rmse < 1.5 for _, rmse, _, _ in disagreeing), disagreeing
 

@@ -19,8 +19,8 @@ as esmini implements them, on the longitudinal domain. Ported by their semantics
 
 Where esmini's roadmanager decides something CARLOS computes differently, this uses the closest CARLOS
 equivalent: road deltas along the road network between reference points, freespace gaps from the boxes'
-corners along the road's axes (the lateral gap's size, not signed), velocities from the last step's
-displacement."""
+corners along the road's axes (signed: + ahead, + to the left), velocities from the last step's displacement
+(0 before the first step)."""
 
 from __future__ import annotations
 
@@ -58,12 +58,12 @@ class ObjectInfo:
     obj: Body | None = None
     cut_out_vehicle: Body | None = None
     dist_long: float = LARGE  # freespace along the road
-    dist_lat: float = LARGE  # freespace across it
+    dist_lat: float = LARGE  # freespace across it (+: to the left in its driving direction)
     dv_s: float = 0.0  # own speed less the object's, along the road
     dv_t: float = 0.0  # across it, + when closing in
     ttc: float = LARGE
     thw: float = LARGE
-    d_lane: int = 0  # the object's lane less its own (-1, 0, 1)
+    d_lane: int = 0  # lanes from its own to the object's (+: to the left; -1, 0, 1 considered)
     action: str = NONE
 
 
@@ -143,7 +143,8 @@ class Model:
         delta = world.measure.road_delta_entity(veh, obj)
         if delta is None or abs(delta[0]) > self.max_range:
             return False
-        d_lane = theirs.lane_id - own.lane_id
+        # esmini's Position::Delta: the lane difference seen from its own side of the road (+: to the left)
+        d_lane = int(-sign(own.lane_id) * (theirs.lane_id - own.lane_id))
         if d_lane == 2 and theirs.lane_id == 1 and own.lane_id == -1:
             d_lane = 1
         elif d_lane == -2 and theirs.lane_id == -1 and own.lane_id == 1:

@@ -84,8 +84,8 @@ def freespace_road(
 ) -> tuple[float, float]:
     """esmini's Object::FreeSpaceDistanceObjectRoadLane in road coordinates: (longitudinal, lateral) gaps
     between the two bounding boxes along the road's s and t axes, given the reference points' road delta
-    (ds, dt) in a's driving direction. The longitudinal gap is signed (+: b ahead); the lateral one is the
-    gap's size; both are 0 where the boxes' projections overlap."""
+    (ds, dt) in a's driving direction. Both are signed (+: b ahead, b to the left in a's driving direction)
+    and 0 where the boxes' projections overlap."""
     d = 1.0 if a.direction >= 0 else -1.0
     a0, a1, at0, at1 = _extents(a, pose_a.h_relative)
     b0, b1, bt0, bt1 = _extents(b, pose_b.h_relative)
@@ -103,7 +103,7 @@ def freespace_road(
     if b_t[0] > a_t[1]:
         dt = b_t[0] - a_t[1]
     elif b_t[1] < a_t[0]:
-        dt = a_t[0] - b_t[1]
+        dt = b_t[1] - a_t[0]
     else:
         dt = 0.0
     return ds, dt
