@@ -214,6 +214,7 @@ def start_engine(
             step_seconds=spec.simulation.step_seconds,
             ego=spec.simulation.ego,
             external=closed_loop,
+            seed=point.seed,
         )
         for name in control.entities if control is not None else ():
             engine.drive_externally(name)

@@ -789,7 +789,7 @@ def test_an_alks_controller_brakes_for_a_vehicle_in_its_path_without_colliding(
         controllers={"Ego": alks},
     )
     loaded = load_scenario(path)
-    assert any("R157 safety driver" in w for w in loaded.warnings)
+    assert not any("ALKS_R157SM" in w for w in loaded.warnings)  # modelled as esmini's
     engine = ScenarioEngine(loaded, road=road, sumo=None, step_seconds=0.05)
     ego, lead = engine.bodies["Ego"], engine.bodies["Lead"]
     speeds = []
@@ -799,8 +799,9 @@ def test_an_alks_controller_brakes_for_a_vehicle_in_its_path_without_colliding(
         assert lead.s - ego.s > ego.entity.box.length  # never into the vehicle ahead
     assert speeds[20] == pytest.approx(20.0)  # nothing in its path at first (the Side car is beside it)
     decelerations = [(a - b) / 0.05 for a, b in itertools.pairwise(speeds)]
-    assert max(decelerations) <= 0.774 * 9.81 + 1e-6
-    assert ego.speed == 0.0 and lead.speed == 0.0
+    assert max(decelerations) <= 6.0 + 1e-6  # the Regulation model brakes at 6 m/s² at most
+    assert max(decelerations) > 3.0  # and it does brake
+    assert ego.speed < 0.1 and lead.speed == 0.0  # its cruise creeps toward its minimum distance
     assert lead.s - ego.s < 10.0  # stopped close behind it
 
 

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from simcore.scenario.world import ScenarioWorld
 
 if TYPE_CHECKING:
+    from simcore.scenario.controllers import EsminiController
     from simcore.scenario.drivers import AccDriver, NaturalDriver, OffroadFollower
     from simcore.scenario.ghost import Ghosts
     from simcore.scenario.motion import Body
@@ -20,6 +21,10 @@ class ActionWorld(ScenarioWorld, Protocol):
     acc_drivers: dict[str, AccDriver]
     natural_drivers: dict[str, NaturalDriver]
     vehicle_drivers: dict[str, OffroadFollower]
+    esmini_controllers: dict[
+        str, EsminiController
+    ]  # controllers of the registry (simcore.scenario.controllers)
+    seed: int  # the run's seed (controllers that draw random numbers)
     ghosts: Ghosts | None
     trailer_of: dict[str, str]  # tow vehicle → its trailer
     tow_of: dict[str, str]  # trailer → its tow vehicle

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from simcore.scenario import drivers
+from simcore.scenario import controllers, drivers
 from simcore.scenario import model as m
 from simcore.scenario.runtime import Instant
 
@@ -60,6 +60,7 @@ class ControllerRuntime(Instant):
                 e.log.append(f"t={e.time:.2f} {name}: {kind} controller activated")
         elif e.vehicle_drivers.pop(name, None) is not None:
             e.log.append(f"t={e.time:.2f} {name}: {kind or 'its'} controller deactivated")
+        self._registered(kind, properties, control, external)
         if kind in m.NATURAL_DRIVER_CONTROLLERS and not external and control[1]:
             if self.action.longitudinal or self.action.assign is not None or name not in e.natural_drivers:
                 e.natural_drivers[name] = drivers.NaturalDriver(e, self.actor, properties, e.natural_drivers)
@@ -73,3 +74,23 @@ class ControllerRuntime(Instant):
         if self.action.longitudinal or self.action.assign is not None or name not in e.acc_drivers:
             e.acc_drivers[name] = drivers.AccDriver(e, self.actor, properties)
             e.log.append(f"t={e.time:.2f} {name}: ACC controller activated at {self.actor.speed:.2f} m/s")
+
+    def _registered(self, kind: str, properties: dict[str, str], control: list[Any], external: bool) -> None:
+        """(Re)start or stop a controller of the registry (`simcore.scenario.controllers`): it runs on the
+        domains it operates that are active; an activation or assignment restarts it (as esmini's Activate)."""
+        e, name = self.world, self.actor.name
+        active = frozenset(d for d, on in (("longitudinal", control[1]), ("lateral", control[2])) if on)
+        made = None
+        if kind in controllers.KINDS and not external:
+            if name in e.esmini_controllers and not (
+                self.action.assign is not None
+                or self.action.longitudinal is not None
+                or self.action.lateral is not None
+            ):
+                return
+            made = controllers.make(kind, e, self.actor, properties, active, e.seed)
+        if made is not None:
+            e.esmini_controllers[name] = made
+            e.log.append(f"t={e.time:.2f} {name}: {kind} activated ({', '.join(sorted(made.domains))})")
+        elif e.esmini_controllers.pop(name, None) is not None:
+            e.log.append(f"t={e.time:.2f} {name}: {kind or 'its'} controller deactivated")

@@ -390,57 +390,6 @@ class NaturalDriver:
         a.speed = v
 
 
-class SafetyDriver:
-    """A longitudinal driver model for an entity under an ALKS controller (esmini's ALKS_R157SM_Controller,
-    UN R157): it holds the speed it had when the controller was activated and brakes, within the
-    regulation's 0.774 g, for a vehicle ahead whose path overlaps its own (a cut-in, a slower or a braking
-    vehicle), hard enough to end up 2 m behind it; with room ahead (1.5 s), it gets back to its set speed at
-    2 m/s². An
-    approximation of the regulation's driver models, not esmini's implementation."""
-
-    MAX_DECELERATION = 0.774 * 9.81
-    RESUME_ACCELERATION = 2.0
-    STANDSTILL_GAP = 2.0  # m kept to the vehicle ahead when stopped behind it
-    MIN_DECELERATION = 0.5  # m/s²: gentler needs are ignored (no braking for a far, slowly closing vehicle)
-    TIME_GAP = 1.5  # s: closer than this behind a vehicle that is not pulling away, it does not speed up
-
-    def __init__(self, world: ScenarioWorld, actor: Body) -> None:
-        self.world = world
-        self.actor = actor
-        self.set_speed = actor.speed
-
-    def step(self, dt: float) -> None:
-        a = self.actor
-        need = 0.0
-        blocked = False  # something close ahead in its path, not pulling away: no speeding up
-        for other in self.world.bodies.values():
-            if other is a or other.gone or not other.placed:
-                continue
-            gap = self.world.measure.relative_distance(a, other, "longitudinal", True, signed=True)
-            if gap <= 0.0:
-                continue
-            lateral = self.world.measure.relative_distance(a, other, "lateral", True)
-            if lateral > 0.0:  # beside its path: not in the way
-                continue
-            ahead_speed = other.speed * math.cos(other.heading - a.heading)
-            room = gap - self.STANDSTILL_GAP
-            if room < self.TIME_GAP * a.speed + 1.0 and ahead_speed <= a.speed + 0.1:
-                blocked = True
-            if room <= 0.1 and a.speed > ahead_speed:
-                need = math.inf  # at the standstill gap: stop
-                continue
-            if other.acceleration < -0.1 and ahead_speed > 0.0:
-                # it is braking: stop behind the point where it will stand
-                room += ahead_speed * ahead_speed / (2.0 * -other.acceleration)
-                need = max(need, a.speed * a.speed / (2.0 * max(room, 0.1)))
-            elif a.speed > ahead_speed:
-                need = max(need, (a.speed - ahead_speed) ** 2 / (2.0 * max(room, 0.1)))
-        if need >= self.MIN_DECELERATION:
-            a.speed = max(a.speed - min(need, self.MAX_DECELERATION) * dt, 0.0)
-        elif a.speed < self.set_speed and not blocked:
-            a.speed = min(a.speed + self.RESUME_ACCELERATION * dt, self.set_speed)
-
-
 class AccDriver:
     """esmini's ACCController (and ALKSController, which is the same controller): a longitudinal driver
     that holds a set speed and keeps a time gap to the vehicle ahead in its lane. Its semantics as esmini

@@ -46,6 +46,7 @@ from simcore.world.state import (
 )
 
 if TYPE_CHECKING:
+    from simcore.scenario import controllers
     from simcore.world.opendrive import OpenDrive
     from simcore.world.sumo import SumoWorld
 
@@ -81,6 +82,7 @@ class ScenarioEngine:
         step_seconds: float,
         ego: str | None = None,
         external: ExternalDriver | None = None,
+        seed: int = 0,
     ) -> None:
         # esmini's FollowGhostController: a ghost entity runs the scenario's actions ahead (simcore.scenario.ghost)
         scenario, ghost_setup = ghost.setup(scenario)
@@ -130,11 +132,9 @@ class ScenarioEngine:
         # that shift, for comparisons with such output (the storyboard itself runs on its own time)
         self.output_time_offset = -ghost_setup.headstart if ghost_setup is not None else 0.0
         self.ghosts = ghost.Ghosts(self, ghost_setup) if ghost_setup is not None else None
-        # entities an ALKS controller may drive (UN R157 driver model), and their drivers once active
-        self._alks = [
-            e.name for e in scenario.entities if m.controller_type(e.controller) in m.ALKS_CONTROLLERS
-        ]
-        self.safety_drivers: dict[str, drivers.SafetyDriver] = {}
+        self.seed = seed  # the run's seed (controllers that draw random numbers)
+        # esmini's controllers of the registry (simcore.scenario.controllers: ALKS_R157SM, SloppyDriver) active now
+        self.esmini_controllers: dict[str, controllers.EsminiController] = {}
         # the properties of each entity's controller assigned during the run (AssignControllerAction), and
         # the ACC/ALKS driver models (esmini's ACCController) active on the longitudinal domain now
         self.assigned_controller: dict[str, dict[str, str]] = {}
@@ -374,12 +374,6 @@ class ScenarioEngine:
                     runtime.step(dt)
             self.init_runtimes = [r for r in self.init_runtimes if not r.done]
         self.story.step_actions(dt)
-        for name in self._alks:
-            if self.controllers[name][1]:  # active on the longitudinal domain: it sets the speed
-                driver = self.safety_drivers.get(name)
-                if driver is None:
-                    driver = self.safety_drivers[name] = drivers.SafetyDriver(self, self.bodies[name])
-                driver.step(dt)
         self.moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
         sumo, road, tow_of = self.sumo, self.road, self.tow_of
@@ -395,6 +389,8 @@ class ScenarioEngine:
             deferred = set(self.vehicle_drivers).union(deferred)
         if self.natural_drivers:
             deferred = set(self.natural_drivers).union(deferred)
+        if self.esmini_controllers:
+            deferred = {n for n, c in self.esmini_controllers.items() if c.moves_itself}.union(deferred)
         for body in self.bodies.values():
             if body.gone:
                 continue
@@ -440,6 +436,8 @@ class ScenarioEngine:
             self._step_drivers(self.acc_drivers.values(), dt, now)
         if self.natural_drivers:
             self._step_drivers(self.natural_drivers.values(), dt, now)
+        if self.esmini_controllers:
+            self._step_controllers(dt, now)
         if self.vehicle_drivers:
             for follower in list(self.vehicle_drivers.values()):
                 if not follower.actor.gone and not follower.actor.external:
@@ -497,6 +495,19 @@ class ScenarioEngine:
                 self._move_body(body, dt, now)
                 self._start_lane_change(driver)
             elif driver.override and not driver.virtual:
+                self._move_body(body, dt, now)
+        self.moved()
+
+    def _step_controllers(self, dt: float, now: float) -> None:
+        """The controllers of the registry, after the default motion of every entity (as esmini): each sets
+        its entity's speed and, when it moves it, moves it with that speed."""
+        for controller in list(self.esmini_controllers.values()):
+            body = controller.actor
+            if body.gone or body.external:
+                continue
+            self.measure.clear()
+            controller.step(dt)
+            if controller.moves_itself:
                 self._move_body(body, dt, now)
         self.moved()
 
@@ -563,7 +574,8 @@ class ScenarioEngine:
         and `carlos conformance` give the same trajectories for the same file."""
         external = self.external
         if external is None or not external.has_input(body.entity.name):
-            if m.controller_type(body.entity.controller) == "InteractiveController":
+            assigned = self.assigned_controller.get(body.name, body.entity.controller)
+            if m.controller_type(assigned) == "InteractiveController":
                 self._coast(body, dt)
             else:
                 body.speed = 0.0
@@ -580,10 +592,11 @@ class ScenarioEngine:
         """esmini's InteractiveController with no key pressed (a headless run): its vehicle model rolls on,
         the speed declining by 0.1 % a step and held within 1.2 × the default speed limit, wheels straight:
         along its heading when it steers too, along the road when it controls the speed only."""
-        limit = drivers.speed_limit(self, body)
-        body.speed = min(max(body.speed * (1.0 - 0.001), -1.2 * limit), 1.2 * limit)
+        _, longitudinal, lateral = self.controllers[body.name]
+        if longitudinal:  # on the lateral domain only, the speed stays the default controller's
+            limit = drivers.speed_limit(self, body)
+            body.speed = min(max(body.speed * (1.0 - 0.001), -1.2 * limit), 1.2 * limit)
         distance = body.speed * dt
-        _, _, lateral = self.controllers[body.name]
         if lateral or self.road is None or body.road_id is None:
             body.x += distance * math.cos(body.heading)
             body.y += distance * math.sin(body.heading)

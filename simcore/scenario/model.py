@@ -72,8 +72,9 @@ class Entity:
 
 # controllers of other tools whose entity is moved from outside the scenario (a program, a person)
 EXTERNAL_CONTROLLERS = frozenset({"ExternalController", "InteractiveController"})
-# controllers CARLOS runs as its UN R157 ALKS driver model (simcore.scenario.actions.SafetyDriver)
-ALKS_CONTROLLERS = frozenset({"ALKS_R157SM_Controller"})
+# esmini's controllers of the registry (simcore.scenario.controllers), one module each: ALKS_R157SM (the UN R157
+# driver models), SloppyDriver
+REGISTERED_CONTROLLERS = frozenset({"ALKS_R157SM_Controller", "SloppyDriverController"})
 # esmini's driver controllers CARLOS runs with esmini's algorithm (simcore.scenario.actions.AccDriver): the
 # ALKS controller is esmini's ACC controller under another name
 ACC_CONTROLLERS = frozenset({"ACCController", "ALKSController"})
@@ -89,6 +90,7 @@ MODELLED_CONTROLLERS = (
     | FOLLOW_GHOST_CONTROLLERS
     | VEHICLE_CONTROLLERS
     | NATURAL_DRIVER_CONTROLLERS
+    | REGISTERED_CONTROLLERS
     # esmini's ExternalController with no input holds its entity, as the engine does until a command arrives
     | {"", "DefaultController", "ExternalController"}
 )

@@ -710,13 +710,8 @@ def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
         known = True  # esmini's IDM driver with lane changes (simcore.scenario.drivers.NaturalDriver)
     if kind in m.FOLLOW_GHOST_CONTROLLERS:
         known = True  # a ghost runs the actions ahead, the entity follows it (simcore.scenario.ghost)
-    if kind in m.ALKS_CONTROLLERS:
-        reader.warn(
-            f"controller {kind!r} runs as CARLOS's R157 safety driver (holds its speed, brakes for vehicles "
-            "in its path): an approximation of the regulation's driver models",
-            parent,
-        )
-        known = True
+    if kind in m.REGISTERED_CONTROLLERS:
+        known = True  # runs as esmini's (simcore.scenario.controllers)
     if not known and kind not in ("", "DefaultController"):
         reader.warn(
             f"controller {kind!r} is not modelled: the entity follows the scenario's actions "
