@@ -86,7 +86,15 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
                 pose = r.lane_to_world(road_id, position.lane_id, s_on, position.lane_offset)
             else:
                 pose = r.road_to_world(road_id, s_on, position.t)
-            base = pose.heading + (math.pi if direction < 0 else 0.0)
+            if position.lane_id is not None:
+                # in a lane: facing the lane's driving direction whichever way the route runs, and an
+                # Orientation relative to it (as esmini's RoutePosition, like a LanePosition)
+                backward = r.drives_backward(road_id, position.lane_id)
+                base = pose.heading + (math.pi if backward else 0.0)
+            elif position.orientation is None:
+                base = pose.heading + (math.pi if direction < 0 else 0.0)  # along the route
+            else:
+                base = pose.heading  # relative to the road's s direction (as a RoadPosition's)
             return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
         ref = world.body(position.entity)
         if isinstance(position, m.RelativeWorldPosition):

@@ -1,0 +1,103 @@
+"""Scenario semantics the public catalogues (Euro NCAP, ASAM examples) rely on, each as the esmini player does
+it: a plain test on the engine, and a differential one on a generated scenario (skipped without esmini)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from simcore import conformance
+from simcore.scenario.engine import ScenarioEngine
+from simcore.scenario.xosc import load_scenario
+from simcore.world.opendrive import OpenDrive
+from tests import differential_scenarios as gen
+from tests.tooling import esmini_player
+from tests.xosc_fixtures import act, event, openscenario, scenario_object, sim_time, story, write_scenario
+
+
+def _engine(path: Path) -> ScenarioEngine:
+    scenario = load_scenario(path)
+    road = OpenDrive.from_file(scenario.road_file) if scenario.road_file else None
+    return ScenarioEngine(scenario, road=road, sumo=None, step_seconds=0.05)
+
+
+def _agrees_with_esmini(path: Path) -> None:
+    results = conformance.run_files([path], esmini=esmini_player(), cap_seconds=60.0)
+    (result,) = results
+    assert result.agreed, (result.status, result.max_rmse, result.end_error, result.message)
+
+
+def _angle(a: float, b: float) -> float:
+    return abs(math.remainder(a - b, math.tau))
+
+
+# --- RoutePosition: heading and Orientation ----------------------------------------------------------------
+
+
+def _route_scenario(orientation: str, after: bool) -> str:
+    # a route that runs against the road's s (lane 1 of the rural road, from s=900 to s=100), entities placed
+    # in lane -1 along it: each faces its lane's driving direction, an Orientation turns it from there, and
+    # one written after InRoutePosition (out of the schema's order) is ignored, as esmini ignores it
+    route = (
+        '<Route name="Back" closed="false">'
+        f'<Waypoint routeStrategy="shortest">{gen.lane_position(900.0, 1, road=1)}</Waypoint>'
+        f'<Waypoint routeStrategy="shortest">{gen.lane_position(100.0, 1, road=1)}</Waypoint></Route>'
+    )
+
+    def at(path_s: float, lane: int, extra: str = "", extra_after: str = "") -> str:
+        return (
+            f"<Position><RoutePosition><RouteRef>{route}</RouteRef>{extra}<InRoutePosition>"
+            f'<FromLaneCoordinates pathS="{path_s}" laneId="{lane}" laneOffset="0.3"/></InRoutePosition>'
+            f"{extra_after}</RoutePosition></Position>"
+        )
+
+    placed = at(300.0, -1, "" if after else orientation, orientation if after else "")
+    init = (
+        gen.private("Ego", gen.teleport(at(100.0, 1)), gen.speed_to(10.0))
+        + gen.private("Target", gen.teleport(placed), gen.speed_to(8.0))
+        + gen.private(
+            "Near",
+            gen.teleport('<Position><RelativeObjectPosition entityRef="Target" dx="12" dy="2"/></Position>'),
+        )
+    )
+    return openscenario(
+        entities="".join(scenario_object(n) for n in ("Ego", "Target", "Near")),
+        init=init,
+        stories=story(act(event("E", gen.speed_to(12.0), sim_time("greaterThan", 1.0)))),
+        stop=sim_time("greaterThan", 4.0, name="stop"),
+        road=f'<RoadNetwork><LogicFile filepath="{gen.RURAL.path}"/></RoadNetwork>',
+    )
+
+
+ROUTE_CASES = {
+    "relative_before": ('<Orientation type="relative" h="0.4"/>', False),
+    "relative_after": ('<Orientation type="relative" h="3.14159"/>', True),
+    "none": ("", False),
+}
+
+
+@pytest.mark.parametrize("case", sorted(ROUTE_CASES))
+def test_route_position_faces_the_lane_and_turns_by_an_orientation_before_in_route_position(
+    tmp_path: Path, case: str
+) -> None:
+    orientation, after = ROUTE_CASES[case]
+    path = write_scenario(tmp_path, _route_scenario(orientation, after))
+    engine = _engine(path)
+    target, near = engine.bodies["Target"], engine.bodies["Near"]
+    assert engine.road is not None
+    lane_heading = engine.road.lane_to_world("1", -1, target.s).heading  # lane -1 drives toward +s
+    turn = 0.4 if case == "relative_before" else 0.0
+    assert _angle(target.heading, lane_heading + turn) < 1e-6
+    # what is placed relative to it lands ahead of it, on its left
+    ahead = (near.x - target.x) * math.cos(target.heading) + (near.y - target.y) * math.sin(target.heading)
+    assert ahead == pytest.approx(12.0, abs=1e-6)
+    if after:
+        assert any("Orientation after InRoutePosition" in w for w in load_scenario(path).warnings)
+
+
+@pytest.mark.parametrize("case", sorted(ROUTE_CASES))
+def test_route_position_orientation_agrees_with_esmini(tmp_path: Path, case: str) -> None:
+    orientation, after = ROUTE_CASES[case]
+    _agrees_with_esmini(write_scenario(tmp_path, _route_scenario(orientation, after)))
