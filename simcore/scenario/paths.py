@@ -56,6 +56,22 @@ class SampledPath:
             self.h[i] + f * dh,
         )
 
+    def project(self, x: float, y: float) -> tuple[float, float]:
+        """(arc length, distance) of the point of the path nearest to (x, y)."""
+        best_s, best_d2 = 0.0, math.inf
+        xs, ys, ss = self.x, self.y, self.s
+        for i in range(len(ss) - 1):
+            dx, dy = xs[i + 1] - xs[i], ys[i + 1] - ys[i]
+            seg2 = dx * dx + dy * dy
+            f = 0.0 if seg2 <= 0.0 else min(max(((x - xs[i]) * dx + (y - ys[i]) * dy) / seg2, 0.0), 1.0)
+            px, py = xs[i] + f * dx - x, ys[i] + f * dy - y
+            d2 = px * px + py * py
+            if d2 < best_d2:
+                best_s, best_d2 = ss[i] + f * (ss[i + 1] - ss[i]), d2
+        if len(ss) == 1:
+            best_d2 = (xs[0] - x) ** 2 + (ys[0] - y) ** 2
+        return best_s, math.sqrt(best_d2)
+
     def time_at_s(self, s: float) -> float:
         """Trajectory time at arc length `s` (linear between the samples; clamped)."""
         assert self.t is not None
