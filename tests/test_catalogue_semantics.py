@@ -101,3 +101,59 @@ def test_route_position_faces_the_lane_and_turns_by_an_orientation_before_in_rou
 def test_route_position_orientation_agrees_with_esmini(tmp_path: Path, case: str) -> None:
     orientation, after = ROUTE_CASES[case]
     _agrees_with_esmini(write_scenario(tmp_path, _route_scenario(orientation, after)))
+
+
+# --- SynchronizeAction of an entity on a trajectory ----------------------------------------------------------
+
+
+def _crossing_scenario(master_speed: float) -> str:
+    # Walker crosses the motorway on a straight trajectory (its road s never changes); it synchronises with
+    # Ego, which drives (or reverses) to its own target: Walker's distance is measured along its trajectory
+    forward = master_speed > 0
+    ego_s, master_s = (40.0, 140.0) if forward else (160.0, 90.0)
+    trajectory = (
+        '<Trajectory name="Cross" closed="false"><Shape><Polyline>'
+        '<Vertex><Position><WorldPosition x="200" y="-16" h="1.5708"/></Position></Vertex>'
+        '<Vertex><Position><WorldPosition x="200" y="6" h="1.5708"/></Position></Vertex>'
+        "</Polyline></Shape></Trajectory>"
+    )
+    follow = (
+        "<PrivateAction><RoutingAction><FollowTrajectoryAction><TrajectoryRef>"
+        f"{trajectory}</TrajectoryRef><TimeReference><None/></TimeReference>"
+        '<TrajectoryFollowingMode followingMode="position"/></FollowTrajectoryAction></RoutingAction>'
+        "</PrivateAction>"
+    )
+    init = gen.private(
+        "Ego", gen.teleport(gen.lane_position(ego_s, -2)), gen.speed_to(master_speed)
+    ) + gen.private(
+        "Walker", gen.teleport('<Position><WorldPosition x="200" y="-16" h="1.5708"/></Position>'), follow
+    )
+    sync = f"""<PrivateAction><SynchronizeAction masterEntityRef="Ego">
+      <TargetPositionMaster><LanePosition roadId="1" laneId="-2" s="{master_s}" offset="0"/>
+      </TargetPositionMaster><TargetPosition><WorldPosition x="200" y="-5.25"/></TargetPosition>
+      <FinalSpeed><AbsoluteSpeed value="2.0"/></FinalSpeed></SynchronizeAction></PrivateAction>"""
+    return openscenario(
+        entities="".join(scenario_object(n) for n in ("Ego", "Walker")),
+        init=init,
+        stories=story(act(event("Sync", sync, sim_time("greaterThan", 0.0)), actor="Walker")),
+        stop=sim_time("greaterThan", 12.0, name="stop"),
+        road=f'<RoadNetwork><LogicFile filepath="{gen.HIGHWAY.path}"/></RoadNetwork>',
+    )
+
+
+@pytest.mark.parametrize("master_speed", [12.0, -8.0])
+def test_synchronize_measures_an_entity_on_a_trajectory_along_it(tmp_path: Path, master_speed: float) -> None:
+    engine = _engine(write_scenario(tmp_path, _crossing_scenario(master_speed)))
+    ego, walker = engine.bodies["Ego"], engine.bodies["Walker"]
+    master_x = 140.0 if master_speed > 0 else 90.0
+    arrival = abs(ego.x - master_x) / abs(master_speed)
+    while engine.time < arrival - 1e-9:
+        engine.advance()
+    # the walker is at its target (y = -5.25, 10.75 m along its trajectory) when Ego is at its own
+    assert walker.y == pytest.approx(-5.25, abs=0.3)
+    assert walker.speed == pytest.approx(2.0, abs=0.3)
+
+
+@pytest.mark.parametrize("master_speed", [12.0, -8.0])
+def test_synchronize_on_a_trajectory_agrees_with_esmini(tmp_path: Path, master_speed: float) -> None:
+    _agrees_with_esmini(write_scenario(tmp_path, _crossing_scenario(master_speed)))

@@ -768,6 +768,12 @@ class SynchronizeRuntime(Runtime):
             if off <= self.ON_PATH:
                 return abs(s_target - mover.s)
             return math.hypot(target[0] - body.x, target[1] - body.y)
+        road = self.world.road
+        if road is not None and body.road_id is not None and body.speed < 0:
+            # reversing toward a target behind: the distance either way along the road (esmini's |ds|)
+            rc = road.world_to_road(target[0], target[1], None, road_hint=body.road_id)
+            if rc is not None and rc.road_id == body.road_id:
+                return abs(rc.s - body.s)
         return self.world.distance_to(body, target)
 
     @staticmethod
