@@ -157,3 +157,56 @@ def test_synchronize_measures_an_entity_on_a_trajectory_along_it(tmp_path: Path,
 @pytest.mark.parametrize("master_speed", [12.0, -8.0])
 def test_synchronize_on_a_trajectory_agrees_with_esmini(tmp_path: Path, master_speed: float) -> None:
     _agrees_with_esmini(write_scenario(tmp_path, _crossing_scenario(master_speed)))
+
+
+# --- RelativeDistanceCondition, lateral, in the entity's coordinates ---------------------------------------
+
+
+def _lateral_scenario() -> str:
+    # A1, 25 m ahead of Ego, changes from lane -1 into Ego's lane -2; the scenario ends 1 s after A1's
+    # lateral distance to Ego falls below 0.5 m: measured across A1's own heading (which turns during the
+    # lane change), not across the road, as esmini measures it
+    change = gen.lateral(
+        '<LaneChangeAction><LaneChangeActionDynamics dynamicsShape="sinusoidal" value="4"'
+        ' dynamicsDimension="time"/><LaneChangeTarget><AbsoluteTargetLane value="-2"/></LaneChangeTarget>'
+        "</LaneChangeAction>"
+    )
+    near = gen.by_entity(
+        "A1",
+        '<RelativeDistanceCondition entityRef="Ego" freespace="false" relativeDistanceType="lateral"'
+        ' value="0.5" rule="lessThan" coordinateSystem="entity"/>',
+        name="near",
+        delay=1.0,
+    )
+    init = gen.private("Ego", gen.teleport(gen.lane_position(50.0, -2)), gen.speed_to(20.0)) + gen.private(
+        "A1", gen.teleport(gen.lane_position(75.0, -1)), gen.speed_to(20.0)
+    )
+    return openscenario(
+        entities="".join(scenario_object(n) for n in ("Ego", "A1")),
+        init=init,
+        stories=story(act(event("LC", change, sim_time("greaterThan", 1.0)), actor="A1")),
+        stop=near + "</ConditionGroup><ConditionGroup>" + sim_time("greaterThan", 20.0, name="cap"),
+        road=f'<RoadNetwork><LogicFile filepath="{gen.HIGHWAY.path}"/></RoadNetwork>',
+    )
+
+
+def test_lateral_relative_distance_is_across_the_entitys_own_heading(tmp_path: Path) -> None:
+    engine = _engine(write_scenario(tmp_path, _lateral_scenario()))
+    ego, a1 = engine.bodies["Ego"], engine.bodies["A1"]
+    first_own = first_road = None
+    while not engine.ended and engine.time < 20.0:
+        engine.advance()
+        c, s = math.cos(a1.heading), math.sin(a1.heading)
+        own = -s * (ego.x - a1.x) + c * (ego.y - a1.y)
+        if first_own is None and abs(own) < 0.5:
+            first_own = engine.time
+        if first_road is None and abs(ego.y - a1.y) < 0.5:  # the motorway runs along x
+            first_road = engine.time
+    assert first_own is not None and first_road is not None
+    assert first_own - first_road > 0.2  # the two measures part here
+    assert engine.ended
+    assert engine.time == pytest.approx(first_own + 1.0, abs=0.051)
+
+
+def test_lateral_relative_distance_agrees_with_esmini(tmp_path: Path) -> None:
+    _agrees_with_esmini(write_scenario(tmp_path, _lateral_scenario()))
