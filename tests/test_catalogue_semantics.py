@@ -210,3 +210,42 @@ def test_lateral_relative_distance_is_across_the_entitys_own_heading(tmp_path: P
 
 def test_lateral_relative_distance_agrees_with_esmini(tmp_path: Path) -> None:
     _agrees_with_esmini(write_scenario(tmp_path, _lateral_scenario()))
+
+
+# --- NURBS control-point times ----------------------------------------------------------------------------
+
+
+def _nurbs_scenario() -> str:
+    # a timed NURBS over the motorway's lanes, past its end (5 s) the entity drives on at the speed it had
+    points = [
+        (100.0, -5.25, 0.0),
+        (115.0, -2.0, 1.25),
+        (130.0, -8.0, 2.5),
+        (160.0, -5.25, 3.75),
+        (200.0, -8.75, 5.0),
+    ]
+    control = "".join(
+        f'<ControlPoint time="{t}" weight="1"><Position><WorldPosition x="{x}" y="{y}" h="0"/></Position>'
+        "</ControlPoint>"
+        for x, y, t in points
+    )
+    knots = "".join(f'<Knot value="{k}"/>' for k in (0, 0, 0, 1, 2, 3, 3, 3))
+    follow = (
+        "<PrivateAction><RoutingAction><FollowTrajectoryAction><TrajectoryRef>"
+        f'<Trajectory name="n" closed="false"><Shape><Nurbs order="3">{control}{knots}</Nurbs></Shape>'
+        "</Trajectory></TrajectoryRef>"
+        '<TimeReference><Timing domainAbsoluteRelative="absolute" scale="1" offset="0"/></TimeReference>'
+        '<TrajectoryFollowingMode followingMode="position"/></FollowTrajectoryAction></RoutingAction>'
+        "</PrivateAction>"
+    )
+    return openscenario(
+        entities=scenario_object("Ego"),
+        init=gen.private("Ego", gen.teleport(gen.lane_position(100.0, -2)), gen.speed_to(20.0)),
+        stories=story(act(event("Fly", follow, sim_time("greaterThan", 0.0)))),
+        stop=sim_time("greaterThan", 10.0, name="stop"),
+        road=f'<RoadNetwork><LogicFile filepath="{gen.HIGHWAY.path}"/></RoadNetwork>',
+    )
+
+
+def test_nurbs_control_point_times_agree_with_esmini(tmp_path: Path) -> None:
+    _agrees_with_esmini(write_scenario(tmp_path, _nurbs_scenario()))
