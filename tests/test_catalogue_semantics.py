@@ -249,3 +249,40 @@ def _nurbs_scenario() -> str:
 
 def test_nurbs_control_point_times_agree_with_esmini(tmp_path: Path) -> None:
     _agrees_with_esmini(write_scenario(tmp_path, _nurbs_scenario()))
+
+
+# --- AddEntityAction on an entity already in the world ------------------------------------------------------
+
+
+def _add_active_scenario() -> str:
+    # Target is placed in Init and never deleted: the AddEntityAction at 1 s leaves it where it is (esmini
+    # skips the action for an active entity)
+    add = gen._global_event(
+        "Add",
+        f'<EntityAction entityRef="Target"><AddEntityAction>{gen.lane_position(400.0, -3)}'
+        "</AddEntityAction></EntityAction>",
+        gen.at(1.0),
+    )
+    init = gen.private("Ego", gen.teleport(gen.lane_position(50.0, -2)), gen.speed_to(20.0)) + gen.private(
+        "Target", gen.teleport(gen.lane_position(80.0, -1)), gen.speed_to(15.0)
+    )
+    return openscenario(
+        entities="".join(scenario_object(n) for n in ("Ego", "Target")),
+        init=init,
+        stories=story(act(add)),
+        stop=sim_time("greaterThan", 4.0, name="stop"),
+        road=f'<RoadNetwork><LogicFile filepath="{gen.HIGHWAY.path}"/></RoadNetwork>',
+    )
+
+
+def test_add_entity_on_an_entity_in_the_world_is_skipped(tmp_path: Path) -> None:
+    engine = _engine(write_scenario(tmp_path, _add_active_scenario()))
+    while engine.time < 2.0 - 1e-9:
+        engine.advance()
+    target = engine.bodies["Target"]
+    assert target.x == pytest.approx(80.0 + 15.0 * 2.0, abs=1e-6)  # on at its speed, not teleported to 400
+    assert any("AddEntityAction: Target is already in the world" in line for line in engine.log)
+
+
+def test_add_entity_on_an_entity_in_the_world_agrees_with_esmini(tmp_path: Path) -> None:
+    _agrees_with_esmini(write_scenario(tmp_path, _add_active_scenario()))
