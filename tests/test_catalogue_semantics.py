@@ -286,3 +286,36 @@ def test_add_entity_on_an_entity_in_the_world_is_skipped(tmp_path: Path) -> None
 
 def test_add_entity_on_an_entity_in_the_world_agrees_with_esmini(tmp_path: Path) -> None:
     _agrees_with_esmini(write_scenario(tmp_path, _add_active_scenario()))
+
+
+# --- LanePosition past the end of a road with no link there -------------------------------------------------
+
+
+def _past_the_end_scenario(s: float) -> str:
+    init = gen.private("Ego", gen.teleport(gen.lane_position(s, -2)), gen.speed_to(20.0))
+    return openscenario(
+        entities=scenario_object("Ego"),
+        init=init,
+        stop=sim_time("greaterThan", 3.0, name="stop"),
+        road=f'<RoadNetwork><LogicFile filepath="{gen.HIGHWAY.path}"/></RoadNetwork>',
+    )
+
+
+@pytest.mark.parametrize("s", [-30.0, 2100.0])
+def test_lane_position_past_a_road_end_runs_placed_at_the_end(tmp_path: Path, s: float) -> None:
+    # the motorway (2,000 m) has no links: the entity is placed at the end it is past, with a warning, and
+    # the run goes on (esmini runs such files; they are not bad input)
+    path = write_scenario(tmp_path, _past_the_end_scenario(s))
+    result, trace = conformance.run_scenario(path, 10.0)
+    assert result.status == "ended", result.message
+    assert any("lies beyond the road's end" in w for w in result.warnings)
+    engine = _engine(path)
+    assert engine.road is not None
+    end = engine.road.lane_to_world("1", -2, 0.0 if s < 0 else 2000.0, 0.0)
+    (_, x0, y0) = trace.tracks["Ego"][0]
+    assert (x0, y0) == (pytest.approx(end.x, abs=1e-6), pytest.approx(end.y, abs=1e-6))
+
+
+@pytest.mark.parametrize("s", [-30.0, 2100.0])
+def test_lane_position_past_a_road_end_agrees_with_esmini(tmp_path: Path, s: float) -> None:
+    _agrees_with_esmini(write_scenario(tmp_path, _past_the_end_scenario(s)))

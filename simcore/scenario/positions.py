@@ -57,7 +57,18 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
                     s_on = min(max(s_on, 0.0), length)
                 pose = r.lane_to_world(road_id, lane_id, s_on, position.offset)
                 return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
-            pose = r.lane_to_world(position.road_id, position.lane_id, position.s, position.offset)
+            length = r.road_length(position.road_id)
+            s_on = position.s
+            if not 0.0 <= s_on <= length:
+                # beyond the end of a road with no link there: at its end (esmini runs such files too)
+                message = (
+                    f"{position.source or world.source}: LanePosition: road {position.road_id} "
+                    f"s={position.s:g} lies beyond the road's end: placed at s={min(max(s_on, 0.0), length):g}"
+                )
+                if message not in world.warnings:
+                    world.warnings.append(message)
+                s_on = min(max(s_on, 0.0), length)
+            pose = r.lane_to_world(position.road_id, position.lane_id, s_on, position.offset)
             # relative orientation is relative to the lane's driving direction (as esmini does)
             backward = r.drives_backward(position.road_id, position.lane_id)
             base = pose.heading + (math.pi if backward else 0.0)
