@@ -319,3 +319,46 @@ def test_lane_position_past_a_road_end_runs_placed_at_the_end(tmp_path: Path, s:
 @pytest.mark.parametrize("s", [-30.0, 2100.0])
 def test_lane_position_past_a_road_end_agrees_with_esmini(tmp_path: Path, s: float) -> None:
     _agrees_with_esmini(write_scenario(tmp_path, _past_the_end_scenario(s)))
+
+
+# --- ReachPositionCondition with an Orientation: heading within 0.05 rad -----------------------------------
+
+
+def _reach_scenario(h: float) -> str:
+    # Ego drives along the motorway (heading 0) through s=150; the position carries an absolute Orientation:
+    # reached within 0.05 rad of it, headings compared in [0, 2π) (so -0.02 rad, i.e. 6.26, is not reached)
+    init = gen.private("Ego", gen.teleport(gen.lane_position(50.0, -2)), gen.speed_to(20.0))
+    reach = gen.by_entity(
+        "Ego",
+        '<ReachPositionCondition tolerance="5"><Position><LanePosition roadId="1" laneId="-2" s="150"'
+        f' offset="0"><Orientation type="absolute" h="{h}"/></LanePosition></Position>'
+        "</ReachPositionCondition>",
+        name="reach",
+        delay=0.5,
+    )
+    return openscenario(
+        entities=scenario_object("Ego"),
+        init=init,
+        stop=reach + "</ConditionGroup><ConditionGroup>" + sim_time("greaterThan", 9.0, name="cap"),
+        road=f'<RoadNetwork><LogicFile filepath="{gen.HIGHWAY.path}"/></RoadNetwork>',
+    )
+
+
+REACH_CASES = {0.0: True, 0.049: True, 0.051: False, -0.02: False}
+
+
+@pytest.mark.parametrize("h", sorted(REACH_CASES))
+def test_reach_position_with_an_orientation_wants_the_heading_within_005_rad(
+    tmp_path: Path, h: float
+) -> None:
+    engine = _engine(write_scenario(tmp_path, _reach_scenario(h)))
+    while not engine.ended and engine.time < 10.0:
+        engine.advance()
+    # 100 m at 20 m/s: within 5 m of the position from 4.8 s on, the stop 0.5 s later; else the 9 s cap
+    expected = 5.3 if REACH_CASES[h] else 9.05
+    assert engine.time == pytest.approx(expected, abs=0.051)
+
+
+@pytest.mark.parametrize("h", sorted(REACH_CASES))
+def test_reach_position_with_an_orientation_agrees_with_esmini(tmp_path: Path, h: float) -> None:
+    _agrees_with_esmini(write_scenario(tmp_path, _reach_scenario(h)))
