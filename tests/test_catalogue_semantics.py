@@ -362,3 +362,61 @@ def test_reach_position_with_an_orientation_wants_the_heading_within_005_rad(
 @pytest.mark.parametrize("h", sorted(REACH_CASES))
 def test_reach_position_with_an_orientation_agrees_with_esmini(tmp_path: Path, h: float) -> None:
     _agrees_with_esmini(write_scenario(tmp_path, _reach_scenario(h)))
+
+
+# --- RelativeLanePosition: ds along the road's s ------------------------------------------------------------
+
+
+def _relative_lane_scenario(ds: float, d_lane: int, lane: int, attribute: str = "ds") -> str:
+    # Ego in lane `lane` of the two-way rural road (lane 1 travels toward decreasing s); T placed relative
+    # to it: ds along the road's s, dLane and offset across the road's direction, facing the road's s;
+    # dsLane along Ego's lane in its travel direction, facing the driving direction of the lane T lands in
+    relative = (
+        f'<Position><RelativeLanePosition entityRef="Ego" dLane="{d_lane}" {attribute}="{ds}" offset="0.2"/>'
+        "</Position>"
+    )
+    init = gen.private("Ego", gen.teleport(gen.lane_position(500.0, lane)), gen.speed_to(10.0)) + gen.private(
+        "T", gen.teleport(relative), gen.speed_to(5.0)
+    )
+    return openscenario(
+        entities="".join(scenario_object(n) for n in ("Ego", "T")),
+        init=init,
+        stop=sim_time("greaterThan", 2.0, name="stop"),
+        road=f'<RoadNetwork><LogicFile filepath="{gen.RURAL.path}"/></RoadNetwork>',
+    )
+
+
+RELATIVE_LANE_CASES = [(20.0, 0, 1), (20.0, -1, 1), (-30.0, 1, 1), (-15.0, 1, -1)]
+
+
+@pytest.mark.parametrize(("ds", "d_lane", "lane"), RELATIVE_LANE_CASES)
+def test_relative_lane_position_ds_is_along_the_roads_s(
+    tmp_path: Path, ds: float, d_lane: int, lane: int
+) -> None:
+    engine = _engine(write_scenario(tmp_path, _relative_lane_scenario(ds, d_lane, lane)))
+    assert engine.road is not None
+    target = engine.bodies["T"]
+    expected_lane = lane + d_lane
+    if expected_lane == 0 or (lane > 0) != (expected_lane > 0):
+        expected_lane += 1 if d_lane > 0 else -1  # there is no lane 0
+    pose = engine.road.lane_to_world("1", expected_lane, 500.0 + ds, 0.2)
+    assert (target.x, target.y) == (pytest.approx(pose.x, abs=1e-6), pytest.approx(pose.y, abs=1e-6))
+    assert _angle(target.heading, pose.heading) < 1e-6
+
+
+def test_relative_lane_position_ds_lane_is_along_the_lane_facing_the_lane_landed_in(tmp_path: Path) -> None:
+    # Ego in lane -1 (toward +s): dsLane -15 is 15 m behind it; dLane 1 lands in lane 1, which drives toward -s
+    engine = _engine(write_scenario(tmp_path, _relative_lane_scenario(-15.0, 1, -1, "dsLane")))
+    assert engine.road is not None
+    target = engine.bodies["T"]
+    pose = engine.road.lane_to_world("1", 1, 485.0, 0.2)
+    assert (target.x, target.y) == (pytest.approx(pose.x, abs=1e-6), pytest.approx(pose.y, abs=1e-6))
+    assert _angle(target.heading, pose.heading + math.pi) < 1e-6
+
+
+@pytest.mark.parametrize("attribute", ["ds", "dsLane"])
+@pytest.mark.parametrize(("ds", "d_lane", "lane"), RELATIVE_LANE_CASES)
+def test_relative_lane_position_agrees_with_esmini(
+    tmp_path: Path, ds: float, d_lane: int, lane: int, attribute: str
+) -> None:
+    _agrees_with_esmini(write_scenario(tmp_path, _relative_lane_scenario(ds, d_lane, lane, attribute)))

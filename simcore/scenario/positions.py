@@ -129,11 +129,15 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
                 f"{type(position).__name__}: entity {ref.name!r} is not on a road", file=world.source
             )
         if isinstance(position, m.RelativeLanePosition):
-            # ds beyond the end of the road goes on along the lane onto the next road (as esmini)
+            # ds along the road's s whichever way the entity travels, dLane and offset across the road's
+            # direction, facing the road's s; dsLane along the lane in the entity's travel direction, dLane
+            # and offset across it, facing it (as esmini). Beyond the end of the road it goes on along the
+            # lane onto the next road
+            start = ref.direction if position.along_lane else 1
             road_id, lane_id, s_new, direction = along_lane(
-                r, ref.road_id, ref.lane_id, ref.s, ref.direction, position.ds
+                r, ref.road_id, ref.lane_id, ref.s, start, position.ds
             )
-            if direction != ref.direction:
+            if direction != start:
                 # onto a road that runs the other way: esmini keeps the lane id and the s direction of the
                 # road it started on (the mirrored lane, facing the other way)
                 lane_id, direction = -lane_id, -direction
@@ -142,6 +146,9 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
             )
             lane = lane_shift(r, road_id, s_new, lane_id, position.d_lane, direction)
             pose = r.lane_to_world(road_id, lane, s_new, position.offset * direction)
+            if position.along_lane and lane != lane_id:
+                # dsLane into another lane: facing that lane's driving direction
+                direction = -1 if r.drives_backward(road_id, lane) else 1
             base = pose.heading + (math.pi if direction < 0 else 0.0)
             return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
         if isinstance(position, m.RelativeRoadPosition):

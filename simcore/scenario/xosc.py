@@ -1454,12 +1454,14 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
         )
     if p.tag == "RelativeLanePosition":
         ds = reader.opt_num(p, "ds")
+        along_lane = ds is None  # dsLane: along the lane, in its driving direction
         if ds is None:
             ds = reader.num(p, "dsLane", 0.0)
         return m.RelativeLanePosition(
             entity=reader.attr(p, "entityRef"),
             d_lane=reader.integer(p, "dLane"),
             ds=ds,
+            along_lane=along_lane,
             offset=reader.num(p, "offset", 0.0),
             orientation=_orientation(reader, p),
         )
