@@ -420,3 +420,38 @@ def test_relative_lane_position_agrees_with_esmini(
     tmp_path: Path, ds: float, d_lane: int, lane: int, attribute: str
 ) -> None:
     _agrees_with_esmini(write_scenario(tmp_path, _relative_lane_scenario(ds, d_lane, lane, attribute)))
+
+
+# --- EndOfRoadCondition: the step that reaches the end counts ---------------------------------------------
+
+
+def _end_of_road_scenario(duration: float, s: float) -> str:
+    # the motorway (2,000 m) ends with no link: Ego at 20 m/s from s reaches its end at (2000 - s) / 20 s
+    end = gen.by_entity("Ego", f'<EndOfRoadCondition duration="{duration}"/>', name="end", edge="none")
+    return openscenario(
+        entities=scenario_object("Ego"),
+        init=gen.private("Ego", gen.teleport(gen.lane_position(s, -2)), gen.speed_to(20.0)),
+        stop=end + "</ConditionGroup><ConditionGroup>" + sim_time("greaterThan", 15.0, name="cap"),
+        road=f'<RoadNetwork><LogicFile filepath="{gen.HIGHWAY.path}"/></RoadNetwork>',
+    )
+
+
+END_OF_ROAD_CASES = [(0.0, 1950.0), (1.0, 1950.0), (0.0, 1953.3)]
+
+
+@pytest.mark.parametrize(("duration", "s"), END_OF_ROAD_CASES)
+def test_end_of_road_holds_from_the_step_that_reaches_the_end(
+    tmp_path: Path, duration: float, s: float
+) -> None:
+    engine = _engine(write_scenario(tmp_path, _end_of_road_scenario(duration, s)))
+    while not engine.ended and engine.time < 15.0:
+        engine.advance()
+    reached = math.ceil((2000.0 - s) / 20.0 / 0.05 - 1e-6) * 0.05  # the first step at the end
+    assert engine.time == pytest.approx(reached + duration, abs=1e-6)
+    if duration > 0:
+        assert engine.bodies["Ego"].speed == 0.0  # stopped there (two steps after it got there)
+
+
+@pytest.mark.parametrize(("duration", "s"), END_OF_ROAD_CASES)
+def test_end_of_road_agrees_with_esmini(tmp_path: Path, duration: float, s: float) -> None:
+    _agrees_with_esmini(write_scenario(tmp_path, _end_of_road_scenario(duration, s)))
