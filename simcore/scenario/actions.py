@@ -14,6 +14,7 @@ from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
     from simcore.scenario.action_world import ActionWorld
+    from simcore.scenario.world import Pose
     from simcore.world.opendrive import OpenDrive
 
 _BIG = 1e10  # no limit (esmini's LARGE_NUMBER)
@@ -631,6 +632,7 @@ class SynchronizeRuntime(Runtime):
         self.convex = False
         self.last_dist = math.inf
         self.last_master_dist = math.inf
+        self._projections: dict[tuple[int, float, float], tuple[float, float]] = {}
 
     def start(self) -> None:
         e = self.world
@@ -651,9 +653,9 @@ class SynchronizeRuntime(Runtime):
         return None
 
     def step(self, dt: float) -> None:
-        e, a, action = self.world, self.actor, self.action
-        master_dist = e.distance_to(self.master, self.master_target)
-        dist = e.distance_to(a, self.target)
+        a, action = self.actor, self.action
+        master_dist = self._distance(self.master, self.master_target)
+        dist = self._distance(a, self.target)
         done = (
             dist < action.tolerance + _EPS
             or master_dist < action.master_tolerance + _EPS
@@ -665,8 +667,9 @@ class SynchronizeRuntime(Runtime):
         dist = max(dist - action.tolerance, _EPS)
         master_dist = max(master_dist - action.master_tolerance, _EPS)
         master_time = _BIG
-        if self.master.speed > _EPS:
-            master_time = master_dist / self.master.speed
+        master_speed = abs(self._speed_along_road(self.master))  # reversing toward it gets there too
+        if master_speed > _EPS:
+            master_time = master_dist / master_speed
             done = done or master_time < dt
         final = self._final_speed()
         if done:
@@ -724,7 +727,7 @@ class SynchronizeRuntime(Runtime):
         if self.mode == "none":
             self.mode = "nonlinear"
             self.convex = (final + a.speed) / 2 < dist / master_time  # rush first, else linger first
-        acc, apex = self._first_phase(dist, master_time, a.speed, final)
+        acc, apex = self._first_phase(dist, master_time, self._speed_along_road(a), final)
         if (not self.convex and acc > 0) or (self.convex and acc < 0):
             self.mode = "linear"  # past the apex: the speed is kept this step
             acc = 0.0
@@ -741,6 +744,37 @@ class SynchronizeRuntime(Runtime):
                 self.mode = "stopped"
                 return
         a.speed += acc * dt
+
+    def _speed_along_road(self, body: Body) -> float:
+        """The body's speed projected on its road's s axis (as esmini measures speeds here)."""
+        road = self.world.road
+        if road is None or body.road_id is None:
+            return body.speed
+        road_heading = road.road_to_world(body.road_id, body.s, 0.0).heading
+        return math.copysign(abs(body.speed * math.cos(body.heading - road_heading)), body.speed)
+
+    ON_PATH = 1.0  # m: a target this close to an entity's trajectory is measured along it
+
+    def _distance(self, body: Body, target: Pose) -> float:
+        """Distance still to go: for an entity on a trajectory, along the trajectory to the target's point
+        on it (a crossing pedestrian's road s does not change), in a straight line to a target off it; else
+        along the road (as esmini)."""
+        mover = body.mover
+        if isinstance(mover, FollowTrajectoryRuntime) and mover.path is not None:
+            key = (id(mover), target[0], target[1])
+            if key not in self._projections:  # targets are fixed: project each once per trajectory
+                self._projections[key] = mover.path.project(target[0], target[1])
+            s_target, off = self._projections[key]
+            if off <= self.ON_PATH:
+                return abs(s_target - mover.s)
+            return math.hypot(target[0] - body.x, target[1] - body.y)
+        road = self.world.road
+        if road is not None and body.road_id is not None and body.speed < 0:
+            # reversing toward a target behind: the distance either way along the road (esmini's |ds|)
+            rc = road.world_to_road(target[0], target[1], None, road_hint=body.road_id)
+            if rc is not None and rc.road_id == body.road_id:
+                return abs(rc.s - body.s)
+        return self.world.distance_to(body, target)
 
     @staticmethod
     def _first_phase(s: float, t: float, v0: float, v1: float) -> tuple[float, float]:

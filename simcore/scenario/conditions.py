@@ -291,7 +291,7 @@ def bind_collision(c: m.CollisionCondition, world: ScenarioWorld) -> EntityTest:
     return with_any
 
 
-REACH_ANGLE_TOLERANCE = 1e-6  # rad: esmini's ReachPosition with an Orientation wants the heading itself
+REACH_ANGLE_TOLERANCE = 0.05  # rad: esmini's ReachPosition with an Orientation wants the heading within
 
 
 def reach_position(c: m.ReachPositionCondition, world: ScenarioWorld, body: Body) -> bool:
@@ -299,8 +299,9 @@ def reach_position(c: m.ReachPositionCondition, world: ScenarioWorld, body: Body
     if math.hypot(body.x - x, body.y - y) >= c.tolerance:
         return False
     if getattr(c.position, "orientation", None) is not None:
-        # a position with an Orientation is reached with that heading only (as esmini checks it)
-        return abs(wrap_angle(body.heading - h)) < REACH_ANGLE_TOLERANCE
+        # a position with an Orientation is reached with that heading only, within 0.05 rad, both read in
+        # [0, 2π) (as esmini checks it: 6.27 and 0.01 rad differ)
+        return abs(body.heading % math.tau - h % math.tau) < REACH_ANGLE_TOLERANCE
     return True
 
 

@@ -251,7 +251,9 @@ class ScenarioEngine:
                 body.road_id, body.lane_id, body.s = rc.road_id, rc.lane_id, rc.s
                 body.offset = rc.offset
                 body.direction = 1 if math.cos(heading - rc.heading) >= 0 else -1
-                if isinstance(position, m.LanePosition):
+                if isinstance(position, m.LanePosition) and 0.0 <= position.s <= self.road.road_length(
+                    position.road_id
+                ):
                     body.road_id, body.lane_id, body.s = position.road_id, position.lane_id, position.s
                     body.offset = position.offset
         # an orientation given relative to the road is kept while the entity moves along it (as esmini)

@@ -44,7 +44,12 @@ def set_or_modify(action: m.ParameterSetAction | m.ParameterModifyAction, world:
 
 
 def add_entity(action: m.AddEntityAction, world: ScenarioWorld) -> None:
+    """AddEntityAction: the entity comes into the world at the position; one already in it stays where it
+    is (esmini skips the action)."""
     body = world.body(action.entity)
+    if not body.gone:
+        world.log.append(f"t={world.time:.2f} AddEntityAction: {body.name} is already in the world: skipped")
+        return
     body.gone = False
     world.place(body, action.position)
 

@@ -6,7 +6,9 @@ corpus; its roadmanager `Position::Distance` and `Object::Distance`):
 
 - distances are signed: positive when the target is ahead of the measuring entity;
 - in the entity coordinate system, without freespace, the measuring frame is the road's heading at the
-  entity, turned to the entity's driving direction (not the entity's own heading); with freespace, the
+  entity, turned to the entity's driving direction (not the entity's own heading), except for the lateral
+  distance between two entities, which is across the entity's own heading (it turns during a lane change,
+  as esmini's does); with freespace, the
   longitudinal and lateral distances are the gaps between the bounding boxes along the entity's own axes
   (0 where the projections overlap), and the Euclidean one the shortest distance between the boxes;
 - in the road and lane coordinate systems, the difference of s (longitudinal) or t (lateral) along the
@@ -181,6 +183,11 @@ class Measure:
             if delta is None:
                 return None
             return delta[0] if kind == "longitudinal" else delta[1]
+        if kind == "lateral":
+            # across the entity's own heading (esmini: during a lane change the lateral distance to an
+            # entity ahead or behind turns with the changing entity)
+            c, s = math.cos(a.heading), math.sin(a.heading)
+            return -s * (b.x - a.x) + c * (b.y - a.y)
         dx, dy = self.local(a, b.x, b.y)
         return dx if kind == "longitudinal" else dy
 

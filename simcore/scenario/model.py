@@ -153,9 +153,10 @@ class RoadPosition:
 class RelativeLanePosition:
     entity: str
     d_lane: int
-    ds: float
+    ds: float  # along the road's s (`ds`), or along the lane in the entity's travel direction (`dsLane`)
     offset: float = 0.0
     orientation: Orientation | None = None
+    along_lane: bool = False  # given as dsLane
 
 
 @record

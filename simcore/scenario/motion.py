@@ -157,7 +157,9 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
         scale = abs(1.0 - r.curvature(length if length < on else on) * t)
         ds = remaining / (1e-6 if scale < 1e-6 else scale)  # max(scale, 1e-6)
         target = s + body.direction * ds
-        if 0.0 <= target <= length:
+        # reaching a road's end exactly counts as reaching it (the end-of-road timer starts on this step,
+        # as esmini's); standing still there stays
+        if 0.0 < target < length or (ds == 0.0 and 0.0 <= target <= length):
             if lane_id == 0 or _plain_side(r, 1 if lane_id > 0 else -1):
                 body.s = target  # no lane link or vanishing lane to follow on this side of the road
             else:
@@ -169,8 +171,8 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
                 body.end_of_road_since = None
             break
         # past the end of this road: continue on the successor
-        overshoot = (target - length) if target > length else -target
-        edge_s = length if target > length else 0.0
+        overshoot = (target - length) if target >= length else -target
+        edge_s = length if target >= length else 0.0
         nxt = next_road(road, body)
         if nxt is None:
             body.s = edge_s

@@ -56,6 +56,22 @@ class SampledPath:
             self.h[i] + f * dh,
         )
 
+    def project(self, x: float, y: float) -> tuple[float, float]:
+        """(arc length, distance) of the point of the path nearest to (x, y)."""
+        best_s, best_d2 = 0.0, math.inf
+        xs, ys, ss = self.x, self.y, self.s
+        for i in range(len(ss) - 1):
+            dx, dy = xs[i + 1] - xs[i], ys[i + 1] - ys[i]
+            seg2 = dx * dx + dy * dy
+            f = 0.0 if seg2 <= 0.0 else min(max(((x - xs[i]) * dx + (y - ys[i]) * dy) / seg2, 0.0), 1.0)
+            px, py = xs[i] + f * dx - x, ys[i] + f * dy - y
+            d2 = px * px + py * py
+            if d2 < best_d2:
+                best_s, best_d2 = ss[i] + f * (ss[i + 1] - ss[i]), d2
+        if len(ss) == 1:
+            best_d2 = (xs[0] - x) ** 2 + (ys[0] - y) ** 2
+        return best_s, math.sqrt(best_d2)
+
     def time_at_s(self, s: float) -> float:
         """Trajectory time at arc length `s` (linear between the samples; clamped)."""
         assert self.t is not None
@@ -224,22 +240,42 @@ def _piecewise_linear(xs: list[float], ys: list[float], x: float) -> float:
     return ys[-1]
 
 
-def _basis_peaks(knots: tuple[float, ...], order: int, count: int, u0: float, u1: float) -> list[float]:
-    """For each control point, the curve parameter at which its B-spline basis function is largest."""
-    samples = 2000
-    best = [(-1.0, u0)] * count
-    for j in range(samples + 1):
-        u = u0 + (u1 - u0) * j / samples
-        if j == samples:
-            u = u1 - 1e-12 * max(1.0, abs(u1))
-        for i in range(count):
-            b = _basis(knots, order, i, u)
-            if b > best[i][0]:
-                best[i] = (b, u)
-    peaks = [u for _, u in best]
-    for i in range(1, count):  # non-decreasing, as time must be along the curve
-        peaks[i] = max(peaks[i], peaks[i - 1])
-    return peaks
+def _nurbs_times(
+    knots: tuple[float, ...],
+    order: int,
+    pts: list[tuple[float, float, float, float]],
+    times: list[float],
+    u0: float,
+    u1: float,
+) -> tuple[list[float], list[float]]:
+    """(curve parameters, trajectory times) of esmini's coarse sampling of a timed NURBS: about one sample a
+    metre of the control polygon; each control point's time belongs to the sample where its basis function,
+    read just ahead of the sample (just behind at the end), is largest; between two such samples time is
+    linear in the parameter, moving on to the next pair once past its first (as esmini's NurbsShape)."""
+    count = len(pts)
+    polygon = sum(math.dist(pts[i - 1][:2], pts[i][:2]) for i in range(1, count))
+    steps = int(1 + polygon / 1.0)
+    step = (u1 - u0) / steps
+    top = u1 - 1e-10
+    params = [u0 + i * step for i in range(steps + 1)]
+    peak_value = [0.0] * count
+    peak_at = [u0] * count
+    for i, u in enumerate(params):
+        probe = min(max(u + 0.01 * step if i < steps else u - 0.01 * step, knots[0]), top)
+        for j in range(count):
+            b = _basis(knots, order, j, probe)
+            if b > peak_value[j]:
+                peak_value[j], peak_at[j] = b, u
+    out: list[float] = []
+    current = 0
+    for u in params:
+        if current + 1 < count and u >= peak_at[current + 1]:
+            current = min(current + 1, count - 2)
+        lo, hi = peak_at[current], peak_at[min(current + 1, count - 1)]
+        w = (u - lo) / (hi - lo) if hi != lo else 0.0
+        t_next = times[min(current + 1, count - 1)]
+        out.append(times[current] + w * (t_next - times[current]))
+    return params, out
 
 
 def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
@@ -249,9 +285,10 @@ def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
     timed = all(t is not None for t in times)
     knots = shape.knots
     u0, u1 = knots[shape.order - 1], knots[len(pts)]
-    # a control point's time belongs to the parameter where its basis function peaks (the point's greatest
-    # influence); between them time is linear in the curve parameter (as esmini)
-    peaks = _basis_peaks(knots, shape.order, len(pts), u0, u1) if timed else []
+    # control points' times to the curve parameter as esmini maps them (`_nurbs_times`)
+    params, param_times = (
+        _nurbs_times(knots, shape.order, pts, [float(t or 0.0) for t in times], u0, u1) if timed else ([], [])
+    )
     n = max(NURBS_SAMPLES_PER_POINT * len(pts), 2)
     out_pts: list[tuple[float, float, float]] = []
     out_t: list[float] = []
@@ -270,7 +307,7 @@ def nurbs(shape: m.Nurbs, resolve: Resolver) -> SampledPath:
             continue
         out_pts.append((num_x / den, num_y / den, num_z / den))
         if timed:
-            out_t.append(_piecewise_linear(peaks, [float(t or 0.0) for t in times], u))
+            out_t.append(_piecewise_linear(params, param_times, u))
     return _from_points(out_pts, out_t if timed else None)
 
 

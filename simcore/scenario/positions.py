@@ -57,7 +57,18 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
                     s_on = min(max(s_on, 0.0), length)
                 pose = r.lane_to_world(road_id, lane_id, s_on, position.offset)
                 return pose.x, pose.y, pose.z, wrap_angle(orient(pose.heading, position.orientation))
-            pose = r.lane_to_world(position.road_id, position.lane_id, position.s, position.offset)
+            length = r.road_length(position.road_id)
+            s_on = position.s
+            if not 0.0 <= s_on <= length:
+                # beyond the end of a road with no link there: at its end (esmini runs such files too)
+                message = (
+                    f"{position.source or world.source}: LanePosition: road {position.road_id} "
+                    f"s={position.s:g} lies beyond the road's end: placed at s={min(max(s_on, 0.0), length):g}"
+                )
+                if message not in world.warnings:
+                    world.warnings.append(message)
+                s_on = min(max(s_on, 0.0), length)
+            pose = r.lane_to_world(position.road_id, position.lane_id, s_on, position.offset)
             # relative orientation is relative to the lane's driving direction (as esmini does)
             backward = r.drives_backward(position.road_id, position.lane_id)
             base = pose.heading + (math.pi if backward else 0.0)
@@ -86,7 +97,15 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
                 pose = r.lane_to_world(road_id, position.lane_id, s_on, position.lane_offset)
             else:
                 pose = r.road_to_world(road_id, s_on, position.t)
-            base = pose.heading + (math.pi if direction < 0 else 0.0)
+            if position.lane_id is not None:
+                # in a lane: facing the lane's driving direction whichever way the route runs, and an
+                # Orientation relative to it (as esmini's RoutePosition, like a LanePosition)
+                backward = r.drives_backward(road_id, position.lane_id)
+                base = pose.heading + (math.pi if backward else 0.0)
+            elif position.orientation is None:
+                base = pose.heading + (math.pi if direction < 0 else 0.0)  # along the route
+            else:
+                base = pose.heading  # relative to the road's s direction (as a RoadPosition's)
             return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
         ref = world.body(position.entity)
         if isinstance(position, m.RelativeWorldPosition):
@@ -110,11 +129,15 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
                 f"{type(position).__name__}: entity {ref.name!r} is not on a road", file=world.source
             )
         if isinstance(position, m.RelativeLanePosition):
-            # ds beyond the end of the road goes on along the lane onto the next road (as esmini)
+            # ds along the road's s whichever way the entity travels, dLane and offset across the road's
+            # direction, facing the road's s; dsLane along the lane in the entity's travel direction, dLane
+            # and offset across it, facing it (as esmini). Beyond the end of the road it goes on along the
+            # lane onto the next road
+            start = ref.direction if position.along_lane else 1
             road_id, lane_id, s_new, direction = along_lane(
-                r, ref.road_id, ref.lane_id, ref.s, ref.direction, position.ds
+                r, ref.road_id, ref.lane_id, ref.s, start, position.ds
             )
-            if direction != ref.direction:
+            if direction != start:
                 # onto a road that runs the other way: esmini keeps the lane id and the s direction of the
                 # road it started on (the mirrored lane, facing the other way)
                 lane_id, direction = -lane_id, -direction
@@ -123,6 +146,9 @@ def resolve(world: ScenarioWorld, position: m.Position, for_body: Body | None = 
             )
             lane = lane_shift(r, road_id, s_new, lane_id, position.d_lane, direction)
             pose = r.lane_to_world(road_id, lane, s_new, position.offset * direction)
+            if position.along_lane and lane != lane_id:
+                # dsLane into another lane: facing that lane's driving direction
+                direction = -1 if r.drives_backward(road_id, lane) else 1
             base = pose.heading + (math.pi if direction < 0 else 0.0)
             return pose.x, pose.y, pose.z, wrap_angle(orient(base, position.orientation))
         if isinstance(position, m.RelativeRoadPosition):

@@ -1391,6 +1391,24 @@ def _lane_change(reader: _Reader, action: ET.Element) -> m.LaneChangeAction:
 # --- positions --------------------------------------------------------------------------------------------
 
 
+def _route_orientation(reader: _Reader, position: ET.Element, in_route: ET.Element) -> m.Orientation | None:
+    """A RoutePosition's Orientation. The schema puts it before InRoutePosition; the reference player reads
+    the children in order and places the position when it meets InRoutePosition, so an Orientation written
+    after it changes nothing there: the same here, with a warning naming the element."""
+    orientation = position.find("Orientation")
+    if orientation is None:
+        return None
+    children = list(position)
+    if children.index(orientation) > children.index(in_route):
+        reader.warn(
+            "Orientation after InRoutePosition (the schema puts it before): ignored, as the reference "
+            "player does; move it before InRoutePosition to turn the entity",
+            orientation,
+        )
+        return None
+    return _orientation(reader, position)
+
+
 def _orientation(reader: _Reader, element: ET.Element) -> m.Orientation | None:
     o = element.find("Orientation")
     if o is None:
@@ -1442,12 +1460,14 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
         )
     if p.tag == "RelativeLanePosition":
         ds = reader.opt_num(p, "ds")
+        along_lane = ds is None  # dsLane: along the lane, in its driving direction
         if ds is None:
             ds = reader.num(p, "dsLane", 0.0)
         return m.RelativeLanePosition(
             entity=reader.attr(p, "entityRef"),
             d_lane=reader.integer(p, "dLane"),
             ds=ds,
+            along_lane=along_lane,
             offset=reader.num(p, "offset", 0.0),
             orientation=_orientation(reader, p),
         )
@@ -1470,10 +1490,12 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
     if p.tag == "RoutePosition":
         ref = reader.child(p, "RouteRef")
         route = _route_or_ref(reader, ref)
-        in_route = reader.only_child(reader.child(p, "InRoutePosition"))
+        in_route_element = reader.child(p, "InRoutePosition")
+        in_route = reader.only_child(in_route_element)
+        orientation = _route_orientation(reader, p, in_route_element)
         if in_route.tag == "FromCurrentEntity":
             return m.RoutePosition(
-                route=route, entity=reader.attr(in_route, "entityRef"), orientation=_orientation(reader, p)
+                route=route, entity=reader.attr(in_route, "entityRef"), orientation=orientation
             )
         if in_route.tag == "FromRoadCoordinates":
             return m.RoutePosition(
@@ -1481,7 +1503,7 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
                 entity=None,
                 path_s=reader.num(in_route, "pathS"),
                 t=reader.num(in_route, "t", 0.0),
-                orientation=_orientation(reader, p),
+                orientation=orientation,
             )
         if in_route.tag == "FromLaneCoordinates":
             return m.RoutePosition(
@@ -1490,7 +1512,7 @@ def _position(reader: _Reader, element: ET.Element) -> m.Position:
                 path_s=reader.num(in_route, "pathS"),
                 lane_id=reader.integer(in_route, "laneId"),
                 lane_offset=reader.num(in_route, "laneOffset", 0.0),
-                orientation=_orientation(reader, p),
+                orientation=orientation,
             )
         raise reader.fail(f"unknown InRoutePosition <{in_route.tag}>", in_route)
     if p.tag == "TrajectoryPosition":
