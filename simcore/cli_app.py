@@ -21,6 +21,7 @@ from typer.core import TyperGroup
 from simcore import cli as entry  # the collector's pause (entry.resume_gc: looked up there, at each call)
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError, shorten
 from simcore.workflow import commands as workflow
+from simcore.workflow import compare as workflow_compare
 
 if TYPE_CHECKING:
     from typer.core import _click  # typer's click (vendored in typer >= 0.29); annotations only
@@ -773,5 +774,6 @@ for _command in (
     workflow.results,
     workflow.export,
     workflow.rerun,
+    workflow_compare.compare,
 ):
     app.command()(_command)

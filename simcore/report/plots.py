@@ -142,11 +142,11 @@ def birds_eye(recording: Recording, road: RoadOutline | None, title: str) -> str
         _text(18.0, py + ph / 2, "y (m)", size=10, extra=f' transform="rotate(-90 18 {py + ph / 2:.1f})"')
     )
     out.append(_text(px + pw / 2, 18.0, title, size=10))
-    lx = px + pw + 16.0
+    key_x = px + pw + 16.0
     for k, (colour, label) in enumerate(legend[:14]):
-        ly = py + 10.0 + k * 18.0
-        out.append(f'<path d="M{lx:.1f} {ly:.1f}h18" stroke="{colour}" stroke-width="2.5"/>')
-        out.append(_text(lx + 24.0, ly + 3.5, label, size=8.5, anchor="start"))
+        key_y = py + 10.0 + k * 18.0
+        out.append(f'<path d="M{key_x:.1f} {key_y:.1f}h18" stroke="{colour}" stroke-width="2.5"/>')
+        out.append(_text(key_x + 24.0, key_y + 3.5, label, size=8.5, anchor="start"))
     out.append("</svg>")
     return "".join(out)
 
