@@ -102,6 +102,15 @@ def run(
     index: Annotated[
         list[int] | None, typer.Option("--index", "-i", help="Run only these indexes (repeatable).")
     ] = None,
+    repeat: Annotated[
+        int | None,
+        typer.Option(
+            "--repeat",
+            min=1,
+            max=100,
+            help="Run every point this many times to find flaky runs (overrides spec.execution.repeat).",
+        ),
+    ] = None,
     fresh: Annotated[
         bool, typer.Option("--fresh", help="Replace existing results of this run instead of resuming.")
     ] = False,
@@ -161,6 +170,12 @@ def run(
     hub = None
     try:
         simulation_run = load_manifest(manifest)
+        if repeat is not None:
+            spec = simulation_run.spec
+            execution = spec.execution.model_copy(update={"repeat": repeat})
+            simulation_run = simulation_run.model_copy(
+                update={"spec": spec.model_copy(update={"execution": execution})}
+            )
         total = len(Plan(simulation_run.spec))
         _preflight(simulation_run, manifest)
         live = live or simulation_run.spec.live

@@ -233,14 +233,20 @@ def execute(
             _in_pool(sweep, workers)
         finally:
             shutil.rmtree(settings.scratch_root, ignore_errors=True)
-    summary = run_summary(
-        name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted), expected=set(wanted)
-    )
+    ordered = [outcomes[i] for i in sorted(outcomes)]
+    repeats = _repeats(store, name, plan, ordered) if plan.repeat > 1 else None
+    if repeats is not None:
+        from simcore.evaluation.flaky import flag_flaky
+
+        ordered = flag_flaky(ordered, repeats)
+    summary = run_summary(name, ordered, total=len(wanted), expected=set(wanted))
     summary["outputUrl"] = store.url_for(name)
-    store.put_bytes(f"{name}/junit.xml", junit_xml(name, [outcomes[i] for i in sorted(outcomes)]).encode())
+    if repeats is not None:
+        summary["repeats"] = repeats
+    store.put_bytes(f"{name}/junit.xml", junit_xml(name, ordered).encode())
     store.put_bytes(f"{name}/summary.json", summary_bytes(summary))
     store.sync()
-    report_url, report_error = _html_report(store, run, summary, [outcomes[i] for i in sorted(outcomes)])
+    report_url, report_error = _html_report(store, run, summary, ordered)
     return RunReport(
         run_name=name,
         output_url=store.url_for(name),
@@ -252,6 +258,22 @@ def execute(
         report_url=report_url,
         report_error=report_error,
     )
+
+
+def _repeats(store: Store, name: str, plan: Plan, ordered: list[dict[str, Any]]) -> dict[str, Any]:
+    """summary.json's `repeats` (execution.repeat > 1): flaky points, and determinism from the recorded
+    messages of runs of a point with the same seed (simcore.evaluation.flaky)."""
+    from simcore.evaluation.flaky import message_digest, repeat_report
+
+    digests: dict[int, str] = {}
+    for summary in ordered:
+        key = f"{name}/{summary['index']}/recording.mcap"
+        try:
+            if store.exists(key):
+                digests[int(summary["index"])] = message_digest(store.get_bytes(key))
+        except Exception:  # an unreadable recording is not compared (deterministic: None)
+            continue
+    return repeat_report(ordered, plan.point_of, plan.repeat, digests)
 
 
 def _in_pool(sweep: _Sweep, workers: int) -> None:

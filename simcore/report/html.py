@@ -311,7 +311,11 @@ def _birds_eye(results: RunResults, worst: int) -> str:
             continue
         source = recording.scenario_file or ""
         if source not in roads:
-            roads[source] = road_outline(recording.scenario_file)
+            # one sample per ~2 px of the plot's 600 px over the trajectories' extent (at least every 2 m)
+            xs = [v for tr in recording.trajectories.values() for v in tr.x] or [0.0]
+            ys = [v for tr in recording.trajectories.values() for v in tr.y] or [0.0]
+            extent = max(max(xs) - min(xs), max(ys) - min(ys)) + 20.0
+            roads[source] = road_outline(recording.scenario_file, step=min(max(extent / 300.0, 2.0), 10.0))
         title = f"{testcase_name(s)} · {s['status']} · {reason}"
         figures.append(plots.birds_eye(recording, roads[source], title))
     if not figures:
@@ -340,6 +344,7 @@ def _index_table(results: RunResults, relative: bool, metric_limit: int = 6) -> 
                 metric_names.append(name)
     metric_names = metric_names[:metric_limit]
     constant = constant_parameters(results.indexes)
+    flaky = _flaky_indexes(results)
     head = "".join(f"<th>{_e(n)}</th>" for n in metric_names)
     out = [
         f"<table class=runs><tr><th>files</th><th>index</th><th>scenario</th><th>status</th>"
@@ -359,9 +364,47 @@ def _index_table(results: RunResults, relative: bool, metric_limit: int = 6) -> 
                 links.append(f'<a href="{_e(href)}">{label}</a>')
         out.append(
             f"<tr><td>{' '.join(links)}</td><td class=num>{i}</td><td>{_e(s['scenario'])}</td>"
-            f"<td>{_badge(s['status'])}</td><td>{_e(params)}</td><td class=num>{_e(s.get('seed'))}</td>{cells}</tr>"
+            f"<td>{_badge(s['status'])}{' flaky' if i in flaky else ''}</td><td>{_e(params)}</td><td class=num>{_e(s.get('seed'))}</td>{cells}</tr>"
         )
     out.append("</table>")
+    return "".join(out)
+
+
+def _flaky_indexes(results: RunResults) -> set[int]:
+    repeats = (results.summary or {}).get("repeats") or {}
+    return {int(i) for p in repeats.get("flakyPoints", []) if p.get("flaky") for i in p["indexes"]}
+
+
+def _repeats(results: RunResults) -> str:
+    """Flaky points and the determinism check (summary.json `repeats`, execution.repeat > 1)."""
+    repeats = (results.summary or {}).get("repeats")
+    if not repeats:
+        return ""
+    checked = repeats.get("determinismChecked", 0)
+    determinism = (
+        f"{repeats['nondeterministic']} of {checked} points recorded different messages with the same seed"
+        if checked
+        else "determinism not checked (no two recordings of a point with the same seed)"
+    )
+    out = [
+        "<h2>Repeats: flaky runs and determinism</h2>",
+        f"<p>{_badge('failed' if repeats['flaky'] or repeats.get('nondeterministic') else 'passed')} "
+        f"every point run {repeats['repeat']} times · {repeats['flaky']} of {repeats['points']} points flaky "
+        f"(verdict changed between repeats) · {_e(determinism)}</p>",
+    ]
+    listed = repeats.get("flakyPoints", [])
+    if listed:
+        out.append(
+            "<table><tr><th>indexes</th><th>statuses</th><th>seeds</th><th>flaky</th><th>same messages</th></tr>"
+        )
+        for p in listed:
+            same = {True: "yes", False: "no", None: "not checked"}[p.get("deterministic")]
+            out.append(
+                f"<tr><td>{_e(', '.join(map(str, p['indexes'])))}</td><td>{_e(', '.join(p['statuses']))}</td>"
+                f"<td>{_e(', '.join(map(str, p['seeds'])))}</td><td>{'yes' if p['flaky'] else 'no'}</td>"
+                f"<td>{same}</td></tr>"
+            )
+        out.append("</table>")
     return "".join(out)
 
 
@@ -457,6 +500,7 @@ def render(results: RunResults, *, worst: int = 6, relative_links: bool = False,
         _header(results, relative_links),
         _verdict(results),
         _comparison(results),
+        _repeats(results),
         "<h2>Criteria</h2>",
         _criteria_table(results),
         "<h2>Failed and errored runs</h2>",
