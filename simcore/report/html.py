@@ -29,7 +29,8 @@ th{background:#f5f5f5}td.num{text-align:right;font-variant-numeric:tabular-nums}
 .badge{display:inline-block;padding:2px 10px;border-radius:10px;color:#fff;font-weight:600}
 .passed{background:#2e7d32}.failed{background:#c62828}.error{background:#6a1b9a}.optional{background:#757575}
 .muted{color:#757575}svg.plot{max-width:100%;height:auto;display:block;margin:8px 0}
-table.runs{width:100%;table-layout:auto;font-size:12px}table.runs td{overflow-wrap:anywhere}
+table.runs{width:100%;font-size:12px}table.runs td{overflow-wrap:break-word}
+table.runs th{font-size:11px;overflow-wrap:anywhere}.badge{white-space:nowrap}
 table.runs td:first-child{white-space:nowrap}p.links a{font-weight:600}
 
 """
@@ -297,6 +298,7 @@ def _distributions(results: RunResults, limit: int = 16) -> str:
 def _birds_eye(results: RunResults, worst: int) -> str:
     ego = results.spec.spec.simulation.ego if results.spec is not None else None
     roads: dict[str, RoadOutline | None] = {}
+    constant = constant_parameters(results.indexes)
     figures = []
     for s, reason in worst_runs(results.indexes, worst):
         key = f"{s['index']}/recording.mcap"
@@ -316,8 +318,9 @@ def _birds_eye(results: RunResults, worst: int) -> str:
             ys = [v for tr in recording.trajectories.values() for v in tr.y] or [0.0]
             extent = max(max(xs) - min(xs), max(ys) - min(ys)) + 20.0
             roads[source] = road_outline(recording.scenario_file, step=min(max(extent / 300.0, 2.0), 10.0))
-        title = f"{testcase_name(s)} · {s['status']} · {reason}"
-        figures.append(plots.birds_eye(recording, roads[source], title))
+        varying = ",".join(f"{k}={v}" for k, v in (s.get("parameters") or {}).items() if k not in constant)
+        title = f"{s['scenario']}[{s['index']}] {varying} · {s['status']}"
+        figures.append(plots.birds_eye(recording, roads[source], title, reason))
     if not figures:
         return ""
     note = (
@@ -336,13 +339,16 @@ def _birds_eye(results: RunResults, worst: int) -> str:
     )
 
 
-def _index_table(results: RunResults, relative: bool, metric_limit: int = 6) -> str:
+def _index_table(results: RunResults, relative: bool, metric_limit: int = 5) -> str:
     metric_names: list[str] = []
     for s in results.indexes:
         for name in s.get("metrics", {}):
             if name not in metric_names:
                 metric_names.append(name)
-    metric_names = metric_names[:metric_limit]
+    criteria_metrics = [c.get("metric") for s in results.indexes for c in s.get("criteria", [])]
+    preferred = [*criteria_metrics, "collision", *NEAR_MISS_METRICS]
+    rank = {name: k for k, name in reversed(list(enumerate(preferred)))}
+    metric_names = sorted(metric_names, key=lambda n: rank.get(n, len(rank)))[:metric_limit]
     constant = constant_parameters(results.indexes)
     flaky = _flaky_indexes(results)
     head = "".join(f"<th>{_e(n)}</th>" for n in metric_names)

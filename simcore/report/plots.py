@@ -52,7 +52,7 @@ def _polyline_path(
     return "".join(parts)
 
 
-def birds_eye(recording: Recording, road: RoadOutline | None, title: str) -> str:
+def birds_eye(recording: Recording, road: RoadOutline | None, title: str, subtitle: str = "") -> str:
     """Every entity's trajectory over the road outline (cropped to the trajectories), the start of each
     trajectory as a dot, the minimum-distance moment as a dashed line between the two boxes' centres and
     every collision as a red cross; axes x and y in metres. Written as SVG directly (matplotlib's import
@@ -62,8 +62,8 @@ def birds_eye(recording: Recording, road: RoadOutline | None, title: str) -> str
     all_y = [v for tr in tracks for v in tr.y] or [0.0]
     margin = 10.0
     x0, x1, y0, y1 = min(all_x) - margin, max(all_x) + margin, min(all_y) - margin, max(all_y) + margin
-    width, height = 864.0, 340.0
-    px, py, pw, ph = 64.0, 30.0, 600.0, 262.0
+    width, height = 864.0, 356.0
+    px, py, pw, ph = 64.0, 46.0, 580.0, 262.0
     dx, dy = x1 - x0, y1 - y0
     if max(dx, dy) <= 5 * min(dx, dy):  # equal scale: widen the narrower side of the window
         scale = min(pw / dx, ph / dy)
@@ -117,9 +117,8 @@ def birds_eye(recording: Recording, road: RoadOutline | None, title: str) -> str
         )
         for cx_, cy_ in ((ex, ey), (ox, oy)):
             out.append(f'<circle cx="{cx_:.1f}" cy="{cy_:.1f}" r="2.8" fill="#000"/>')
-        legend.append(
-            ("#000", f"closest: {closest.distance:.2f} m to {closest.other} at t={closest.time:.2f} s")
-        )
+        legend.append(("#000", f"closest: {closest.distance:.2f} m"))
+        legend.append(("", f"to {closest.other}, t={closest.time:.2f} s"))
     for hit in recording.collisions:
         hx, hy = to_px(*hit.ego_xy)
         out.append(
@@ -141,11 +140,14 @@ def birds_eye(recording: Recording, road: RoadOutline | None, title: str) -> str
     out.append(
         _text(18.0, py + ph / 2, "y (m)", size=10, extra=f' transform="rotate(-90 18 {py + ph / 2:.1f})"')
     )
-    out.append(_text(px + pw / 2, 18.0, title, size=10))
+    out.append(_text(8.0, 16.0, title, size=10, anchor="start", extra=' font-weight="bold"'))
+    if subtitle:
+        out.append(_text(8.0, 32.0, subtitle, size=9, anchor="start"))
     key_x = px + pw + 16.0
     for k, (colour, label) in enumerate(legend[:14]):
         key_y = py + 10.0 + k * 18.0
-        out.append(f'<path d="M{key_x:.1f} {key_y:.1f}h18" stroke="{colour}" stroke-width="2.5"/>')
+        if colour:
+            out.append(f'<path d="M{key_x:.1f} {key_y:.1f}h18" stroke="{colour}" stroke-width="2.5"/>')
         out.append(_text(key_x + 24.0, key_y + 3.5, label, size=8.5, anchor="start"))
     out.append("</svg>")
     return "".join(out)
