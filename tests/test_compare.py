@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from simcore.compare import classify, compare, metric_changes, run_key
+from tests.s3server import S3Server
 from tests.test_cli import ROOT, carlos
 
 SCENARIO = ROOT / "examples" / "scenarios" / "cut-in.xosc"
@@ -133,3 +134,27 @@ def test_metric_changes_beyond_the_tolerance() -> None:
     assert [(c.metric, c.baseline, c.candidate) for c in changes] == [("maxSpeed", 20.0, 23.0)]
     result = compare([_summary(0, "passed", minDistance=1.0)], [_summary(0, "passed", minDistance=2.0)])
     assert len(result.changed_metrics) == 1 and result.exit_code == 0
+
+
+pytest_plugins = ["tests.s3server"]
+
+
+@pytest.mark.s3
+def test_baseline_in_s3_against_a_local_candidate(
+    runs: tuple[Path, Path], s3_server: S3Server, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from simcore.store import open_store
+
+    base, cand = runs
+    for name in ("AWS_SESSION_TOKEN", "AWS_ENDPOINT_URL_S3", "AWS_PROFILE", "AWS_DEFAULT_REGION"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in s3_server.env().items():  # open_store reads the endpoint and keys from here
+        monkeypatch.setenv(name, value)
+    url = f"s3://{s3_server.bucket}/compare/base"
+    store = open_store(url)
+    for path in sorted(base.rglob("*")):
+        if path.is_file():
+            store.put_file(path.relative_to(base).as_posix(), path)
+    done = carlos("compare", url, cand.as_uri(), env=s3_server.env())
+    assert done.returncode == 1, done.stderr
+    assert "1 new failure · 0 fixed · 0 still failing · 0 still passing · 1 added · 1 removed" in done.stdout
