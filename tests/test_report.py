@@ -100,7 +100,7 @@ def test_report_renders_its_plots_in_headless_chromium(
     image = Image.open(io.BytesIO(page.screenshot)).convert("RGB")
     assert image.height > 2000
     colours = {colour for _, colour in image.getcolors(maxcolors=1 << 20) or []}
-    # drawn, not blank: the pass colour of the heat map, the histogram bars, matplotlib's first line colour
+    # drawn, not blank: the pass colour of the heat map, the histogram bars, the first trajectory's colour
     for wanted in ((0x2E, 0x7D, 0x32), (0x15, 0x65, 0xC0), (0x1F, 0x77, 0xB4)):
         assert wanted in colours, wanted
 
