@@ -93,6 +93,10 @@ def test_report_option_adds_a_comparison_section_to_the_candidates_report(runs: 
     # `carlos report` keeps the section (it reads comparison.json)
     assert carlos("report", cand.as_uri()).returncode == 0
     assert "<h2>Compared with the baseline</h2>" in (cand / "report.html").read_text()
+    # the candidate run again (a new summary.json): its report no longer shows the old comparison
+    (cand / "summary.json").write_text((cand / "summary.json").read_text().replace("{", "{ ", 1))
+    assert carlos("report", cand.as_uri()).returncode == 0
+    assert "Compared with the baseline" not in (cand / "report.html").read_text()
 
 
 def test_bad_input_is_one_line_and_exit_2(runs: tuple[Path, Path], tmp_path: Path) -> None:

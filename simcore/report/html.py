@@ -454,7 +454,9 @@ def _header(results: RunResults, relative: bool) -> str:
 
 
 def _comparison(results: RunResults, limit: int = 30) -> str:
-    """The section `carlos compare --report` adds (from comparison.json next to the summary)."""
+    """The section `carlos compare --report` adds (from comparison.json next to the summary), when it was
+    made for the summary.json that is there now."""
+    import hashlib
     import json
 
     from simcore.compare import COMPARISON_KEY, VERDICTS
@@ -463,8 +465,11 @@ def _comparison(results: RunResults, limit: int = 30) -> str:
         if not results.store.exists(COMPARISON_KEY):
             return ""
         data = json.loads(results.store.get_bytes(COMPARISON_KEY))
+        summary = results.store.get_bytes("summary.json") if results.store.exists("summary.json") else b""
     except (StoreError, ValueError):
         return ""
+    if data.get("candidateSummarySha256") != hashlib.sha256(summary).hexdigest():
+        return ""  # made for earlier results in this folder (the run was run again since)
     counts = data.get("counts", {})
     status = "failed" if data.get("exitCode") else "passed"
     out = [

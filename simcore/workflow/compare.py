@@ -83,9 +83,14 @@ def compare(
     if junit_file is not None:
         _write(junit_file, cmp.junit_xml(comparison), "--junit")
     if report:
+        import hashlib
+
         from simcore.report.html import write_next_to_summary
 
-        data = json.dumps(comparison.as_dict(), indent=2, sort_keys=True) + "\n"
+        # the results compared: a later run into the same folder leaves this comparison out of its report
+        summary = candidate.store.get_bytes("summary.json") if candidate.store.exists("summary.json") else b""
+        stored = {**comparison.as_dict(), "candidateSummarySha256": hashlib.sha256(summary).hexdigest()}
+        data = json.dumps(stored, indent=2, sort_keys=True) + "\n"
         candidate.store.put_bytes(cmp.COMPARISON_KEY, data.encode())
         typer.echo(f"report: {write_next_to_summary(candidate)}")
     raise typer.Exit(comparison.exit_code)
