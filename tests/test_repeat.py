@@ -68,7 +68,11 @@ def test_a_point_whose_verdict_changes_is_flaky_and_different_messages_are_nonde
     flagged = flag_flaky(runs, report)
     assert [s.get("flaky") for s in flagged] == [True, True, None, None]
     cases = ET.fromstring(junit_xml("r", flagged)).iter("testcase")
-    flaky = [c.get("name") for c in cases if c.find("properties/property[@name='flaky']") is not None]
+    flaky = [
+        c.get("name")
+        for c in cases
+        if c.find("properties/property[@name='flaky'][@value='true']") is not None
+    ]
     assert flaky == ["s[0]", "s[1]"]
 
 

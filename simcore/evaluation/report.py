@@ -248,9 +248,9 @@ def junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]]) -> st
     """JUnit XML: `<testsuites>` with one `<testsuite>` per scenario (in order of first appearance) and
     one `<testcase>` per index (by index): name `testcase_name`, classname `carlos.<run>.<scenario>`,
     time the wall seconds, `<properties>` with the parameters (`param.<name>`), `seed`, `attempts`,
-    `endReason` and `flaky` (`True` on the runs of a point whose verdict changed between its repeats). A failed index gets `<failure>` listing its failed required criteria with expected and
-    actual values, an errored one `<error>`; in an optional scenario either is `<skipped message="optional:
-    …">` instead."""
+    `endReason` and `flaky` (`true` on the runs of a point whose verdict changed between its repeats). A
+    failed index gets `<failure>` listing its failed required criteria with expected and actual values, an
+    errored one `<error>`; in an optional scenario either is `<skipped message="optional: …">` instead."""
     by_scenario: dict[str, list[Mapping[str, Any]]] = {}
     for summary in index_summaries:
         by_scenario.setdefault(summary["scenario"], []).append(summary)
@@ -282,7 +282,8 @@ def junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]]) -> st
                 )
             for key in ("seed", "attempts", "endReason", "flaky"):
                 if summary.get(key) is not None:
-                    ET.SubElement(properties, "property", name=key, value=_xml_text(summary[key]))
+                    value = _format_value(summary[key])  # `flaky`: true
+                    ET.SubElement(properties, "property", name=key, value=_xml_text(value))
             counts["tests"] += 1
             status = summary["status"]
             if status == "passed":
