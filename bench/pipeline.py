@@ -1,7 +1,7 @@
 """The run pipeline as a user meets it, side by side with the esmini player on the same files.
 
-(a) single run: one scenario (the corpus' cut-in, 22 s simulated, recording off) through `carlos run` as a
-    fresh process (the installed console script next to this Python) vs the esmini player as a fresh process
+(a) single run: one scenario (the corpus' cut-in, 22 s simulated) with the defaults a user gets — recording
+    on and report.html written (checked after the warm-up run) — through `carlos run` as a fresh process (the installed console script next to this Python) vs the esmini player as a fresh process
     on the same file; median of BENCH_REPEAT (default 3) runs each, interleaved.
 (b) sweep: a BENCH_SWEEP-run (default 200) sweep of examples/scenarios/cut-in.xosc (EgoSpeed × CutInGap ×
     AdversarySpeed, recording off) through `carlos run --parallel 2` vs as many esmini processes two at a
@@ -60,7 +60,14 @@ def esmini_binary() -> Path | None:
     return Path(env) if env and Path(env).is_file() else None
 
 
-def manifest(directory: Path, name: str, scenario: Path, sweep: dict[str, list[float]] | None = None) -> Path:
+def manifest(
+    directory: Path,
+    name: str,
+    scenario: Path,
+    sweep: dict[str, list[float]] | None = None,
+    *,
+    recording: bool = False,
+) -> Path:
     lines = [
         "apiVersion: carlos.dev/v1alpha1",
         "kind: SimulationRun",
@@ -68,7 +75,7 @@ def manifest(directory: Path, name: str, scenario: Path, sweep: dict[str, list[f
         "spec:",
         f"  scenarios: [{{name: {name}, openscenario: {json.dumps(str(scenario))}}}]",
         "  simulation: {stepSeconds: 0.05, maxSeconds: 60, seed: 1}",
-        "  recording: {enabled: false}",
+        *([] if recording else ["  recording: {enabled: false}"]),
         f"  output: {{url: {json.dumps((directory / 'results').as_uri())}}}",
     ]
     if sweep:
@@ -196,10 +203,13 @@ def main() -> None:
     figures: dict[str, float | int | None] = {"sweep_runs": SWEEP}
     with tempfile.TemporaryDirectory(prefix="carlos-bench-") as name:
         work = Path(name)
-        single = manifest(work, "single", cut_in)
+        single = manifest(work, "single", cut_in, recording=True)  # the defaults: recording and report on
         envs = {label: tree_env(tree) for label, tree in trees.items()}
         for env in envs.values():  # warm-up: bytecode cache, road network cache
             timed([str(CARLOS), "run", str(single), "--fresh"], work, env)
+            for made in ("results/single/report.html", "results/single/0/recording.mcap"):
+                if not (work / made).is_file():
+                    raise SystemExit(f"the single run did not write {made}: not the default pipeline")
         singles: dict[str, list[tuple[float, float]]] = {label: [] for label in [*trees, "esmini"]}
         for _ in range(REPEAT):
             for label, env in envs.items():

@@ -21,6 +21,7 @@ from typer.core import TyperGroup
 from simcore import startup as entry  # the collector's pause (entry.resume_gc: looked up there, at each call)
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError, shorten
 from simcore.workflow import commands as workflow
+from simcore.workflow import compare as workflow_compare
 
 if TYPE_CHECKING:
     from typer.core import _click  # typer's click (vendored in typer >= 0.29); annotations only
@@ -106,6 +107,15 @@ def run(
     index: Annotated[
         list[int] | None, typer.Option("--index", "-i", help="Run only these indexes (repeatable).")
     ] = None,
+    repeat: Annotated[
+        int | None,
+        typer.Option(
+            "--repeat",
+            min=1,
+            max=100,
+            help="Run every point this many times to find flaky runs (overrides spec.execution.repeat).",
+        ),
+    ] = None,
     fresh: Annotated[
         bool, typer.Option("--fresh", help="Replace existing results of this run instead of resuming.")
     ] = False,
@@ -165,6 +175,12 @@ def run(
     hub = None
     try:
         simulation_run = load_manifest(manifest)
+        if repeat is not None:
+            spec = simulation_run.spec
+            execution = spec.execution.model_copy(update={"repeat": repeat})
+            simulation_run = simulation_run.model_copy(
+                update={"spec": spec.model_copy(update={"execution": execution})}
+            )
         total = len(Plan(simulation_run.spec))
         _preflight(simulation_run, manifest)
         live = live or simulation_run.spec.live
@@ -831,5 +847,6 @@ for _command in (
     workflow.results,
     workflow.export,
     workflow.rerun,
+    workflow_compare.compare,
 ):
     app.command()(_command)

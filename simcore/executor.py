@@ -258,17 +258,23 @@ def execute(
             shutil.rmtree(settings.scratch_root, ignore_errors=True)
     # this invocation's verdict (its exit code, what it prints) is over the indexes it selected; what it
     # writes covers every index of the run that has a result
-    summary = run_summary(
-        name, [outcomes[i] for i in sorted(outcomes)], total=len(wanted), expected=set(wanted)
-    )
-    summary["outputUrl"] = store.url_for(name)
     merged = {**others, **outcomes}
     results = [merged[i] for i in sorted(merged)]
+    repeats = _repeats(store, name, plan, results) if plan.repeat > 1 else None
+    if repeats is not None:
+        from simcore.evaluation.flaky import flag_flaky
+
+        results = flag_flaky(results, repeats)
+    selected = [s for s in results if int(s["index"]) in outcomes]
+    summary = run_summary(name, selected, total=len(wanted), expected=set(wanted))
+    summary["outputUrl"] = store.url_for(name)
     written = summary
     if others:
         covered = set(merged) | set(wanted)  # a selected index without a result counts as missing
         written = run_summary(name, results, total=len(covered), expected=covered)
         written["outputUrl"] = summary["outputUrl"]
+    if repeats is not None:
+        summary["repeats"] = written["repeats"] = repeats
     store.put_bytes(f"{name}/junit.xml", junit_xml(name, results).encode())
     store.put_bytes(f"{name}/summary.json", summary_bytes(written))
     store.sync()
@@ -284,6 +290,22 @@ def execute(
         report_url=report_url,
         report_error=report_error,
     )
+
+
+def _repeats(store: Store, name: str, plan: Plan, ordered: list[dict[str, Any]]) -> dict[str, Any]:
+    """summary.json's `repeats` (execution.repeat > 1): flaky points, and determinism from the recorded
+    messages of runs of a point with the same seed (simcore.evaluation.flaky)."""
+    from simcore.evaluation.flaky import message_digest, repeat_report
+
+    digests: dict[int, str] = {}
+    for summary in ordered:
+        key = f"{name}/{summary['index']}/recording.mcap"
+        try:
+            if store.exists(key):
+                digests[int(summary["index"])] = message_digest(store.get_bytes(key))
+        except Exception:  # an unreadable recording is not compared (deterministic: None)
+            continue
+    return repeat_report(ordered, plan.point_of, plan.repeat, digests)
 
 
 def _in_pool(sweep: _Sweep, workers: int) -> None:

@@ -1,7 +1,8 @@
 """Index → run: the pure mapping from a run index to its scenario, parameters and seed.
 
 Index order (DESIGN.md): scenarios in manifest order; within a scenario the matrix permutations in mixed
-radix over the matrix keys in manifest order, last key fastest; repetitions innermost. Nothing is ever
+radix over the matrix keys in manifest order, last key fastest; then repetitions (sweep.repetitions); then,
+innermost, repeats (execution.repeat). Nothing is ever
 materialised: any index is computed alone, on any machine, in O(number of matrix keys).
 """
 
@@ -26,6 +27,7 @@ class RunPoint:
     sweep_values: dict[str, ParameterValue]  # the matrix values of this permutation
     parameters: dict[str, ParameterValue]  # every override for the scenario: spec < scenario < matrix
     seed: int
+    repeat: int = 0  # which run of the point (execution.repeat), 0-based
 
 
 def permutation(matrix: Sequence[tuple[str, Sequence[ParameterValue]]], k: int) -> dict[str, ParameterValue]:
@@ -62,7 +64,9 @@ class Plan(Sequence[RunPoint]):
         self.matrix_permutations = prod(len(values) for _, values in self.matrix)
         self.permutations = self.matrix_permutations * (len(self.distribution) if self.distribution else 1)
         self.repetitions = spec.sweep.repetitions
-        self.per_scenario = self.permutations * self.repetitions
+        self.repeat = spec.execution.repeat
+        self.vary_seeds = spec.execution.seed_policy == "vary"
+        self.per_scenario = self.permutations * self.repetitions * self.repeat
         self.selected = spec.sweep.indexes
         whole = len(self.spec.scenarios) * self.per_scenario
         for index in self.selected or ():
@@ -90,6 +94,7 @@ class Plan(Sequence[RunPoint]):
     def sweep_point(self, index: int) -> RunPoint:
         """Index `index` of the whole sweep (`spec.sweep.indexes` aside)."""
         scenario_index, k = divmod(index, self.per_scenario)
+        k, repeat = divmod(k, self.repeat)
         perm, repetition = divmod(k, self.repetitions)
         scenario = self.spec.scenarios[scenario_index]
         if self.distribution is not None:
@@ -106,8 +111,18 @@ class Plan(Sequence[RunPoint]):
             repetition=repetition,
             sweep_values=values,
             parameters=parameters,
-            seed=self.spec.simulation.seed + repetition,
+            seed=self.spec.simulation.seed
+            + repetition
+            + (repeat * self.repetitions if self.vary_seeds else 0),
+            repeat=repeat,
         )
+
+    def point_of(self, index: int) -> int:
+        """The point (scenario, permutation, repetition) of an index of this plan: indexes with the same
+        point are repeats of one another (execution.repeat)."""
+        if self.selected is not None:
+            index = self.selected[index]
+        return index // self.repeat
 
     def __iter__(self) -> Iterator[RunPoint]:
         for index in range(len(self)):

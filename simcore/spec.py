@@ -616,6 +616,24 @@ class Execution(Model):
             "the label `kueue.x-k8s.io/queue-name` and Kueue admits it. Default: none (no Kueue)."
         ),
     )
+    repeat: int = Field(
+        1,
+        ge=1,
+        le=100,
+        description=(
+            "Runs of every point (scenario, parameters, repetition) to find flaky runs: a point whose verdict "
+            "differs between its runs is flagged flaky, and runs of a point with the same seed must record "
+            "the same messages (determinism). Repeats are innermost in the index order. Default 1."
+        ),
+    )
+    seed_policy: Literal["same", "vary"] = Field(
+        "same",
+        description=(
+            "Seeds of a point's repeats: `same` (every repeat with the point's seed: checks determinism) or "
+            "`vary` (repeat r with seed + r × sweep.repetitions, so that no two runs share a seed). "
+            "Default same."
+        ),
+    )
     max_failed_indexes: int | None = Field(
         None,
         ge=0,

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from simcore.report.html import criteria_rows, swept_parameters, worst_indexes
+from simcore.report.html import constant_parameters, criteria_rows, margin, swept_parameters, worst_runs
 from tests.chromium import find_chromium, load_page
 from tests.test_cli import RUNS, carlos
 
@@ -100,20 +100,51 @@ def test_report_renders_its_plots_in_headless_chromium(
     image = Image.open(io.BytesIO(page.screenshot)).convert("RGB")
     assert image.height > 2000
     colours = {colour for _, colour in image.getcolors(maxcolors=1 << 20) or []}
-    # drawn, not blank: the pass colour of the heat map, the histogram bars, matplotlib's first line colour
+    # drawn, not blank: the pass colour of the heat map, the histogram bars, the first trajectory's colour
     for wanted in ((0x2E, 0x7D, 0x32), (0x15, 0x65, 0xC0), (0x1F, 0x77, 0xB4)):
         assert wanted in colours, wanted
 
 
-def test_worst_indexes_rank_errors_failures_collisions_then_distance() -> None:
+def _criterion(name: str, expected: str, actual: float | None) -> dict[str, object]:
+    passed = actual is not None and margin(expected, actual) is not None and margin(expected, actual) >= 0  # type: ignore[operator]
+    return {"name": name, "expected": expected, "actual": actual, "passed": passed}
+
+
+def test_worst_runs_rank_errors_failures_by_margin_collisions_then_the_tightest_per_criterion_and_ttc() -> (
+    None
+):
+    assert margin(">= 2", 1.0) == -0.5 and margin("< 5", 4.0) == 0.2 and margin(">= 0.5", 1.0) == 0.5
+    assert margin(">= 2", None) is None
     indexes = [
-        {"index": 0, "status": "passed", "metrics": {"minDistance": 5.0}},
-        {"index": 1, "status": "passed", "metrics": {"minDistance": 1.0}},
-        {"index": 2, "status": "failed", "metrics": {"minDistance": 9.0}},
-        {"index": 3, "status": "passed", "metrics": {"collision": 1.0, "minDistance": 0.0}},
-        {"index": 4, "status": "error", "metrics": {}},
+        {"index": 0, "status": "passed", "metrics": {"minDistance": 0.5, "minTimeHeadway": 3.0},
+         "criteria": [_criterion("THW", "> 1", 3.0)]},
+        {"index": 1, "status": "passed", "metrics": {"minDistance": 6.0, "minTimeHeadway": 1.1},
+         "criteria": [_criterion("THW", "> 1", 1.1)]},
+        {"index": 2, "status": "failed", "metrics": {"minDistance": 9.0, "minTimeHeadway": 0.9},
+         "criteria": [_criterion("THW", "> 1", 0.9)]},
+        {"index": 3, "status": "failed", "metrics": {"minDistance": 9.0, "minTimeHeadway": 0.2},
+         "criteria": [_criterion("THW", "> 1", 0.2)]},
+        {"index": 4, "status": "passed", "metrics": {"collision": 1.0, "minDistance": 0.0}, "criteria": []},
+        {"index": 5, "status": "error", "metrics": {}},
+        {"index": 6, "status": "passed", "metrics": {"minTimeToCollision": 0.8, "minDistance": 3.0}},
+    ]  # fmt: skip
+    ranked = [(s["index"], reason) for s, reason in worst_runs(indexes, 7)]
+    assert ranked == [
+        (5, "error"),
+        (3, "failed THW (margin -0.8)"),  # further outside the threshold than index 2
+        (2, "failed THW (margin -0.1)"),
+        (4, "collision"),
+        (1, "closest to THW (margin +0.1)"),  # the tightest passed headway, not the smallest distance
+        (6, "smallest minTimeToCollision (0.8 s)"),
+        (0, "next tightest"),  # the smallest headway (3) and distance (4) are already shown
     ]
-    assert [s["index"] for s in worst_indexes(indexes, 4)] == [4, 2, 3, 1]
+    assert [s["index"] for s, _ in worst_runs(indexes, 3)] == [5, 3, 2]
+
+
+def test_constant_parameters_are_those_every_run_shares() -> None:
+    runs = [{"parameters": {"a": 1, "b": 2, "c": 3}}, {"parameters": {"a": 1, "b": 5, "c": 3}}]
+    assert constant_parameters(runs) == {"a": 1, "c": 3}
+    assert constant_parameters([]) == {}
 
 
 def test_criteria_rows_and_swept_parameters() -> None:
@@ -149,6 +180,10 @@ def test_criteria_rows_and_swept_parameters() -> None:
         }
     ]
     assert swept_parameters([summary(0, 10.0, 1, True), summary(1, 20.0, 1, True)]) == ["speed"]
+    # manifest order, not the number of values nor the order the summaries happen to list them in
+    two = [{"parameters": {"b": b, "a": a}} for a in (1, 2, 3) for b in (1, 2)]
+    assert swept_parameters(two, ["a", "b"]) == ["a", "b"]
+    assert swept_parameters(two, ["b", "a"]) == ["b", "a"]
 
 
 def test_sweep_plots_are_svg_with_a_cell_per_value_pair_and_a_bar_per_bin() -> None:

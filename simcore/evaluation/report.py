@@ -289,10 +289,10 @@ def _failure_message(summary: Mapping[str, Any]) -> tuple[str, str]:
 def junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]]) -> str:
     """JUnit XML: `<testsuites>` with one `<testsuite>` per scenario (in order of first appearance) and
     one `<testcase>` per index (by index): name `testcase_name`, classname `carlos.<run>.<scenario>`,
-    time the wall seconds, `<properties>` with the parameters (`param.<name>`), `seed`, `attempts` and
-    `endReason`. A failed index gets `<failure>` listing its failed required criteria with expected and
-    actual values, an errored one `<error>`; in an optional scenario either is `<skipped message="optional:
-    …">` instead."""
+    time the wall seconds, `<properties>` with the parameters (`param.<name>`), `seed`, `attempts`,
+    `endReason` and `flaky` (`true` on the runs of a point whose verdict changed between its repeats). A
+    failed index gets `<failure>` listing its failed required criteria with expected and actual values, an
+    errored one `<error>`; in an optional scenario either is `<skipped message="optional: …">` instead."""
     by_scenario: dict[str, list[Mapping[str, Any]]] = {}
     for summary in index_summaries:
         by_scenario.setdefault(summary["scenario"], []).append(summary)
@@ -322,9 +322,10 @@ def junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]]) -> st
                     name=_xml_text(f"param.{key}"),
                     value=_xml_text(_format_value(value)),
                 )
-            for key in ("seed", "attempts", "endReason"):
+            for key in ("seed", "attempts", "endReason", "flaky"):
                 if summary.get(key) is not None:
-                    ET.SubElement(properties, "property", name=key, value=_xml_text(summary[key]))
+                    value = _format_value(summary[key])  # `flaky`: true
+                    ET.SubElement(properties, "property", name=key, value=_xml_text(value))
             counts["tests"] += 1
             status = summary["status"]
             if status == "passed":

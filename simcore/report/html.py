@@ -29,6 +29,10 @@ th{background:#f5f5f5}td.num{text-align:right;font-variant-numeric:tabular-nums}
 .badge{display:inline-block;padding:2px 10px;border-radius:10px;color:#fff;font-weight:600}
 .passed{background:#2e7d32}.failed{background:#c62828}.error{background:#6a1b9a}.optional{background:#757575}
 .muted{color:#757575}svg.plot{max-width:100%;height:auto;display:block;margin:8px 0}
+table.runs{width:100%;font-size:12px}table.runs td{overflow-wrap:break-word}
+table.runs th{font-size:11px;overflow-wrap:anywhere}.badge{white-space:nowrap}
+table.runs td:first-child{white-space:nowrap}p.links a{font-weight:600}
+
 """
 
 
@@ -74,32 +78,116 @@ def criteria_rows(indexes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     return list(rows.values())
 
 
-def worst_indexes(indexes: Sequence[Mapping[str, Any]], count: int) -> list[Mapping[str, Any]]:
-    """The `count` most interesting indexes: errors, then failures, then collisions, then the smallest
-    minDistance (pure)."""
-    rank = {"error": 0, "failed": 1, "passed": 2}
+def margin(expected: str, actual: float | None) -> float | None:
+    """How far `actual` is inside (positive) or outside (negative) a criterion's `expected` (`>= 2`), as a
+    share of the threshold's size (at least 1), so that criteria of different units rank together (pure;
+    None when the criterion was not measured or `expected` is not `<op> <number>`)."""
+    if actual is None:
+        return None
+    op, _, value = expected.partition(" ")
+    try:
+        threshold = float(value)
+    except ValueError:
+        return None
+    distance = {
+        ">=": actual - threshold,
+        ">": actual - threshold,
+        "<=": threshold - actual,
+        "<": threshold - actual,
+        "==": -abs(actual - threshold),
+        "!=": abs(actual - threshold),
+    }.get(op)
+    return None if distance is None else distance / max(abs(threshold), 1.0)
 
-    def key(s: Mapping[str, Any]) -> tuple[int, float, float, int]:
+
+#: metrics whose smallest value marks a near miss even without a criterion on them, tightest first
+NEAR_MISS_METRICS = ("minTimeToCollision", "minTimeHeadway", "minDistance")
+
+
+def worst_runs(indexes: Sequence[Mapping[str, Any]], count: int) -> list[tuple[Mapping[str, Any], str]]:
+    """The `count` most telling runs and why each was chosen (pure): errors; failures, tightest margin to
+    a threshold first; collisions; then for each criterion the passed run closest to its threshold and for each
+    of minTimeToCollision, minTimeHeadway, minDistance the run with the smallest value; then the others by
+    their smallest margin, time to collision, headway and distance."""
+    chosen: dict[int, tuple[Mapping[str, Any], str]] = {}
+
+    def pick(summary: Mapping[str, Any], reason: str) -> None:
+        if len(chosen) < count and int(summary["index"]) not in chosen:
+            chosen[int(summary["index"])] = (summary, reason)
+
+    def margins(s: Mapping[str, Any]) -> list[tuple[float, str]]:
+        out = []
+        for c in s.get("criteria", []):
+            m = margin(str(c.get("expected", "")), c.get("actual"))
+            if m is not None:
+                out.append((m, str(c["name"])))
+        return out
+
+    by_index = sorted(indexes, key=lambda s: int(s["index"]))
+    for s in by_index:
+        if s["status"] == "error":
+            pick(s, "error")
+    failed = [s for s in by_index if s["status"] == "failed"]
+    for s in sorted(failed, key=lambda s: min((m for m, _ in margins(s)), default=0.0)):
+        tightest = min(margins(s), default=None)
+        pick(s, f"failed {tightest[1]} (margin {tightest[0]:+.3g})" if tightest else "failed")
+    for s in by_index:
+        if float(s.get("metrics", {}).get("collision", 0.0)) > 0:
+            pick(s, "collision")
+    criteria: dict[str, list[tuple[float, int, Mapping[str, Any]]]] = {}
+    for s in by_index:
+        for m, name in margins(s):
+            if m >= 0:  # the failures are already chosen: the near misses that passed
+                criteria.setdefault(name, []).append((m, int(s["index"]), s))
+    for name, ranked in criteria.items():
+        m, _, s = min(ranked, key=lambda r: (r[0], r[1]))
+        pick(s, f"closest to {name} (margin {m:+.3g})")
+    for metric in NEAR_MISS_METRICS:
+        measured = [
+            (float(s["metrics"][metric]), int(s["index"]), s)
+            for s in by_index
+            if metric in s.get("metrics", {})
+        ]
+        if measured:
+            value, _, s = min(measured, key=lambda r: (r[0], r[1]))
+            pick(s, f"smallest {metric} ({value:.3g} {plots.UNITS.get(metric, '')})".replace(" )", ")"))
+
+    def tightness(s: Mapping[str, Any]) -> tuple[float, ...]:
         metrics = s.get("metrics", {})
-        return (
-            rank.get(s["status"], 0),
-            -float(metrics.get("collision", 0.0)),
-            float(metrics.get("minDistance", float("inf"))),
-            int(s["index"]),
-        )
+        near = (float(metrics.get(m, float("inf"))) for m in NEAR_MISS_METRICS)
+        return (min((m for m, _ in margins(s)), default=float("inf")), *near, float(s["index"]))
 
-    return sorted(indexes, key=key)[:count]
+    for s in sorted(by_index, key=tightness):  # the remaining places: the next tightest runs
+        pick(s, "next tightest")
+    return list(chosen.values())
 
 
-def swept_parameters(indexes: Sequence[Mapping[str, Any]]) -> list[str]:
-    """Numeric parameters that take more than one value across the indexes, most values first (pure)."""
+def constant_parameters(indexes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Parameters every run has with the same value, in the first run's order (pure; shown once in the
+    report instead of in every row)."""
+    if not indexes:
+        return {}
+    first = dict(indexes[0].get("parameters") or {})
+    for s in indexes[1:]:
+        params = s.get("parameters") or {}
+        for name in list(first):
+            if name not in params or params[name] != first[name]:
+                del first[name]
+    return first
+
+
+def swept_parameters(indexes: Sequence[Mapping[str, Any]], order: Sequence[str] = ()) -> list[str]:
+    """Numeric parameters that take more than one value across the indexes (pure): those named in `order`
+    (the manifest's matrix keys) in that order, then the others in order of first appearance — the same
+    for the same results, fresh or resumed."""
     values: dict[str, set[float]] = {}
     for s in indexes:
         for name, value in (s.get("parameters") or {}).items():
             if isinstance(value, int | float) and not isinstance(value, bool):
                 values.setdefault(name, set()).add(float(value))
     swept = [name for name, seen in values.items() if len(seen) > 1]
-    return sorted(swept, key=lambda n: -len(values[n]))
+    rank = {name: k for k, name in enumerate(order)}
+    return sorted(swept, key=lambda n: rank.get(n, len(rank)))
 
 
 def _link(results: RunResults, key: str, relative: bool) -> str | None:
@@ -176,11 +264,18 @@ def _failures(results: RunResults, limit: int = 50) -> str:
     return "".join(out)
 
 
+def _manifest_order(results: RunResults) -> list[str]:
+    if results.spec is None:
+        return []
+    spec = results.spec.spec
+    return [*spec.sweep.matrix, *spec.parameters]
+
+
 def _heat_map(results: RunResults) -> str:
-    swept = swept_parameters(results.indexes)
+    swept = swept_parameters(results.indexes, _manifest_order(results))
     if len(swept) < 2:
         return ""
-    x_name, y_name = swept[1], swept[0]
+    x_name, y_name = swept[0], swept[1]
     points = [
         (float(s["parameters"][x_name]), float(s["parameters"][y_name]), s["status"] == "passed")
         for s in results.indexes
@@ -203,8 +298,9 @@ def _distributions(results: RunResults, limit: int = 16) -> str:
 def _birds_eye(results: RunResults, worst: int) -> str:
     ego = results.spec.spec.simulation.ego if results.spec is not None else None
     roads: dict[str, RoadOutline | None] = {}
+    constant = constant_parameters(results.indexes)
     figures = []
-    for s in worst_indexes(results.indexes, worst):
+    for s, reason in worst_runs(results.indexes, worst):
         key = f"{s['index']}/recording.mcap"
         try:
             data = results.store.get_bytes(key) if results.store.exists(key) else None
@@ -217,9 +313,14 @@ def _birds_eye(results: RunResults, worst: int) -> str:
             continue
         source = recording.scenario_file or ""
         if source not in roads:
-            roads[source] = road_outline(recording.scenario_file)
-        title = f"{testcase_name(s)} · {s['status']}"
-        figures.append(plots.birds_eye(recording, roads[source], title))
+            # one sample per ~2 px of the plot's 600 px over the trajectories' extent (at least every 2 m)
+            xs = [v for tr in recording.trajectories.values() for v in tr.x] or [0.0]
+            ys = [v for tr in recording.trajectories.values() for v in tr.y] or [0.0]
+            extent = max(max(xs) - min(xs), max(ys) - min(ys)) + 20.0
+            roads[source] = road_outline(recording.scenario_file, step=min(max(extent / 300.0, 2.0), 10.0))
+        varying = ",".join(f"{k}={v}" for k, v in (s.get("parameters") or {}).items() if k not in constant)
+        title = f"{s['scenario']}[{s['index']}] {varying} · {s['status']}"
+        figures.append(plots.birds_eye(recording, roads[source], title, reason))
     if not figures:
         return ""
     note = (
@@ -230,26 +331,34 @@ def _birds_eye(results: RunResults, worst: int) -> str:
     )
     return (
         f"<h2>Bird's-eye view of the {len(figures)} worst runs</h2>{note}"
+        "<p class=muted>Chosen in this order: errors, failures (tightest margin to a threshold first), "
+        "collisions, then per criterion the run closest to its threshold and the smallest time to "
+        "collision, time headway and distance; the reason is in each title.</p>"
         "<p class=muted>Dots: start of each trajectory; dashed: the closest approach to the ego; "
         "red crosses: collisions.</p>" + "".join(figures)
     )
 
 
-def _index_table(results: RunResults, relative: bool, metric_limit: int = 8) -> str:
+def _index_table(results: RunResults, relative: bool, metric_limit: int = 5) -> str:
     metric_names: list[str] = []
     for s in results.indexes:
         for name in s.get("metrics", {}):
             if name not in metric_names:
                 metric_names.append(name)
-    metric_names = metric_names[:metric_limit]
+    criteria_metrics = [c.get("metric") for s in results.indexes for c in s.get("criteria", [])]
+    preferred = [*criteria_metrics, "collision", *NEAR_MISS_METRICS]
+    rank = {name: k for k, name in reversed(list(enumerate(preferred)))}
+    metric_names = sorted(metric_names, key=lambda n: rank.get(n, len(rank)))[:metric_limit]
+    constant = constant_parameters(results.indexes)
+    flaky = _flaky_indexes(results)
     head = "".join(f"<th>{_e(n)}</th>" for n in metric_names)
     out = [
-        f"<table><tr><th>index</th><th>scenario</th><th>status</th><th>parameters</th><th>seed</th>{head}"
-        "<th>files</th></tr>"
+        f"<table class=runs><tr><th>files</th><th>index</th><th>scenario</th><th>status</th>"
+        f"<th>parameters</th><th>seed</th>{head}</tr>"
     ]
     for s in results.indexes:
         i = s["index"]
-        params = ", ".join(f"{k}={v}" for k, v in (s.get("parameters") or {}).items())
+        params = ", ".join(f"{k}={v}" for k, v in (s.get("parameters") or {}).items() if k not in constant)
         cells = "".join(
             f"<td class=num>{_short(float(s['metrics'][n])) if n in s.get('metrics', {}) else '—'}</td>"
             for n in metric_names
@@ -260,11 +369,134 @@ def _index_table(results: RunResults, relative: bool, metric_limit: int = 8) -> 
             if href is not None:
                 links.append(f'<a href="{_e(href)}">{label}</a>')
         out.append(
-            f"<tr><td class=num>{i}</td><td>{_e(s['scenario'])}</td><td>{_badge(s['status'])}</td>"
-            f"<td>{_e(params)}</td><td class=num>{_e(s.get('seed'))}</td>{cells}"
-            f"<td>{' '.join(links)}</td></tr>"
+            f"<tr><td>{' '.join(links)}</td><td class=num>{i}</td><td>{_e(s['scenario'])}</td>"
+            f"<td>{_badge(s['status'])}{' flaky' if i in flaky else ''}</td><td>{_e(params)}</td><td class=num>{_e(s.get('seed'))}</td>{cells}</tr>"
         )
     out.append("</table>")
+    return "".join(out)
+
+
+def _flaky_indexes(results: RunResults) -> set[int]:
+    repeats = (results.summary or {}).get("repeats") or {}
+    return {int(i) for p in repeats.get("flakyPoints", []) if p.get("flaky") for i in p["indexes"]}
+
+
+def _repeats(results: RunResults) -> str:
+    """Flaky points and the determinism check (summary.json `repeats`, execution.repeat > 1)."""
+    repeats = (results.summary or {}).get("repeats")
+    if not repeats:
+        return ""
+    checked = repeats.get("determinismChecked", 0)
+    determinism = (
+        f"{repeats['nondeterministic']} of {checked} points recorded different messages with the same seed"
+        if checked
+        else "determinism not checked (no two recordings of a point with the same seed)"
+    )
+    out = [
+        "<h2>Repeats: flaky runs and determinism</h2>",
+        f"<p>{_badge('failed' if repeats['flaky'] or repeats.get('nondeterministic') else 'passed')} "
+        f"every point run {repeats['repeat']} times · {repeats['flaky']} of {repeats['points']} points flaky "
+        f"(verdict changed between repeats) · {_e(determinism)}</p>",
+    ]
+    listed = repeats.get("flakyPoints", [])
+    if listed:
+        out.append(
+            "<table><tr><th>indexes</th><th>statuses</th><th>seeds</th><th>flaky</th><th>same messages</th></tr>"
+        )
+        for p in listed:
+            same = {True: "yes", False: "no", None: "not checked"}[p.get("deterministic")]
+            out.append(
+                f"<tr><td>{_e(', '.join(map(str, p['indexes'])))}</td><td>{_e(', '.join(p['statuses']))}</td>"
+                f"<td>{_e(', '.join(map(str, p['seeds'])))}</td><td>{'yes' if p['flaky'] else 'no'}</td>"
+                f"<td>{same}</td></tr>"
+            )
+        out.append("</table>")
+    return "".join(out)
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("carlos")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _header(results: RunResults, relative: bool) -> str:
+    """Links to the run's files first, then the CARLOS version, the runs' time and the constant
+    parameters (shown once here, not in every row)."""
+    links = []
+    for label, key in (
+        ("summary.json", "summary.json"),
+        ("junit.xml", "junit.xml"),
+        ("run.yaml", "run.yaml"),
+        ("comparison.json", "comparison.json"),
+    ):
+        href = _link(results, key, relative)
+        if href is not None:
+            links.append(f'<a href="{_e(href)}">{label}</a>')
+    walls = [float(s.get("wallSeconds") or 0.0) for s in results.indexes]
+    timing = (
+        f"{len(walls)} runs took {sum(walls):.1f} s of wall time in all (longest {max(walls):.1f} s)"
+        if walls
+        else "no run finished"
+    )
+    parts = [
+        f"<p class=links>{' · '.join(links)}</p>" if links else "",
+        f'<p class="muted">CARLOS {_e(_version())} · {_e(timing)}</p>',
+    ]
+    constant = constant_parameters(results.indexes)
+    if constant:
+        values = ", ".join(f"{k}={v}" for k, v in constant.items())
+        parts.append(f"<p><b>Parameters of every run:</b> {_e(values)}</p>")
+    return "".join(parts)
+
+
+def _comparison(results: RunResults, limit: int = 30) -> str:
+    """The section `carlos compare --report` adds (from comparison.json next to the summary), when it was
+    made for the summary.json that is there now."""
+    import hashlib
+    import json
+
+    from simcore.compare import COMPARISON_KEY, VERDICTS
+
+    try:
+        if not results.store.exists(COMPARISON_KEY):
+            return ""
+        data = json.loads(results.store.get_bytes(COMPARISON_KEY))
+        summary = results.store.get_bytes("summary.json") if results.store.exists("summary.json") else b""
+    except (StoreError, ValueError):
+        return ""
+    if data.get("candidateSummarySha256") != hashlib.sha256(summary).hexdigest():
+        return ""  # made for earlier results in this folder (the run was run again since)
+    counts = data.get("counts", {})
+    status = "failed" if data.get("exitCode") else "passed"
+    out = [
+        "<h2>Compared with the baseline</h2>",
+        f"<p>{_badge(status)} baseline {_e(data.get('baseline'))} · "
+        + " · ".join(f"{counts.get(v, 0)} {_e(v)}" for v in VERDICTS)
+        + "</p>",
+    ]
+    shown = [r for r in data.get("runs", []) if r["verdict"] not in ("still passing",) or r["metricChanges"]]
+    if shown:
+        out.append(
+            "<table><tr><th>run</th><th>verdict</th><th>baseline</th><th>candidate</th>"
+            "<th>metric changes</th></tr>"
+        )
+        for r in shown[:limit]:
+            changes = ", ".join(
+                f"{c['metric']} {_short(c['baseline'])} → {_short(c['candidate'])}"
+                for c in r["metricChanges"]
+            )
+            out.append(
+                f"<tr><td>{_e(r['name'])}</td><td>{_e(r['verdict'])}</td>"
+                f"<td>{_e(r['baselineStatus'] or '—')}</td><td>{_e(r['candidateStatus'] or '—')}</td>"
+                f"<td>{_e(changes)}</td></tr>"
+            )
+        out.append("</table>")
+        if len(shown) > limit:
+            out.append(f'<p class="muted">… and {len(shown) - limit} more (comparison.json).</p>')
     return "".join(out)
 
 
@@ -276,7 +508,10 @@ def render(results: RunResults, *, worst: int = 6, relative_links: bool = False,
     body = [
         f"<h1>SimulationRun {_e(results.name)}</h1>",
         f'<p class="muted">{_e(results.url)} · report generated {now}</p>',
+        _header(results, relative_links),
         _verdict(results),
+        _comparison(results),
+        _repeats(results),
         "<h2>Criteria</h2>",
         _criteria_table(results),
         "<h2>Failed and errored runs</h2>",

@@ -1,5 +1,5 @@
-"""The report's figures as inline SVG: the bird's-eye plots drawn with matplotlib (object API, no pyplot
-state), the sweep's heat map and metric distributions written directly.
+"""The report's figures as inline SVG, written directly (no matplotlib: its import and layout cost seconds
+per report): the bird's-eye plots, the sweep's heat map and the metric distributions.
 
 Each function takes plain data and returns the `<svg>` element's text; nothing here reads the store.
 """
@@ -7,108 +7,150 @@ Each function takes plain data and returns the `<svg>` element's text; nothing h
 from __future__ import annotations
 
 import html
-import io
 import math
-import re
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from simcore.report.trajectories import Recording, RoadOutline
-
-if TYPE_CHECKING:  # numpy is imported by the figures that need it (a run's report without them does not)
-    import numpy as np
 
 PASSED_COLOUR = "#2e7d32"
 FAILED_COLOUR = "#c62828"
 ERROR_COLOUR = "#6a1b9a"
 STATUS_COLOURS = {"passed": PASSED_COLOUR, "failed": FAILED_COLOUR, "error": ERROR_COLOUR}
-_SVG_START = re.compile(r"^.*?(?=<svg)", re.DOTALL)
 _counter = iter(range(1, 1 << 62))
 
 
-def _svg(fig: Any, label: str) -> str:
-    """The figure as an `<svg>` element (text as text, ids made unique within the page)."""
-    import matplotlib
-
-    buffer = io.StringIO()
-    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": f"carlos{next(_counter)}"}):
-        fig.savefig(buffer, format="svg", bbox_inches="tight")
-    text = _SVG_START.sub("", buffer.getvalue(), count=1)
-    return text.replace("<svg ", f'<svg role="img" aria-label="{html.escape(label)}" class="plot" ', 1)
+#: matplotlib's default line colours (tab10), so the plots look as they did when matplotlib drew them
+LINE_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 
 
-def _figure(width: float, height: float) -> Any:
-    from matplotlib.figure import Figure
+def _polyline_path(
+    xs: Sequence[float], ys: Sequence[float], to_px: Any, keep: Sequence[bool] | None = None, tol: float = 0.6
+) -> str:
+    """An SVG path through the points (pixels via `to_px`), broken where `keep` is false and thinned to
+    points at least `tol` pixels apart (pure)."""
+    parts: list[str] = []
+    last: tuple[float, float] | None = None
+    pending: tuple[float, float] | None = None
+    for i, (x, y) in enumerate(zip(xs, ys, strict=True)):
+        if (keep is not None and not keep[i]) or not (math.isfinite(x) and math.isfinite(y)):
+            if pending is not None and last is not None:
+                parts.append(f"L{pending[0]:.1f} {pending[1]:.1f}")
+            last = pending = None
+            continue
+        px, py = to_px(float(x), float(y))
+        if last is None:
+            parts.append(f"M{px:.1f} {py:.1f}")
+            last, pending = (px, py), None
+        elif abs(px - last[0]) + abs(py - last[1]) >= tol:
+            parts.append(f"L{px:.1f} {py:.1f}")
+            last, pending = (px, py), None
+        else:
+            pending = (px, py)
+    if pending is not None:
+        parts.append(f"L{pending[0]:.1f} {pending[1]:.1f}")
+    return "".join(parts)
 
-    return Figure(figsize=(width, height), dpi=96, layout="constrained")
 
-
-def _window(xs: np.ndarray, ys: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarray:
-    x0, x1, y0, y1 = box
-    return (xs >= x0) & (xs <= x1) & (ys >= y0) & (ys <= y1)
-
-
-def birds_eye(recording: Recording, road: RoadOutline | None, title: str) -> str:
+def birds_eye(recording: Recording, road: RoadOutline | None, title: str, subtitle: str = "") -> str:
     """Every entity's trajectory over the road outline (cropped to the trajectories), the start of each
     trajectory as a dot, the minimum-distance moment as a dashed line between the two boxes' centres and
-    every collision as a red cross."""
-    import numpy as np
-
-    fig = _figure(9.0, 3.4)
-    ax = fig.add_subplot()
-    xs = np.concatenate([np.asarray(tr.x) for tr in recording.trajectories.values()] or [np.zeros(1)])
-    ys = np.concatenate([np.asarray(tr.y) for tr in recording.trajectories.values()] or [np.zeros(1)])
+    every collision as a red cross; axes x and y in metres. Written as SVG directly (matplotlib's import
+    and layout took seconds, more than a short run itself)."""
+    tracks = list(recording.trajectories.values())
+    all_x = [v for tr in tracks for v in tr.x] or [0.0]
+    all_y = [v for tr in tracks for v in tr.y] or [0.0]
     margin = 10.0
-    box = (xs.min() - margin, xs.max() + margin, ys.min() - margin, ys.max() + margin)
+    x0, x1, y0, y1 = min(all_x) - margin, max(all_x) + margin, min(all_y) - margin, max(all_y) + margin
+    width, height = 864.0, 356.0
+    px, py, pw, ph = 64.0, 46.0, 580.0, 262.0
+    dx, dy = x1 - x0, y1 - y0
+    if max(dx, dy) <= 5 * min(dx, dy):  # equal scale: widen the narrower side of the window
+        scale = min(pw / dx, ph / dy)
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        x0, x1 = cx - pw / scale / 2, cx + pw / scale / 2
+        y0, y1 = cy - ph / scale / 2, cy + ph / scale / 2
+    else:
+        title += " (lateral scale exaggerated)" if dx > dy else " (longitudinal scale exaggerated)"
+
+    def to_px(x: float, y: float) -> tuple[float, float]:
+        return px + (x - x0) / (x1 - x0) * pw, py + ph - (y - y0) / (y1 - y0) * ph
+
+    out = _open_svg(width, height, f"bird's-eye view: {title}")
+    clip = f"be{next(_counter)}"
+    out.append(
+        f'<defs><clipPath id="{clip}"><rect x="{px}" y="{py}" width="{pw}" height="{ph}"/></clipPath></defs>'
+    )
+    out.append(f'<g clip-path="url(#{clip})" fill="none" stroke-linejoin="round" stroke-linecap="round">')
     if road is not None:
         for lines, style in (
-            (road.lanes, {"color": "#9e9e9e", "lw": 0.6, "ls": "--"}),
-            (road.edges, {"color": "#424242", "lw": 1.0, "ls": "-"}),
+            (road.lanes, 'stroke="#9e9e9e" stroke-width="0.8" stroke-dasharray="4 3"'),
+            (road.edges, 'stroke="#424242" stroke-width="1.3"'),
         ):
             for lx, ly in lines:
-                keep = _window(lx, ly, box)
-                if keep.sum() >= 2:
-                    ax.plot(np.where(keep, lx, np.nan), np.where(keep, ly, np.nan), zorder=1, **style)
-    for name, track in recording.trajectories.items():
-        is_ego = name == recording.ego
-        (line,) = ax.plot(
-            track.x, track.y, lw=2.2 if is_ego else 1.5, zorder=3, label=f"{name} (ego)" if is_ego else name
-        )
-        ax.plot(track.x[:1], track.y[:1], "o", color=line.get_color(), ms=5, zorder=4)
+                keep = [
+                    x0 <= x <= x1 and y0 <= y <= y1 for x, y in zip(lx.tolist(), ly.tolist(), strict=True)
+                ]
+                if sum(keep) >= 2:
+                    path = _polyline_path(lx.tolist(), ly.tolist(), to_px, keep)
+                    out.append(f'<path d="{path}" {style}/>')
+    legend: list[tuple[str, str]] = []
+    for k, track in enumerate(tracks):
+        colour = LINE_COLOURS[k % len(LINE_COLOURS)]
+        is_ego = track.name == recording.ego
+        path = _polyline_path(track.x, track.y, to_px)
+        out.append(f'<path d="{path}" stroke="{colour}" stroke-width="{2.9 if is_ego else 2.0}"/>')
+        legend.append((colour, f"{track.name} (ego)" if is_ego else track.name))
+    out.append("</g>")
+    for k, track in enumerate(tracks):
+        if track.x:
+            sx, sy = to_px(track.x[0], track.y[0])
+            out.append(
+                f'<circle cx="{sx:.1f}" cy="{sy:.1f}" r="3.5" fill="{LINE_COLOURS[k % len(LINE_COLOURS)]}"/>'
+            )
     closest = recording.closest
     if closest is not None:
-        (ex, ey), (ox, oy) = closest.ego_xy, closest.other_xy
-        ax.plot([ex, ox], [ey, oy], "k--", lw=1.0, zorder=5)
-        ax.plot(
-            [ex, ox],
-            [ey, oy],
-            "ko",
-            ms=4,
-            zorder=5,
-            label=f"closest: {closest.distance:.2f} m to {closest.other} at t={closest.time:.2f} s",
+        (ex, ey), (ox, oy) = to_px(*closest.ego_xy), to_px(*closest.other_xy)
+        out.append(
+            f'<path d="M{ex:.1f} {ey:.1f}L{ox:.1f} {oy:.1f}" stroke="#000" stroke-width="1.2" '
+            'stroke-dasharray="5 3"/>'
         )
-    for i, hit in enumerate(recording.collisions):
-        ax.plot(
-            *hit.ego_xy,
-            "x",
-            color=FAILED_COLOUR,
-            ms=11,
-            mew=2.5,
-            zorder=6,
-            label="collision" if i == 0 else None,
+        for cx_, cy_ in ((ex, ey), (ox, oy)):
+            out.append(f'<circle cx="{cx_:.1f}" cy="{cy_:.1f}" r="2.8" fill="#000"/>')
+        legend.append(("#000", f"closest: {closest.distance:.2f} m"))
+        legend.append(("", f"to {closest.other}, t={closest.time:.2f} s"))
+    for hit in recording.collisions:
+        hx, hy = to_px(*hit.ego_xy)
+        out.append(
+            f'<path d="M{hx - 6:.1f} {hy - 6:.1f}l12 12M{hx - 6:.1f} {hy + 6:.1f}l12 -12" '
+            f'stroke="{FAILED_COLOUR}" stroke-width="2.5"/>'
         )
-    width, height = box[1] - box[0], box[3] - box[2]
-    if max(width, height) <= 5 * min(width, height):
-        ax.set_aspect("equal", adjustable="box")
-    else:
-        title += " (lateral scale exaggerated)" if width > height else " (longitudinal scale exaggerated)"
-    ax.set_xlim(box[0], box[1])
-    ax.set_ylim(box[2], box[3])
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=8, loc="best")
-    return _svg(fig, f"bird's-eye view: {title}")
+    if recording.collisions:
+        legend.append((FAILED_COLOUR, f"collision ({len(recording.collisions)})"))
+    out.append(_frame(px, py, pw, ph))
+    for tick in _ticks(x0, x1, 7):
+        tx = to_px(tick, y0)[0]
+        out.append(f'<path d="M{tx:.2f} {py + ph:.2f}v4" stroke="#212121" stroke-width="0.8"/>')
+        out.append(_text(tx, py + ph + 15.0, f"{tick:g}", size=8))
+    for tick in _ticks(y0, y1, 5):
+        ty = to_px(x0, tick)[1]
+        out.append(f'<path d="M{px:.2f} {ty:.2f}h-4" stroke="#212121" stroke-width="0.8"/>')
+        out.append(_text(px - 7.0, ty + 3.0, f"{tick:g}", size=8, anchor="end"))
+    out.append(_text(px + pw / 2, py + ph + 34.0, "x (m)", size=10))
+    out.append(
+        _text(18.0, py + ph / 2, "y (m)", size=10, extra=f' transform="rotate(-90 18 {py + ph / 2:.1f})"')
+    )
+    out.append(_text(8.0, 16.0, title, size=10, anchor="start", extra=' font-weight="bold"'))
+    if subtitle:
+        out.append(_text(8.0, 32.0, subtitle, size=9, anchor="start"))
+    key_x = px + pw + 16.0
+    for k, (colour, label) in enumerate(legend[:14]):
+        key_y = py + 10.0 + k * 18.0
+        if colour:
+            out.append(f'<path d="M{key_x:.1f} {key_y:.1f}h18" stroke="{colour}" stroke-width="2.5"/>')
+        out.append(_text(key_x + 24.0, key_y + 3.5, label, size=8.5, anchor="start"))
+    out.append("</svg>")
+    return "".join(out)
 
 
 # --- the sweep's figures, written as SVG directly (matplotlib's import and layout cost seconds per report,
@@ -162,22 +204,58 @@ def _frame(x: float, y: float, w: float, h: float) -> str:
     return f'<path d="M{x:.2f} {y:.2f}h{w:.2f}v{h:.2f}h{-w:.2f}z" fill="none" stroke="#212121" stroke-width="0.8"/>'
 
 
+#: units of the built-in metrics (simcore.evaluation.metrics.METRICS); a metric not here is shown without
+UNITS: dict[str, str] = {
+    "collision": "0/1",
+    "collisionTime": "s",
+    "minDistance": "m",
+    "minTimeHeadway": "s",
+    "minTimeToCollision": "s",
+    "minLateralDistance": "m",
+    "maxDeceleration": "m/s²",
+    "maxAcceleration": "m/s²",
+    "maxSpeed": "m/s",
+    "meanSpeed": "m/s",
+    "egoDistance": "m",
+    "simSeconds": "s",
+    "stopTriggered": "0/1",
+}
+
+
+def axis_label(metric: str) -> str:
+    """`minDistance (m)`: the metric with its unit when known (pure)."""
+    unit = UNITS.get(metric)
+    return f"{metric} ({unit})" if unit else metric
+
+
 def distributions(values: Mapping[str, Sequence[float]], columns: int = 4) -> str:
-    """One histogram per metric (small multiples)."""
+    """One histogram per metric (small multiples): x the metric's value with its unit, y the number of
+    runs."""
     import numpy as np
 
     names = list(values)
     rows = max(1, math.ceil(len(names) / columns))
-    cell_w, cell_h = 864.0 / columns, 182.0
+    cell_w, cell_h = 864.0 / columns, 196.0
     out = _open_svg(864.0, cell_h * rows, "metric distributions")
     for i, name in enumerate(names):
         ox, oy = (i % columns) * cell_w, (i // columns) * cell_h
-        px, py, pw, ph = ox + 34.0, oy + 24.0, cell_w - 46.0, cell_h - 50.0
+        px, py, pw, ph = ox + 40.0, oy + 24.0, cell_w - 52.0, cell_h - 64.0
         data = np.asarray(values[name], dtype=float)
         counts, edges = np.histogram(data, bins=min(20, max(5, len(data) // 2)))
         top = max(int(counts.max()), 1)
         span = float(edges[-1] - edges[0]) or 1.0
         out.append(_text(ox + cell_w / 2, oy + 14.0, name, size=9))
+        out.append(_text(px + pw / 2, py + ph + 26.0, axis_label(name), size=8))
+        label_x, label_y = ox + 10.0, py + ph / 2
+        out.append(
+            _text(
+                label_x,
+                label_y,
+                "runs",
+                size=8,
+                extra=f' transform="rotate(-90 {label_x:.1f} {label_y:.1f})"',
+            )
+        )
         for count, left, right in zip(counts, edges[:-1], edges[1:], strict=True):
             if count:
                 bx = px + (float(left) - float(edges[0])) / span * pw
