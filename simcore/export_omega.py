@@ -1,0 +1,382 @@
+"""`carlos export --format omega-prime`: one omega-prime file per index (ASAM OSI GroundTruth per step).
+
+An omega-prime file is an MCAP file of `osi3.GroundTruth` messages (protobuf, topic `ground_truth`, one per
+simulation step) with the scenario's OpenDRIVE map as one `osi3.MapAsamOpenDrive` message on topic
+`ground_truth_map`, written by betterosi (the `net.asam.osi.trace` metadata and channel metadata are its own).
+It is read by `omega_prime.Recording.from_file(path, validate=True)`.
+
+What goes in, from the index's `recording.mcap`:
+- every scenario entity (the ids of `/carlos/objects`, in their order of first appearance: OSI id 0, 1, …) as
+  an OSI MovingObject per step: `type`/`vehicle_classification` from the OpenSCENARIO category, `dimension`
+  from the ground-truth box, `position` = the box centre (OSI: the bounding box's centre, not the entity's
+  reference point; /tf has the reference point), `orientation` roll/pitch/yaw from /tf, `velocity` = the
+  odometry speed along the entity's x axis turned into the map frame, `acceleration` = the change of that
+  velocity between steps (central differences, one-sided at the ends: the recording has no acceleration);
+- `host_vehicle_id` = the ego (`spec.simulation.ego`, else the entity named Ego/ego/hero/Hero, else the first);
+- the map: the OpenDRIVE file of the scenario (`carlos.run` metadata `scenarioFile`, its RoadNetwork LogicFile).
+
+Needs the optional extra `carlos[omega]` (betterosi); without it the export is bad input (exit 2) naming it.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import tempfile
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from simcore.errors import BadInput
+from simcore.results import RunResults
+from simcore.store import FileStore
+
+__all__ = ["ObjectRow", "export_omega_prime", "osi_rows", "osi_type"]
+
+TF_TOPIC = "/tf"
+OBJECTS_TOPIC = "/carlos/objects"
+#: The largest OpenDRIVE file embedded (bytes): a map is a few MB; more is a mistake, not a map.
+MAX_MAP_BYTES = 256 * 1024 * 1024
+
+#: OSI MovingObject.Type values (osi_object.proto)
+TYPE_OTHER, TYPE_VEHICLE, TYPE_PEDESTRIAN, TYPE_ANIMAL = 1, 2, 3, 4
+#: OSI MovingObject.VehicleClassification.Type values for the OpenSCENARIO vehicle categories
+_VEHICLE_TYPES = {
+    "car": 4,  # TYPE_MEDIUM_CAR
+    "van": 7,  # TYPE_DELIVERY_VAN
+    "truck": 8,  # TYPE_HEAVY_TRUCK
+    "semitrailer": 9,  # TYPE_SEMITRACTOR
+    "trailer": 10,  # TYPE_TRAILER
+    "motorbike": 11,  # TYPE_MOTORBIKE
+    "bicycle": 12,  # TYPE_BICYCLE
+    "bus": 13,  # TYPE_BUS
+    "tram": 14,  # TYPE_TRAM
+    "train": 15,  # TYPE_TRAIN
+}
+_ROLE_CIVIL = 1  # OSI MovingObject.VehicleClassification.Role.ROLE_CIVIL
+_PEDESTRIANS = {"pedestrian", "wheelchair"}
+
+
+def osi_type(category: str) -> tuple[int, int, int]:
+    """(OSI MovingObject type, vehicle classification type, role) of an OpenSCENARIO category (pure);
+    -1 for the classification of a non-vehicle, as omega-prime's tables have it."""
+    key = category.strip().lower()
+    if key in _VEHICLE_TYPES:
+        return TYPE_VEHICLE, _VEHICLE_TYPES[key], _ROLE_CIVIL
+    if key in _PEDESTRIANS:
+        return TYPE_PEDESTRIAN, -1, -1
+    if key == "animal":
+        return TYPE_ANIMAL, -1, -1
+    return TYPE_OTHER, -1, -1
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectRow:
+    """One entity at one step as OSI has it (map frame, box centre, SI units, angles in rad)."""
+
+    nanos: int
+    idx: int
+    name: str
+    position: tuple[float, float, float]
+    orientation: tuple[float, float, float]  # roll, pitch, yaw in [-pi, pi]
+    velocity: tuple[float, float, float]
+    acceleration: tuple[float, float, float]
+    dimension: tuple[float, float, float]  # length, width, height
+    types: tuple[int, int, int]  # type, vehicle classification type, role
+
+
+@dataclass(frozen=True, slots=True)
+class _Seen:
+    """What the recording says of one entity at one step."""
+
+    translation: tuple[float, float, float]
+    rotation: tuple[float, float, float, float]  # quaternion x, y, z, w
+    center: tuple[float, float, float] | None = None
+    size: tuple[float, float, float] | None = None
+    category: str = ""
+    speed: float = 0.0
+
+
+def _wrap(angle: float) -> float:
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+def _euler(q: tuple[float, float, float, float]) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (rad, each in [-pi, pi]) of a unit quaternion (x, y, z, w), ZYX order."""
+    x, y, z, w = q
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return _wrap(roll), _wrap(pitch), _wrap(yaw)
+
+
+def _forward(q: tuple[float, float, float, float]) -> tuple[float, float, float]:
+    """The entity's x axis in the map frame (first column of the quaternion's rotation matrix)."""
+    x, y, z, w = q
+    return 1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)
+
+
+def osi_rows(steps: Sequence[tuple[int, Mapping[str, _Seen]]], names: Sequence[str]) -> list[list[ObjectRow]]:
+    """The OSI moving objects of every step (pure): `steps` in time order as (ns, entity → what was seen),
+    `names` the entities in id order. An entity is written at the steps it has both a /tf pose and a box."""
+    ids = {name: i for i, name in enumerate(names)}
+    # velocity per entity and step, then central differences over the steps each entity is present
+    velocity: dict[tuple[str, int], tuple[float, float, float]] = {}
+    series: dict[str, list[tuple[int, tuple[float, float, float]]]] = {}
+    for step, (nanos, seen) in enumerate(steps):
+        for name, s in seen.items():
+            if s.size is None or name not in ids:
+                continue
+            fx, fy, fz = _forward(s.rotation)
+            v = (s.speed * fx, s.speed * fy, s.speed * fz)
+            velocity[(name, step)] = v
+            series.setdefault(name, []).append((nanos, v))
+    acceleration: dict[tuple[str, int], tuple[float, float, float]] = {}
+    step_of = {nanos: step for step, (nanos, _) in enumerate(steps)}
+    for name, points in series.items():
+        times = np.array([p[0] for p in points], dtype=np.float64) * 1e-9
+        values = np.array([p[1] for p in points], dtype=np.float64)
+        grads = np.gradient(values, times, axis=0) if len(points) > 1 else np.zeros_like(values)
+        for (nanos, _), g in zip(points, grads, strict=True):
+            acceleration[(name, step_of[nanos])] = (float(g[0]), float(g[1]), float(g[2]))
+    out: list[list[ObjectRow]] = []
+    for step, (nanos, seen) in enumerate(steps):
+        rows = []
+        for name in names:
+            got = seen.get(name)
+            if got is None or got.size is None or got.center is None:
+                continue
+            rows.append(
+                ObjectRow(
+                    nanos=nanos,
+                    idx=ids[name],
+                    name=name,
+                    position=got.center,
+                    orientation=_euler(got.rotation),
+                    velocity=velocity[(name, step)],
+                    acceleration=acceleration[(name, step)],
+                    dimension=got.size,
+                    types=osi_type(got.category),
+                )
+            )
+        out.append(rows)
+    return out
+
+
+def _read_recording(
+    data: bytes,
+) -> tuple[list[tuple[int, dict[str, _Seen]]], list[str], dict[str, dict[str, str]]]:
+    """(steps, entity names in order of first appearance, metadata records) of a CARLOS recording."""
+    from mcap.reader import make_reader
+
+    from simcore.transport.messages import deserialize
+
+    reader = make_reader(io.BytesIO(data))
+    metadata = {record.name: dict(record.metadata) for record in reader.iter_metadata()}
+    poses: dict[int, dict[str, tuple[tuple[float, float, float], tuple[float, float, float, float]]]] = {}
+    boxes: dict[int, list[tuple[str, tuple[float, float, float], tuple[float, float, float], str]]] = {}
+    speeds: dict[int, dict[str, float]] = {}
+    names: dict[str, None] = {}
+    for schema, channel, message in reader.iter_messages(log_time_order=True):
+        topic = channel.topic
+        wanted = topic in (TF_TOPIC, OBJECTS_TOPIC) or (
+            topic.startswith("/carlos/") and topic.endswith("/odometry")
+        )
+        if schema is None or not wanted:
+            continue
+        msg = deserialize(message.data, schema.name)
+        nanos = int(message.log_time)
+        if topic == TF_TOPIC:
+            frame = poses.setdefault(nanos, {})
+            for t in msg.transforms:
+                name = str(t.child_frame_id).removesuffix("/base_link")
+                tr, rot = t.transform.translation, t.transform.rotation
+                frame[name] = (
+                    (float(tr.x), float(tr.y), float(tr.z)),
+                    (float(rot.x), float(rot.y), float(rot.z), float(rot.w)),
+                )
+        elif topic == OBJECTS_TOPIC:
+            listed = boxes.setdefault(nanos, [])
+            for d in msg.detections:
+                c, size = d.bbox.center.position, d.bbox.size
+                category = str(d.results[0].hypothesis.class_id) if d.results else ""
+                listed.append(
+                    (
+                        str(d.id),
+                        (float(c.x), float(c.y), float(c.z)),
+                        (float(size.x), float(size.y), float(size.z)),
+                        category,
+                    )
+                )
+                names.setdefault(str(d.id))
+        else:
+            name = topic.removeprefix("/carlos/").removesuffix("/odometry")
+            speeds.setdefault(nanos, {})[name] = float(msg.twist.twist.linear.x)
+    steps: list[tuple[int, dict[str, _Seen]]] = []
+    for nanos in sorted(set(poses) & set(boxes)):
+        pose, speed = poses[nanos], speeds.get(nanos, {})
+        seen: dict[str, _Seen] = {}
+        for name, center, size, category in boxes[nanos]:
+            if name in pose:
+                translation, rotation = pose[name]
+                seen[name] = _Seen(translation, rotation, center, size, category, speed.get(name, 0.0))
+        steps.append((nanos, seen))
+    return steps, list(names), metadata
+
+
+def _ego(metadata: Mapping[str, Mapping[str, str]], names: Sequence[str]) -> str | None:
+    """The host vehicle: `spec.simulation.ego` of the recorded manifest, else the engine's default rule."""
+    import yaml
+
+    manifest = metadata.get("carlos.spec", {}).get("manifest")
+    if manifest:
+        spec = (yaml.safe_load(manifest) or {}).get("spec", {})
+        ego = (spec.get("simulation") or {}).get("ego")
+        if isinstance(ego, str) and ego in names:
+            return ego
+    for candidate in ("Ego", "ego", "hero", "Hero"):
+        if candidate in names:
+            return candidate
+    return names[0] if names else None
+
+
+def _map_file(metadata: Mapping[str, Mapping[str, str]], index: int) -> Path:
+    """The OpenDRIVE file of the recorded scenario (its RoadNetwork LogicFile, relative to the scenario)."""
+    from simcore.scenario.xosc import load_scenario
+
+    scenario = metadata.get("carlos.run", {}).get("scenarioFile")
+    where = f"index {index}: the recording's carlos.run metadata"
+    if not scenario:
+        raise BadInput(f"{where} names no scenarioFile: cannot find the OpenDRIVE map", field="--format")
+    path = Path(scenario)
+    if not path.is_file():
+        raise BadInput(
+            f"{where}: scenario {path} is not on this machine; export where the scenario files are",
+            field="--format",
+        )
+    parameters = json.loads(metadata.get("carlos.run", {}).get("parameters") or "{}")
+    odr = load_scenario(path, parameters).road_file
+    if odr is None:
+        raise BadInput(f"{path}: no RoadNetwork/LogicFile: the scenario has no OpenDRIVE map", file=str(path))
+    if not odr.is_file():
+        raise BadInput(
+            f"{path}: OpenDRIVE map {odr} not found", file=str(path), field="RoadNetwork.LogicFile"
+        )
+    return odr
+
+
+def _betterosi() -> Any:
+    try:
+        import betterosi
+    except ImportError:
+        raise BadInput(
+            "--format omega-prime needs betterosi: pip install 'carlos[omega]'", field="--format"
+        ) from None
+    return betterosi
+
+
+def omega_prime_bytes(
+    steps: Sequence[tuple[int, Mapping[str, _Seen]]],
+    names: Sequence[str],
+    ego: str | None,
+    odr: tuple[str, str] | None,
+    description: str,
+) -> bytes:
+    """The omega-prime MCAP file (betterosi's writer): GroundTruth per step, the map once."""
+    bo = _betterosi()
+    host = names.index(ego) if ego is not None and ego in names else None
+    version = bo.InterfaceVersion(version_major=3, version_minor=8, version_patch=0)
+    with tempfile.TemporaryDirectory(prefix="carlos-omega-") as tmp:
+        target = Path(tmp) / "index.mcap"
+        # creation_time fixed: the same recording gives the same bytes
+        meta = {"creation_time": "1970-01-01T00:00:00Z", "description": description, "data_sources": "CARLOS"}
+        with bo.Writer(target, metadata=meta, library="carlos") as writer:
+            first: int | None = None
+            for rows, (nanos, _) in zip(osi_rows(steps, names), steps, strict=True):
+                first = nanos if first is None else first
+                gt = bo.GroundTruth(
+                    version=version,
+                    timestamp=bo.Timestamp(seconds=nanos // 1_000_000_000, nanos=nanos % 1_000_000_000),
+                    host_vehicle_id=None if host is None else bo.Identifier(value=host),
+                    moving_object=[_moving_object(bo, row) for row in rows],
+                )
+                writer.add(gt, topic="ground_truth", log_time=nanos)
+            if odr is not None:
+                reference, xml = odr
+                writer.add(
+                    bo.MapAsamOpenDrive(map_reference=reference, open_drive_xml_content=xml),
+                    topic="ground_truth_map",
+                    log_time=first or 0,
+                )
+        return target.read_bytes()
+
+
+def _vector(bo: Any, v: tuple[float, float, float]) -> Any:
+    return bo.Vector3D(x=v[0], y=v[1], z=v[2])
+
+
+def _moving_object(bo: Any, row: ObjectRow) -> Any:
+    kind, vehicle, role = row.types
+    classification = (
+        bo.MovingObjectVehicleClassification(type=vehicle, role=role) if kind == TYPE_VEHICLE else None
+    )
+    length, width, height = row.dimension
+    return bo.MovingObject(
+        id=bo.Identifier(value=row.idx),
+        type=kind,
+        base=bo.BaseMoving(
+            dimension=bo.Dimension3D(length=length, width=width, height=height),
+            position=_vector(bo, row.position),
+            orientation=bo.Orientation3D(
+                roll=row.orientation[0], pitch=row.orientation[1], yaw=row.orientation[2]
+            ),
+            velocity=_vector(bo, row.velocity),
+            acceleration=_vector(bo, row.acceleration),
+        ),
+        vehicle_classification=classification,
+        source_reference=[bo.ExternalReference(identifier=[row.name])],
+    )
+
+
+def _indexes(results: RunResults) -> Iterator[int]:
+    for summary in results.indexes:
+        if results.store.exists(f"{summary['index']}/recording.mcap"):
+            yield int(summary["index"])
+
+
+def export_omega_prime(
+    results: RunResults, out: Path, indexes: Iterable[int] | None = None
+) -> tuple[Path, int]:
+    """Write `out/<run>/<index>.mcap` (omega-prime) per index with a recording; (that folder, files written)."""
+    _betterosi()
+    root = out.expanduser().absolute() / results.name
+    store = FileStore(root)
+    written = 0
+    maps: dict[Path, tuple[str, str]] = {}
+    for index in indexes if indexes is not None else _indexes(results):
+        data = results.store.get_bytes(f"{index}/recording.mcap")
+        steps, names, metadata = _read_recording(data)
+        if not steps:
+            raise BadInput(
+                f"index {index}: the recording has no /tf and /carlos/objects: record them "
+                "(spec.recording.topics) to export omega-prime",
+                field="spec.recording.topics",
+            )
+        odr_path = _map_file(metadata, index)
+        if odr_path not in maps:
+            if odr_path.stat().st_size > MAX_MAP_BYTES:
+                raise BadInput(f"{odr_path}: larger than {MAX_MAP_BYTES} bytes", file=str(odr_path))
+            maps[odr_path] = (odr_path.name, odr_path.read_text(encoding="utf-8"))
+        run = metadata.get("carlos.run", {})
+        description = json.dumps(
+            {"run": results.name, "index": index, "scenario": run.get("scenario"), "seed": run.get("seed")},
+            sort_keys=True,
+        )
+        blob = omega_prime_bytes(steps, names, _ego(metadata, names), maps[odr_path], description)
+        store.put_bytes(f"{index}.mcap", blob)
+        written += 1
+    return root, written

@@ -1,0 +1,208 @@
+"""`carlos export --format omega-prime`: ASAM OSI GroundTruth per step + the OpenDRIVE map, read back by
+omega-prime's own validating reader."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from simcore.export_omega import TYPE_OTHER, TYPE_PEDESTRIAN, TYPE_VEHICLE, _Seen, osi_rows, osi_type
+from tests.test_cli import ROOT, RUNS, carlos
+
+#: index 0 of the data-generation example: EgoSpeed 20, CutInGap 8, AdversarySpeed 32
+SAMPLED = (0, 7, 100, 250)
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(index 0's recording.mcap, its omega-prime export) of examples/runs/data-generation.yaml."""
+    tmp = tmp_path_factory.mktemp("omega")
+    done = carlos("run", RUNS / "data-generation.yaml", "-i", "0", "-q", "--output", f"file://{tmp}/out")
+    assert done.returncode == 0, done.stderr
+    run = tmp / "out" / "data-generation"
+    done = carlos("export", run.as_uri(), "--format", "omega-prime", "--out", tmp / "export")
+    assert done.returncode == 0, done.stderr
+    assert "1 omega-prime files" in done.stdout
+    return run / "0" / "recording.mcap", tmp / "export" / "data-generation" / "0.mcap"
+
+
+def _tf(recording: Path) -> dict[int, dict[str, tuple[float, float, float]]]:
+    from mcap.reader import make_reader
+
+    from simcore.transport.messages import deserialize
+
+    out: dict[int, dict[str, tuple[float, float, float]]] = {}
+    with recording.open("rb") as f:
+        for schema, _, message in make_reader(f).iter_messages(topics=["/tf"]):
+            assert schema is not None
+            msg = deserialize(message.data, schema.name)
+            out[message.log_time] = {
+                t.child_frame_id.removesuffix("/base_link"): (
+                    t.transform.translation.x,
+                    t.transform.translation.y,
+                    t.transform.translation.z,
+                )
+                for t in msg.transforms
+            }
+    return out
+
+
+def test_osi_type_of_categories() -> None:
+    assert osi_type("car") == (TYPE_VEHICLE, 4, 1)
+    assert osi_type("Truck")[0] == TYPE_VEHICLE
+    assert osi_type("pedestrian") == (TYPE_PEDESTRIAN, -1, -1)
+    assert osi_type("obstacle") == (TYPE_OTHER, -1, -1)
+
+
+def test_rows_velocity_and_acceleration_from_speed_and_heading() -> None:
+    yaw = math.pi / 2  # facing +y
+    q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+    steps = [
+        (
+            n * 100_000_000,
+            {"A": _Seen((0.0, n * 1.0, 0.0), q, (0.0, n + 1.5, 0.7), (4.0, 2.0, 1.4), "car", 10.0 + n)},
+        )
+        for n in range(4)
+    ]
+    rows = osi_rows(steps, ["A"])
+    assert [len(r) for r in rows] == [1, 1, 1, 1]
+    row = rows[2][0]
+    assert row.position == (0.0, 3.5, 0.7) and row.idx == 0
+    assert row.orientation[2] == pytest.approx(yaw)
+    assert row.velocity == pytest.approx((0.0, 12.0, 0.0), abs=1e-9)
+    assert row.acceleration == pytest.approx((0.0, 10.0, 0.0), abs=1e-6)  # +1 m/s per 0.1 s
+
+
+def test_export_reads_back_valid_with_every_entity(exported: tuple[Path, Path]) -> None:
+    import omega_prime
+
+    recording, path = exported
+    rec = omega_prime.Recording.from_file(str(path), validate=True)
+    df = rec._df.sort(["total_nanos", "idx"])
+    tf = _tf(recording)
+    names = sorted({name for frame in tf.values() for name in frame if not name.endswith("_ghost")})
+    assert df["idx"].n_unique() == len(names) == 2  # Ego and Adversary
+    assert rec.host_vehicle_idx == 0
+    assert rec.map is not None and "OpenDRIVE" in rec.map.odr_xml
+    nanos = sorted(tf)
+    assert sorted(df["total_nanos"].unique().to_list()) == nanos
+    # positions are the box centres: the /tf reference point moved by the box's offset along the heading
+    objects = _objects(recording)
+    offsets = _offsets(recording, objects, tf)
+    for step in SAMPLED:
+        t = nanos[step]
+        frame = df.filter(df["total_nanos"] == t)
+        for i, name in enumerate(objects[t]):
+            row = frame.filter(frame["idx"] == i).row(0, named=True)
+            x, y, _z = tf[t][name]
+            cx, cy, cz = objects[t][name]
+            assert (row["x"], row["y"], row["z"]) == pytest.approx((cx, cy, cz), abs=1e-9)
+            # box centre minus the reference point: the entity's fixed box offset turned by its yaw
+            dx, dy = cx - x, cy - y
+            c, s = math.cos(row["yaw"]), math.sin(row["yaw"])
+            local = (c * dx + s * dy, -s * dx + c * dy)
+            assert local == pytest.approx(offsets[name], abs=1e-6)
+    assert np.isfinite(df.select(["acc_x", "acc_y", "vel_x", "vel_y"]).to_numpy()).all()
+
+
+def _objects(recording: Path) -> dict[int, dict[str, tuple[float, float, float]]]:
+    from mcap.reader import make_reader
+
+    from simcore.transport.messages import deserialize
+
+    out: dict[int, dict[str, tuple[float, float, float]]] = {}
+    with recording.open("rb") as f:
+        for schema, _, message in make_reader(f).iter_messages(topics=["/carlos/objects"]):
+            assert schema is not None
+            msg = deserialize(message.data, schema.name)
+            out[message.log_time] = {
+                d.id: (d.bbox.center.position.x, d.bbox.center.position.y, d.bbox.center.position.z)
+                for d in msg.detections
+            }
+    return out
+
+
+def _offsets(recording: Path, objects: dict, tf: dict) -> dict[str, tuple[float, float]]:
+    """Each entity's box offset in its own frame, from the first step (constant: the test compares others)."""
+    from mcap.reader import make_reader
+
+    from simcore.transport.messages import deserialize
+
+    first = min(objects)
+    with recording.open("rb") as f:
+        for schema, _, message in make_reader(f).iter_messages(topics=["/tf"]):
+            assert schema is not None
+            msg = deserialize(message.data, schema.name)
+            out = {}
+            for t in msg.transforms:
+                name = t.child_frame_id.removesuffix("/base_link")
+                if name not in objects[first]:
+                    continue
+                q = t.transform.rotation
+                yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+                dx = objects[first][name][0] - tf[first][name][0]
+                dy = objects[first][name][1] - tf[first][name][1]
+                c, s = math.cos(yaw), math.sin(yaw)
+                out[name] = (c * dx + s * dy, -s * dx + c * dy)
+            return out
+    raise AssertionError("no /tf")
+
+
+def test_export_is_deterministic(exported: tuple[Path, Path], tmp_path: Path) -> None:
+    recording, path = exported
+    run = recording.parents[1]
+    done = carlos("export", run.as_uri(), "--format", "omega-prime", "--out", tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "data-generation" / "0.mcap").read_bytes() == path.read_bytes()
+
+
+def test_export_of_a_run_without_tf_is_bad_input(tmp_path: Path) -> None:
+    manifest = tmp_path / "no-tf.yaml"
+    cut_in = (ROOT / "examples" / "scenarios" / "cut-in.xosc").as_uri()
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: no-tf}\nspec:\n"
+        f"  scenarios: [{{name: cut-in, openscenario: '{cut_in}'}}]\n"
+        "  simulation: {stepSeconds: 0.05, maxSeconds: 0.5}\n"
+        "  recording: {enabled: true, topics: ['/clock']}\n"
+    )
+    assert carlos("run", manifest, "-q", "--output", f"file://{tmp_path}/out").returncode == 0
+    done = carlos(
+        "export", (tmp_path / "out" / "no-tf").as_uri(), "--format", "omega-prime", "--out", tmp_path
+    )
+    assert done.returncode == 2
+    assert "spec.recording.topics" in done.stderr and "Traceback" not in done.stderr
+
+
+@pytest.mark.slow
+def test_export_reads_in_a_venv_with_only_omega_prime(exported: tuple[Path, Path], tmp_path: Path) -> None:
+    """The issue's goal: a virtualenv that has only omega-prime installed reads the file, validating."""
+    _, path = exported
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
+    python = venv / "bin" / "python"
+    subprocess.run(
+        [str(python), "-m", "pip", "install", "-q", "omega-prime>=0.3.7,<0.4"],
+        check=True,
+        timeout=1200,
+        env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"},
+    )
+    script = textwrap.dedent(
+        f"""
+        import omega_prime
+        rec = omega_prime.Recording.from_file({str(path)!r}, validate=True)
+        print(rec._df["idx"].n_unique(), rec._df["total_nanos"].n_unique(), rec.map is not None)
+        """
+    )
+    done = subprocess.run(
+        [str(python), "-c", script], capture_output=True, text=True, timeout=600, cwd=tmp_path, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    objects, steps, has_map = done.stdout.split()
+    assert objects == "2" and int(steps) > 100 and has_map == "True"
