@@ -22,71 +22,24 @@ from __future__ import annotations
 
 import io
 import json
-import math
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from simcore.errors import BadInput
+from simcore.osi import ObjectRow, betterosi, forward, ground_truth, osi_type, rpy
 from simcore.results import RunResults
 from simcore.store import FileStore
 
-__all__ = ["ObjectRow", "export_omega_prime", "osi_rows", "osi_type"]
+__all__ = ["export_omega_prime", "omega_prime_bytes", "osi_rows"]
 
 TF_TOPIC = "/tf"
 OBJECTS_TOPIC = "/carlos/objects"
 #: The largest OpenDRIVE file embedded (bytes): a map is a few MB; more is a mistake, not a map.
 MAX_MAP_BYTES = 256 * 1024 * 1024
-
-#: OSI MovingObject.Type values (osi_object.proto)
-TYPE_OTHER, TYPE_VEHICLE, TYPE_PEDESTRIAN, TYPE_ANIMAL = 1, 2, 3, 4
-#: OSI MovingObject.VehicleClassification.Type values for the OpenSCENARIO vehicle categories
-_VEHICLE_TYPES = {
-    "car": 4,  # TYPE_MEDIUM_CAR
-    "van": 7,  # TYPE_DELIVERY_VAN
-    "truck": 8,  # TYPE_HEAVY_TRUCK
-    "semitrailer": 9,  # TYPE_SEMITRACTOR
-    "trailer": 10,  # TYPE_TRAILER
-    "motorbike": 11,  # TYPE_MOTORBIKE
-    "bicycle": 12,  # TYPE_BICYCLE
-    "bus": 13,  # TYPE_BUS
-    "tram": 14,  # TYPE_TRAM
-    "train": 15,  # TYPE_TRAIN
-}
-_ROLE_CIVIL = 1  # OSI MovingObject.VehicleClassification.Role.ROLE_CIVIL
-_PEDESTRIANS = {"pedestrian", "wheelchair"}
-
-
-def osi_type(category: str) -> tuple[int, int, int]:
-    """(OSI MovingObject type, vehicle classification type, role) of an OpenSCENARIO category (pure);
-    -1 for the classification of a non-vehicle, as omega-prime's tables have it."""
-    key = category.strip().lower()
-    if key in _VEHICLE_TYPES:
-        return TYPE_VEHICLE, _VEHICLE_TYPES[key], _ROLE_CIVIL
-    if key in _PEDESTRIANS:
-        return TYPE_PEDESTRIAN, -1, -1
-    if key == "animal":
-        return TYPE_ANIMAL, -1, -1
-    return TYPE_OTHER, -1, -1
-
-
-@dataclass(frozen=True, slots=True)
-class ObjectRow:
-    """One entity at one step as OSI has it (map frame, box centre, SI units, angles in rad)."""
-
-    nanos: int
-    idx: int
-    name: str
-    position: tuple[float, float, float]
-    orientation: tuple[float, float, float]  # roll, pitch, yaw in [-pi, pi]
-    velocity: tuple[float, float, float]
-    acceleration: tuple[float, float, float]
-    dimension: tuple[float, float, float]  # length, width, height
-    types: tuple[int, int, int]  # type, vehicle classification type, role
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,25 +54,6 @@ class _Seen:
     speed: float = 0.0
 
 
-def _wrap(angle: float) -> float:
-    return math.atan2(math.sin(angle), math.cos(angle))
-
-
-def _euler(q: tuple[float, float, float, float]) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (rad, each in [-pi, pi]) of a unit quaternion (x, y, z, w), ZYX order."""
-    x, y, z, w = q
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return _wrap(roll), _wrap(pitch), _wrap(yaw)
-
-
-def _forward(q: tuple[float, float, float, float]) -> tuple[float, float, float]:
-    """The entity's x axis in the map frame (first column of the quaternion's rotation matrix)."""
-    x, y, z, w = q
-    return 1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)
-
-
 def osi_rows(steps: Sequence[tuple[int, Mapping[str, _Seen]]], names: Sequence[str]) -> list[list[ObjectRow]]:
     """The OSI moving objects of every step (pure): `steps` in time order as (ns, entity → what was seen),
     `names` the entities in id order. An entity is written at the steps it has both a /tf pose and a box."""
@@ -131,7 +65,7 @@ def osi_rows(steps: Sequence[tuple[int, Mapping[str, _Seen]]], names: Sequence[s
         for name, s in seen.items():
             if s.size is None or name not in ids:
                 continue
-            fx, fy, fz = _forward(s.rotation)
+            fx, fy, fz = forward(s.rotation)
             v = (s.speed * fx, s.speed * fy, s.speed * fz)
             velocity[(name, step)] = v
             series.setdefault(name, []).append((nanos, v))
@@ -156,7 +90,7 @@ def osi_rows(steps: Sequence[tuple[int, Mapping[str, _Seen]]], names: Sequence[s
                     idx=ids[name],
                     name=name,
                     position=got.center,
-                    orientation=_euler(got.rotation),
+                    orientation=rpy(got.rotation),
                     velocity=velocity[(name, step)],
                     acceleration=acceleration[(name, step)],
                     dimension=got.size,
@@ -269,16 +203,6 @@ def _map_file(metadata: Mapping[str, Mapping[str, str]], index: int) -> Path:
     return odr
 
 
-def _betterosi() -> Any:
-    try:
-        import betterosi
-    except ImportError:
-        raise BadInput(
-            "--format omega-prime needs betterosi: pip install 'carlos[omega]'", field="--format"
-        ) from None
-    return betterosi
-
-
 def omega_prime_bytes(
     steps: Sequence[tuple[int, Mapping[str, _Seen]]],
     names: Sequence[str],
@@ -287,9 +211,8 @@ def omega_prime_bytes(
     description: str,
 ) -> bytes:
     """The omega-prime MCAP file (betterosi's writer): GroundTruth per step, the map once."""
-    bo = _betterosi()
+    bo = betterosi("--format omega-prime")
     host = names.index(ego) if ego is not None and ego in names else None
-    version = bo.InterfaceVersion(version_major=3, version_minor=8, version_patch=0)
     with tempfile.TemporaryDirectory(prefix="carlos-omega-") as tmp:
         target = Path(tmp) / "index.mcap"
         # creation_time fixed: the same recording gives the same bytes
@@ -298,13 +221,7 @@ def omega_prime_bytes(
             first: int | None = None
             for rows, (nanos, _) in zip(osi_rows(steps, names), steps, strict=True):
                 first = nanos if first is None else first
-                gt = bo.GroundTruth(
-                    version=version,
-                    timestamp=bo.Timestamp(seconds=nanos // 1_000_000_000, nanos=nanos % 1_000_000_000),
-                    host_vehicle_id=None if host is None else bo.Identifier(value=host),
-                    moving_object=[_moving_object(bo, row) for row in rows],
-                )
-                writer.add(gt, topic="ground_truth", log_time=nanos)
+                writer.add(ground_truth(bo, nanos, rows, host), topic="ground_truth", log_time=nanos)
             if odr is not None:
                 reference, xml = odr
                 writer.add(
@@ -313,33 +230,6 @@ def omega_prime_bytes(
                     log_time=first or 0,
                 )
         return target.read_bytes()
-
-
-def _vector(bo: Any, v: tuple[float, float, float]) -> Any:
-    return bo.Vector3D(x=v[0], y=v[1], z=v[2])
-
-
-def _moving_object(bo: Any, row: ObjectRow) -> Any:
-    kind, vehicle, role = row.types
-    classification = (
-        bo.MovingObjectVehicleClassification(type=vehicle, role=role) if kind == TYPE_VEHICLE else None
-    )
-    length, width, height = row.dimension
-    return bo.MovingObject(
-        id=bo.Identifier(value=row.idx),
-        type=kind,
-        base=bo.BaseMoving(
-            dimension=bo.Dimension3D(length=length, width=width, height=height),
-            position=_vector(bo, row.position),
-            orientation=bo.Orientation3D(
-                roll=row.orientation[0], pitch=row.orientation[1], yaw=row.orientation[2]
-            ),
-            velocity=_vector(bo, row.velocity),
-            acceleration=_vector(bo, row.acceleration),
-        ),
-        vehicle_classification=classification,
-        source_reference=[bo.ExternalReference(identifier=[row.name])],
-    )
 
 
 def _indexes(results: RunResults) -> Iterator[int]:
@@ -352,7 +242,7 @@ def export_omega_prime(
     results: RunResults, out: Path, indexes: Iterable[int] | None = None
 ) -> tuple[Path, int]:
     """Write `out/<run>/<index>.mcap` (omega-prime) per index with a recording; (that folder, files written)."""
-    _betterosi()
+    betterosi("--format omega-prime")
     root = out.expanduser().absolute() / results.name
     store = FileStore(root)
     written = 0

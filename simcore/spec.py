@@ -506,6 +506,13 @@ class Recording(Model):
     compression: Literal["zstd", "lz4", "none"] = Field(
         "zstd", description="MCAP chunk compression. Default zstd."
     )
+    osi: bool = Field(
+        False,
+        description=(
+            "Also record ASAM OSI ground truth: channel `/carlos/osi/ground_truth`, protobuf `osi3.GroundTruth` "
+            "(OSI 3.8.0), one message per step (needs `pip install 'carlos[omega]'`). Default false."
+        ),
+    )
 
 
 class SecretRef(Model):
