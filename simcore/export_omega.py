@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import io
 import json
+import shutil
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -178,20 +179,42 @@ def _ego(metadata: Mapping[str, Mapping[str, str]], names: Sequence[str]) -> str
     return names[0] if names else None
 
 
-def _map_file(metadata: Mapping[str, Mapping[str, str]], index: int) -> Path:
+def _scenario_file(
+    metadata: Mapping[str, Mapping[str, str]], index: int, results: RunResults, scratch: Path
+) -> Path:
+    """The recorded scenario's OpenSCENARIO file here: the path the run used (`carlos.run` scenarioFile)
+    when it is on this machine, else the run's `spec.scenarios[].openscenario` (an s3:// scenario and its
+    road are downloaded into `scratch`; a relative path is taken from the working directory)."""
+    run = metadata.get("carlos.run", {})
+    recorded = run.get("scenarioFile")
+    if recorded and Path(recorded).is_file():
+        return Path(recorded)
+    refs = [s for s in results.spec.spec.scenarios if s.name == run.get("scenario")] if results.spec else []
+    if not refs or not refs[0].openscenario:
+        raise BadInput(
+            f"index {index}: scenario {recorded or run.get('scenario')!r} is not on this machine and the run's "
+            "spec names no openscenario for it: export where the scenario files are",
+            field="--format",
+        )
+    from simcore.plan import RunPoint
+    from simcore.runner import resolve_scenario_file
+    from simcore.store import open_store
+
+    parameters = json.loads(run.get("parameters") or "{}")
+    point = RunPoint(index, refs[0], 0, 0, {}, parameters, 0)
+    path = resolve_scenario_file(point, Path.cwd(), scratch, open_store)
+    if not path.is_file():
+        raise BadInput(f"index {index}: scenario {path} not found", field=f"spec.scenarios[{refs[0].name}]")
+    return path
+
+
+def _map_file(
+    metadata: Mapping[str, Mapping[str, str]], index: int, results: RunResults, scratch: Path
+) -> Path:
     """The OpenDRIVE file of the recorded scenario (its RoadNetwork LogicFile, relative to the scenario)."""
     from simcore.scenario.xosc import load_scenario
 
-    scenario = metadata.get("carlos.run", {}).get("scenarioFile")
-    where = f"index {index}: the recording's carlos.run metadata"
-    if not scenario:
-        raise BadInput(f"{where} names no scenarioFile: cannot find the OpenDRIVE map", field="--format")
-    path = Path(scenario)
-    if not path.is_file():
-        raise BadInput(
-            f"{where}: scenario {path} is not on this machine; export where the scenario files are",
-            field="--format",
-        )
+    path = _scenario_file(metadata, index, results, scratch)
     parameters = json.loads(metadata.get("carlos.run", {}).get("parameters") or "{}")
     odr = load_scenario(path, parameters).road_file
     if odr is None:
@@ -247,26 +270,37 @@ def export_omega_prime(
     store = FileStore(root)
     written = 0
     maps: dict[Path, tuple[str, str]] = {}
-    for index in indexes if indexes is not None else _indexes(results):
-        data = results.store.get_bytes(f"{index}/recording.mcap")
-        steps, names, metadata = _read_recording(data)
-        if not steps:
-            raise BadInput(
-                f"index {index}: the recording has no /tf and /carlos/objects: record them "
-                "(spec.recording.topics) to export omega-prime",
-                field="spec.recording.topics",
-            )
-        odr_path = _map_file(metadata, index)
-        if odr_path not in maps:
-            if odr_path.stat().st_size > MAX_MAP_BYTES:
-                raise BadInput(f"{odr_path}: larger than {MAX_MAP_BYTES} bytes", file=str(odr_path))
-            maps[odr_path] = (odr_path.name, odr_path.read_text(encoding="utf-8"))
-        run = metadata.get("carlos.run", {})
-        description = json.dumps(
-            {"run": results.name, "index": index, "scenario": run.get("scenario"), "seed": run.get("seed")},
-            sort_keys=True,
-        )
-        blob = omega_prime_bytes(steps, names, _ego(metadata, names), maps[odr_path], description)
-        store.put_bytes(f"{index}.mcap", blob)
-        written += 1
+    scratch = Path(tempfile.mkdtemp(prefix="carlos-export-"))
+    try:
+        for index in indexes if indexes is not None else _indexes(results):
+            written += _export_index(results, index, store, maps, scratch)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
     return root, written
+
+
+def _export_index(
+    results: RunResults, index: int, store: FileStore, maps: dict[Path, tuple[str, str]], scratch: Path
+) -> int:
+    """Write one index's omega-prime file; 1."""
+    data = results.store.get_bytes(f"{index}/recording.mcap")
+    steps, names, metadata = _read_recording(data)
+    if not steps:
+        raise BadInput(
+            f"index {index}: the recording has no /tf and /carlos/objects: record them "
+            "(spec.recording.topics) to export omega-prime",
+            field="spec.recording.topics",
+        )
+    odr_path = _map_file(metadata, index, results, scratch)
+    if odr_path not in maps:
+        if odr_path.stat().st_size > MAX_MAP_BYTES:
+            raise BadInput(f"{odr_path}: larger than {MAX_MAP_BYTES} bytes", file=str(odr_path))
+        maps[odr_path] = (odr_path.name, odr_path.read_text(encoding="utf-8"))
+    run = metadata.get("carlos.run", {})
+    description = json.dumps(
+        {"run": results.name, "index": index, "scenario": run.get("scenario"), "seed": run.get("seed")},
+        sort_keys=True,
+    )
+    blob = omega_prime_bytes(steps, names, _ego(metadata, names), maps[odr_path], description)
+    store.put_bytes(f"{index}.mcap", blob)
+    return 1

@@ -252,3 +252,37 @@ def test_recording_osi_channel_has_ground_truth_of_every_step(tmp_path: Path) ->
             dx, dy = m.base.position.x - x, m.base.position.y - y
             assert -math.sin(yaw) * dx + math.cos(yaw) * dy == pytest.approx(0.0, abs=1e-6)
             assert m.base.dimension.length > 0 and m.base.dimension.width > 0
+
+
+@pytest.mark.s3
+def test_export_of_s3_results_with_an_s3_scenario(s3_server: object, tmp_path: Path) -> None:
+    """Results and scenario on S3 (the run's local copy of the scenario is gone): the export reads the
+    recording from s3:// and fetches the scenario and its road from the run's spec."""
+    import boto3
+    import omega_prime
+
+    env = s3_server.env()  # type: ignore[attr-defined]
+    bucket = s3_server.bucket  # type: ignore[attr-defined]
+    client = boto3.client(
+        "s3",
+        endpoint_url=env["AWS_ENDPOINT_URL"],
+        aws_access_key_id=env["AWS_ACCESS_KEY_ID"],
+        aws_secret_access_key=env["AWS_SECRET_ACCESS_KEY"],
+        region_name=env["AWS_REGION"],
+    )
+    client.upload_file(
+        str(ROOT / "examples" / "scenarios" / "cut-in.xosc"), bucket, "om/scenarios/cut-in.xosc"
+    )
+    client.upload_file(str(ROOT / "examples" / "maps" / "highway.xodr"), bucket, "om/maps/highway.xodr")
+    manifest = tmp_path / "s3.yaml"
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: om}\nspec:\n"
+        f"  scenarios: [{{name: c, openscenario: 's3://{bucket}/om/scenarios/cut-in.xosc'}}]\n"
+        "  simulation: {stepSeconds: 0.05, maxSeconds: 1.0}\n"
+    )
+    done = carlos("run", manifest, "-q", "--output", f"s3://{bucket}/omres", env=env)
+    assert done.returncode == 0, done.stderr
+    done = carlos("export", f"s3://{bucket}/omres/om", "--format", "omega-prime", "--out", tmp_path, env=env)
+    assert done.returncode == 0, done.stderr
+    rec = omega_prime.Recording.from_file(str(tmp_path / "om" / "0.mcap"), validate=True)
+    assert rec._df["idx"].n_unique() == 2 and rec.map is not None
