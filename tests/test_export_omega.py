@@ -286,3 +286,35 @@ def test_export_of_s3_results_with_an_s3_scenario(s3_server: object, tmp_path: P
     assert done.returncode == 0, done.stderr
     rec = omega_prime.Recording.from_file(str(tmp_path / "om" / "0.mcap"), validate=True)
     assert rec._df["idx"].n_unique() == 2 and rec.map is not None
+
+
+def test_without_betterosi_the_export_and_the_osi_channel_are_bad_input(
+    exported: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """Without the extra: one line naming `carlos[omega]`, exit 2, no traceback."""
+    recording, _ = exported
+    run = recording.parents[1]
+    manifest = tmp_path / "osi.yaml"
+    cut_in = (ROOT / "examples" / "scenarios" / "cut-in.xosc").as_uri()
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: osi}\nspec:\n"
+        f"  scenarios: [{{name: cut-in, openscenario: '{cut_in}'}}]\n"
+        "  simulation: {stepSeconds: 0.05, maxSeconds: 0.2}\n"
+        "  recording: {enabled: true, osi: true}\n"
+    )
+    block = "import sys; sys.modules['betterosi'] = None; from simcore.cli import main; sys.argv[0] = 'carlos'; main()"
+    for args in (
+        ["export", run.as_uri(), "--format", "omega-prime", "--out", str(tmp_path)],
+        ["run", str(manifest), "-q", "-j", "1", "--output", f"file://{tmp_path}/out"],
+    ):
+        done = subprocess.run(
+            [sys.executable, "-c", block, *args],
+            capture_output=True,
+            text=True,
+            timeout=600,
+            cwd=ROOT,
+            check=False,
+        )
+        assert "carlos[omega]" in done.stderr + done.stdout, done.stderr
+        assert "Traceback" not in done.stderr
+        assert done.returncode == 2
