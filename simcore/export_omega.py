@@ -116,12 +116,18 @@ def _read_recording(
     boxes: dict[int, list[tuple[str, tuple[float, float, float], tuple[float, float, float], str]]] = {}
     speeds: dict[int, dict[str, float]] = {}
     names: dict[str, None] = {}
-    for schema, channel, message in reader.iter_messages(log_time_order=True):
+    summary = reader.get_summary()
+    channels = summary.channels.values() if summary is not None else ()
+    topics = [
+        c.topic
+        for c in channels
+        if c.topic in (TF_TOPIC, OBJECTS_TOPIC)
+        or (c.topic.startswith("/carlos/") and c.topic.endswith("/odometry"))
+    ]
+    # file order (no heap merge by time: each step is keyed by its time below, names by the objects' order)
+    for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=False):
         topic = channel.topic
-        wanted = topic in (TF_TOPIC, OBJECTS_TOPIC) or (
-            topic.startswith("/carlos/") and topic.endswith("/odometry")
-        )
-        if schema is None or not wanted:
+        if schema is None:
             continue
         msg = deserialize(message.data, schema.name)
         nanos = int(message.log_time)
