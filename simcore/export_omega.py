@@ -108,7 +108,7 @@ def _read_recording(
     """(steps, entity names in order of first appearance, metadata records) of a CARLOS recording."""
     from mcap.reader import make_reader
 
-    from simcore.transport.messages import deserialize
+    from simcore.transport.messages import base_link, deserialize, odometry_topic
 
     reader = make_reader(io.BytesIO(data))
     metadata = {record.name: dict(record.metadata) for record in reader.iter_metadata()}
@@ -134,7 +134,7 @@ def _read_recording(
         if topic == TF_TOPIC:
             frame = poses.setdefault(nanos, {})
             for t in msg.transforms:
-                name = str(t.child_frame_id).removesuffix("/base_link")
+                name = str(t.child_frame_id)  # `<ros name>/base_link`
                 tr, rot = t.transform.translation, t.transform.rotation
                 frame[name] = (
                     (float(tr.x), float(tr.y), float(tr.z)),
@@ -155,16 +155,19 @@ def _read_recording(
                 )
                 names.setdefault(str(d.id))
         else:
-            name = topic.removeprefix("/carlos/").removesuffix("/odometry")
-            speeds.setdefault(nanos, {})[name] = float(msg.twist.twist.linear.x)
+            speeds.setdefault(nanos, {})[topic] = float(msg.twist.twist.linear.x)
     steps: list[tuple[int, dict[str, _Seen]]] = []
     for nanos in sorted(set(poses) & set(boxes)):
         pose, speed = poses[nanos], speeds.get(nanos, {})
         seen: dict[str, _Seen] = {}
         for name, center, size, category in boxes[nanos]:
-            if name in pose:
-                translation, rotation = pose[name]
-                seen[name] = _Seen(translation, rotation, center, size, category, speed.get(name, 0.0))
+            # /tf and odometry name the entity by its ROS token, /carlos/objects by its scenario name
+            found = pose.get(base_link(name))
+            if found is not None:
+                translation, rotation = found
+                seen[name] = _Seen(
+                    translation, rotation, center, size, category, speed.get(odometry_topic(name), 0.0)
+                )
         steps.append((nanos, seen))
     return steps, list(names), metadata
 

@@ -116,13 +116,13 @@ class ObjectRow:
 
 
 def _vector(bo: Any, v: tuple[float, float, float]) -> Any:
-    return bo.Vector3D(x=v[0], y=v[1], z=v[2])
+    return bo.Vector3d(x=v[0], y=v[1], z=v[2])
 
 
 def _moving_object(bo: Any, row: ObjectRow) -> Any:
     kind, vehicle, role = row.types
     classification = (
-        bo.MovingObjectVehicleClassification(type=vehicle, role=role) if kind == TYPE_VEHICLE else None
+        bo.MovingObject.VehicleClassification(type=vehicle, role=role) if kind == TYPE_VEHICLE else None
     )
     length, width, height = row.dimension
     roll, pitch, yaw = row.orientation
@@ -130,9 +130,9 @@ def _moving_object(bo: Any, row: ObjectRow) -> Any:
         id=bo.Identifier(value=row.idx),
         type=kind,
         base=bo.BaseMoving(
-            dimension=bo.Dimension3D(length=length, width=width, height=height),
+            dimension=bo.Dimension3d(length=length, width=width, height=height),
             position=_vector(bo, row.position),
-            orientation=bo.Orientation3D(roll=roll, pitch=pitch, yaw=yaw),
+            orientation=bo.Orientation3d(roll=roll, pitch=pitch, yaw=yaw),
             velocity=_vector(bo, row.velocity),
             acceleration=_vector(bo, row.acceleration),
         ),

@@ -318,3 +318,43 @@ def test_without_betterosi_the_export_and_the_osi_channel_are_bad_input(
         assert "carlos[omega]" in done.stderr + done.stdout, done.stderr
         assert "Traceback" not in done.stderr
         assert done.returncode == 2
+
+
+def test_recording_and_export_paths_agree_for_any_entity_name(tmp_path: Path) -> None:
+    """An entity whose name is no ROS token (`lead truck`: /tf says `lead_truck_<hash>/base_link`) is still
+    exported; the export from the ROS topics and the recorded OSI channel give the same objects."""
+    import dataclasses
+
+    import betterosi
+
+    from simcore.export_omega import _read_recording
+    from simcore.osi import OsiFrames
+    from simcore.recorder import McapRecorder
+    from tests.test_recorder import _frame
+
+    frames = []
+    for step in range(6):
+        frame = _frame(step)
+        truck = dataclasses.replace(frame.entities[1], name="lead truck")
+        frames.append(dataclasses.replace(frame, entities=(frame.entities[0], truck)))
+    path = tmp_path / "r.mcap"
+    with McapRecorder(path) as rec:
+        for frame in frames:
+            rec.write_frame(frame)
+    steps, names, _ = _read_recording(path.read_bytes())
+    assert names == ["Ego", "lead truck"]
+    exported = osi_rows(steps, names)
+    osi = OsiFrames()
+    for frame, rows in zip(frames, exported, strict=True):
+        gt = betterosi.GroundTruth.from_binary(osi.encode(frame))  # type: ignore[attr-defined]
+        assert [r.name for r in rows] == ["Ego", "lead truck"]
+        for row, m in zip(rows, gt.moving_object, strict=True):
+            assert row.idx == m.id.value and row.types[0] == m.type
+            assert row.position == pytest.approx((m.base.position.x, m.base.position.y, m.base.position.z))
+            assert row.velocity == pytest.approx((m.base.velocity.x, m.base.velocity.y, m.base.velocity.z))
+            assert row.orientation == pytest.approx(
+                (m.base.orientation.roll, m.base.orientation.pitch, m.base.orientation.yaw)
+            )
+            assert row.dimension == pytest.approx(
+                (m.base.dimension.length, m.base.dimension.width, m.base.dimension.height)
+            )
