@@ -14,6 +14,8 @@ What goes in, from the index's `recording.mcap`:
   velocity between steps (central differences, one-sided at the ends: the recording has no acceleration);
 - `host_vehicle_id` = the ego (`spec.simulation.ego`, else the entity named Ego/ego/hero/Hero, else the first);
 - the map: the OpenDRIVE file of the scenario (`carlos.run` metadata `scenarioFile`, its RoadNetwork LogicFile).
+A recording with its own OSI channel (`spec.recording.osi`) for every step: those GroundTruth messages are
+taken as they are (the engine's longitudinal acceleration instead of differences).
 
 Needs the optional extra `carlos[omega]` (betterosi); without it the export is bad input (exit 2) naming it.
 """
@@ -31,7 +33,16 @@ from pathlib import Path
 import numpy as np
 
 from simcore.errors import BadInput
-from simcore.osi import ObjectRow, betterosi, forward, ground_truth, osi_type, rpy
+from simcore.osi import (
+    GROUND_TRUTH_SCHEMA,
+    OSI_TOPIC,
+    ObjectRow,
+    betterosi,
+    forward,
+    ground_truth,
+    osi_type,
+    rpy,
+)
 from simcore.results import RunResults
 from simcore.store import FileStore
 
@@ -102,10 +113,19 @@ def osi_rows(steps: Sequence[tuple[int, Mapping[str, _Seen]]], names: Sequence[s
     return out
 
 
-def _read_recording(
-    data: bytes,
-) -> tuple[list[tuple[int, dict[str, _Seen]]], list[str], dict[str, dict[str, str]]]:
-    """(steps, entity names in order of first appearance, metadata records) of a CARLOS recording."""
+@dataclass
+class _Recorded:
+    """What the export takes from a recording: the steps (time order, ns → entity → what was seen), the
+    entities in order of first appearance, the metadata records, the recorded OSI GroundTruth by ns."""
+
+    steps: list[tuple[int, dict[str, _Seen]]]
+    names: list[str]
+    metadata: dict[str, dict[str, str]]
+    osi: dict[int, bytes]
+
+
+def _read_recording(data: bytes) -> _Recorded:
+    """The ground truth of a CARLOS recording (see `_Recorded`)."""
     from mcap.reader import make_reader
 
     from simcore.transport.messages import base_link, deserialize, odometry_topic
@@ -116,18 +136,23 @@ def _read_recording(
     boxes: dict[int, list[tuple[str, tuple[float, float, float], tuple[float, float, float], str]]] = {}
     speeds: dict[int, dict[str, float]] = {}
     names: dict[str, None] = {}
+    recorded: dict[int, bytes] = {}
     summary = reader.get_summary()
     channels = summary.channels.values() if summary is not None else ()
     topics = [
         c.topic
         for c in channels
-        if c.topic in (TF_TOPIC, OBJECTS_TOPIC)
+        if c.topic in (TF_TOPIC, OBJECTS_TOPIC, OSI_TOPIC)
         or (c.topic.startswith("/carlos/") and c.topic.endswith("/odometry"))
     ]
     # file order (no heap merge by time: each step is keyed by its time below, names by the objects' order)
     for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=False):
         topic = channel.topic
         if schema is None:
+            continue
+        if topic == OSI_TOPIC:  # spec.recording.osi: the engine's own ground truth, taken as it is
+            if schema.name == GROUND_TRUTH_SCHEMA:
+                recorded[int(message.log_time)] = bytes(message.data)
             continue
         msg = deserialize(message.data, schema.name)
         nanos = int(message.log_time)
@@ -169,7 +194,7 @@ def _read_recording(
                     translation, rotation, center, size, category, speed.get(odometry_topic(name), 0.0)
                 )
         steps.append((nanos, seen))
-    return steps, list(names), metadata
+    return _Recorded(steps, list(names), metadata, recorded)
 
 
 def _ego(metadata: Mapping[str, Mapping[str, str]], names: Sequence[str]) -> str | None:
@@ -236,15 +261,14 @@ def _map_file(
 
 
 def omega_prime_bytes(
-    steps: Sequence[tuple[int, Mapping[str, _Seen]]],
-    names: Sequence[str],
-    ego: str | None,
-    odr: tuple[str, str] | None,
-    description: str,
+    recorded: _Recorded, ego: str | None, odr: tuple[str, str] | None, description: str
 ) -> bytes:
-    """The omega-prime MCAP file (betterosi's writer): GroundTruth per step, the map once."""
+    """The omega-prime MCAP file (betterosi's writer): GroundTruth per step, the map once. When the
+    recording has its own OSI channel for every step (spec.recording.osi), those messages are taken."""
     bo = betterosi("--format omega-prime")
+    steps, names = recorded.steps, recorded.names
     host = names.index(ego) if ego is not None and ego in names else None
+    own = all(nanos in recorded.osi for nanos, _ in steps)
     with tempfile.TemporaryDirectory(prefix="carlos-omega-") as tmp:
         target = Path(tmp) / "index.mcap"
         # creation_time fixed: the same recording gives the same bytes
@@ -253,7 +277,12 @@ def omega_prime_bytes(
             first: int | None = None
             for rows, (nanos, _) in zip(osi_rows(steps, names), steps, strict=True):
                 first = nanos if first is None else first
-                writer.add(ground_truth(bo, nanos, rows, host), topic="ground_truth", log_time=nanos)
+                gt = (
+                    bo.GroundTruth.from_binary(recorded.osi[nanos])
+                    if own
+                    else ground_truth(bo, nanos, rows, host)
+                )
+                writer.add(gt, topic="ground_truth", log_time=nanos)
             if odr is not None:
                 reference, xml = odr
                 writer.add(
@@ -293,8 +322,9 @@ def _export_index(
 ) -> int:
     """Write one index's omega-prime file; 1."""
     data = results.store.get_bytes(f"{index}/recording.mcap")
-    steps, names, metadata = _read_recording(data)
-    if not steps:
+    recorded = _read_recording(data)
+    metadata = recorded.metadata
+    if not recorded.steps:
         raise BadInput(
             f"index {index}: the recording has no /tf and /carlos/objects: record them "
             "(spec.recording.topics) to export omega-prime",
@@ -310,6 +340,6 @@ def _export_index(
         {"run": results.name, "index": index, "scenario": run.get("scenario"), "seed": run.get("seed")},
         sort_keys=True,
     )
-    blob = omega_prime_bytes(steps, names, _ego(metadata, names), maps[odr_path], description)
+    blob = omega_prime_bytes(recorded, _ego(metadata, recorded.names), maps[odr_path], description)
     store.put_bytes(f"{index}.mcap", blob)
     return 1

@@ -222,7 +222,7 @@ def test_recording_osi_channel_has_ground_truth_of_every_step(tmp_path: Path) ->
         "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: osi}\nspec:\n"
         f"  scenarios: [{{name: cut-in, openscenario: '{cut_in}'}}]\n"
         "  simulation: {stepSeconds: 0.05, maxSeconds: 1.0}\n"
-        "  recording: {enabled: true, osi: true, topics: ['/tf']}\n"
+        "  recording: {enabled: true, osi: true, topics: ['/tf', '/carlos/objects', '/carlos/*/odometry']}\n"
     )
     done = carlos("run", manifest, "-q", "--output", f"file://{tmp_path}/out")
     assert done.returncode == 0, done.stderr
@@ -252,6 +252,11 @@ def test_recording_osi_channel_has_ground_truth_of_every_step(tmp_path: Path) ->
             dx, dy = m.base.position.x - x, m.base.position.y - y
             assert -math.sin(yaw) * dx + math.cos(yaw) * dy == pytest.approx(0.0, abs=1e-6)
             assert m.base.dimension.length > 0 and m.base.dimension.width > 0
+    # the export takes the recorded GroundTruth as it is (the engine's acceleration, not differences)
+    done = carlos("export", (tmp_path / "out" / "osi").as_uri(), "--format", "omega-prime", "--out", tmp_path)
+    assert done.returncode == 0, done.stderr
+    exported = list(betterosi.read(str(tmp_path / "osi" / "0.mcap"), return_ground_truth=True))
+    assert [g.to_binary() for g in exported] == [g.to_binary() for g in gts]
 
 
 @pytest.mark.s3
@@ -341,7 +346,8 @@ def test_recording_and_export_paths_agree_for_any_entity_name(tmp_path: Path) ->
     with McapRecorder(path) as rec:
         for frame in frames:
             rec.write_frame(frame)
-    steps, names, _ = _read_recording(path.read_bytes())
+    recorded = _read_recording(path.read_bytes())
+    steps, names = recorded.steps, recorded.names
     assert names == ["Ego", "lead truck"]
     exported = osi_rows(steps, names)
     osi = OsiFrames()
