@@ -506,8 +506,10 @@ class Recording(Model):
     compression: Literal["zstd", "lz4", "none"] = Field(
         "zstd", description="MCAP chunk compression. Default zstd."
     )
-    osi: bool = Field(
-        False,
+    # None (not False) by default: a manifest that does not ask for OSI dumps as before (`carlos.spec` in the
+    # recording keeps its bytes)
+    osi: bool | None = Field(
+        None,
         description=(
             "Also record ASAM OSI ground truth: channel `/carlos/osi/ground_truth`, protobuf `osi3.GroundTruth` "
             "(OSI 3.8.0), one message per step (needs `pip install 'carlos[omega]'`). Default false."

@@ -364,3 +364,12 @@ def test_recording_and_export_paths_agree_for_any_entity_name(tmp_path: Path) ->
             assert row.dimension == pytest.approx(
                 (m.base.dimension.length, m.base.dimension.width, m.base.dimension.height)
             )
+
+
+def test_a_manifest_without_osi_dumps_as_before() -> None:
+    """`carlos.spec` in every recording is the manifest dumped without None fields: `recording.osi` unset
+    must not appear, so recordings of manifests that do not ask for OSI keep their bytes."""
+    from simcore.spec import Recording
+
+    assert "osi" not in Recording().model_dump(by_alias=True, exclude_none=True)
+    assert Recording.model_validate({"osi": True}).model_dump(by_alias=True, exclude_none=True)["osi"] is True
