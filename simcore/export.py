@@ -4,10 +4,11 @@
   `simSeconds`, `wallSeconds`, `error`, `criteriaFailed`, then `param.<name>` and `metric.<name>` columns
   (null where an index lacks one).
 - `kitti`: per index and lidar, a KITTI object-detection layout: `velodyne/NNNNNN.bin` (float32 x, y, z,
-  intensity per point, sensor frame), `label_2/NNNNNN.txt` (the sweep's ground truth, one object per line
-  in KITTI's label format, camera coordinates of the KITTI convention: x right, y down, z forward, location
-  = bottom centre of the box) and `calib/NNNNNN.txt` (no camera: P0–P3 and R0_rect identity,
-  Tr_velo_to_cam the axis change of that convention, Tr_imu_to_velo the sensor mount inverted).
+  intensity per point, sensor frame; intensity 0 when the lidar's `pointFields` leave it out),
+  `label_2/NNNNNN.txt` (the sweep's ground truth, one object per line in KITTI's label format, camera
+  coordinates of the KITTI convention: x right, y down, z forward, location = bottom centre of the box)
+  and `calib/NNNNNN.txt` (no camera: P0–P3 and R0_rect identity, Tr_velo_to_cam the axis change of that
+  convention, Tr_imu_to_velo the sensor mount inverted).
 """
 
 from __future__ import annotations
@@ -135,7 +136,7 @@ def _sweeps(data: bytes, points_topic: str, objects_topic: str) -> Iterator[tupl
     """(velodyne .bin bytes, label lines) per sweep with ground truth, in time order."""
     from mcap.reader import make_reader
 
-    from simcore.sensors.lidar import POINT_DTYPE
+    from simcore.sensors.ros import read_pointcloud2
     from simcore.transport.messages import deserialize
 
     clouds: dict[int, bytes] = {}
@@ -147,9 +148,12 @@ def _sweeps(data: bytes, points_topic: str, objects_topic: str) -> Iterator[tupl
         msg = deserialize(message.data, schema.name)
         stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
         if channel.topic == points_topic:
-            raw = np.asarray(msg.data, dtype=np.uint8).tobytes()
-            points = np.frombuffer(raw, dtype=POINT_DTYPE, count=len(raw) // POINT_DTYPE.itemsize)
-            xyzi = np.stack([points[k] for k in ("x", "y", "z", "intensity")], axis=1).astype("<f4")
+            points = read_pointcloud2(msg)  # by field name: any layout of spec.sensors[].pointFields
+            names = points.dtype.names or ()
+            columns = [
+                points[k] if k in names else np.zeros(len(points)) for k in ("x", "y", "z", "intensity")
+            ]
+            xyzi = np.stack(columns, axis=1).astype("<f4")
             clouds[stamp] = xyzi.tobytes()
         else:
             labels[stamp] = [kitti_label(d) for d in msg.detections]

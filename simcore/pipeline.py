@@ -30,6 +30,7 @@ from simcore.transport.world import WorldPublisher
 if TYPE_CHECKING:
     from simcore.closedloop import ClosedLoop
     from simcore.evaluation.metrics import MetricsAccumulator
+    from simcore.osi import OsiFrames
     from simcore.recorder import McapRecorder
     from simcore.scenario.engine import ScenarioEngine
     from simcore.scenario.model import Scenario
@@ -76,6 +77,7 @@ class Assembly:
     recorder: McapRecorder | None = None
     perception: PerceptionLoop | None = None
     v2x: V2XService | None = None
+    osi: OsiFrames | None = None  # spec.recording.osi: GroundTruth of every frame into the recording
     _closed: bool = field(default=False, repr=False)
 
     @property
@@ -86,6 +88,7 @@ class Assembly:
             or self.perception is not None
             or self.v2x is not None
             or self.closed_loop is not None
+            or self.osi is not None
             or self.world.has_consumers()
         )
 
@@ -280,6 +283,12 @@ def assemble(
                 metadata=_metadata(run, point, scenario, scenario_file, engine.output_time_offset),
             )
             _subscribe(bus, "*", _record_into(recorder), wants=recorder.wants)
+            if spec.recording.osi:
+                from simcore.osi import OSI_TOPIC, OsiFrames
+
+                parts.osi = OsiFrames()
+                name, encoding, schema, channel_metadata = parts.osi.channel()
+                recorder.add_channel(OSI_TOPIC, name, encoding, schema, "protobuf", channel_metadata)
         perceiving = spec.sensors or any(rsu.sensors for rsu in spec.infrastructure)
         if perceiving or spec.system_under_test is not None or spec.evaluation.detection is not None:
             from simcore.sensors.loop import PerceptionLoop
@@ -347,11 +356,16 @@ def drive(
     index = parts.point.index
     if closed_loop is not None:
         closed_loop.wait_for_nodes(b.name for b in engine.bodies.values() if b.external)
+    osi, recorder = parts.osi, parts.recorder
+    if osi is not None:
+        from simcore.osi import GROUND_TRUTH_SCHEMA, OSI_TOPIC
     frames = parts.needs_frames
     frame = engine.frame() if frames else None
 
     def consume() -> None:
         assert frame is not None
+        if osi is not None and recorder is not None:
+            recorder.write(OSI_TOPIC, GROUND_TRUTH_SCHEMA, osi.encode(frame), frame.time)
         if metrics is not None:
             metrics.update(frame)
         if closed_loop is not None:

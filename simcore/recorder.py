@@ -504,6 +504,52 @@ class McapRecorder:
         self._counts[channel_id] = 0
         return channel_id
 
+    def add_channel(
+        self,
+        topic: str,
+        schema_name: str,
+        schema_encoding: str,
+        schema_data: bytes,
+        message_encoding: str,
+        metadata: Mapping[str, str],
+    ) -> None:
+        """A channel of a schema other than a ROS 2 message (e.g. protobuf `osi3.GroundTruth`): `write(topic,
+        schema_name, data, t)` then records encoded `data` on it. Recorded whatever the topic patterns say."""
+        self._check_open()
+        if topic in self._channels:
+            raise RecorderError(f"topic {topic!r} already has a channel")
+        chunk = self._chunk
+        schema_id = self._schemas.get(schema_name)
+        if schema_id is None:
+            schema_id = self._schemas[schema_name] = len(self._schemas) + 1
+            record = _record(
+                _OP_SCHEMA,
+                _U16.pack(schema_id)
+                + _string(schema_name)
+                + _string(schema_encoding)
+                + _U32.pack(len(schema_data))
+                + schema_data,
+            )
+            self._schema_records.append(record)
+            chunk.pieces.append(record)
+            chunk.size += len(record)
+        channel_id = len(self._channels) + 1
+        record = _record(
+            _OP_CHANNEL,
+            _U16.pack(channel_id)
+            + _U16.pack(schema_id)
+            + _string(topic)
+            + _string(message_encoding)
+            + _map(metadata),
+        )
+        self._channel_records.append(record)
+        chunk.pieces.append(record)
+        chunk.size += len(record)
+        self._channels[topic] = (channel_id, schema_name)
+        self._sequence[channel_id] = 0
+        self._counts[channel_id] = 0
+        self._wanted[topic] = True
+
     def write(self, topic: str, typename: str, msg: Any, time_s: float) -> bool:
         """Record `msg` on `topic` at simulated time `time_s`: a rosbags message of `typename`, or its CDR
         serialisation (`bytes`, `bytearray` or `memoryview`, written as it is: what a transport received).

@@ -512,6 +512,15 @@ class Recording(Model):
     compression: Literal["zstd", "lz4", "none"] = Field(
         "zstd", description="MCAP chunk compression. Default zstd."
     )
+    # None (not False) by default: a manifest that does not ask for OSI dumps as before (`carlos.spec` in the
+    # recording keeps its bytes)
+    osi: bool | None = Field(
+        None,
+        description=(
+            "Also record ASAM OSI ground truth: channel `/carlos/osi/ground_truth`, protobuf `osi3.GroundTruth` "
+            "(OSI 3.8.0), one message per step (needs `pip install 'carlos[omega]'`). Default false."
+        ),
+    )
 
 
 class SecretRef(Model):
@@ -769,6 +778,28 @@ class LidarSensor(_SensorBase):
             "`…/objects/info`: velocity, lidar points, occlusion ratio). Default true."
         ),
     )
+    point_fields: list[Literal["x", "y", "z", "intensity", "time", "object_id", "ring", "label"]] | None = (
+        Field(
+            None,
+            description=(
+                "The PointCloud2 fields to publish and record, packed in this canonical order without padding "
+                "(x, y, z required; e.g. `[x, y, z, intensity]`: 16 bytes a point, the common XYZI layout). "
+                "Default: all eight (x, y, z, intensity, time, object_id, ring, label; 28 bytes a point)."
+            ),
+            max_length=8,
+        )
+    )
+
+    @model_validator(mode="after")
+    def _point_fields(self) -> Self:
+        fields = self.point_fields
+        if fields is not None:
+            missing = [f for f in ("x", "y", "z") if f not in fields]
+            if missing:
+                raise ValueError(f"pointFields lacks {', '.join(missing)}: x, y and z are required")
+            if len(set(fields)) != len(fields):
+                raise ValueError("pointFields names a field twice")
+        return self
 
     @model_validator(mode="after")
     def _angles(self) -> Self:

@@ -121,3 +121,56 @@ def test_index_rows_and_calibration_of_a_yawed_mount() -> None:
     imu = np.array([float(v) for v in calib_text(mount).splitlines()[-1].split()[1:]]).reshape(3, 4)
     # a point 1 m ahead of the mount (base_link (2, 0, 2)) is on the sensor's -y axis
     assert imu @ np.array([2.0, 0.0, 2.0, 1.0]) == pytest.approx([0.0, -1.0, 0.0], abs=1e-9)
+
+
+def test_compact_point_fields_record_less_and_export_the_same(tmp_path: Path) -> None:
+    """spec.sensors[].pointFields [x, y, z, intensity]: 16-byte points in the recording (not 28), the same
+    KITTI velodyne bytes as the full layout for the same seed."""
+    from mcap.reader import make_reader
+
+    from simcore.transport.messages import deserialize
+
+    bins: dict[str, list[bytes]] = {}
+    steps: dict[str, set[int]] = {}
+    for name, fields in (("full", ""), ("xyzi", ", pointFields: [intensity, x, y, z]")):
+        manifest = tmp_path / f"{name}.yaml"
+        manifest.write_text(
+            "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: " + name + "}\nspec:\n"
+            f"  scenarios: [{{name: cut-in, openscenario: '{CUT_IN}'}}]\n"
+            "  simulation: {stepSeconds: 0.05, maxSeconds: 0.5, seed: 7}\n"
+            "  sensors:\n    - {type: lidar, name: top, entity: Ego, mount: {x: 1.0, z: 1.8},"
+            f" channels: 8, verticalFov: [-15, 5], horizontalResolution: 180{fields}}}\n"
+        )
+        assert carlos("run", manifest, "-q", "--output", f"file://{tmp_path}/out").returncode == 0
+        run = tmp_path / "out" / name
+        with (run / "0" / "recording.mcap").open("rb") as f:
+            for schema, _, message in make_reader(f).iter_messages(topics=["/carlos/Ego/top/points"]):
+                assert schema is not None
+                msg = deserialize(message.data, schema.name)
+                steps.setdefault(name, set()).add(msg.point_step)
+                if name == "xyzi":
+                    assert [(p.name, p.offset) for p in msg.fields] == [
+                        ("x", 0),
+                        ("y", 4),
+                        ("z", 8),
+                        ("intensity", 12),
+                    ]
+        done = carlos("export", run.as_uri(), "--format", "kitti", "--out", tmp_path / "kitti")
+        assert done.returncode == 0, done.stderr
+        velodyne = tmp_path / "kitti" / name / "0" / "Ego_top" / "velodyne"
+        bins[name] = [p.read_bytes() for p in sorted(velodyne.glob("*.bin"))]
+    assert steps == {"full": {28}, "xyzi": {16}}
+    assert bins["full"] and bins["full"] == bins["xyzi"]
+
+
+def test_point_fields_need_xyz() -> None:
+    from pydantic import ValidationError
+
+    from simcore.spec import LidarSensor
+
+    with pytest.raises(ValidationError, match="pointFields lacks z"):
+        LidarSensor.model_validate({"type": "lidar", "name": "l", "entity": "Ego", "pointFields": ["x", "y"]})
+    with pytest.raises(ValidationError, match="twice"):
+        LidarSensor.model_validate(
+            {"type": "lidar", "name": "l", "entity": "Ego", "pointFields": ["x", "y", "z", "x"]}
+        )

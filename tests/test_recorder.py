@@ -447,3 +447,23 @@ def test_the_same_messages_make_the_same_file(tmp_path: Path, compression: Any) 
     first, second = (tmp_path / "a.mcap").read_bytes(), (tmp_path / "b.mcap").read_bytes()
     assert len(first) > 500_000 and first == second
     assert len(_read_mcap(tmp_path / "a.mcap")[0]) > 4
+
+
+def test_add_channel_records_encoded_messages_of_its_own_schema(tmp_path: Path) -> None:
+    path = tmp_path / "mixed.mcap"
+    with McapRecorder(path, topics=["/tf"]) as rec:
+        rec.add_channel("/osi", "osi3.GroundTruth", "protobuf", b"\x0a\x03abc", "protobuf", {"k": "v"})
+        rec.write_frame(_frame(0))
+        assert rec.write("/osi", "osi3.GroundTruth", b"\x01\x02\x03", 0.05)  # not in the topic patterns
+        with pytest.raises(RecorderError, match="already has a channel"):
+            rec.add_channel("/osi", "osi3.GroundTruth", "protobuf", b"", "protobuf", {})
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        osi = next(c for c in summary.channels.values() if c.topic == "/osi")
+        schema = summary.schemas[osi.schema_id]
+        assert (schema.name, schema.encoding, schema.data) == ("osi3.GroundTruth", "protobuf", b"\x0a\x03abc")
+        assert osi.message_encoding == "protobuf" and osi.metadata == {"k": "v"}
+        got = [(m.log_time, m.data) for _, c, m in reader.iter_messages() if c.topic == "/osi"]
+    assert got == [(50_000_000, b"\x01\x02\x03")]

@@ -221,7 +221,8 @@ class SensorRig:
         cfg = s.config
         assert isinstance(cfg, LidarSensor) and isinstance(s.model, Lidar)
         frame_id = s.frame_id()
-        s.publishers["points"].publish(ros.pointcloud2(scan.points, frame.time, frame_id), frame.time)
+        points = ros.packed_points(scan.points, cfg.point_fields)
+        s.publishers["points"].publish(ros.pointcloud2(points, frame.time, frame_id), frame.time)
         if not cfg.ground_truth:
             return
         objects = ground_truth(s.model, boxes, frame, carrier, scan, mounted_on=carrier_state)

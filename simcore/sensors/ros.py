@@ -16,6 +16,7 @@ Topics (DESIGN.md), `<e>` = the carrier's ROS name, `<s>` = the sensor name:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -75,6 +76,21 @@ def pointcloud2(points: np.ndarray, time_s: float, frame_id: str) -> Any:
         data=data,
         is_dense=True,
     )
+
+
+def packed_points(points: np.ndarray, fields: Sequence[str] | None) -> np.ndarray:
+    """`points` with only `fields` (None: all, as they are), in the dtype's order, packed without padding;
+    read-only, so the recorder references it instead of copying (pure)."""
+    if fields is None or len(fields) == len(points.dtype.names or ()):
+        return points
+    wanted = set(fields)
+    names = [name for name in points.dtype.names or () if name in wanted]
+    dtype = np.dtype([(name, points.dtype.fields[name][0]) for name in names])  # type: ignore[index]
+    out = np.empty(len(points), dtype)
+    for name in names:
+        out[name] = points[name]
+    out.flags.writeable = False
+    return out
 
 
 def read_pointcloud2(msg: Any) -> np.ndarray:

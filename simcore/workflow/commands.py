@@ -188,16 +188,25 @@ def results(
 
 def export(
     results_url: Annotated[str, typer.Argument(help="The run's results: file://…/<run> or s3://…/<run>.")],
-    output_format: Annotated[str, typer.Option("--format", help="parquet or kitti.")],
+    output_format: Annotated[str, typer.Option("--format", help="parquet, kitti or omega-prime.")],
     out_dir: Annotated[Path, typer.Option("--out", help="Folder (or a .parquet file) to write.")] = Path("."),
 ) -> None:
-    """Export the results: `parquet` (one row per index) or `kitti` (lidar frames, labels, calibration)."""
+    """Export the results: `parquet` (one row per index), `kitti` (lidar frames, labels, calibration) or
+    `omega-prime` (ASAM OSI ground truth and the OpenDRIVE map, one MCAP file per index)."""
     from simcore.export import export_kitti, export_parquet
     from simcore.results import open_results
 
-    if output_format not in ("parquet", "kitti"):
-        raise BadInput(f"unknown format {output_format!r}: use parquet or kitti", field="--format")
+    if output_format not in ("parquet", "kitti", "omega-prime"):
+        raise BadInput(
+            f"unknown format {output_format!r}: use parquet, kitti or omega-prime", field="--format"
+        )
     results = open_results(results_url)
+    if output_format == "omega-prime":
+        from simcore.export_omega import export_omega_prime
+
+        folder, files = export_omega_prime(results, out_dir)
+        typer.echo(f"{files} omega-prime files → {folder}")
+        return
     if output_format == "parquet":
         typer.echo(f"{len(results.indexes)} rows → {export_parquet(results, out_dir)}")
         return
