@@ -30,12 +30,14 @@ import hashlib
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 import yaml
 
+from simcore import shards
 from simcore.errors import BadInput, ExitCode
 from simcore.plan import Plan
 from simcore.spec import API_GROUP, API_VERSION, KIND, EnvVar, SimulationRun, Sweep
@@ -50,6 +52,9 @@ RECORDER_READY_PORT = 7448
 QUEUE_LABEL = "kueue.x-k8s.io/queue-name"
 RUN_LABEL = f"{API_GROUP}/run"
 INDEX_FAILURES_ANNOTATION = "batch.kubernetes.io/job-index-failure-count"
+#: on the Job: runs per pod and runs of the Job (simcore.shards: completion index ↔ run indexes)
+RUNS_PER_POD_ANNOTATION = f"{API_GROUP}/runs-per-pod"
+RUNS_ANNOTATION = f"{API_GROUP}/runs"
 #: a cluster run without `execution.parallelism` runs this many pods at a time
 DEFAULT_PARALLELISM = 10
 #: a per-pod backstop beyond `execution.timeoutSeconds` (simcore enforces the limit itself)
@@ -515,26 +520,40 @@ def _env_var(var: EnvVar) -> dict[str, Any]:
     return {"name": var.name, "valueFrom": {"secretKeyRef": var.secret_key_ref.model_dump()}}
 
 
+def runs_per_pod(run: SimulationRun, runs: int, measured: Sequence[float] = ()) -> int:
+    """The Job's slice size: `execution.runsPerPod`, else `simcore.shards.default_runs_per_pod` from the
+    plan's estimate (or `measured` wall seconds of earlier runs, a search's earlier rounds)."""
+    spec = run.spec
+    if spec.execution.runs_per_pod is not None:
+        return min(spec.execution.runs_per_pod, max(runs, 1))
+    sensors = len(spec.sensors) + sum(len(rsu.sensors) for rsu in spec.infrastructure)
+    cost = shards.estimate_run_seconds(spec.simulation.max_seconds, sensors, measured)
+    return shards.default_runs_per_pod(runs, cost)
+
+
 def build_job(
     run: SimulationRun,
     body: dict[str, Any],
     settings: OperatorSettings,
     output: Output,
     search_round: SearchRound | None = None,
+    measured: Sequence[float] = (),
 ) -> dict[str, Any]:
-    """The run's Indexed Job: one completion per index, Kubernetes doing retries and parallelism. A
-    search's round (`search_round`) gets its own Job over the round's ConfigMap, its pods' indexes offset
-    by the round's start (CARLOS_INDEX_OFFSET)."""
+    """The run's Indexed Job: one completion per slice of `runs_per_pod` indexes (simcore.shards),
+    Kubernetes doing retries and parallelism. A search's round (`search_round`) gets its own Job over the
+    round's ConfigMap, its pods' indexes offset by the round's start (CARLOS_INDEX_OFFSET)."""
     spec = run.spec
     if search_round is None:
-        total = len(Plan(spec))
+        runs = len(Plan(spec))
         name = job_name(run.name)
     else:
-        total = search_round.count
+        runs = search_round.count
         name = round_job_name(run.name, search_round.number)
+    per_pod = runs_per_pod(run, runs, measured)
+    total = shards.pods_for(runs, per_pod)
     parallelism = min(spec.execution.parallelism or DEFAULT_PARALLELISM, total)
     attempts = spec.execution.retries + 1
-    pod_deadline = spec.execution.timeout_seconds + POD_DEADLINE_GRACE_S
+    pod_deadline = spec.execution.timeout_seconds * per_pod + POD_DEADLINE_GRACE_S
     waves = math.ceil(total / parallelism)
     labels = _labels(run, settings)
     if search_round is not None:
@@ -574,6 +593,7 @@ def build_job(
     if search_round is not None:
         for container in (simcore, bridge, recorder):
             container["env"].append({"name": "CARLOS_INDEX_OFFSET", "value": str(search_round.start)})
+    simcore["env"].append({"name": "CARLOS_RUNS_PER_POD", "value": str(per_pod)})
     sidecars = [bridge, recorder]
     sut = spec.system_under_test
     if sut is not None and sut.image:
@@ -638,6 +658,7 @@ def build_job(
             "name": name,
             "namespace": body["metadata"].get("namespace"),
             "labels": job_labels,
+            "annotations": {RUNS_PER_POD_ANNOTATION: str(per_pod), RUNS_ANNOTATION: str(runs)},
             "ownerReferences": [owner_reference(body)],
         },
         "spec": {
