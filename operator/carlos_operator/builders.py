@@ -37,6 +37,7 @@ from typing import Any
 
 import yaml
 
+from carlos_operator.status import RUNS_ANNOTATION, RUNS_PER_POD_ANNOTATION
 from simcore import shards
 from simcore.errors import BadInput, ExitCode
 from simcore.plan import Plan
@@ -52,9 +53,6 @@ RECORDER_READY_PORT = 7448
 QUEUE_LABEL = "kueue.x-k8s.io/queue-name"
 RUN_LABEL = f"{API_GROUP}/run"
 INDEX_FAILURES_ANNOTATION = "batch.kubernetes.io/job-index-failure-count"
-#: on the Job: runs per pod and runs of the Job (simcore.shards: completion index ↔ run indexes)
-RUNS_PER_POD_ANNOTATION = f"{API_GROUP}/runs-per-pod"
-RUNS_ANNOTATION = f"{API_GROUP}/runs"
 #: a cluster run without `execution.parallelism` runs this many pods at a time
 DEFAULT_PARALLELISM = 10
 #: a per-pod backstop beyond `execution.timeoutSeconds` (simcore enforces the limit itself)
