@@ -35,7 +35,7 @@ def manifest(name: str, bucket: str, criteria: list[str], speeds: list[float], *
             "simulation": {"stepSeconds": 0.1, "maxSeconds": 3},
             "evaluation": {"criteria": criteria},
             "output": {"url": f"s3://{bucket}/operator", "credentialsSecretRef": {"name": "s3"}},
-            "execution": {"parallelism": 2, "retries": 1},
+            "execution": {"parallelism": 2, "retries": 1, "runsPerPod": 1},
             **spec,
         },
     }

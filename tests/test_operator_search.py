@@ -50,7 +50,7 @@ def search_manifest(name: str, bucket: str) -> dict[str, Any]:
             "evaluation": {"criteria": ["simSeconds <= 1000"]},
             "recording": {"enabled": False},
             "output": {"url": f"s3://{bucket}/operator", "credentialsSecretRef": {"name": "s3"}},
-            "execution": {"parallelism": 3, "retries": 1},
+            "execution": {"parallelism": 3, "retries": 1, "runsPerPod": 1},
         },
     }
 

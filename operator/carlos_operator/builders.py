@@ -588,10 +588,10 @@ def build_job(
     bridge["resources"] = sidecar_resources
     recorder = _sidecar(_container("recorder", settings, run, output, mounts), RECORDER_READY_PORT)
     recorder["resources"] = copy.deepcopy(sidecar_resources)
-    if search_round is not None:
-        for container in (simcore, bridge, recorder):
+    for container in (simcore, bridge, recorder):
+        container["env"].append({"name": "CARLOS_RUNS_PER_POD", "value": str(per_pod)})
+        if search_round is not None:
             container["env"].append({"name": "CARLOS_INDEX_OFFSET", "value": str(search_round.start)})
-    simcore["env"].append({"name": "CARLOS_RUNS_PER_POD", "value": str(per_pod)})
     sidecars = [bridge, recorder]
     sut = spec.system_under_test
     if sut is not None and sut.image:
