@@ -576,15 +576,15 @@ def run_recorder(env: PodEnv) -> int:
         values: dict[str, str] = {}
         if message.topic == STATUS_TOPIC:
             values = _values(message.obj())
-            if values.get("state") == "start":
+            if values.get("state") == "start" or SUMMARY_KEY in values:
+                # simcore ↔ recorder, not part of the run's recording (the verdict's wall time would make
+                # the same run's recordings differ; its content is the index's summary.json and log.txt)
                 events.put(values)
                 return
         with lock:
             if current and current[0].recorder is not None and current[0].recorder.wants(message.topic):
                 # the CDR as received: no deserialising and serialising again
                 current[0].recorder.write(message.topic, message.typename, message.cdr(), message.time_s)
-        if SUMMARY_KEY in values:
-            events.put(values)
 
     _on_sigterm(stop.set)
     try:

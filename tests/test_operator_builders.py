@@ -685,9 +685,13 @@ def test_slices_cover_every_run_once_in_index_order() -> None:
     from simcore import shards
 
     for runs, per_pod in ((10, 3), (9, 3), (1, 5), (52_500, 500)):
-        covered = [p for k in range(shards.pods_for(runs, per_pod)) for p in shards.slice_of(k, per_pod, runs)]
+        covered = [
+            p for k in range(shards.pods_for(runs, per_pod)) for p in shards.slice_of(k, per_pod, runs)
+        ]
         assert covered == list(range(runs))
-        assert all(shards.pod_of(p, per_pod) == k for k in range(3) for p in shards.slice_of(k, per_pod, runs))
+        assert all(
+            shards.pod_of(p, per_pod) == k for k in range(3) for p in shards.slice_of(k, per_pod, runs)
+        )
 
 
 def test_finished_pods_count_as_the_runs_of_their_slices() -> None:
