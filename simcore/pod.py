@@ -356,6 +356,9 @@ def run_simcore(env: PodEnv) -> int:
     last_pod_attempt = env.failures >= spec.execution.retries
     tries = spec.execution.retries + 1
     worst = ExitCode.PASSED
+    # the slice's first unfinished index is the one an earlier attempt of this pod was running when it
+    # failed: each earlier pod attempt counts one attempt of it (the later indexes had not started)
+    earlier = env.failures
     try:
         for position in env.positions(len(plan)):
             index = env.offset + position
@@ -370,9 +373,12 @@ def run_simcore(env: PodEnv) -> int:
             code = ExitCode.INFRASTRUCTURE
             for attempt in range(1, tries + 1):
                 final = last_pod_attempt and attempt == tries
-                code = _run_one(env, run, plan[position], index, attempt, final, bus, status, reports)
+                code = _run_one(
+                    env, run, plan[position], index, earlier + attempt, final, bus, status, reports
+                )
                 if code != ExitCode.INFRASTRUCTURE:
                     break
+            earlier = 0
             if code == ExitCode.BAD_INPUT:
                 return int(code)
             if code == ExitCode.INFRASTRUCTURE and not last_pod_attempt:
@@ -665,7 +671,6 @@ def _open_recording(env: PodEnv, run: Any, plan: Any, index: int, attempt: str) 
                     "parameters": json.dumps(point.parameters, sort_keys=True),
                     "seed": str(point.seed),
                     "stepSeconds": repr(spec.simulation.step_seconds),
-                    "attempt": attempt,
                 },
                 "carlos.versions": versions(),
             },

@@ -356,7 +356,8 @@ def test_a_killed_shard_is_retried_without_rerunning_its_finished_runs(
 ) -> None:
     """Two pods of three runs each. Pod 0's simcore is killed mid-slice, once runs 0 and 1 wrote their
     summaries: the retried pod skips them and runs 2 only. The results equal those of the same run left
-    alone (in another namespace): summaries but for the wall time, and the recordings byte for byte."""
+    alone (in another namespace): summaries but for the wall time and run 2's attempts, and the recordings
+    byte for byte."""
     c, kube = env
     monkeypatch.setenv("CARLOS_SECRET_NAMESPACES", "default,calm")
     # over the loopback hub the recorder receives one publisher's messages in publish order; over DDS the
@@ -382,12 +383,15 @@ def test_a_killed_shard_is_retried_without_rerunning_its_finished_runs(
     )
     body = manifest("shard", s3_server.bucket, ["simSeconds <= 100"], [10.0, 12.0, 14.0, 16.0, 18.0, 20.0])
     body["spec"]["execution"]["runsPerPod"] = 3
-    jobs = runner(
-        kube,
-        s3_server,
-        tmp_path,
-        crash_first_attempt_when={0: lambda: store.exists("shard/1/summary.json")},
-    )
+    killed: list[bool] = []
+
+    def mid_slice() -> bool:  # once (the undisturbed run's pod 0 is left alone)
+        if not killed and store.exists("shard/1/summary.json"):
+            killed.append(True)
+            return True
+        return False
+
+    jobs = runner(kube, s3_server, tmp_path, crash_first_attempt_when={0: mid_slice})
     try:
         create(kube, body)
         st = wait_for(lambda: terminal(kube, "shard"), 240, "a terminal phase")
@@ -417,6 +421,8 @@ def test_a_killed_shard_is_retried_without_rerunning_its_finished_runs(
     for index in range(6):
         disturbed = json.loads(store.get_bytes(f"shard/{index}/summary.json"))
         undisturbed = json.loads(calm.get_bytes(f"shard/{index}/summary.json"))
+        # run 2 was the one in progress when pod 0 was killed: its second attempt
+        assert (disturbed.pop("attempts"), undisturbed.pop("attempts")) == (2 if index == 2 else 1, 1)
         for summary in (disturbed, undisturbed):
             summary.pop("wallSeconds")
         assert disturbed == undisturbed
