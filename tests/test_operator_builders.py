@@ -674,7 +674,7 @@ def test_default_slices_follow_the_cost_of_a_run() -> None:
     quick = shards.default_runs_per_pod(52_500, shards.estimate_run_seconds(20.0, 0))
     lidar = shards.default_runs_per_pod(52_500, shards.estimate_run_seconds(20.0, 2))
     assert shards.pods_for(52_500, quick) <= 1_050 and shards.pods_for(52_500, lidar) <= 1_050
-    assert shards.default_runs_per_pod(20, shards.estimate_run_seconds(60.0, 2)) < 20  # long runs: more pods
+    assert shards.default_runs_per_pod(200, shards.estimate_run_seconds(120.0, 2)) < 200  # long: more pods
     assert shards.default_runs_per_pod(200, shards.estimate_run_seconds(10.0, 0)) == 200  # short: one pod
     # a search round: the measured wall seconds of earlier rounds decide, not the plan's estimate
     assert shards.default_runs_per_pod(100, shards.estimate_run_seconds(10.0, 0, [30.0, 30.0])) == 10
