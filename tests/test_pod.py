@@ -265,3 +265,27 @@ def test_a_shard_pod_runs_its_slice_and_skips_finished_indexes_when_retried(
     assert again.logs["simcore"].count("done by an earlier attempt (passed), skipped") == 2
     for key, data in first.items():
         assert store.get_bytes(f"{name}/{key}") == data
+
+
+def test_pod_env_names_the_slice_of_its_completion_index() -> None:
+    from simcore.errors import BadInput
+    from simcore.pod import PodEnv
+
+    base = {"CARLOS_SPEC": "/s.yaml", "CARLOS_OUTPUT_URL": "file:///out", "JOB_COMPLETION_INDEX": "2"}
+    env = PodEnv.from_env({**base, "CARLOS_RUNS_PER_POD": "3", "CARLOS_INDEX_OFFSET": "100"})
+    assert (env.completion, env.position, env.runs_per_pod) == (2, 6, 3)
+    assert list(env.positions(8)) == [6, 7]  # the last slice is short
+    assert [env.offset + p for p in env.positions(8)] == [106, 107]  # the run's indexes
+    assert list(PodEnv.from_env(base).positions(8)) == [2]  # default: one run per pod
+    with pytest.raises(BadInput, match="CARLOS_RUNS_PER_POD"):
+        PodEnv.from_env({**base, "CARLOS_RUNS_PER_POD": "0"})
+
+
+def test_a_rerun_of_failed_indexes_is_sliced_like_any_sweep() -> None:
+    manifest = body("rerun", "bucket", [], execution={"runsPerPod": 2})
+    manifest["spec"]["sweep"] = {"matrix": {"Speed": [10.0, 12.0, 14.0, 16.0, 18.0]}, "indexes": [4, 1, 3]}
+    run = parse_manifest(json.loads(json.dumps(manifest)), source="test")
+    settings = OperatorSettings.from_env({"CARLOS_DEFAULT_S3_ENDPOINT": "http://s3"})
+    job = build_job(run, manifest, settings, resolve_output(run, settings))
+    assert job["spec"]["completions"] == 2  # 3 runs in slices of 2
+    assert job["metadata"]["annotations"]["carlos.dev/runs"] == "3"
