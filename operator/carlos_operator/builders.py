@@ -1,6 +1,7 @@
 """Pure builders: a SimulationRun → its ConfigMap and Indexed Job (plain dicts, no I/O, no kopf).
 
-One pod per index (DESIGN.md, pod roles): the simulator core is the main container; the bridge and the
+One pod per slice of `runs_per_pod` indexes (simcore.shards; DESIGN.md, pod roles and shards): the
+simulator core is the main container, running its slice one index after another; the bridge and the
 recorder are native sidecars, i.e. init containers with `restartPolicy: Always` whose startup probes make
 the kubelet start them in order, each ready before the next starts:
 
@@ -8,8 +9,9 @@ the kubelet start them in order, each ready before the next starts:
    default) it logs the pod's ROS 2 graph; over the loopback transport it is the topic hub.
 2. `recorder`: subscribes to every topic, then opens 127.0.0.1:`RECORDER_READY_PORT` (its startup probe)
    — so no message simcore publishes can be missed.
-3. `simcore`: runs the index, publishes the topics and the verdict, waits until the recorder has uploaded
-   the results, and exits with DESIGN.md's exit code, which the Job's podFailurePolicy acts on.
+3. `simcore`: runs each index of its slice, publishes the topics and the verdict, waits until the recorder
+   has uploaded the results, and exits with the worst of DESIGN.md's exit codes of its slice, which the
+   Job's podFailurePolicy acts on.
 
 Topics: `CARLOS_TRANSPORT` on every container, the operator's `pod_transport` (CARLOS_POD_TRANSPORT, Helm
 value `podTransport`): `dds` (default) puts them on DDS as ROS 2 topics, so the system under test's
