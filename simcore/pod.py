@@ -22,22 +22,26 @@ transport `CARLOS_TRANSPORT` names:
   the domain, accepts connections on 127.0.0.1:`CARLOS_BUS_PORT` for its startup probe, and logs every
   ROS 2 topic (name, type) that appears on the domain until SIGTERM: it is the pod's view of the ROS 2
   graph (ROS 2 nodes talk to simcore's and the recorder's participants directly, nothing is relayed).
-- `recorder` (second sidecar): subscribes to every topic, then opens 127.0.0.1:`CARLOS_RECORDER_READY_PORT`
-  for its startup probe. It writes the MCAP while the run goes on. When simcore's verdict arrives (the final
-  `/carlos/status` message, whose values carry the index summary as JSON) — or on SIGTERM — it closes the
-  MCAP with everything received, uploads `recording.mcap` and `log.txt` to `<output>/<run>/<index>/`, then
-  `summary.json` last, and reports on `/carlos/recorder/status` (`uploaded` or `error`).
-- `simcore` (main container): runs the index (simcore.runner.simulate) publishing on the hub, judges it,
-  publishes the verdict, waits for the recorder's report and exits with DESIGN.md's code: 0 passed,
-  1 test failure, 2 bad input, 3 infrastructure error (also when the results could not be uploaded).
+- `recorder` (second sidecar): subscribes to every topic (only to `/carlos/status` when the spec does not
+  record), then opens 127.0.0.1:`CARLOS_RECORDER_READY_PORT` for its startup probe. It serves the pod's
+  slice: for each index simcore announces (`start` on `/carlos/status`) it opens the index's MCAP and answers
+  `ready` on `/carlos/recorder/status`; when the index's verdict arrives (its values carry the index summary
+  as JSON) — or on SIGTERM — it closes the MCAP with everything received, uploads `recording.mcap` and
+  `log.txt` to `<output>/<run>/<index>/`, then `summary.json` last, and answers `uploaded` or `error`.
+- `simcore` (main container): runs the pod's slice of indexes (`CARLOS_RUNS_PER_POD`, simcore.shards) one
+  after another in this warm process — each with simcore.runner.simulate, on the pod's transport when the
+  recorder records or a system under test has its own container, else on an in-process bus as a local
+  worker — judges each, hands each verdict to the recorder and waits for its upload; it exits with the
+  worst of DESIGN.md's codes over the slice: 0 passed, 1 test failure, 2 bad input (at once), 3
+  infrastructure error (also when results could not be uploaded). See `run_simcore` for skips and retries.
 
 A search's round (the operator's Job `carlos-<run>-r<N>`) mounts a spec that runs the round's points as a
-sweep (`points.xosc` beside it) and sets `CARLOS_INDEX_OFFSET` to the round's first index: the pod of Job
-index k runs point k of the round as the run's index offset+k (its results under `<run>/<offset+k>/`).
+sweep (`points.xosc` beside it) and sets `CARLOS_INDEX_OFFSET` to the round's first index: position k of the
+round runs as the run's index offset+k (its results under `<run>/<offset+k>/`).
 
-An infrastructure error on an attempt that Kubernetes will retry (`CARLOS_INDEX_FAILURES`, from the pod's
-`batch.kubernetes.io/job-index-failure-count` annotation, below `execution.retries`) uploads the log but
-no summary, so the index does not look complete.
+An infrastructure error on an attempt that will be retried (within the pod, or by Kubernetes:
+`CARLOS_INDEX_FAILURES`, from the pod's `batch.kubernetes.io/job-index-failure-count` annotation, below
+`execution.retries`) uploads the log but no summary, so the index does not look complete.
 """
 
 from __future__ import annotations
