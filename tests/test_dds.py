@@ -709,7 +709,7 @@ def test_the_operators_pod_template_runs_over_dds(
 
     from tests.test_pod import body, kubelet_for, results_store
 
-    manifest = body("pod-dds", s3_server.bucket, ["simSeconds <= 100"])
+    manifest = body("pod-dds", s3_server.bucket, ["simSeconds <= 100"], execution={"runsPerPod": 1})
     kubelet, pod = kubelet_for(manifest, s3_server, tmp_path)
     containers = [*pod["initContainers"], *pod["containers"]]
     for container in containers:
