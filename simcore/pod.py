@@ -22,22 +22,26 @@ transport `CARLOS_TRANSPORT` names:
   the domain, accepts connections on 127.0.0.1:`CARLOS_BUS_PORT` for its startup probe, and logs every
   ROS 2 topic (name, type) that appears on the domain until SIGTERM: it is the pod's view of the ROS 2
   graph (ROS 2 nodes talk to simcore's and the recorder's participants directly, nothing is relayed).
-- `recorder` (second sidecar): subscribes to every topic, then opens 127.0.0.1:`CARLOS_RECORDER_READY_PORT`
-  for its startup probe. It writes the MCAP while the run goes on. When simcore's verdict arrives (the final
-  `/carlos/status` message, whose values carry the index summary as JSON) — or on SIGTERM — it closes the
-  MCAP with everything received, uploads `recording.mcap` and `log.txt` to `<output>/<run>/<index>/`, then
-  `summary.json` last, and reports on `/carlos/recorder/status` (`uploaded` or `error`).
-- `simcore` (main container): runs the index (simcore.runner.simulate) publishing on the hub, judges it,
-  publishes the verdict, waits for the recorder's report and exits with DESIGN.md's code: 0 passed,
-  1 test failure, 2 bad input, 3 infrastructure error (also when the results could not be uploaded).
+- `recorder` (second sidecar): subscribes to every topic (only to `/carlos/status` when the spec does not
+  record), then opens 127.0.0.1:`CARLOS_RECORDER_READY_PORT` for its startup probe. It serves the pod's
+  slice: for each index simcore announces (`start` on `/carlos/status`) it opens the index's MCAP and answers
+  `ready` on `/carlos/recorder/status`; when the index's verdict arrives (its values carry the index summary
+  as JSON) — or on SIGTERM — it closes the MCAP with everything received, uploads `recording.mcap` and
+  `log.txt` to `<output>/<run>/<index>/`, then `summary.json` last, and answers `uploaded` or `error`.
+- `simcore` (main container): runs the pod's slice of indexes (`CARLOS_RUNS_PER_POD`, simcore.shards) one
+  after another in this warm process — each with simcore.runner.simulate, on the pod's transport when the
+  recorder records or a system under test has its own container, else on an in-process bus as a local
+  worker — judges each, hands each verdict to the recorder and waits for its upload; it exits with the
+  worst of DESIGN.md's codes over the slice: 0 passed, 1 test failure, 2 bad input (at once), 3
+  infrastructure error (also when results could not be uploaded). See `run_simcore` for skips and retries.
 
 A search's round (the operator's Job `carlos-<run>-r<N>`) mounts a spec that runs the round's points as a
-sweep (`points.xosc` beside it) and sets `CARLOS_INDEX_OFFSET` to the round's first index: the pod of Job
-index k runs point k of the round as the run's index offset+k (its results under `<run>/<offset+k>/`).
+sweep (`points.xosc` beside it) and sets `CARLOS_INDEX_OFFSET` to the round's first index: position k of the
+round runs as the run's index offset+k (its results under `<run>/<offset+k>/`).
 
-An infrastructure error on an attempt that Kubernetes will retry (`CARLOS_INDEX_FAILURES`, from the pod's
-`batch.kubernetes.io/job-index-failure-count` annotation, below `execution.retries`) uploads the log but
-no summary, so the index does not look complete.
+An infrastructure error on an attempt that will be retried (within the pod, or by Kubernetes:
+`CARLOS_INDEX_FAILURES`, from the pod's `batch.kubernetes.io/job-index-failure-count` annotation, below
+`execution.retries`) uploads the log but no summary, so the index does not look complete.
 """
 
 from __future__ import annotations
@@ -84,14 +88,27 @@ class PodEnv:
     upload_timeout: float
     transport: str = "loopback"  # CARLOS_TRANSPORT: loopback | dds
     domain_id: int = 0  # ROS_DOMAIN_ID (dds)
-    #: CARLOS_INDEX_OFFSET: the run's index of the Job's index 0 (a search round's Job runs indexes
-    #: offset…offset+completions-1 of the run; its spec lists only that round's points)
+    #: CARLOS_INDEX_OFFSET: the run's index of the Job's position 0 (a search round's Job runs indexes
+    #: offset… of the run; its spec lists only that round's points)
     offset: int = 0
+    #: CARLOS_RUNS_PER_POD: the pod runs positions completion·R … completion·R+R-1 (simcore.shards)
+    runs_per_pod: int = 1
+
+    @property
+    def completion(self) -> int:
+        """The pod's JOB_COMPLETION_INDEX."""
+        return self.index - self.offset
 
     @property
     def position(self) -> int:
-        """The index in the mounted spec's plan."""
-        return self.index - self.offset
+        """The first index of the pod's slice in the mounted spec's plan."""
+        return self.completion * self.runs_per_pod
+
+    def positions(self, total: int) -> range:
+        """The pod's slice of the mounted spec's plan (`total` points)."""
+        from simcore.shards import slice_of
+
+        return slice_of(self.completion, self.runs_per_pod, total)
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> PodEnv:
@@ -130,7 +147,11 @@ class PodEnv:
 
             domain_id = domain_id_from_env(env)
         offset = number("CARLOS_INDEX_OFFSET", 0)
+        runs_per_pod = number("CARLOS_RUNS_PER_POD", 1)
+        if runs_per_pod < 1:
+            raise BadInput("CARLOS_RUNS_PER_POD=0 is not a positive integer", field="CARLOS_RUNS_PER_POD")
         return cls(
+            runs_per_pod=runs_per_pod,
             index=number("JOB_COMPLETION_INDEX") + offset,
             offset=offset,
             spec_path=Path(spec),
@@ -153,8 +174,10 @@ def _load(env: PodEnv) -> Any:
     run = load_manifest(env.spec_path)
     total = len(Plan(run.spec))
     if env.position >= total:
+        from simcore.shards import pods_for
+
         raise BadInput(
-            f"JOB_COMPLETION_INDEX={env.position} is out of range 0..{total - 1}",
+            f"JOB_COMPLETION_INDEX={env.completion} is out of range 0..{pods_for(total, env.runs_per_pod) - 1}",
             field="JOB_COMPLETION_INDEX",
         )
     return run
@@ -276,40 +299,137 @@ def _run_dds_bridge(env: PodEnv, stop: threading.Event) -> int:
 # --- simcore ---------------------------------------------------------------------------------------------
 
 
-def run_simcore(env: PodEnv) -> int:
-    from simcore import pipeline
-    from simcore.evaluation.criteria import CriterionResult, evaluate
-    from simcore.evaluation.report import index_summary, summary_json
-    from simcore.plan import Plan
-    from simcore.runner import resolve_scenario_file
+def _needs_pod_bus(spec: Any) -> bool:
+    """Whether the world's topics must leave simcore's process: the recorder sidecar records them, or a
+    system under test runs in its own container. Otherwise an index runs on an in-process bus (as a local
+    worker does) and only the verdict goes to the recorder."""
+    sut = spec.system_under_test
+    return bool(spec.recording.enabled or (sut is not None and sut.image))
 
-    started = time.monotonic()
+
+class _Reports:
+    """The recorder's reports on /carlos/recorder/status, by the index they are about."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._got: dict[tuple[str, str], dict[str, str]] = {}
+
+    def on_message(self, message: Message) -> None:
+        values = _values(message.obj())
+        with self._cond:
+            self._got[(values.get("index", ""), values.get("phase", "end"))] = values
+            self._cond.notify_all()
+
+    def wait(self, index: int, phase: str, timeout: float) -> dict[str, str] | None:
+        key = (str(index), phase)
+        with self._cond:
+            self._cond.wait_for(lambda: key in self._got, timeout)
+            return self._got.pop(key, None)
+
+
+def run_simcore(env: PodEnv) -> int:
+    """Run the pod's slice of indexes one after another in this (warm) process. Each index ends with its
+    verdict, which the recorder turns into the index's files. Per index: an index whose summary exists (an
+    earlier attempt of this pod) is skipped; an infrastructure error is retried here up to
+    `execution.retries` times, then the pod fails (exit 3) so that Kubernetes retries the slice — unless this
+    is the slice's last attempt, when the index is recorded as an error and the slice goes on; bad input
+    stops the pod at once (exit 2). The exit code is the worst of the slice: 3, else 1 (a test failure),
+    else 0."""
+    from simcore.plan import Plan
+
     run = _load(env)
     spec = run.spec
-    point = Plan(spec)[env.position]
-    attempt = env.failures + 1
-    final_attempt = attempt > spec.execution.retries
+    plan = Plan(spec)
+    store = _store(env, run)
     try:
         bus = _connect(env)
     except ConnectionError as exc:
         print(f"error: {exc}", flush=True)
         return int(ExitCode.INFRASTRUCTURE)
-    report: dict[str, str] = {}
-    reported = threading.Event()
-
-    def on_report(message: Message) -> None:
-        report.update(_values(message.obj()))
-        reported.set()
-
+    reports = _Reports()
     if env.transport == "dds":
-        bus.subscribe(RECORDER_TOPIC, on_report, typename=STATUS_TYPE)
-        # the recorder subscribed ("*") before it reported ready; wait until this participant knows it
+        bus.subscribe(RECORDER_TOPIC, reports.on_message, typename=STATUS_TYPE)
+        # the recorder subscribed before it reported ready; wait until this participant knows it
         if not bus.wait_for_subscribers(STATUS_TOPIC, 1, timeout=60.0):
             print("error: no recorder subscribed on the DDS domain within 60 s", flush=True)
             bus.close()
             return int(ExitCode.INFRASTRUCTURE)
     else:
-        bus.subscribe(RECORDER_TOPIC, on_report)
+        bus.subscribe(RECORDER_TOPIC, reports.on_message)
+    status = bus.advertise(STATUS_TOPIC, STATUS_TYPE)
+    last_pod_attempt = env.failures >= spec.execution.retries
+    tries = spec.execution.retries + 1
+    worst = ExitCode.PASSED
+    # the slice's first unfinished index is the one an earlier attempt of this pod was running when it
+    # failed: each earlier pod attempt counts one attempt of it (the later indexes had not started)
+    earlier = env.failures
+    try:
+        for position in env.positions(len(plan)):
+            index = env.offset + position
+            kept = _kept_summary(store, f"{run.name}/{index}/summary.json")
+            if kept is not None:
+                print(
+                    f"index {index}: done by an earlier attempt ({kept.get('status')}), skipped", flush=True
+                )
+                if kept.get("status") != "passed":
+                    worst = max(worst, ExitCode.FAILED)
+                continue
+            code = ExitCode.INFRASTRUCTURE
+            for attempt in range(1, tries + 1):
+                final = last_pod_attempt and attempt == tries
+                code = _run_one(
+                    env, run, plan[position], index, earlier + attempt, final, bus, status, reports
+                )
+                if code != ExitCode.INFRASTRUCTURE:
+                    break
+            earlier = 0
+            if code == ExitCode.BAD_INPUT:
+                return int(code)
+            if code == ExitCode.INFRASTRUCTURE and not last_pod_attempt:
+                return int(code)  # Kubernetes retries the slice; the finished indexes are skipped then
+            worst = max(worst, code)
+    finally:
+        bus.close()
+    return int(worst)
+
+
+def _kept_summary(store: Any, key: str) -> dict[str, Any] | None:
+    if not store.exists(key):
+        return None
+    try:
+        summary = json.loads(store.get_bytes(key))
+    except ValueError:  # cut short: the index runs again
+        return None
+    return summary if isinstance(summary, dict) else None
+
+
+def _run_one(
+    env: PodEnv,
+    run: Any,
+    point: Any,
+    index: int,
+    attempt: int,
+    final_attempt: bool,
+    bus: Any,
+    status: Publisher,
+    reports: _Reports,
+) -> ExitCode:
+    """One attempt of one index: announce it to the recorder, simulate, judge, hand the verdict to the
+    recorder and wait for its upload. Returns the index's exit code (3 also when the upload failed)."""
+    from simcore import pipeline
+    from simcore.evaluation.criteria import CriterionResult, evaluate
+    from simcore.evaluation.report import index_summary, summary_json
+    from simcore.runner import resolve_scenario_file
+
+    started = time.monotonic()
+    spec = run.spec
+    announce = {"index": str(index), "attempt": str(attempt), "podAttempt": str(env.failures + 1)}
+    status.publish(_status_message("start", 0.0, announce), 0.0)
+    opened = reports.wait(index, "start", env.upload_timeout)
+    if opened is None or opened.get("state") != "ready":
+        why = "did not answer" if opened is None else opened.get("error", "failed")
+        print(f"error: index {index}: the recorder {why}", flush=True)
+        return ExitCode.INFRASTRUCTURE
     criteria = [*spec.evaluation.criteria, *point.scenario.criteria]
     metrics: dict[str, float] = {}
     results: list[CriterionResult] = []
@@ -319,8 +439,8 @@ def run_simcore(env: PodEnv) -> int:
     offset = 0.0
     exit_code = ExitCode.PASSED
     log_lines = [
-        f"carlos pod simcore: run {run.name} index {env.index} attempt {attempt}: "
-        f"scenario {point.scenario.name}, seed {point.seed}",
+        f"carlos pod simcore: run {run.name} index {index} attempt {attempt} (pod attempt "
+        f"{env.failures + 1}): scenario {point.scenario.name}, seed {point.seed}",
         f"parameters: {json.dumps(point.parameters, sort_keys=True)}",
     ]
     # the recorder role records (simulate must not write a second MCAP); a system under test with an image
@@ -353,7 +473,7 @@ def run_simcore(env: PodEnv) -> int:
                 scenario_file,
                 scratch,
                 deadline=started + spec.execution.timeout_seconds,
-                bus=_Borrowed(bus),
+                bus=_Borrowed(bus) if _needs_pod_bus(spec) else None,
             )
             metrics, end_reason, sim_seconds = ran.metrics, ran.end_reason, ran.sim_seconds
             offset = ran.scenario_time_offset
@@ -370,7 +490,7 @@ def run_simcore(env: PodEnv) -> int:
             log_lines.append("error: " + error)
             log_lines.append(traceback.format_exc())
     summary = index_summary(
-        index=env.index,
+        index=index,
         scenario=point.scenario.name,
         parameters=point.parameters,
         seed=point.seed,
@@ -386,6 +506,8 @@ def run_simcore(env: PodEnv) -> int:
     )
     if error is None and summary["status"] == "failed":
         exit_code = ExitCode.FAILED
+    if exit_code == ExitCode.BAD_INPUT:
+        summary["badInput"] = True
     log_lines.append(f"status: {summary['status']} (exit code {int(exit_code)})")
     print("\n".join(log_lines), flush=True)
     write_summary = not (exit_code == ExitCode.INFRASTRUCTURE and not final_attempt)
@@ -393,6 +515,7 @@ def run_simcore(env: PodEnv) -> int:
         "error" if error is not None else "ended",
         sim_seconds,
         {
+            "index": str(index),
             SUMMARY_KEY: summary_json(summary).decode(),  # parameters in the manifest's order
             "log": "\n".join(log_lines) + "\n",
             "exitCode": str(int(exit_code)),
@@ -401,16 +524,15 @@ def run_simcore(env: PodEnv) -> int:
     )
     if env.transport == "dds" and not bus.flush(60.0):  # everything before the verdict has arrived
         log.warning("simcore: not every message was acknowledged by the subscribers within 60 s")
-    bus.advertise(STATUS_TOPIC, STATUS_TYPE).publish(verdict, sim_seconds)
-    if not reported.wait(env.upload_timeout):
+    status.publish(verdict, sim_seconds)
+    report = reports.wait(index, "end", env.upload_timeout)
+    if report is None:
         print(f"error: the recorder did not report its upload within {env.upload_timeout:.0f} s", flush=True)
-        bus.close()
-        return int(ExitCode.INFRASTRUCTURE)
-    bus.close()
+        return ExitCode.INFRASTRUCTURE
     if report.get("state") != "uploaded":
         print(f"error: the recorder failed: {report.get('error', 'unknown error')}", flush=True)
-        return int(ExitCode.INFRASTRUCTURE)
-    return int(exit_code)
+        return ExitCode.INFRASTRUCTURE
+    return exit_code
 
 
 # --- recorder --------------------------------------------------------------------------------------------
@@ -435,28 +557,116 @@ class _ReadyPort:
         self.server.close()
 
 
+class _Recording:
+    """The recorder's state for the index in progress: its MCAP (when the spec records) and its verdict."""
+
+    def __init__(self, index: int, recorder: Any, workdir: Path, attempt: str) -> None:
+        self.index = index
+        self.recorder = recorder
+        self.workdir = workdir
+        self.attempt = attempt
+
+
 def run_recorder(env: PodEnv) -> int:
-    from simcore.recorder import McapRecorder
-    from simcore.runner import versions
+    """Serve the pod's slice: for each index simcore announces (`start`), open its MCAP and report `ready`;
+    record what arrives; on its verdict close the MCAP, upload `recording.mcap` and `log.txt`, then
+    `summary.json` last, and report `uploaded` (or `error`). On SIGTERM the index in progress is closed and
+    uploaded with what was received (no summary)."""
+    import queue
+
+    from simcore.plan import Plan
 
     run = _load(env)
     spec = run.spec
-    from simcore.plan import Plan
-
-    point = Plan(spec)[env.position]
+    plan = Plan(spec)
     store = _store(env, run)
-    prefix = f"{run.name}/{env.index}"
     env.scratch.mkdir(parents=True, exist_ok=True)
-    workdir = Path(tempfile.mkdtemp(prefix="recorder-", dir=env.scratch))
     lock = threading.Lock()
-    verdict: dict[str, str] = {}
-    got_verdict = threading.Event()
-    done = threading.Event()
+    events: queue.Queue[dict[str, str]] = queue.Queue()
     stop = threading.Event()
-    recorder: McapRecorder | None = None
+    current: list[_Recording] = []  # the index being recorded (at most one)
+
+    def on_message(message: Message) -> None:
+        if message.topic == RECORDER_TOPIC:
+            return  # our own reports
+        values: dict[str, str] = {}
+        if message.topic == STATUS_TOPIC:
+            values = _values(message.obj())
+            if values.get("state") == "start" or SUMMARY_KEY in values:
+                # simcore ↔ recorder, not part of the run's recording (the verdict's wall time would make
+                # the same run's recordings differ; its content is the index's summary.json and log.txt)
+                events.put(values)
+                return
+        with lock:
+            if current and current[0].recorder is not None and current[0].recorder.wants(message.topic):
+                # the CDR as received: no deserialising and serialising again
+                current[0].recorder.write(message.topic, message.typename, message.cdr(), message.time_s)
+
+    _on_sigterm(stop.set)
+    try:
+        bus = _connect(env, on_disconnect=stop.set)
+    except ConnectionError as exc:
+        print(f"error: {exc}", flush=True)
+        return int(ExitCode.INFRASTRUCTURE)
+    if spec.recording.enabled:
+        bus.subscribe("*", on_message)
+    elif env.transport == "dds":
+        bus.subscribe(STATUS_TOPIC, on_message, typename=STATUS_TYPE)
+    else:
+        bus.subscribe(STATUS_TOPIC, on_message)
+    report = bus.advertise(RECORDER_TOPIC, STATUS_TYPE)
+    ready = _ReadyPort(env.ready_port)
+    log.info("recorder: subscribed, ready on 127.0.0.1:%d", env.ready_port)
+    failed = False
+    while not stop.is_set():
+        try:
+            values = events.get(timeout=0.2)
+        except queue.Empty:
+            continue
+        index = int(values.get("index", env.index))
+        if values.get("state") == "start":
+            try:
+                opened = _open_recording(env, run, plan, index, values.get("attempt", "1"))
+                state, error = "ready", ""
+            except Exception as exc:  # the scratch volume is full, …: this attempt is an infrastructure error
+                opened, state, error = None, "error", f"{type(exc).__name__}: {exc}"
+            with lock:
+                current[:] = [opened] if opened is not None else []
+            extra = {"index": str(index), "phase": "start", **({"error": error} if error else {})}
+            report.publish(_status_message(state, 0.0, extra), 0.0)
+            continue
+        if env.transport == "dds" and spec.recording.enabled:
+            # topics are not ordered among each other: what simcore sent before the verdict (all
+            # acknowledged) may still be queued here
+            bus.drain()
+        with lock:  # the verdict: no message of this index is written after this point
+            done = current.pop() if current else None
+        state, error = _finish(env, run, store, done, values)
+        failed = failed or state != "uploaded"
+        extra = {"index": str(index), "phase": "end", **({"error": error} if error else {})}
+        report.publish(_status_message(state, 0.0, extra), 0.0)
+    # SIGTERM (or the bus is gone) during an index: what is in flight to us still goes into its file
+    bus.drain()
+    with lock:
+        done = current.pop() if current else None
+    if done is not None:
+        _finish(env, run, store, done, {})
+    ready.close()
+    bus.close()
+    return int(ExitCode.INFRASTRUCTURE) if failed else 0
+
+
+def _open_recording(env: PodEnv, run: Any, plan: Any, index: int, attempt: str) -> _Recording:
+    from simcore.recorder import McapRecorder
+    from simcore.runner import versions
+
+    spec = run.spec
+    workdir = Path(tempfile.mkdtemp(prefix=f"recorder-{index}-", dir=env.scratch))
+    recorder = None
     if spec.recording.enabled:
         import yaml
 
+        point = plan[index - env.offset]
         recorder = McapRecorder.for_recording(
             workdir / "recording.mcap",
             spec.recording,
@@ -466,50 +676,32 @@ def run_recorder(env: PodEnv) -> int:
                 },
                 "carlos.run": {
                     "run": run.name,
-                    "index": str(env.index),
+                    "index": str(index),
                     "scenario": point.scenario.name,
                     "parameters": json.dumps(point.parameters, sort_keys=True),
                     "seed": str(point.seed),
                     "stepSeconds": repr(spec.simulation.step_seconds),
-                    "attempt": str(env.failures + 1),
                 },
                 "carlos.versions": versions(),
             },
         )
+    return _Recording(index, recorder, workdir, attempt)
 
-    def on_message(message: Message) -> None:
-        with lock:
-            if recorder is not None and not done.is_set() and recorder.wants(message.topic):
-                # the CDR as received: no deserialising and serialising again
-                recorder.write(message.topic, message.typename, message.cdr(), message.time_s)
-            if message.topic == STATUS_TOPIC:
-                values = _values(message.obj())
-                if SUMMARY_KEY in values:
-                    verdict.update(values)
-                    got_verdict.set()
 
-    _on_sigterm(stop.set)
-    try:
-        bus = _connect(env, on_disconnect=stop.set)
-    except ConnectionError as exc:
-        print(f"error: {exc}", flush=True)
-        return int(ExitCode.INFRASTRUCTURE)
-    bus.subscribe("*", on_message)
-    ready = _ReadyPort(env.ready_port)
-    log.info("recorder: subscribed, ready on 127.0.0.1:%d", env.ready_port)
-    while not got_verdict.is_set() and not stop.is_set():
-        got_verdict.wait(0.2)
-    if not got_verdict.is_set() or env.transport == "dds":
-        # SIGTERM: what is in flight to us still goes into the file; DDS: topics are not ordered among
-        # each other, what simcore sent before the verdict (all acknowledged) may still be queued here
-        bus.drain()
-    with lock:  # no message is written after this point; everything received is in the file
-        done.set()
-        if recorder is not None:
-            recorder.close()
+def _finish(
+    env: PodEnv, run: Any, store: Any, done: _Recording | None, verdict: dict[str, str]
+) -> tuple[str, str]:
+    """Close the index's MCAP and upload its files (the summary last); (state, error)."""
+    import shutil
+
+    if done is None:
+        return "error", "no index was announced before its verdict"
+    prefix = f"{run.name}/{done.index}"
     state, error = "uploaded", ""
     try:
-        mcap = workdir / "recording.mcap"
+        if done.recorder is not None:
+            done.recorder.close()
+        mcap = done.workdir / "recording.mcap"
         if mcap.is_file():
             store.put_file(f"{prefix}/recording.mcap", mcap)
         if verdict:
@@ -522,22 +714,15 @@ def run_recorder(env: PodEnv) -> int:
         else:
             store.put_bytes(
                 f"{prefix}/log.txt",
-                f"recorder: terminated before the end of the run (attempt {env.failures + 1})\n".encode(),
+                f"recorder: terminated before the end of the run (attempt {done.attempt})\n".encode(),
             )
         store.sync()
     except Exception as exc:  # the object store failed: simcore turns this into exit code 3
         state, error = "error", f"{type(exc).__name__}: {exc}"
         print(f"recorder: upload failed: {error}", flush=True)
-    if verdict and not stop.is_set():
-        bus.advertise(RECORDER_TOPIC, STATUS_TYPE).publish(
-            _status_message(state, 0.0, {"error": error} if error else {}), 0.0
-        )
-    # a native sidecar is restarted when it exits while the pod runs: stay until the pod stops us
-    while not stop.is_set():
-        stop.wait(0.5)
-    ready.close()
-    bus.close()
-    return 0 if state == "uploaded" else int(ExitCode.INFRASTRUCTURE)
+    finally:
+        shutil.rmtree(done.workdir, ignore_errors=True)
+    return state, error
 
 
 def main(role: str) -> int:

@@ -652,6 +652,16 @@ class Execution(Model):
             "remaining runs are not started. Default: no limit (every run is tried)."
         ),
     )
+    runs_per_pod: int | None = Field(
+        None,
+        ge=1,
+        le=100_000,
+        description=(
+            "Cluster: runs one pod executes one after another (a contiguous slice of the indexes, the "
+            "simulator kept warm across it; each index still has its own results). Default: chosen from "
+            "the plan so that a pod works for minutes and a Job has at most 1,000 pods."
+        ),
+    )
     resources: Resources | None = Field(
         None,
         description=(

@@ -27,7 +27,7 @@ import os
 import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -382,6 +382,9 @@ class JobRunner:
     workdir: Path
     extra_env: dict[str, str] = field(default_factory=dict)
     crash_first_attempt: set[int] = field(default_factory=set)  # indexes whose first simcore is killed
+    #: completion index → a condition polled while its first simcore runs: SIGKILL once it holds
+    #: (e.g. mid-slice, after the slice's first runs wrote their summaries)
+    crash_first_attempt_when: dict[int, Callable[[], bool]] = field(default_factory=dict)
     attempts: dict[tuple[str, int], int] = field(default_factory=dict)
     _seen: set[str] = field(default_factory=set)
     _stop: threading.Event = field(default_factory=threading.Event)
@@ -479,6 +482,17 @@ class JobRunner:
                     if name == "simcore" and index in self.crash_first_attempt and self.attempts[key] == 1:
                         time.sleep(0.5)
                         proc.kill()
+                    when = self.crash_first_attempt_when.get(index)
+                    if name == "simcore" and when is not None and self.attempts[key] == 1:
+
+                        def kill_when() -> None:
+                            while proc.poll() is None:
+                                if when():
+                                    proc.kill()
+                                    return
+                                time.sleep(0.02)
+
+                        threading.Thread(target=kill_when, daemon=True).start()
 
                 kubelet = Kubelet(
                     configmaps=configmaps,

@@ -35,7 +35,7 @@ def manifest(name: str, bucket: str, criteria: list[str], speeds: list[float], *
             "simulation": {"stepSeconds": 0.1, "maxSeconds": 3},
             "evaluation": {"criteria": criteria},
             "output": {"url": f"s3://{bucket}/operator", "credentialsSecretRef": {"name": "s3"}},
-            "execution": {"parallelism": 2, "retries": 1},
+            "execution": {"parallelism": 2, "retries": 1, "runsPerPod": 1},
             **spec,
         },
     }
@@ -346,3 +346,90 @@ def test_api_server_errors_are_retried_to_the_same_end(
     assert len(c.objects("configmaps")) == 1
     store = results(s3_server, monkeypatch)
     assert json.loads(store.get_bytes("e2e-faults/summary.json"))["counts"]["passed"] == 2
+
+
+def test_a_killed_shard_is_retried_without_rerunning_its_finished_runs(
+    env: tuple[Cluster, Kube],
+    s3_server: S3Server,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Two pods of three runs each. Pod 0's simcore is killed mid-slice, once runs 0 and 1 wrote their
+    summaries: the retried pod skips them and runs 2 only. The results equal those of the same run left
+    alone (in another namespace): summaries but for the wall time and run 2's attempts, and the recordings
+    byte for byte."""
+    c, kube = env
+    monkeypatch.setenv("CARLOS_SECRET_NAMESPACES", "default,calm")
+    # over the loopback hub the recorder receives one publisher's messages in publish order; over DDS the
+    # order among topics at the same instant varies from run to run (two undisturbed runs differ in it too)
+    monkeypatch.setenv("CARLOS_POD_TRANSPORT", "loopback")
+    secret = kube.core.read_namespaced_secret("s3", "default")
+    kube.core.create_namespaced_secret(
+        "calm",
+        {
+            "apiVersion": "v1",
+            "kind": "Secret",
+            "metadata": {"name": "s3", "namespace": "calm"},
+            "data": secret.data,
+        },
+        _preload_content=False,
+    )
+    c.start_operator()
+    store = results(s3_server, monkeypatch)
+    from simcore.store import open_store
+
+    calm = open_store(
+        f"s3://{s3_server.bucket}/operator/calm", endpoint=s3_server.endpoint, region=s3_server.region
+    )
+    body = manifest("shard", s3_server.bucket, ["simSeconds <= 100"], [10.0, 12.0, 14.0, 16.0, 18.0, 20.0])
+    body["spec"]["execution"]["runsPerPod"] = 3
+    killed: list[bool] = []
+
+    def mid_slice() -> bool:  # once (the undisturbed run's pod 0 is left alone)
+        if not killed and store.exists("shard/1/summary.json"):
+            killed.append(True)
+            return True
+        return False
+
+    jobs = runner(kube, s3_server, tmp_path, crash_first_attempt_when={0: mid_slice})
+    try:
+        create(kube, body)
+        st = wait_for(lambda: terminal(kube, "shard"), 240, "a terminal phase")
+        quiet = json.loads(json.dumps(body))
+        quiet["metadata"]["namespace"] = "calm"
+        kube.custom.create_namespaced_custom_object(
+            GROUP, VERSION, "calm", PLURAL, quiet, _preload_content=False
+        )
+
+        def calm_terminal() -> dict[str, Any] | None:
+            raw = kube.custom.get_namespaced_custom_object(
+                GROUP, VERSION, "calm", PLURAL, "shard", _preload_content=False
+            )
+            got = dict(json.loads(raw.data).get("status") or {})
+            return got if got.get("phase") in ("Succeeded", "Failed") else None
+
+        calm_st = wait_for(calm_terminal, 240, "the undisturbed run's terminal phase")
+    finally:
+        jobs.stop()
+    assert jobs.errors == []
+    assert st["phase"] == calm_st["phase"] == "Succeeded", (st, calm_st)
+    assert (st["total"], st["passed"], st["progress"]) == (6, 6, "6/6")
+    job = next(j for j in c.objects("jobs") if j["metadata"]["namespace"] == "default")
+    assert job["spec"]["completions"] == 2
+    uid = job["metadata"]["uid"]
+    assert jobs.attempts[(uid, 0)] == 2 and jobs.attempts[(uid, 1)] == 1  # pod 0 killed once, retried
+    for index in range(6):
+        disturbed = json.loads(store.get_bytes(f"shard/{index}/summary.json"))
+        undisturbed = json.loads(calm.get_bytes(f"shard/{index}/summary.json"))
+        # run 2 was the one in progress when pod 0 was killed: its second attempt
+        assert (disturbed.pop("attempts"), undisturbed.pop("attempts")) == (2 if index == 2 else 1, 1)
+        for summary in (disturbed, undisturbed):
+            summary.pop("wallSeconds")
+        assert disturbed == undisturbed
+        assert store.get_bytes(f"shard/{index}/recording.mcap") == calm.get_bytes(
+            f"shard/{index}/recording.mcap"
+        )
+    # runs 0 and 1 ran once (the first pod), run 2 again in the retried pod: its log says so
+    assert "pod attempt 1" in store.get_bytes("shard/0/log.txt").decode()
+    assert "pod attempt 1" in store.get_bytes("shard/1/log.txt").decode()
+    assert "pod attempt 2" in store.get_bytes("shard/2/log.txt").decode()

@@ -60,7 +60,7 @@ def manifest(**spec: Any) -> dict[str, Any]:
             {"name": "b", "configMapRef": {"name": "scenarios", "key": "b.xosc"}},
         ],
         "sweep": {"matrix": {"speed": [10, 20, 30]}, "repetitions": 2},
-        "execution": {"parallelism": 4, "retries": 2, "timeoutSeconds": 600},
+        "execution": {"parallelism": 4, "retries": 2, "timeoutSeconds": 600, "runsPerPod": 1},
     }
     base.update(spec)
     return {
@@ -642,3 +642,101 @@ def test_round_steps_and_search_status() -> None:
     assert done["phase"] == "Failed"  # a required criterion failed at index 2: as `carlos run` exits 1
     assert done["search"]["rounds"] == "3/3" and done["search"]["round"] is None
     assert done["search"]["searchURL"] == "s3://b/r/search.json" and done["completionTime"] == "T"
+
+
+# --- shards: slices of runs per pod ----------------------------------------------------------------------
+
+
+def test_a_large_sweep_gets_a_slice_per_pod_by_default_and_runs_per_pod_when_asked() -> None:
+    from carlos_operator.status import RUNS_ANNOTATION, RUNS_PER_POD_ANNOTATION
+
+    body = manifest(sweep={"matrix": {"a": list(range(210)), "b": list(range(125))}, "repetitions": 1})
+    del body["spec"]["execution"]["runsPerPod"]
+    run = load(body)
+    job = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))
+    runs = 2 * 210 * 125  # 52,500
+    per_pod = int(job["metadata"]["annotations"][RUNS_PER_POD_ANNOTATION])
+    assert job["metadata"]["annotations"][RUNS_ANNOTATION] == str(runs)
+    assert job["spec"]["completions"] == -(-runs // per_pod) <= 1_050
+    env = {e["name"]: e.get("value") for e in job["spec"]["template"]["spec"]["containers"][0]["env"]}
+    assert env["CARLOS_RUNS_PER_POD"] == str(per_pod)
+    # a pod's deadline covers its whole slice
+    assert job["spec"]["template"]["spec"]["activeDeadlineSeconds"] == 600 * per_pod + 300
+    body["spec"]["execution"]["runsPerPod"] = 7
+    run = load(body)
+    job = build_job(run, body, SETTINGS, resolve_output(run, SETTINGS))
+    assert job["spec"]["completions"] == -(-runs // 7)
+
+
+def test_default_slices_follow_the_cost_of_a_run() -> None:
+    from simcore import shards
+
+    quick = shards.default_runs_per_pod(52_500, shards.estimate_run_seconds(20.0, 0))
+    lidar = shards.default_runs_per_pod(52_500, shards.estimate_run_seconds(20.0, 2))
+    assert shards.pods_for(52_500, quick) <= 1_050 and shards.pods_for(52_500, lidar) <= 1_050
+    assert shards.default_runs_per_pod(200, shards.estimate_run_seconds(120.0, 2)) < 200  # long: more pods
+    assert shards.default_runs_per_pod(200, shards.estimate_run_seconds(10.0, 0)) == 200  # short: one pod
+    # a search round: the measured wall seconds of earlier rounds decide, not the plan's estimate
+    assert shards.default_runs_per_pod(100, shards.estimate_run_seconds(10.0, 0, [30.0, 30.0])) == 10
+    assert shards.default_runs_per_pod(3, 1.0) == 3 and shards.default_runs_per_pod(0, 1.0) == 1
+
+
+def test_slices_cover_every_run_once_in_index_order() -> None:
+    from simcore import shards
+
+    for runs, per_pod in ((10, 3), (9, 3), (1, 5), (52_500, 500)):
+        covered = [
+            p for k in range(shards.pods_for(runs, per_pod)) for p in shards.slice_of(k, per_pod, runs)
+        ]
+        assert covered == list(range(runs))
+        assert all(
+            shards.pod_of(p, per_pod) == k for k in range(3) for p in shards.slice_of(k, per_pod, runs)
+        )
+
+
+def test_finished_pods_count_as_the_runs_of_their_slices() -> None:
+    from carlos_operator.status import RUNS_ANNOTATION, RUNS_PER_POD_ANNOTATION, runs_view
+
+    job = {
+        "metadata": {"annotations": {RUNS_PER_POD_ANNOTATION: "3", RUNS_ANNOTATION: "10"}},
+        "status": {"completedIndexes": "0,2-3", "failedIndexes": "1", "active": 1},
+    }
+    view = runs_view(job)
+    assert view is not None
+    assert view["status"]["completedIndexes"] == "0-2,6-9"  # pod 3 holds run 9 only
+    assert view["status"]["failedIndexes"] == "3-5"
+    assert view["status"]["active"] == 1  # pods
+    assert job["status"]["completedIndexes"] == "0,2-3"  # the Job itself is left alone
+    one = {"metadata": {}, "status": {"completedIndexes": "0-4"}}
+    assert runs_view(one) == one and runs_view(None) is None
+
+
+def test_operator_modules_import_no_circle() -> None:
+    """controller ↔ inputs ↔ searching once formed a circle; module-level imports (with TYPE_CHECKING ones)
+    of carlos_operator form none."""
+    import ast
+
+    package = Path(__file__).resolve().parent.parent / "operator/carlos_operator"
+    graph: dict[str, set[str]] = {}
+    for path in package.glob("*.py"):
+        edges = graph.setdefault(path.stem, set())
+        for node in ast.parse(path.read_text()).body:
+            for sub in ast.walk(node) if isinstance(node, ast.If) else [node]:
+                if isinstance(sub, ast.ImportFrom) and (sub.module or "").startswith("carlos_operator"):
+                    mod = sub.module or ""
+                    edges.update(
+                        {a.name for a in sub.names} if mod == "carlos_operator" else {mod.rpartition(".")[2]}
+                    )
+    seen: dict[str, int] = {}
+
+    def visit(name: str, stack: list[str]) -> None:
+        if seen.get(name) == 2:
+            return
+        assert seen.get(name) != 1, f"import circle: {' → '.join([*stack, name])}"
+        seen[name] = 1
+        for target in sorted(graph.get(name, ())):
+            visit(target, [*stack, name])
+        seen[name] = 2
+
+    for name in sorted(graph):
+        visit(name, [])

@@ -116,6 +116,7 @@ def run_body(name: str, uid: str, n: int, status: dict[str, Any] | None = None) 
             "scenarios": [{"name": "s", "openscenario": "s3://bucket/s.xosc"}],
             "sweep": {"repetitions": n},
             "output": {"url": "s3://bucket/out", "credentialsSecretRef": {"name": "s3"}},
+            "execution": {"runsPerPod": 1},  # a pod per run: the Job statuses below are written per run
         },
         "status": status or {},
     }
@@ -432,7 +433,7 @@ def test_suspended_run_with_a_queue_is_held_until_resumed() -> None:
     kube, store = FakeKube(), FakeStore()
     body = run_body("r", "uid-1", 3)
     body["spec"]["suspend"] = True
-    body["spec"]["execution"] = {"queueName": "team-a"}
+    body["spec"]["execution"] = {"queueName": "team-a", "runsPerPod": 1}
     c = controller(kube, store)
     c.observe_run("ADDED", body)
     drain(c)
@@ -515,6 +516,7 @@ def search_body(name: str, uid: str, status: dict[str, Any] | None = None, **sce
             },
             "evaluation": {"criteria": ["minDistance >= 10"]},
             "output": {"url": "s3://bucket/out", "credentialsSecretRef": {"name": "s3"}},
+            "execution": {"runsPerPod": 1},
         },
         "status": status or {},
     }

@@ -50,7 +50,7 @@ def search_manifest(name: str, bucket: str) -> dict[str, Any]:
             "evaluation": {"criteria": ["simSeconds <= 1000"]},
             "recording": {"enabled": False},
             "output": {"url": f"s3://{bucket}/operator", "credentialsSecretRef": {"name": "s3"}},
-            "execution": {"parallelism": 3, "retries": 1},
+            "execution": {"parallelism": 3, "retries": 1},  # default slices: a round of 3 points, 1 pod
         },
     }
 
@@ -99,9 +99,11 @@ def test_search_runs_in_rounds_survives_restarts_and_succeeds(
     by_name = {j["metadata"]["name"]: j for j in c.objects("jobs")}
     for number, job_name in enumerate((r0, r1)):
         spec = by_name[job_name]["spec"]
-        assert spec["completionMode"] == "Indexed" and spec["completions"] == 3
+        # the round's 3 points in one pod (round 1 sized by round 0's measured wall seconds)
+        assert spec["completionMode"] == "Indexed" and spec["completions"] == 1
+        assert by_name[job_name]["metadata"]["annotations"]["carlos.dev/runs"] == "3"
         env_of = {e["name"]: e.get("value") for e in spec["template"]["spec"]["containers"][0]["env"]}
-        assert env_of["CARLOS_INDEX_OFFSET"] == str(3 * number)
+        assert env_of["CARLOS_INDEX_OFFSET"] == str(3 * number) and env_of["CARLOS_RUNS_PER_POD"] == "3"
     search = st["search"]
     assert (search["rounds"], search["roundsDone"], search["roundsTotal"], search["evaluated"]) == (
         "2/2",

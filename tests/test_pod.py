@@ -15,6 +15,7 @@ from carlos_operator.builders import OperatorSettings, build_configmap, build_jo
 from mcap.reader import make_reader
 
 from simcore.manifest import parse_manifest
+from simcore.pod import RECORDER_TOPIC, STATUS_TOPIC, STATUS_TYPE, _status_message
 from simcore.store import open_store
 from simcore.transport.bus import Message
 from simcore.transport.loopback import LoopbackBus, LoopbackHub
@@ -112,7 +113,7 @@ def test_pod_roles_run_an_index_and_upload_results(
     transport: str, s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     name = f"pod-pass-{transport}"
-    manifest = body(name, s3_server.bucket, ["simSeconds <= 100"])
+    manifest = body(name, s3_server.bucket, ["simSeconds <= 100"], execution={"runsPerPod": 1})
     kubelet, pod = kubelet_for(manifest, s3_server, tmp_path, transport)
     result = kubelet.run_pod(pod, index=1)
     assert result.exit_codes == {"simcore": 0, "bridge": 0, "recorder": 0}, result.logs
@@ -138,7 +139,7 @@ def test_pod_roles_run_an_index_and_upload_results(
 def test_a_test_failure_exits_1_and_bad_input_exits_2(
     s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    manifest = body("pod-fail", s3_server.bucket, ["minDistance >= 10000"])
+    manifest = body("pod-fail", s3_server.bucket, ["minDistance >= 10000"], execution={"runsPerPod": 1})
     kubelet, pod = kubelet_for(manifest, s3_server, tmp_path)
     result = kubelet.run_pod(pod, index=0)
     assert result.exit_codes["simcore"] == 1, result.logs
@@ -193,6 +194,13 @@ def test_recorder_on_sigterm_keeps_every_message_and_writes_no_summary(
         Clock = TYPESTORE.types["rosgraph_msgs/msg/Clock"]
         Time = TYPESTORE.types["builtin_interfaces/msg/Time"]
         bus = LoopbackBus("127.0.0.1", bus_port)
+        # as simcore does: announce index 0 and wait until the recorder has opened its recording
+        opened = threading.Event()
+        bus.subscribe(RECORDER_TOPIC, lambda m: opened.set())
+        bus.advertise(STATUS_TOPIC, STATUS_TYPE).publish(
+            _status_message("start", 0.0, {"index": "0", "attempt": "1"}), 0.0
+        )
+        assert opened.wait(30)
         clock = bus.advertise("/clock", "rosgraph_msgs/msg/Clock")
         # stopped while they are published, the recorder has read none of them when SIGTERM arrives: every
         # one is in flight (with the hub and in the recorder's socket), and reading and writing them all takes
@@ -224,3 +232,60 @@ def test_recorder_on_sigterm_keeps_every_message_and_writes_no_summary(
             for _, _, message in reader.iter_messages()
         ]
     assert seconds == list(range(count))  # every message sent, each once, in order
+
+
+@pytest.mark.s3
+@pytest.mark.parametrize("transport", ["dds", "loopback"])
+def test_a_shard_pod_runs_its_slice_and_skips_finished_indexes_when_retried(
+    transport: str, s3_server: S3Server, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Both indexes of the sweep in one pod (the default slice of a 2-run sweep): each index gets its own
+    files and recording; a second attempt of the pod finds them and runs nothing again."""
+    name = f"pod-shard-{transport}"
+    manifest = body(name, s3_server.bucket, ["simSeconds <= 100"])
+    kubelet, pod = kubelet_for(manifest, s3_server, tmp_path, transport)
+    assert {"name": "CARLOS_RUNS_PER_POD", "value": "2"} in pod["containers"][0]["env"]
+    result = kubelet.run_pod(pod, index=0)
+    assert result.exit_codes == {"simcore": 0, "bridge": 0, "recorder": 0}, result.logs
+    store = results_store(s3_server, monkeypatch)
+    first: dict[str, bytes] = {}
+    for index, speed in ((0, 15.0), (1, 20.0)):
+        summary = json.loads(store.get_bytes(f"{name}/{index}/summary.json"))
+        assert summary["index"] == index and summary["status"] == "passed"
+        assert summary["parameters"] == {"Speed": speed}
+        for key in ("recording.mcap", "log.txt", "summary.json"):
+            first[f"{index}/{key}"] = store.get_bytes(f"{name}/{index}/{key}")
+        recording = tmp_path / f"recording-{index}.mcap"
+        recording.write_bytes(first[f"{index}/recording.mcap"])
+        with recording.open("rb") as f:
+            metadata = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+        assert metadata["carlos.run"]["index"] == str(index)
+    again = kubelet.run_pod(pod, index=0, failures=1)
+    assert again.exit_codes["simcore"] == 0, again.logs
+    assert again.logs["simcore"].count("done by an earlier attempt (passed), skipped") == 2
+    for key, data in first.items():
+        assert store.get_bytes(f"{name}/{key}") == data
+
+
+def test_pod_env_names_the_slice_of_its_completion_index() -> None:
+    from simcore.errors import BadInput
+    from simcore.pod import PodEnv
+
+    base = {"CARLOS_SPEC": "/s.yaml", "CARLOS_OUTPUT_URL": "file:///out", "JOB_COMPLETION_INDEX": "2"}
+    env = PodEnv.from_env({**base, "CARLOS_RUNS_PER_POD": "3", "CARLOS_INDEX_OFFSET": "100"})
+    assert (env.completion, env.position, env.runs_per_pod) == (2, 6, 3)
+    assert list(env.positions(8)) == [6, 7]  # the last slice is short
+    assert [env.offset + p for p in env.positions(8)] == [106, 107]  # the run's indexes
+    assert list(PodEnv.from_env(base).positions(8)) == [2]  # default: one run per pod
+    with pytest.raises(BadInput, match="CARLOS_RUNS_PER_POD"):
+        PodEnv.from_env({**base, "CARLOS_RUNS_PER_POD": "0"})
+
+
+def test_a_rerun_of_failed_indexes_is_sliced_like_any_sweep() -> None:
+    manifest = body("rerun", "bucket", [], execution={"runsPerPod": 2})
+    manifest["spec"]["sweep"] = {"matrix": {"Speed": [10.0, 12.0, 14.0, 16.0, 18.0]}, "indexes": [4, 1, 3]}
+    run = parse_manifest(json.loads(json.dumps(manifest)), source="test")
+    settings = OperatorSettings.from_env({"CARLOS_DEFAULT_S3_ENDPOINT": "http://s3"})
+    job = build_job(run, manifest, settings, resolve_output(run, settings))
+    assert job["spec"]["completions"] == 2  # 3 runs in slices of 2
+    assert job["metadata"]["annotations"]["carlos.dev/runs"] == "3"

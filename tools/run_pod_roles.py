@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""Run one SimulationRun index as a pod would — `carlos pod --role bridge`, `--role recorder`, then
-`--role simcore`, three processes of the `carlos` next to this interpreter — over the loopback hub and
-over DDS, with file:// results; check the exit codes, the summary and the recording. Used by
+"""Run a slice of two SimulationRun indexes as a pod would — `carlos pod --role bridge`, `--role recorder`,
+then `--role simcore` (CARLOS_RUNS_PER_POD=2), three processes of the `carlos` next to this interpreter —
+over the loopback hub and over DDS, with file:// results; check the exit codes, each index's summary and
+recording. Used by
 tools/wheel-check with the interpreter of a virtualenv holding only the built wheel. Standard library only.
 
     python tools/run_pod_roles.py SCENARIO.xosc WORKDIR
@@ -50,6 +51,7 @@ def manifest(scenario: Path, output: str) -> dict[str, object]:
         "metadata": {"name": RUN_NAME},
         "spec": {
             "scenarios": [{"name": "braking", "openscenario": scenario.resolve().as_uri()}],
+            "sweep": {"repetitions": 2},
             "simulation": {"stepSeconds": 0.1, "maxSeconds": 4},
             "evaluation": {"criteria": ["simSeconds <= 100"]},
             "output": {"url": output},
@@ -58,7 +60,7 @@ def manifest(scenario: Path, output: str) -> dict[str, object]:
 
 
 def run_pod(scenario: Path, work: Path, transport: str) -> None:
-    """One index through the three roles; raises with the logs when anything is off."""
+    """A slice of two indexes through the three roles; raises with the logs when anything is off."""
     carlos = str(Path(sys.executable).with_name("carlos"))
     root = work / transport
     results = root / "results"
@@ -71,6 +73,7 @@ def run_pod(scenario: Path, work: Path, transport: str) -> None:
     env = {
         **os.environ,
         "JOB_COMPLETION_INDEX": "0",
+        "CARLOS_RUNS_PER_POD": "2",
         "CARLOS_SPEC": str(spec),
         "CARLOS_OUTPUT_URL": output,
         "CARLOS_BUS_PORT": str(bus_port),
@@ -111,12 +114,13 @@ def run_pod(scenario: Path, work: Path, transport: str) -> None:
                 procs[role].send_signal(signal.SIGTERM)
             if procs[role].wait(60) != 0:
                 raise RuntimeError(f"{role} exited with {procs[role].returncode}")
-        index = results / RUN_NAME / "0"
-        summary = json.loads((index / "summary.json").read_text())
-        if summary.get("status") != "passed":
-            raise RuntimeError(f"summary.json: status {summary.get('status')!r}, not passed: {summary}")
-        if (index / "recording.mcap").stat().st_size == 0:
-            raise RuntimeError("recording.mcap is empty")
+        for number in ("0", "1"):
+            index = results / RUN_NAME / number
+            summary = json.loads((index / "summary.json").read_text())
+            if summary.get("status") != "passed" or summary.get("index") != int(number):
+                raise RuntimeError(f"{number}/summary.json: not index {number} passed: {summary}")
+            if (index / "recording.mcap").stat().st_size == 0:
+                raise RuntimeError(f"{number}/recording.mcap is empty")
     except Exception as exc:
         logs = "\n".join(
             f"--- {log.name}\n{log.read_text(errors='replace')[-3000:]}" for log in sorted(root.glob("*.log"))

@@ -1,6 +1,7 @@
 """Pure builders: a SimulationRun → its ConfigMap and Indexed Job (plain dicts, no I/O, no kopf).
 
-One pod per index (DESIGN.md, pod roles): the simulator core is the main container; the bridge and the
+One pod per slice of `runs_per_pod` indexes (simcore.shards; DESIGN.md, pod roles and shards): the
+simulator core is the main container, running its slice one index after another; the bridge and the
 recorder are native sidecars, i.e. init containers with `restartPolicy: Always` whose startup probes make
 the kubelet start them in order, each ready before the next starts:
 
@@ -8,8 +9,9 @@ the kubelet start them in order, each ready before the next starts:
    default) it logs the pod's ROS 2 graph; over the loopback transport it is the topic hub.
 2. `recorder`: subscribes to every topic, then opens 127.0.0.1:`RECORDER_READY_PORT` (its startup probe)
    — so no message simcore publishes can be missed.
-3. `simcore`: runs the index, publishes the topics and the verdict, waits until the recorder has uploaded
-   the results, and exits with DESIGN.md's exit code, which the Job's podFailurePolicy acts on.
+3. `simcore`: runs each index of its slice, publishes the topics and the verdict, waits until the recorder
+   has uploaded the results, and exits with the worst of DESIGN.md's exit codes of its slice, which the
+   Job's podFailurePolicy acts on.
 
 Topics: `CARLOS_TRANSPORT` on every container, the operator's `pod_transport` (CARLOS_POD_TRANSPORT, Helm
 value `podTransport`): `dds` (default) puts them on DDS as ROS 2 topics, so the system under test's
@@ -30,12 +32,15 @@ import hashlib
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 import yaml
 
+from carlos_operator.status import RUNS_ANNOTATION, RUNS_PER_POD_ANNOTATION
+from simcore import shards
 from simcore.errors import BadInput, ExitCode
 from simcore.plan import Plan
 from simcore.spec import API_GROUP, API_VERSION, KIND, EnvVar, SimulationRun, Sweep
@@ -515,26 +520,40 @@ def _env_var(var: EnvVar) -> dict[str, Any]:
     return {"name": var.name, "valueFrom": {"secretKeyRef": var.secret_key_ref.model_dump()}}
 
 
+def runs_per_pod(run: SimulationRun, runs: int, measured: Sequence[float] = ()) -> int:
+    """The Job's slice size: `execution.runsPerPod`, else `simcore.shards.default_runs_per_pod` from the
+    plan's estimate (or `measured` wall seconds of earlier runs, a search's earlier rounds)."""
+    spec = run.spec
+    if spec.execution.runs_per_pod is not None:
+        return min(spec.execution.runs_per_pod, max(runs, 1))
+    sensors = len(spec.sensors) + sum(len(rsu.sensors) for rsu in spec.infrastructure)
+    cost = shards.estimate_run_seconds(spec.simulation.max_seconds, sensors, measured)
+    return shards.default_runs_per_pod(runs, cost)
+
+
 def build_job(
     run: SimulationRun,
     body: dict[str, Any],
     settings: OperatorSettings,
     output: Output,
     search_round: SearchRound | None = None,
+    measured: Sequence[float] = (),
 ) -> dict[str, Any]:
-    """The run's Indexed Job: one completion per index, Kubernetes doing retries and parallelism. A
-    search's round (`search_round`) gets its own Job over the round's ConfigMap, its pods' indexes offset
-    by the round's start (CARLOS_INDEX_OFFSET)."""
+    """The run's Indexed Job: one completion per slice of `runs_per_pod` indexes (simcore.shards),
+    Kubernetes doing retries and parallelism. A search's round (`search_round`) gets its own Job over the
+    round's ConfigMap, its pods' indexes offset by the round's start (CARLOS_INDEX_OFFSET)."""
     spec = run.spec
     if search_round is None:
-        total = len(Plan(spec))
+        runs = len(Plan(spec))
         name = job_name(run.name)
     else:
-        total = search_round.count
+        runs = search_round.count
         name = round_job_name(run.name, search_round.number)
+    per_pod = runs_per_pod(run, runs, measured)
+    total = shards.pods_for(runs, per_pod)
     parallelism = min(spec.execution.parallelism or DEFAULT_PARALLELISM, total)
     attempts = spec.execution.retries + 1
-    pod_deadline = spec.execution.timeout_seconds + POD_DEADLINE_GRACE_S
+    pod_deadline = spec.execution.timeout_seconds * per_pod + POD_DEADLINE_GRACE_S
     waves = math.ceil(total / parallelism)
     labels = _labels(run, settings)
     if search_round is not None:
@@ -571,8 +590,9 @@ def build_job(
     bridge["resources"] = sidecar_resources
     recorder = _sidecar(_container("recorder", settings, run, output, mounts), RECORDER_READY_PORT)
     recorder["resources"] = copy.deepcopy(sidecar_resources)
-    if search_round is not None:
-        for container in (simcore, bridge, recorder):
+    for container in (simcore, bridge, recorder):
+        container["env"].append({"name": "CARLOS_RUNS_PER_POD", "value": str(per_pod)})
+        if search_round is not None:
             container["env"].append({"name": "CARLOS_INDEX_OFFSET", "value": str(search_round.start)})
     sidecars = [bridge, recorder]
     sut = spec.system_under_test
@@ -638,6 +658,7 @@ def build_job(
             "name": name,
             "namespace": body["metadata"].get("namespace"),
             "labels": job_labels,
+            "annotations": {RUNS_PER_POD_ANNOTATION: str(per_pod), RUNS_ANNOTATION: str(runs)},
             "ownerReferences": [owner_reference(body)],
         },
         "spec": {

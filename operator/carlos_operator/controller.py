@@ -38,7 +38,6 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 from typing import Any
 
 from carlos_operator import metrics
@@ -58,9 +57,17 @@ from carlos_operator.builders import (
 )
 from carlos_operator.inputs import read_input
 from carlos_operator.kube import Conflict, Kube, NotFound, now_rfc3339
+from carlos_operator.runstate import RunState, slim_job
 from carlos_operator.scratch import ScratchFolders
-from carlos_operator.searching import SearchProgress, SearchRuns
-from carlos_operator.status import TERMINAL_PHASES, Tally, aggregate, condition, job_finished
+from carlos_operator.searching import SearchRuns
+from carlos_operator.status import (
+    TERMINAL_PHASES,
+    Tally,
+    aggregate,
+    condition,
+    job_finished,
+    runs_view,
+)
 from simcore.errors import BadInput, CarlosError
 from simcore.evaluation.report import junit_xml, run_summary
 from simcore.manifest import parse_manifest
@@ -111,27 +118,6 @@ class Rejected(Exception):
 
 class Waiting(Rejected):
     """Something the run names does not exist yet (or is being deleted): retried with backoff."""
-
-
-@dataclass
-class RunState:
-    """What the controller remembers of one run (rebuilt from the cluster and the store after a restart)."""
-
-    body: dict[str, Any]
-    uid: str
-    run: SimulationRun | None = None
-    output: Output | None = None
-    tally: Tally | None = None
-    store: Any = None
-    ensured: bool = False
-    last_status: dict[str, Any] = field(default_factory=dict)
-    generation: int | None = None
-    job_seen: bool = False  # its Job existed (created, adopted, or the status shows it started)
-    held: bool = False  # suspended with a queueName: the Job is not created yet
-    waits: int = 0  # consecutive waits for a prerequisite (the backoff exponent)
-    pods_checked: float = 0.0  # monotonic time of the last pod check
-    stuck: tuple[str, str] | None = None  # (reason, message) of a pod that cannot start
-    search: SearchProgress | None = None  # a search's rounds (searching.py)
 
 
 def _store_for(kube: Kube, namespace: str, output: Output) -> Any:
@@ -659,7 +645,7 @@ class Controller:
             except NotFound:
                 return None
         owners = job.get("metadata", {}).get("ownerReferences") or []
-        return job if any(o.get("uid") == state.uid for o in owners) else None
+        return runs_view(job) if any(o.get("uid") == state.uid for o in owners) else None
 
     def _update_status(self, key: Key, state: RunState) -> None:
         assert state.run is not None and state.tally is not None and state.output is not None
@@ -892,24 +878,6 @@ def _missing_summary(run: SimulationRun, index: int, reason: str) -> dict[str, A
     from simcore.runner import error_outcome
 
     return error_outcome(run, index, 1, reason).summary
-
-
-def slim_job(job: dict[str, Any]) -> dict[str, Any]:
-    """What the controller needs of a Job (its pod template is most of its size: kept out of memory)."""
-    meta = job.get("metadata") or {}
-    spec = job.get("spec") or {}
-    return {
-        "metadata": {
-            "name": meta.get("name"),
-            "namespace": meta.get("namespace"),
-            "ownerReferences": [
-                {"kind": o.get("kind"), "name": o.get("name"), "uid": o.get("uid")}
-                for o in meta.get("ownerReferences") or []
-            ],
-        },
-        "spec": {"suspend": spec.get("suspend"), "parallelism": spec.get("parallelism")},
-        "status": job.get("status") or {},
-    }
 
 
 def slim_run(body: dict[str, Any]) -> dict[str, Any]:

@@ -16,11 +16,11 @@ from simcore.errors import BadInput
 from simcore.spec import ConfigMapKeyRef
 
 if TYPE_CHECKING:
-    from carlos_operator.controller import Controller
+    from carlos_operator.hosting import Host
 
 
 def read_input(
-    c: Controller,
+    c: Host,
     namespace: str,
     output: Output,
     *,

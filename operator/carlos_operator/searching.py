@@ -21,7 +21,6 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -33,6 +32,7 @@ from carlos_operator.builders import (
 )
 from carlos_operator.inputs import read_input
 from carlos_operator.kube import Conflict, NotFound, now_rfc3339
+from carlos_operator.runstate import RunState, SearchProgress, slim_job
 from carlos_operator.scratch import ScratchFolders
 from carlos_operator.status import (
     ERROR,
@@ -44,15 +44,15 @@ from carlos_operator.status import (
     count_intervals,
     iter_intervals,
     job_finished,
+    runs_view,
     verdict_fields,
 )
 from simcore.search import driver
 from simcore.search.export import distribution_xml
-from simcore.search.space import Dimension
 from simcore.spec import Search
 
 if TYPE_CHECKING:
-    from carlos_operator.controller import Controller, RunState
+    from carlos_operator.hosting import Host
 
 log = logging.getLogger("carlos.operator")
 
@@ -211,24 +211,10 @@ def search_status(
     return status
 
 
-@dataclass
-class SearchProgress:
-    """What the operator keeps of one search between passes (rebuilt from the store after a restart)."""
-
-    scenario_name: str  # the scenario as failing.xosc names it
-    space: list[Dimension]
-    log: list[dict[str, Any]] = field(default_factory=list)
-    points: list[dict[str, Any]] = field(default_factory=list)
-    loaded: bool = False  # the stored state was read
-    round: driver.Round | None = None  # the round asked (its study tells the results)
-    created: set[int] = field(default_factory=set)  # rounds whose Job this process created or adopted
-    stopped: bool = False
-
-
 class SearchRuns:
     """The search side of the controller: the scenario, the rounds, their Jobs and the status."""
 
-    def __init__(self, controller: Controller) -> None:
+    def __init__(self, controller: Host) -> None:
         self.c = controller
         self._scratch = ScratchFolders("carlos-operator-search-")
 
@@ -360,7 +346,7 @@ class SearchRuns:
             except NotFound:
                 return None
         owners = job.get("metadata", {}).get("ownerReferences") or []
-        return job if any(o.get("uid") == state.uid for o in owners) else None
+        return runs_view(job) if any(o.get("uid") == state.uid for o in owners) else None
 
     def _gone(self, state: RunState, current: SearchRound) -> bool:
         """The round's Job was created (by this process, or before a restart: the status names it) and is
@@ -389,7 +375,6 @@ class SearchRuns:
         self, state: RunState, namespace: str, current: SearchRound, progress: SearchProgress
     ) -> dict[str, Any]:
         from carlos_operator import metrics
-        from carlos_operator.controller import slim_job
 
         assert state.run is not None and state.output is not None
         run = state.run
@@ -403,7 +388,14 @@ class SearchRuns:
         except Conflict:
             existing = self.c.kube.read_configmap(namespace, cm["metadata"]["name"])
             self.c._check_owned(existing, state, "ConfigMap")
-        job = build_job(run, state.body, self.c.settings, state.output, search_round=current)
+        job = build_job(
+            run,
+            state.body,
+            self.c.settings,
+            state.output,
+            search_round=current,
+            measured=progress.wall_seconds[-1000:],
+        )
         created = False
         try:
             job = self.c.kube.create_job(namespace, job)
@@ -471,6 +463,9 @@ class SearchRuns:
         progress.log, progress.points, progress.round = asked.log, points, None
         for summary in summaries:
             state.tally.record(summary)
+            if summary.get("status") != "error" and summary.get("wallSeconds"):
+                progress.wall_seconds.append(float(summary["wallSeconds"]))
+        del progress.wall_seconds[:-1000]
         log.info(
             "search %s: round %d told (%d points, optimiser %.2f s)",
             state.run.name,

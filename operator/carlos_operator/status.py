@@ -13,10 +13,15 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from simcore.spec import API_GROUP
+
 UNKNOWN, PASSED, FAILED, ERROR = 0, 1, 2, 3
 _VERDICTS = {"passed": PASSED, "failed": FAILED, "error": ERROR}
 MAX_FAILURES = 20
 TERMINAL_PHASES = ("Succeeded", "Failed")
+#: the Job's annotations of its slicing (set by carlos_operator.builders): runs per pod, runs of the Job
+RUNS_PER_POD_ANNOTATION = f"{API_GROUP}/runs-per-pod"
+RUNS_ANNOTATION = f"{API_GROUP}/runs"
 
 
 def parse_intervals(text: str | None) -> list[tuple[int, int]]:
@@ -148,6 +153,26 @@ def condition(
         "message": message,
         "lastTransitionTime": since or now,
     }
+
+
+def runs_view(job: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """The Job with its finished completion indexes (`completedIndexes`, `failedIndexes`: pods, each a slice
+    of runs) expressed as the Job's run positions (simcore.shards; the builders annotate runs per pod and
+    runs), so that everything downstream counts runs, not pods. `active` stays pods."""
+    from simcore.shards import positions_of_pods
+
+    if job is None:
+        return None
+    annotations = (job.get("metadata") or {}).get("annotations") or {}
+    per_pod = int(annotations.get(RUNS_PER_POD_ANNOTATION) or 1)
+    status = dict(job.get("status") or {})
+    if per_pod == 1 or not status:
+        return dict(job)
+    runs = int(annotations.get(RUNS_ANNOTATION) or 0)
+    for key in ("completedIndexes", "failedIndexes"):
+        if status.get(key):
+            status[key] = positions_of_pods(status[key], per_pod, runs)
+    return {**job, "status": status}
 
 
 def job_finished(job: Mapping[str, Any] | None) -> str | None:
