@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from simcore.errors import BadInput
+from simcore.errors import BadInput, CarlosError
 from simcore.spec import SimulationRun
 from simcore.store import Store, StoreError, open_store
 
@@ -95,7 +95,10 @@ def _in_manifest_order(spec: SimulationRun, summaries: list[dict[str, Any]]) -> 
     from simcore.evaluation.report import in_manifest_order
     from simcore.plan import Plan
 
-    plan = Plan(spec.spec)
+    try:
+        plan = Plan(spec.spec)
+    except CarlosError:  # a plan this machine cannot build (a ConfigMap's distribution): order as stored
+        return summaries
     ordered = []
     for summary in summaries:
         index = summary.get("index")
