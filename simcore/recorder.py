@@ -476,35 +476,11 @@ class McapRecorder:
             text = msgdef(typename)
         except KeyError:
             raise RecorderError(f"topic {topic!r}: unknown message type {typename!r}") from None
-        chunk = self._chunk
-        schema_id = self._schemas.get(typename)
-        if schema_id is None:
-            schema_id = self._schemas[typename] = len(self._schemas) + 1
-            record = _record(
-                _OP_SCHEMA,
-                _U16.pack(schema_id) + _string(typename) + _string("ros2msg") + _string(text),
-            )
-            self._schema_records.append(record)
-            chunk.pieces.append(record)
-            chunk.size += len(record)
-        channel_id = len(self._channels) + 1
-        record = _record(
-            _OP_CHANNEL,
-            _U16.pack(channel_id)
-            + _U16.pack(schema_id)
-            + _string(topic)
-            + _string("cdr")
-            + _map({"offered_qos_profiles": DEFAULT_QOS}),
+        return self._new_channel(
+            topic, typename, "ros2msg", text.encode("utf-8"), "cdr", {"offered_qos_profiles": DEFAULT_QOS}
         )
-        self._channel_records.append(record)
-        chunk.pieces.append(record)
-        chunk.size += len(record)
-        self._channels[topic] = (channel_id, typename)
-        self._sequence[channel_id] = 0
-        self._counts[channel_id] = 0
-        return channel_id
 
-    def add_channel(
+    def _new_channel(
         self,
         topic: str,
         schema_name: str,
@@ -512,12 +488,8 @@ class McapRecorder:
         schema_data: bytes,
         message_encoding: str,
         metadata: Mapping[str, str],
-    ) -> None:
-        """A channel of a schema other than a ROS 2 message (e.g. protobuf `osi3.GroundTruth`): `write(topic,
-        schema_name, data, t)` then records encoded `data` on it. Recorded whatever the topic patterns say."""
-        self._check_open()
-        if topic in self._channels:
-            raise RecorderError(f"topic {topic!r} already has a channel")
+    ) -> int:
+        """The schema record (once per schema name) and the channel record of a new topic, into the chunk."""
         chunk = self._chunk
         schema_id = self._schemas.get(schema_name)
         if schema_id is None:
@@ -548,6 +520,23 @@ class McapRecorder:
         self._channels[topic] = (channel_id, schema_name)
         self._sequence[channel_id] = 0
         self._counts[channel_id] = 0
+        return channel_id
+
+    def add_channel(
+        self,
+        topic: str,
+        schema_name: str,
+        schema_encoding: str,
+        schema_data: bytes,
+        message_encoding: str,
+        metadata: Mapping[str, str],
+    ) -> None:
+        """A channel of a schema other than a ROS 2 message (e.g. protobuf `osi3.GroundTruth`): `write(topic,
+        schema_name, data, t)` then records encoded `data` on it. Recorded whatever the topic patterns say."""
+        self._check_open()
+        if topic in self._channels:
+            raise RecorderError(f"topic {topic!r} already has a channel")
+        self._new_channel(topic, schema_name, schema_encoding, schema_data, message_encoding, metadata)
         self._wanted[topic] = True
 
     def write(self, topic: str, typename: str, msg: Any, time_s: float) -> bool:
