@@ -9,7 +9,7 @@ SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 TEST_SYSTEM_PACKAGES := chromium
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck docs reference wheel wheel-check bench conformance differential crds helm lint-chart images clean
+.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images clean
 
 
 install: $(STAMP)
@@ -70,6 +70,10 @@ reference: install
 	$(VENV)/bin/carlos docs fields > docs/simulationrun.md
 	$(VENV)/bin/carlos docs cli > docs/reference/cli.md
 	$(VENV)/bin/carlos docs topics > docs/reference/topics.md
+
+# the ROS 2 message definitions of the type store (rosbags' jazzy store + simcore/transport/msg), as data
+msgdefs: install
+	$(PY) -m simcore.transport.typestore > simcore/transport/msgdefs.py
 
 # the wheel (dist/carlos-VERSION-py3-none-any.whl), built from a clean copy of the sources
 wheel:

@@ -25,61 +25,12 @@ import math
 import re
 from collections.abc import Callable, Mapping
 from functools import cache, partial
-from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-from rosbags.typesys.store import Typestore
-from rosbags.typesys.stores.ros2_jazzy import (
-    builtin_interfaces__msg__Time as Time,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    diagnostic_msgs__msg__DiagnosticStatus as DiagnosticStatus,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    diagnostic_msgs__msg__KeyValue as KeyValue,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    geometry_msgs__msg__Point as Point,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    geometry_msgs__msg__Pose as Pose,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    geometry_msgs__msg__PoseWithCovariance as PoseWithCovariance,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    geometry_msgs__msg__Quaternion as Quaternion,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    geometry_msgs__msg__Transform as Transform,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    geometry_msgs__msg__TransformStamped as TransformStamped,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    geometry_msgs__msg__Twist as Twist,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    geometry_msgs__msg__TwistWithCovariance as TwistWithCovariance,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    geometry_msgs__msg__Vector3 as Vector3,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    nav_msgs__msg__Odometry as Odometry,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    rosgraph_msgs__msg__Clock as Clock,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    std_msgs__msg__Header as Header,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    tf2_msgs__msg__TFMessage as TFMessage,
-)
 
+from simcore.transport.msgdefs import FIELDDEFS
+from simcore.transport.typestore import MSG_DIR, LazyTypestore
 from simcore.world.state import EntityState, WorldFrame
 
 __all__ = [
@@ -104,8 +55,6 @@ __all__ = [
     "tf",
 ]
 
-#: Where the extra `.msg` definitions live: `msg/<package>/<Type>.msg`.
-MSG_DIR = Path(__file__).with_name("msg")
 MAP_FRAME = "map"
 CLOCK_TOPIC = "/clock"
 TF_TOPIC = "/tf"
@@ -114,29 +63,51 @@ STATUS_TOPIC = "/carlos/status"
 
 _ZERO_COVARIANCE = np.zeros(36, dtype=np.float64)
 
-
-def _build_typestore() -> Typestore:
-    store = get_typestore(Stores.ROS2_JAZZY)
-    types: dict[str, Any] = {}
-    paths = sorted(MSG_DIR.glob("*/*.msg"))
-    if not paths:
-        raise RuntimeError(
-            f"no message definitions under {MSG_DIR}: the package was installed without its .msg files "
-            "(package data 'transport/msg/*/*.msg')"
-        )
-    for path in paths:
-        typename = f"{path.parent.name}/msg/{path.stem}"
-        types.update(get_types_from_msg(path.read_text(encoding="utf-8"), typename))
-    store.register(types)
-    return store
-
-
-#: The one type store of CARLOS: ROS 2 jazzy + vision_msgs + ackermann_msgs + the V2X packages.
-TYPESTORE: Typestore = _build_typestore()
+#: The one type store of CARLOS: ROS 2 jazzy + vision_msgs + ackermann_msgs + the V2X packages; each type's
+#: class is generated when it is first used (simcore/transport/typestore.py).
+TYPESTORE: LazyTypestore = LazyTypestore(FIELDDEFS)
 
 
 def _type(typename: str) -> Any:
     return TYPESTORE.types[typename]
+
+
+if TYPE_CHECKING:
+    from rosbags.typesys.stores.ros2_jazzy import builtin_interfaces__msg__Time as Time
+    from rosbags.typesys.stores.ros2_jazzy import diagnostic_msgs__msg__DiagnosticStatus as DiagnosticStatus
+    from rosbags.typesys.stores.ros2_jazzy import diagnostic_msgs__msg__KeyValue as KeyValue
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Point as Point
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Pose as Pose
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__PoseWithCovariance as PoseWithCovariance
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Quaternion as Quaternion
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Transform as Transform
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__TransformStamped as TransformStamped
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Twist as Twist
+    from rosbags.typesys.stores.ros2_jazzy import (
+        geometry_msgs__msg__TwistWithCovariance as TwistWithCovariance,
+    )
+    from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Vector3 as Vector3
+    from rosbags.typesys.stores.ros2_jazzy import nav_msgs__msg__Odometry as Odometry
+    from rosbags.typesys.stores.ros2_jazzy import rosgraph_msgs__msg__Clock as Clock
+    from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
+    from rosbags.typesys.stores.ros2_jazzy import tf2_msgs__msg__TFMessage as TFMessage
+else:
+    Time = _type("builtin_interfaces/msg/Time")
+    DiagnosticStatus = _type("diagnostic_msgs/msg/DiagnosticStatus")
+    KeyValue = _type("diagnostic_msgs/msg/KeyValue")
+    Point = _type("geometry_msgs/msg/Point")
+    Pose = _type("geometry_msgs/msg/Pose")
+    PoseWithCovariance = _type("geometry_msgs/msg/PoseWithCovariance")
+    Quaternion = _type("geometry_msgs/msg/Quaternion")
+    Transform = _type("geometry_msgs/msg/Transform")
+    TransformStamped = _type("geometry_msgs/msg/TransformStamped")
+    Twist = _type("geometry_msgs/msg/Twist")
+    TwistWithCovariance = _type("geometry_msgs/msg/TwistWithCovariance")
+    Vector3 = _type("geometry_msgs/msg/Vector3")
+    Odometry = _type("nav_msgs/msg/Odometry")
+    Clock = _type("rosgraph_msgs/msg/Clock")
+    Header = _type("std_msgs/msg/Header")
+    TFMessage = _type("tf2_msgs/msg/TFMessage")
 
 
 # --- names and small conversions ------------------------------------------------------------------------

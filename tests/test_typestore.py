@@ -1,0 +1,109 @@
+"""The type store: generated definitions match their sources; types are generated on first use and behave as
+rosbags' fully built store."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from rosbags.interfaces import Nodetype
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.base import TypesysError
+
+from simcore.transport import msgdefs
+from simcore.transport.typestore import LazyTypestore, definitions_from_sources, module_source
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_generated_definitions_match_their_sources() -> None:
+    """simcore/transport/msgdefs.py is what `make msgdefs` writes from rosbags' jazzy store and the .msg files."""
+    expected = module_source(definitions_from_sources())
+    have = (ROOT / "simcore" / "transport" / "msgdefs.py").read_text(encoding="utf-8")
+    assert have == expected, "simcore/transport/msgdefs.py is stale: run `make msgdefs`"
+
+
+def test_lazy_store_equals_the_fully_built_store() -> None:
+    sources = definitions_from_sources()
+    lazy = LazyTypestore(msgdefs.FIELDDEFS)
+    assert "vision_msgs/msg/Detection3DArray" in lazy.types
+    assert "no_such/msg/Type" not in lazy.fielddefs
+    assert dict.__len__(lazy.fielddefs) == 0  # membership generates nothing
+    header = lazy.types["std_msgs/msg/Header"]
+    # a type and the types it nests, nothing else
+    assert set(dict.keys(lazy.fielddefs)) == {"std_msgs/msg/Header", "builtin_interfaces/msg/Time"}
+    assert header.__msgtype__ == "std_msgs/msg/Header"
+    # rosbags' form: lists of fields, node types as Nodetype
+    _consts, fields = lazy.fielddefs["geometry_msgs/msg/PoseWithCovariance"]
+    assert isinstance(fields, list) and isinstance(fields[0][1][0], Nodetype)
+    assert (
+        lazy.fielddefs["geometry_msgs/msg/PoseWithCovariance"]
+        == sources["geometry_msgs/msg/PoseWithCovariance"]
+    )
+    # iteration sees every type, in the sources' order
+    assert list(lazy.fielddefs) == list(sources)
+    assert {k: lazy.fielddefs[k] for k in sources} == sources
+    with pytest.raises(KeyError):
+        lazy.types["no_such/msg/Type"]
+
+
+def test_lazy_store_serialises_as_rosbags_jazzy() -> None:
+    lazy = LazyTypestore(msgdefs.FIELDDEFS)
+    jazzy = get_typestore(Stores.ROS2_JAZZY)
+    for store in (lazy, jazzy):
+        t = store.types
+        msg = t["nav_msgs/msg/Odometry"](
+            header=t["std_msgs/msg/Header"](
+                stamp=t["builtin_interfaces/msg/Time"](sec=3, nanosec=5), frame_id="map"
+            ),
+            child_frame_id="ego/base_link",
+            pose=t["geometry_msgs/msg/PoseWithCovariance"](
+                pose=t["geometry_msgs/msg/Pose"](
+                    position=t["geometry_msgs/msg/Point"](x=1.0, y=2.0, z=0.0),
+                    orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                ),
+                covariance=__import__("numpy").zeros(36),
+            ),
+            twist=t["geometry_msgs/msg/TwistWithCovariance"](
+                twist=t["geometry_msgs/msg/Twist"](
+                    linear=t["geometry_msgs/msg/Vector3"](x=1.0, y=0.0, z=0.0),
+                    angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.1),
+                ),
+                covariance=__import__("numpy").zeros(36),
+            ),
+        )
+        store.last = bytes(store.serialize_cdr(msg, "nav_msgs/msg/Odometry"))  # type: ignore[attr-defined]
+    assert lazy.last == jazzy.last  # type: ignore[attr-defined]
+    assert lazy.generate_msgdef("nav_msgs/msg/Odometry") == jazzy.generate_msgdef("nav_msgs/msg/Odometry")
+    back = lazy.deserialize_cdr(lazy.last, "nav_msgs/msg/Odometry")  # type: ignore[attr-defined]
+    assert back.child_frame_id == "ego/base_link" and back.header.stamp.nanosec == 5
+
+
+def test_register_adds_new_types_and_rejects_a_different_known_one() -> None:
+    lazy = LazyTypestore(msgdefs.FIELDDEFS)
+    lazy.register({"my_msgs/msg/Wrapped": ([], [("stamp", (Nodetype.NAME, "builtin_interfaces/msg/Time"))])})
+    wrapped = lazy.types["my_msgs/msg/Wrapped"](
+        stamp=lazy.types["builtin_interfaces/msg/Time"](sec=1, nanosec=0)
+    )
+    assert (
+        bytes(lazy.serialize_cdr(wrapped, "my_msgs/msg/Wrapped"))[4:] == b"\x01\x00\x00\x00\x00\x00\x00\x00"
+    )
+    # the same definition again is fine; a different one for a known name is not
+    lazy.register({"std_msgs/msg/Header": msgdefs.FIELDDEFS["std_msgs/msg/Header"]})
+    with pytest.raises(TypesysError, match="std_msgs/msg/Header"):
+        lazy.register({"std_msgs/msg/Header": ([], [("other", (Nodetype.BASE, ("int8", 0)))])})
+
+
+def test_importing_the_messages_generates_only_what_they_use() -> None:
+    """The reason for the lazy store: a run does not pay for the ~480 types it does not use (nor imports rosbags'
+    jazzy store, which imports every earlier distribution's)."""
+    code = (
+        "import sys\n"
+        "from simcore.transport.messages import TYPESTORE\n"
+        "print(dict.__len__(TYPESTORE.types), 'rosbags.typesys.stores.ros2_jazzy' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    generated, jazzy_imported = out.stdout.split()
+    assert int(generated) < 40 and jazzy_imported == "False"
