@@ -876,6 +876,22 @@ class Road:
             th = t
         return x - th * sin_h, y + th * cos_h, z, h
 
+    def world_points(self, s: float, ts: Sequence[float]) -> list[tuple[float, float, float]]:
+        """World ``(x, y, z)`` of ``(s, t)`` for every ``t`` in ``ts``: :meth:`world_xyz` with the reference
+        frame at ``s`` computed once (sampling every lane border at one ``s``)."""
+        i = bisect.bisect_right(self._gstarts, s) - 1
+        g = self.geometries[i if i > 0 else 0]
+        ds = s - g.s
+        x, y, _h, cos_h, sin_h = g.frame(ds if ds >= 0.0 else 0.0)
+        z = self._z_fixed
+        if z is None:
+            z = self.elevation(s)
+        if self.superelevations:
+            r = self.roll(s)
+            cos_r, sin_r = math.cos(r), math.sin(r)
+            return [(x - t * cos_r * sin_h, y + t * cos_r * cos_h, z + t * sin_r) for t in ts]
+        return [(x - t * sin_h, y + t * cos_h, z) for t in ts]
+
     def lane_offset(self, s: float) -> float:
         """``t`` of the centre lane (laneOffset) at ``s``."""
         off = self._offset_fixed
@@ -1673,12 +1689,16 @@ class OpenDrive:
             for k, s in enumerate(ss):
                 s = float(s)
                 q = min(s, sec.end - 1e-9) if sec.end > sec.s else s
-                for side in (-1, 1):
-                    if road.section_at(q, side) is not sec:
-                        continue
-                    for lane, ti, to in road.side_borders(q, side):
-                        inner[lane.id][k] = road.world_xyz(s, ti)[:3]
-                        outer[lane.id][k] = road.world_xyz(s, to)[:3]
+                borders = [
+                    border
+                    for side in (-1, 1)
+                    if road.section_at(q, side) is sec
+                    for border in road.side_borders(q, side)
+                ]
+                points = road.world_points(s, [t for _, ti, to in borders for t in (ti, to)])
+                for j, (lane, _, _) in enumerate(borders):
+                    inner[lane.id][k] = points[2 * j]
+                    outer[lane.id][k] = points[2 * j + 1]
             for lane in sec.right + sec.left:
                 out.append(LaneBoundary(road.id, si, lane.id, lane.type, ss, inner[lane.id], outer[lane.id]))
         return out
