@@ -75,7 +75,18 @@ def test_lazy_store_serialises_as_rosbags_jazzy() -> None:
             ),
         )
         store.last = bytes(store.serialize_cdr(msg, "nav_msgs/msg/Odometry"))  # type: ignore[attr-defined]
+        store.last_be = bytes(store.serialize_cdr(msg, "nav_msgs/msg/Odometry", little_endian=False))  # type: ignore[attr-defined]
+        store.ros1 = bytes(store.serialize_ros1(msg, "nav_msgs/msg/Odometry"))  # type: ignore[attr-defined]
     assert lazy.last == jazzy.last  # type: ignore[attr-defined]
+    assert lazy.last_be == jazzy.last_be  # type: ignore[attr-defined]
+    # every serialiser rosbags generates, generated here when first used, gives rosbags' bytes
+    assert lazy.ros1 == jazzy.ros1  # type: ignore[attr-defined]
+    as_ros1 = bytes(lazy.cdr_to_ros1(lazy.last, "nav_msgs/msg/Odometry"))  # type: ignore[attr-defined]
+    assert as_ros1 == bytes(jazzy.cdr_to_ros1(jazzy.last, "nav_msgs/msg/Odometry"))  # type: ignore[attr-defined]
+    assert bytes(lazy.ros1_to_cdr(as_ros1, "nav_msgs/msg/Odometry")) == bytes(
+        jazzy.ros1_to_cdr(as_ros1, "nav_msgs/msg/Odometry")
+    )
+    assert lazy.deserialize_ros1(jazzy.ros1, "nav_msgs/msg/Odometry").child_frame_id == "ego/base_link"  # type: ignore[attr-defined]
     assert lazy.generate_msgdef("nav_msgs/msg/Odometry") == jazzy.generate_msgdef("nav_msgs/msg/Odometry")
     back = lazy.deserialize_cdr(lazy.last, "nav_msgs/msg/Odometry")  # type: ignore[attr-defined]
     assert back.child_frame_id == "ego/base_link" and back.header.stamp.nanosec == 5

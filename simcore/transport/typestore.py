@@ -20,7 +20,7 @@ from importlib.util import module_from_spec, spec_from_loader
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rosbags.interfaces import Nodetype
+from rosbags.interfaces import Msgdef, Nodetype
 from rosbags.typesys.codegen import generate_python_code
 from rosbags.typesys.store import Typestore
 
@@ -83,6 +83,47 @@ def _nested(desc: Any) -> Iterator[str]:
         yield from _nested(payload[0])
 
 
+def _generators() -> dict[str, Any]:
+    """Msgdef field → function(entries, typename, store) that generates it (rosbags' code generators, as in
+    `Typestore.get_msgdef`)."""
+    from rosbags.serde import cdr, ros1
+
+    return {
+        "serialize_cdr_le": lambda e, _n, st: cdr.generate_serialize_cdr(e, st, "le"),
+        "serialize_cdr_be": lambda e, _n, st: cdr.generate_serialize_cdr(e, st, "be"),
+        "deserialize_cdr_le": lambda e, _n, st: cdr.generate_deserialize_cdr(e, st, "le"),
+        "deserialize_cdr_be": lambda e, _n, st: cdr.generate_deserialize_cdr(e, st, "be"),
+        "serialize_ros1": lambda e, _n, st: ros1.generate_serialize_ros1(e, st),
+        "deserialize_ros1": lambda e, _n, st: ros1.generate_deserialize_ros1(e, st),
+        "getsize_ros1_to_cdr": lambda e, n, st: ros1.generate_ros1_to_cdr(e, n, st, copy=False),
+        "ros1_to_cdr": lambda e, n, st: ros1.generate_ros1_to_cdr(e, n, st, copy=True),
+        "getsize_cdr_to_ros1": lambda e, n, st: ros1.generate_cdr_to_ros1(e, n, st, copy=False),
+        "cdr_to_ros1": lambda e, n, st: ros1.generate_cdr_to_ros1(e, n, st, copy=True),
+    }
+
+
+class _LazyMsgdef(Msgdef[object]):
+    """rosbags' Msgdef whose (de)serialisers are generated when first used: a recording needs the CDR
+    serialiser of ~20 types, not the thirteen functions rosbags generates for each."""
+
+    _store: LazyTypestore
+
+    def __getattr__(self, field: str) -> Any:
+        if field in ("size_ros1", "getsize_ros1"):
+            from rosbags.serde.ros1 import generate_getsize_ros1
+
+            getsize, size = generate_getsize_ros1(self.fields, self._store)
+            object.__setattr__(self, "getsize_ros1", getsize)
+            object.__setattr__(self, "size_ros1", size)
+            return getattr(self, field)
+        generate = _generators().get(field)
+        if generate is None or field.startswith("__"):
+            raise AttributeError(field)
+        function = generate(self.fields, self.name, self._store)
+        object.__setattr__(self, field, function)
+        return function
+
+
 class LazyTypestore(Typestore):
     """A rosbags type store over `definitions` that generates each type's class when it is first used."""
 
@@ -117,8 +158,9 @@ class LazyTypestore(Typestore):
         missing = {n: _restore(d) for n, d in self._known.items() if not dict.__contains__(self.fielddefs, n)}
         if missing:
             self._add(missing)
-        for table in (self.fielddefs, self.types):
-            entries = dict(dict.items(table))
+        tables: tuple[dict[str, Any], ...] = (self.fielddefs, self.types)
+        for table in tables:
+            entries: dict[str, Any] = dict(dict.items(table))
             dict.clear(table)
             dict.update(table, {n: entries.pop(n) for n in self._known})
             dict.update(table, entries)
@@ -136,6 +178,24 @@ class LazyTypestore(Typestore):
         for typename in typs:
             dict.__setitem__(self.fielddefs, typename, generated[typename][:2])
             dict.__setitem__(self.types, typename, getattr(module, typename.replace("/", "__")))
+
+    def get_msgdef(self, typename: str) -> Msgdef[object]:
+        """As `Typestore.get_msgdef`, with each (de)serialiser generated when first used."""
+        msgdef = self.cache.get(typename)
+        if msgdef is None:
+            from rosbags.serde.cdr import generate_getsize_cdr
+            from rosbags.typesys.base import normalize_fieldname
+
+            entries = [(normalize_fieldname(name), desc) for name, desc in self.fielddefs[typename][1]]
+            msgdef = object.__new__(_LazyMsgdef)
+            for field, value in (("name", typename), ("fields", entries), ("cls", self.types[typename])):
+                object.__setattr__(msgdef, field, value)
+            object.__setattr__(msgdef, "_store", self)
+            getsize, size = generate_getsize_cdr(entries, self)
+            object.__setattr__(msgdef, "getsize_cdr", getsize)
+            object.__setattr__(msgdef, "size_cdr", size)
+            self.cache[typename] = msgdef
+        return msgdef
 
     def register(self, typs: Typesdict) -> None:
         """Add types (as `Typestore.register`): a known name must have the same fields, else TypesysError."""
