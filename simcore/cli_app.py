@@ -20,6 +20,7 @@ from typer.core import TyperGroup
 
 from simcore import startup as entry  # the collector's pause (entry.resume_gc: looked up there, at each call)
 from simcore.errors import BadInput, CarlosError, ExitCode, SimulationError, shorten
+from simcore.wording import plural
 from simcore.workflow import commands as workflow
 from simcore.workflow import compare as workflow_compare
 
@@ -76,11 +77,6 @@ def _line(label: str, style: str, text: object) -> Text:
     """`label text` with the label styled and the text literal: file names, entity names and messages are
     user-controlled, so never read as rich markup (`[/x]`) or emoji codes (`:100:`)."""
     return Text.assemble((label, style), " ", str(text))
-
-
-def plural(count: int, word: str) -> str:
-    """`1 run`, `2 runs`, `0 runs` (pure)."""
-    return f"{count} {word}" if count == 1 else f"{count} {word}s"
 
 
 def _fail(exc: CarlosError) -> typer.Exit:
@@ -676,7 +672,7 @@ def plan(
         raise _fail(exc) from None
     runs = Plan(simulation_run.spec)
     chosen = list(index) if index else list(range(min(limit, len(runs))))
-    table = Table(title=f"{simulation_run.name}: {len(runs)} runs", show_edge=False)
+    table = Table(title=f"{simulation_run.name}: {plural(len(runs), 'run')}", show_edge=False)
     for column in ("index", "scenario", "parameters", "seed"):
         table.add_column(column)
     for i in chosen:

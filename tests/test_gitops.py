@@ -92,11 +92,11 @@ def test_health_without_status_is_progressing() -> None:
                 "resultsURL": "s3://b/p/r/",
                 "conditions": [
                     condition("Complete", True),
-                    condition("Failed", True, "1 runs failed their criteria, 0 errors"),
+                    condition("Failed", True, "1 run failed its criteria, 0 errors"),
                 ],
             },
             "Degraded",
-            "1 runs failed their criteria",
+            "1 run failed its criteria",
         ),
         (
             {"phase": "Failed", "progress": "6/6", "passed": 4, "testFailures": 0, "errors": 2},

@@ -73,6 +73,7 @@ from simcore.evaluation.report import junit_xml, run_summary
 from simcore.manifest import parse_manifest
 from simcore.plan import Plan
 from simcore.spec import SimulationRun
+from simcore.wording import plural
 
 log = logging.getLogger("carlos.operator")
 
@@ -562,7 +563,7 @@ class Controller:
                 body,
                 "Normal",
                 "JobCreated",
-                f"Job {job['metadata']['name']} with {total} runs (parallelism {job['spec']['parallelism']})",
+                f"Job {job['metadata']['name']} with {plural(total, 'run')} (parallelism {job['spec']['parallelism']})",
             )
             log.info("created Job %s/%s (%d runs)", namespace, job["metadata"]["name"], total)
         else:

@@ -50,6 +50,7 @@ from carlos_operator.status import (
 from simcore.search import driver
 from simcore.search.export import distribution_xml
 from simcore.spec import Search
+from simcore.wording import plural
 
 if TYPE_CHECKING:
     from carlos_operator.hosting import Host
@@ -164,11 +165,11 @@ def search_status(
             reason, message = _job_failure(job)
             message = f"round {current.number if current else '?'}'s Job failed: {reason} {message}".strip()
         elif tally.counts[ERROR] and not tally.counts[FAILED]:
-            reason, message = "RunErrors", f"{tally.counts[ERROR]} runs ended in an error"
+            reason, message = "RunErrors", f"{plural(tally.counts[ERROR], 'run')} ended in an error"
         else:
             reason = "TestFailures"
             message = (
-                f"the search found {tally.counts[FAILED]} runs failing their criteria, "
+                f"the search found {plural(tally.counts[FAILED], 'run')} failing criteria, "
                 f"{tally.counts[ERROR]} errors"
             )
         conditions.append(condition(before, "Failed", True, reason, message, now))

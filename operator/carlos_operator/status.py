@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from simcore.spec import API_GROUP
+from simcore.wording import plural
 
 UNKNOWN, PASSED, FAILED, ERROR = 0, 1, 2, 3
 _VERDICTS = {"passed": PASSED, "failed": FAILED, "error": ERROR}
@@ -266,10 +267,14 @@ def aggregate(
         if job is not None and finished == "Failed" and done < total:
             reason, message = _job_failure_reason(job)
         elif tally.counts[ERROR] and not tally.counts[FAILED]:
-            reason, message = "RunErrors", f"{tally.counts[ERROR]} runs ended in an error"
+            reason, message = "RunErrors", f"{plural(tally.counts[ERROR], 'run')} ended in an error"
         else:
             reason = "TestFailures"
-            message = f"{tally.counts[FAILED]} runs failed their criteria, {tally.counts[ERROR]} errors"
+            failed = tally.counts[FAILED]
+            message = (
+                f"{plural(failed, 'run')} failed {'its' if failed == 1 else 'their'} criteria, "
+                f"{plural(tally.counts[ERROR], 'error')}"
+            )
         conditions.append(condition(conditions_before, "Failed", True, reason, message, now))
     else:
         conditions.append(condition(conditions_before, "Failed", False, "NoFailure", "", now))

@@ -15,6 +15,7 @@ from simcore.report.trajectories import RoadOutline, read_recording, road_outlin
 from simcore.results import PrefixedStore, RunResults
 from simcore.spec import SimulationRun
 from simcore.store import Store, StoreError
+from simcore.wording import plural
 
 #: name of the report next to the run-level summary.json
 REPORT_KEY = "report.html"
@@ -205,7 +206,12 @@ def _verdict(results: RunResults) -> str:
             f"{counts['passed']} passed</p>"
         )
     c = summary["counts"]
-    parts = [f"{c['total']} runs", f"{c['passed']} passed", f"{c['failed']} failed", f"{c['errors']} errors"]
+    parts = [
+        plural(c["total"], "run"),
+        f"{c['passed']} passed",
+        f"{c['failed']} failed",
+        f"{c['errors']} errors",
+    ]
     if c.get("optionalFailed"):
         parts.append(f"{c['optionalFailed']} optional failed")
     if c.get("missing"):
@@ -438,7 +444,7 @@ def _header(results: RunResults, relative: bool) -> str:
             links.append(f'<a href="{_e(href)}">{label}</a>')
     walls = [float(s.get("wallSeconds") or 0.0) for s in results.indexes]
     timing = (
-        f"{len(walls)} runs took {sum(walls):.1f} s of wall time in all (longest {max(walls):.1f} s)"
+        f"{plural(len(walls), 'run')} took {sum(walls):.1f} s of wall time in all (longest {max(walls):.1f} s)"
         if walls
         else "no run finished"
     )

@@ -8,6 +8,7 @@ from typing import Any
 
 from simcore.evaluation.criteria import format_number
 from simcore.evaluation.report import testcase_name
+from simcore.wording import plural
 
 
 def failure_lines(index_summaries: Sequence[Mapping[str, Any]], limit: int = 20) -> list[str]:
@@ -76,7 +77,7 @@ class ProgressLines:
     def start(self, total: int, skipped: int) -> None:
         self.total, self.skipped, self.started = total, skipped, self.clock()
         resumed = f" ({skipped} already complete)" if skipped else ""
-        self.emit(f"{self.name}: {total} runs{resumed}")
+        self.emit(f"{self.name}: {plural(total, 'run')}{resumed}")
 
     def index_done(self, status: str) -> None:
         self.done += 1
