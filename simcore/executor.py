@@ -260,11 +260,13 @@ def execute(
     # writes covers every index of the run that has a result
     merged = {**others, **outcomes}
     results = [merged[i] for i in sorted(merged)]
-    repeats = _repeats(store, name, plan, results) if plan.repeat > 1 else None
-    if repeats is not None:
-        from simcore.evaluation.flaky import flag_flaky
+    repeats = None
+    if plan.repeat > 1:
+        from simcore.evaluation.flaky import RepeatTally, flag_repeats, recording_digests
 
-        results = flag_flaky(results, repeats)
+        tally = RepeatTally(plan.repeat)
+        results = list(flag_repeats(results, plan.point_of, tally, recording_digests(store, name)))
+        repeats = tally.report()
     selected = [s for s in results if int(s["index"]) in outcomes]
     summary = run_summary(name, selected, total=len(wanted), expected=set(wanted))
     summary["outputUrl"] = store.url_for(name)
@@ -290,22 +292,6 @@ def execute(
         report_url=report_url,
         report_error=report_error,
     )
-
-
-def _repeats(store: Store, name: str, plan: Plan, ordered: list[dict[str, Any]]) -> dict[str, Any]:
-    """summary.json's `repeats` (execution.repeat > 1): flaky points, and determinism from the recorded
-    messages of runs of a point with the same seed (simcore.evaluation.flaky)."""
-    from simcore.evaluation.flaky import message_digest, repeat_report
-
-    digests: dict[int, str] = {}
-    for summary in ordered:
-        key = f"{name}/{summary['index']}/recording.mcap"
-        try:
-            if store.exists(key):
-                digests[int(summary["index"])] = message_digest(store.get_bytes(key))
-        except Exception:  # an unreadable recording is not compared (deterministic: None)
-            continue
-    return repeat_report(ordered, plan.point_of, plan.repeat, digests)
 
 
 def _in_pool(sweep: _Sweep, workers: int) -> None:

@@ -852,3 +852,60 @@ def test_a_distribution_in_the_object_store_is_read_with_the_runs_credentials() 
     drain(c)
     assert kube.jobs[job_name("d")]["spec"]["completions"] == 3
     assert kube.configmaps[job_name("d")]["data"][DISTRIBUTION_FILE] == DISTRIBUTION.decode()
+
+
+def _recording(messages: list[bytes]) -> bytes:
+    import io
+
+    from mcap.writer import Writer
+
+    out = io.BytesIO()
+    writer = Writer(out)
+    writer.start()
+    schema = writer.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+    channel = writer.register_channel("/t", "cdr", schema)
+    for k, data in enumerate(messages):
+        writer.add_message(channel, log_time=k, data=data, publish_time=k)
+    writer.finish()
+    return out.getvalue()
+
+
+def test_repeats_flag_flaky_points_and_check_determinism_as_carlos_run() -> None:
+    """execution.repeat on a cluster: the run-level summary.json has `repeats` and junit.xml flags the runs
+    of a flaky point, as `carlos run` writes them (simcore.evaluation.flaky)."""
+    from simcore.evaluation.flaky import RepeatTally, flag_repeats, recording_digests
+
+    kube, store = FakeKube(), FakeStore()
+    body = run_body("r", "uid-1", 2)
+    body["spec"]["execution"]["repeat"] = 2  # 2 points × 2 repeats, same seed: indexes 0,1 and 2,3
+    statuses = ["passed", "failed", "passed", "passed"]
+    recordings = [[b"a"], [b"a"], [b"b"], [b"c"]]  # point 1: same seed, different messages
+    for i, status in enumerate(statuses):
+        store.put_bytes(f"r/{i}/summary.json", summary(i, status))
+        store.put_bytes(f"r/{i}/recording.mcap", _recording(recordings[i]))
+    c = controller(kube, store)
+    c.observe_run("ADDED", body)
+    drain(c)
+    job = kube.jobs[job_name("r")]
+    job["status"] = {
+        "completedIndexes": "0,2-3",
+        "failedIndexes": "1",
+        "startTime": "2026-01-01T00:00:00Z",
+        "conditions": [{"type": "Failed", "status": "True", "reason": "FailedIndexes"}],
+    }
+    c.observe_job("MODIFIED", job)
+    drain(c)
+    repeats = json.loads(store.objects["r/summary.json"])["repeats"]
+    assert (repeats["repeat"], repeats["points"], repeats["flaky"]) == (2, 2, 1)
+    assert (repeats["determinismChecked"], repeats["nondeterministic"]) == (2, 1)
+    assert [(p["indexes"], p["flaky"], p["deterministic"]) for p in repeats["flakyPoints"]] == [
+        ([0, 1], True, True),
+        ([2, 3], False, False),
+    ]
+    junit = store.objects["r/junit.xml"].decode()
+    assert junit.count('<property name="flaky" value="true"') == 2
+    # the same as `carlos run` computes from the same summaries and recordings
+    local = RepeatTally(2)
+    ordered = [json.loads(store.objects[f"r/{i}/summary.json"]) for i in range(4)]
+    list(flag_repeats(ordered, lambda i: i // 2, local, recording_digests(store, "r")))  # type: ignore[arg-type]
+    assert local.report() == repeats

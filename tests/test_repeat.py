@@ -65,7 +65,7 @@ def test_a_point_whose_verdict_changes_is_flaky_and_different_messages_are_nonde
     # different seeds (seedPolicy vary): determinism is not checked
     vary = repeat_report([_s(0, "passed", 1), _s(1, "passed", 2)], lambda i: 0, 2, {0: "a", 1: "b"})
     assert vary["determinismChecked"] == 0 and vary["flakyPoints"] == []
-    flagged = flag_flaky(runs, report)
+    flagged = list(flag_flaky(runs, report))
     assert [s.get("flaky") for s in flagged] == [True, True, None, None]
     cases = ET.fromstring(junit_xml("r", flagged)).iter("testcase")
     flaky = [

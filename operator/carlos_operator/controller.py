@@ -69,6 +69,7 @@ from carlos_operator.status import (
     runs_view,
 )
 from simcore.errors import BadInput, CarlosError
+from simcore.evaluation.flaky import RepeatTally, flag_flaky, flag_repeats, recording_digests
 from simcore.evaluation.report import junit_xml, run_summary
 from simcore.manifest import parse_manifest
 from simcore.plan import Plan
@@ -806,15 +807,29 @@ class Controller:
         from simcore.report.html import ReportSample
 
         sample = ReportSample(REPORT_INDEXES)
+        # execution.repeat (not for searches): the runs of a flaky point are flagged, as by `carlos run`
+        plan = Plan(run.spec) if run.spec.search is None and run.spec.execution.repeat > 1 else None
+        repeats = RepeatTally(plan.repeat) if plan is not None else None
 
         def sampled() -> Iterator[dict[str, Any]]:
-            for summary in summaries():
+            flagged = (
+                summaries()
+                if plan is None or repeats is None
+                else flag_repeats(
+                    summaries(), plan.point_of, repeats, recording_digests(state.store, run.name)
+                )
+            )
+            for summary in flagged:
                 sample.add(summary)
                 yield summary
 
         summary = run_summary(run.name, sampled(), total=tally.total)
         summary["outputUrl"] = state.store.url_for(run.name)
-        state.store.put_bytes(f"{run.name}/junit.xml", junit_xml(run.name, summaries()).encode())
+        junit_summaries = summaries()
+        if repeats is not None:
+            summary["repeats"] = repeats.report()
+            junit_summaries = flag_flaky(junit_summaries, summary["repeats"])
+        state.store.put_bytes(f"{run.name}/junit.xml", junit_xml(run.name, junit_summaries).encode())
         state.store.put_bytes(
             f"{run.name}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
         )
