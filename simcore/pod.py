@@ -560,11 +560,14 @@ class _ReadyPort:
 class _Recording:
     """The recorder's state for the index in progress: its MCAP (when the spec records) and its verdict."""
 
-    def __init__(self, index: int, recorder: Any, workdir: Path, attempt: str) -> None:
+    def __init__(
+        self, index: int, recorder: Any, workdir: Path, attempt: str, run_record: dict[str, str]
+    ) -> None:
         self.index = index
         self.recorder = recorder
         self.workdir = workdir
         self.attempt = attempt
+        self.run_record = run_record
 
 
 def run_recorder(env: PodEnv) -> int:
@@ -661,12 +664,12 @@ def _open_recording(env: PodEnv, run: Any, plan: Any, index: int, attempt: str) 
     from simcore.runner import versions
 
     spec = run.spec
+    point = plan[index - env.offset]
     workdir = Path(tempfile.mkdtemp(prefix=f"recorder-{index}-", dir=env.scratch))
     recorder = None
     if spec.recording.enabled:
         import yaml
 
-        point = plan[index - env.offset]
         recorder = McapRecorder.for_recording(
             workdir / "recording.mcap",
             spec.recording,
@@ -674,18 +677,28 @@ def _open_recording(env: PodEnv, run: Any, plan: Any, index: int, attempt: str) 
                 "carlos.spec": {
                     "manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))
                 },
-                "carlos.run": {
-                    "run": run.name,
-                    "index": str(index),
-                    "scenario": point.scenario.name,
-                    "parameters": json.dumps(point.parameters, sort_keys=True),
-                    "seed": str(point.seed),
-                    "stepSeconds": repr(spec.simulation.step_seconds),
-                },
                 "carlos.versions": versions(),
             },
         )
-    return _Recording(index, recorder, workdir, attempt)
+    run_record = {
+        "run": run.name,
+        "index": str(index),
+        "scenario": point.scenario.name,
+        "parameters": json.dumps(point.parameters, sort_keys=True),
+        "seed": str(point.seed),
+        "stepSeconds": repr(spec.simulation.step_seconds),
+    }
+    return _Recording(index, recorder, workdir, attempt, run_record)
+
+
+def _run_record(done: _Recording, verdict: dict[str, str]) -> dict[str, str]:
+    """The `carlos.run` metadata record, written when the verdict is known: with the summary's
+    `scenarioTimeOffsetSeconds` (scenario time = log time + it, as in a local recording; 0 without a
+    verdict)."""
+    offset = 0.0
+    if verdict.get(SUMMARY_KEY):
+        offset = float(json.loads(verdict[SUMMARY_KEY]).get("scenarioTimeOffsetSeconds", 0.0))
+    return {**done.run_record, "scenarioTimeOffsetSeconds": repr(offset)}
 
 
 def _finish(
@@ -700,6 +713,7 @@ def _finish(
     state, error = "uploaded", ""
     try:
         if done.recorder is not None:
+            done.recorder.add_metadata("carlos.run", _run_record(done, verdict))
             done.recorder.close()
         mcap = done.workdir / "recording.mcap"
         if mcap.is_file():
