@@ -97,7 +97,7 @@ def esmini_ended(corpus: Path, include: list[str] | None = None) -> list[str]:
 def features(path: Path) -> list[str]:
     """The OpenSCENARIO action, condition and position types a file's XML uses (sorted `kind:Type`); its
     catalogues' contents are not read."""
-    from simcore.scenario.xosc import read_xml
+    from simcore.scenario.xosc_xml import read_xml
 
     found: set[str] = set()
     for element in read_xml(path, what="OpenSCENARIO file").iter():

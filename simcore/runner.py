@@ -93,7 +93,7 @@ def _fetch_from_s3(
     local = mirror / key
     local.parent.mkdir(parents=True, exist_ok=True)
     local.write_bytes(store.get_bytes(key))
-    from simcore.scenario.xosc import read_xml
+    from simcore.scenario.xosc_xml import read_xml
 
     root = read_xml(local, what="OpenSCENARIO file")
     logic = root.find("RoadNetwork/LogicFile")

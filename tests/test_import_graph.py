@@ -141,7 +141,7 @@ def test_the_graph_sees_type_checking_imports_and_submodules() -> None:
     assert (
         "simcore.scenario.positions" in graph["simcore.scenario.engine"]
     )  # `from simcore.scenario import positions`
-    assert "simcore.scenario.xosc" not in graph["simcore.scenario.distribution"]  # lazy: not an edge
+    assert "simcore.scenario.xosc_xml" not in graph["simcore.scenario.distribution"]  # lazy: not an edge
 
 
 def test_simcore_has_no_import_cycle() -> None:

@@ -140,7 +140,7 @@ def _weighted(
 
 def load_distribution(path: str | Path, seed: int = 0) -> ParameterDistribution:
     """Parse a ParameterValueDistribution file (safely); errors name the file and element."""
-    from simcore.scenario.xosc import read_xml
+    from simcore.scenario.xosc_xml import read_xml
 
     path = Path(path)
     root = read_xml(path, what="ParameterValueDistribution file")

@@ -1,8 +1,8 @@
 """The OpenSCENARIO object model, after parameter resolution: plain typed data, no behaviour.
 
-The parser (`xosc.py`) builds it; the engine (`engine.py`) runs it. New actions, conditions and positions
-are added here as frozen dataclasses (`@record`: simcore.scenario.record), in the parser as one function
-each, and in the engine as one handler each.
+The parser (`xosc.py` and its `xosc_*` parts) builds it; the engine (`engine.py`) runs it. New actions,
+conditions and positions are added here as frozen dataclasses (`@record`: simcore.scenario.record), in the
+parser as one function each, and in the engine as one handler each.
 """
 
 from __future__ import annotations

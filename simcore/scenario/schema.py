@@ -6,7 +6,7 @@ the XSD check is the strict view a catalogue maintainer wants before handing fil
 `asam-qc-openscenarioxml` (`qc_openscenario/schema/<version>/OpenSCENARIO.xsd`); they are loaded once per
 revision and process (about 0.8 s each), then a file takes milliseconds.
 
-The file is untrusted: it is first parsed with defusedxml (`simcore.scenario.xosc.read_xml`: size bound, no
+The file is untrusted: it is first parsed with defusedxml (`simcore.scenario.xosc_xml.read_xml`: size bound, no
 entities, no external references), then with lxml without entity resolution or network access, only to
 get the source line of every element for the report. Heavy imports (xmlschema, lxml) happen on first use.
 """
@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from simcore.errors import BadInput
-from simcore.scenario.xosc import read_xml
+from simcore.scenario.xosc_xml import read_xml
 
 # revMinor → the newest published schema of that revision
 SCHEMA_VERSIONS = {0: "1.0.0", 1: "1.1.1", 2: "1.2.0", 3: "1.3.0"}

@@ -92,7 +92,7 @@ def declarations(root: ET.Element) -> dict[str, Declaration]:
 
 
 def read_declarations(path: Path) -> dict[str, Declaration]:
-    from simcore.scenario.xosc import read_xml
+    from simcore.scenario.xosc_xml import read_xml
 
     return declarations(read_xml(path, what="OpenSCENARIO file"))
 

@@ -92,7 +92,7 @@ class GeoReference:
 
 def geo_reference_of(road_file: Path) -> GeoReference | None:
     """The header's geoReference (and offset) of an OpenDRIVE file; None when it has none."""
-    from simcore.scenario.xosc import read_xml
+    from simcore.scenario.xosc_xml import read_xml
 
     root = read_xml(road_file, what="OpenDRIVE file", max_bytes=MAX_ROAD_BYTES)
     header = root.find("header")

@@ -107,7 +107,7 @@ def _pack_scenario(
     path: Path, manifest: str, where: str, files: dict[str, str], taken: dict[str, Path]
 ) -> str:
     """Add the scenario, its road network and catalogs to `files` (paths rewritten to keys); its key."""
-    from simcore.scenario.xosc import read_xml
+    from simcore.scenario.xosc_xml import read_xml
 
     text = _read_text(path, manifest, where)
     root = read_xml(path, what="OpenSCENARIO file")
