@@ -54,7 +54,6 @@ import socket
 import tempfile
 import threading
 import time
-import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -417,9 +416,8 @@ def _run_one(
     """One attempt of one index: announce it to the recorder, simulate, judge, hand the verdict to the
     recorder and wait for its upload. Returns the index's exit code (3 also when the upload failed)."""
     from simcore import pipeline
-    from simcore.evaluation.criteria import CriterionResult, evaluate
-    from simcore.evaluation.report import index_summary, summary_json
-    from simcore.runner import resolve_scenario_file
+    from simcore.evaluation.report import summary_json
+    from simcore.runner import judge, resolve_scenario_file
 
     started = time.monotonic()
     spec = run.spec
@@ -431,13 +429,6 @@ def _run_one(
         print(f"error: index {index}: the recorder {why}", flush=True)
         return ExitCode.INFRASTRUCTURE
     criteria = [*spec.evaluation.criteria, *point.scenario.criteria]
-    metrics: dict[str, float] = {}
-    results: list[CriterionResult] = []
-    error: str | None = None
-    end_reason = "error"
-    sim_seconds = 0.0
-    offset = 0.0
-    exit_code = ExitCode.PASSED
     log_lines = [
         f"carlos pod simcore: run {run.name} index {index} attempt {attempt} (pod attempt "
         f"{env.failures + 1}): scenario {point.scenario.name}, seed {point.seed}",
@@ -453,7 +444,8 @@ def _run_one(
     env.scratch.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="simcore-", dir=env.scratch) as scratch_name:
         scratch = Path(scratch_name)
-        try:
+
+        def simulate() -> Any:
             ref = point.scenario
             if ref.config_map_ref is not None:
                 scenario_file = env.scenario_dir / ref.config_map_ref.name / ref.config_map_ref.key
@@ -467,7 +459,7 @@ def _run_one(
                 scenario_file = resolve_scenario_file(
                     point, Path("/"), scratch, lambda url: _store(env, run, url)
                 )
-            ran = pipeline.simulate(
+            return pipeline.simulate(
                 quiet,
                 point,
                 scenario_file,
@@ -475,39 +467,16 @@ def _run_one(
                 deadline=started + spec.execution.timeout_seconds,
                 bus=_Borrowed(bus) if _needs_pod_bus(spec) else None,
             )
-            metrics, end_reason, sim_seconds = ran.metrics, ran.end_reason, ran.sim_seconds
-            offset = ran.scenario_time_offset
-            log_lines.extend(f"warning: {warning}" for warning in ran.warnings)
-            log_lines.extend(ran.log)
-            results = evaluate(criteria, metrics)
-        except CarlosError as exc:
-            error = str(exc)
-            exit_code = exc.exit_code
-            log_lines.append(f"error: {error}")
-        except Exception as exc:  # a crash of the simulator: an infrastructure error of this index
-            error = f"{type(exc).__name__}: {exc}"
-            exit_code = ExitCode.INFRASTRUCTURE
-            log_lines.append("error: " + error)
-            log_lines.append(traceback.format_exc())
-    summary = index_summary(
-        index=index,
-        scenario=point.scenario.name,
-        parameters=point.parameters,
-        seed=point.seed,
-        optional=point.scenario.optional,
-        sim_seconds=sim_seconds,
-        wall_seconds=time.monotonic() - started,
-        metrics=metrics,
-        results=results,
-        error=error,
-        end_reason=end_reason if error is None else "error",  # type: ignore[arg-type]
-        attempts=attempt,
-        scenario_time_offset=offset,
+
+        judged = judge(
+            index, point, criteria, simulate, attempt=attempt, started=started, log_lines=log_lines
+        )
+    summary, exit_code, error, sim_seconds = (
+        judged.summary,
+        judged.exit_code,
+        judged.error,
+        judged.sim_seconds,
     )
-    if error is None and summary["status"] == "failed":
-        exit_code = ExitCode.FAILED
-    if exit_code == ExitCode.BAD_INPUT:
-        summary["badInput"] = True
     log_lines.append(f"status: {summary['status']} (exit code {int(exit_code)})")
     print("\n".join(log_lines), flush=True)
     write_summary = not (exit_code == ExitCode.INFRASTRUCTURE and not final_attempt)

@@ -179,6 +179,76 @@ def _scratch(index: int, root: Path | None, needed: bool) -> Iterator[Path]:
         yield Path(root if root is not None else tempfile.gettempdir()) / f"carlos-{index}-none"
 
 
+@dataclass
+class Judged:
+    """An index after its simulation and the evaluation of its criteria."""
+
+    summary: dict[str, Any]
+    exit_code: ExitCode
+    error: str | None  # what went wrong (CARLOS' error or the crash), None when the simulation ran
+    sim_seconds: float  # on the recording's clock (summary.json's simSeconds)
+
+
+def judge(
+    index: int,
+    point: RunPoint,
+    criteria: list[Any],
+    simulate: Callable[[], Any],
+    *,
+    attempt: int,
+    started: float,
+    log_lines: list[str],
+) -> Judged:
+    """Run `simulate()` (a `pipeline.simulate` call: an Outcome) and judge the index: evaluate the criteria,
+    build its summary and classify what went wrong (CARLOS' own errors by their exit code, a crash as an
+    infrastructure error); appends to `log_lines`. Shared by `carlos run` workers and the simcore pod."""
+    metrics: dict[str, float] = {}
+    results: list[CriterionResult] = []
+    error: str | None = None
+    end_reason = "error"
+    sim_seconds = 0.0
+    offset = 0.0
+    exit_code = ExitCode.PASSED
+    try:
+        result = simulate()
+        metrics, end_reason, sim_seconds = result.metrics, result.end_reason, result.sim_seconds
+        offset = result.scenario_time_offset
+        for warning in result.warnings:  # what the engine read leniently (file, element, what it did)
+            log.warning("%s", warning)
+            log_lines.append(f"warning: {warning}")
+        log_lines.extend(result.log)
+        results = evaluate(criteria, metrics)
+    except CarlosError as exc:
+        error = str(exc)
+        exit_code = exc.exit_code
+        log_lines.append(f"error: {error}")
+    except Exception as exc:  # a crash of the simulator is an infrastructure error of this index
+        error = f"{type(exc).__name__}: {exc}"
+        exit_code = ExitCode.INFRASTRUCTURE
+        log_lines.append("error: " + error)
+        log_lines.append(traceback.format_exc())
+    summary = index_summary(
+        index=index,
+        scenario=point.scenario.name,
+        parameters=point.parameters,
+        seed=point.seed,
+        optional=point.scenario.optional,
+        sim_seconds=sim_seconds,
+        wall_seconds=time.monotonic() - started,
+        metrics=metrics,
+        results=results,
+        error=error,
+        end_reason=end_reason if error is None else "error",  # type: ignore[arg-type]
+        attempts=attempt,
+        scenario_time_offset=offset,
+    )
+    if error is None and summary["status"] == "failed":
+        exit_code = ExitCode.FAILED
+    if exit_code == ExitCode.BAD_INPUT:
+        summary["badInput"] = True  # the run-level exit code keeps it apart from infrastructure
+    return Judged(summary, exit_code, error, sim_seconds)
+
+
 def run_index(
     run: SimulationRun,
     index: int,
@@ -200,24 +270,18 @@ def run_index(
     criteria = [*run.spec.evaluation.criteria, *point.scenario.criteria]
     started = time.monotonic()
     deadline = started + run.spec.execution.timeout_seconds
-    metrics: dict[str, float] = {}
-    results: list[CriterionResult] = []
-    error: str | None = None
-    end_reason = "error"
-    sim_seconds = 0.0
-    offset = 0.0
-    exit_code = ExitCode.PASSED
     log_lines: list[str] = [
         f"carlos run {run.name} index {index}: scenario {point.scenario.name}, seed {point.seed}"
     ]
     log_lines.append(f"parameters: {json.dumps(point.parameters, sort_keys=True)}")
     prefix = f"{run.name}/{index}"
     with _scratch(index, scratch_root, _writes_files(run, point)) as scratch:
-        try:
-            scenario_file = resolve_scenario_file(point, base_dir, scratch, store_factory)
+
+        def simulate() -> Any:
             from simcore import pipeline
 
-            result = pipeline.simulate(
+            scenario_file = resolve_scenario_file(point, base_dir, scratch, store_factory)
+            return pipeline.simulate(
                 run,
                 point,
                 scenario_file,
@@ -227,41 +291,11 @@ def run_index(
                 bus=bus,
                 base_dir=base_dir,
             )
-            metrics, end_reason, sim_seconds = result.metrics, result.end_reason, result.sim_seconds
-            offset = result.scenario_time_offset
-            for warning in result.warnings:  # what the engine read leniently (file, element, what it did)
-                log.warning("%s", warning)
-                log_lines.append(f"warning: {warning}")
-            log_lines.extend(result.log)
-            results = evaluate(criteria, metrics)
-        except CarlosError as exc:
-            error = str(exc)
-            exit_code = exc.exit_code
-            log_lines.append(f"error: {error}")
-        except Exception as exc:  # a crash of the simulator is an infrastructure error of this index
-            error = f"{type(exc).__name__}: {exc}"
-            exit_code = ExitCode.INFRASTRUCTURE
-            log_lines.append("error: " + error)
-            log_lines.append(traceback.format_exc())
-        summary = index_summary(
-            index=index,
-            scenario=point.scenario.name,
-            parameters=point.parameters,
-            seed=point.seed,
-            optional=point.scenario.optional,
-            sim_seconds=sim_seconds,
-            wall_seconds=time.monotonic() - started,
-            metrics=metrics,
-            results=results,
-            error=error,
-            end_reason=end_reason if error is None else "error",  # type: ignore[arg-type]
-            attempts=attempt,
-            scenario_time_offset=offset,
+
+        judged = judge(
+            index, point, criteria, simulate, attempt=attempt, started=started, log_lines=log_lines
         )
-        if error is None and summary["status"] == "failed":
-            exit_code = ExitCode.FAILED
-        if exit_code == ExitCode.BAD_INPUT:
-            summary["badInput"] = True  # the run-level exit code keeps it apart from infrastructure
+        summary, exit_code = judged.summary, judged.exit_code
         log_lines.append(f"status: {summary['status']}")
         recording = scratch / "recording.mcap"
         if recording.is_file():
