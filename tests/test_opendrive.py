@@ -1,4 +1,5 @@
-"""Tests for simcore.world.opendrive: hand-written roads with exact answers, and the esmini reference corpus."""
+"""Tests for simcore.world.opendrive and its parts (road_geometry, road_model, opendrive_parse): hand-written
+roads with exact answers, and the esmini reference corpus."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from simcore.world.opendrive import MAX_FILE_BYTES, OpenDrive, OpenDriveError
+from simcore.world.opendrive import OpenDrive, OpenDriveError
+from simcore.world.opendrive_parse import MAX_FILE_BYTES
 from tests.tooling import NO_CORPUS, corpus_dir
 
 
@@ -662,7 +664,7 @@ def test_shared_parses_a_file_once_per_content(tmp_path: Path) -> None:
 def test_constant_lane_borders_are_the_ones_computed_at_every_s() -> None:
     """A section side with constant widths and laneOffset has its borders computed once: they are, to the
     bit, the ones the per-s sums give at any s of the section; widths that change are computed at each s."""
-    from simcore.world.opendrive import Poly3, _constant
+    from simcore.world.road_model import Poly3, _constant
 
     od = OpenDrive.from_string(
         _xodr(
@@ -704,9 +706,9 @@ def test_constant_lane_borders_are_the_ones_computed_at_every_s() -> None:
 
 def test_quadrature_constants_are_numpys_leggauss() -> None:
     """The Gauss-Legendre nodes and weights written out in the module are exactly numpy's."""
-    from simcore.world import opendrive
+    from simcore.world import road_geometry as rg
 
-    for n, xs, ws in ((6, opendrive._GL_X, opendrive._GL_W), (16, opendrive._GL16_X, opendrive._GL16_W)):
+    for n, xs, ws in ((6, rg._GL_X, rg._GL_W), (16, rg._GL16_X, rg._GL16_W)):
         x, w = np.polynomial.legendre.leggauss(n)
         assert list(xs) == x.tolist() and list(ws) == w.tolist()
 
@@ -723,16 +725,16 @@ def test_quadrature_constants_are_numpys_leggauss() -> None:
     ],
 )
 def test_linspace_gives_numpys_floats(start: float, stop: float, num: int) -> None:
-    from simcore.world.opendrive import _linspace
+    from simcore.world.road_geometry import linspace
 
-    assert _linspace(start, stop, num) == np.linspace(start, stop, num).tolist()
+    assert linspace(start, stop, num) == np.linspace(start, stop, num).tolist()
 
 
 def test_fresnel_integrals_are_scipys() -> None:
     """The module's Fresnel integrals (no scipy import) give scipy.special.fresnel's floats exactly."""
     from scipy.special import fresnel
 
-    from simcore.world.opendrive import _fresnel
+    from simcore.world.road_geometry import _fresnel
 
     rng = np.random.default_rng(3)
     xs = np.concatenate(
@@ -769,7 +771,7 @@ def _numpy_arclen(u: tuple[float, ...], v: tuple[float, ...], ps: np.ndarray) ->
 def test_param_poly3_table_matches_the_numpy_computation(
     u: tuple[float, float, float, float], v: tuple[float, float, float, float], p_max: float, length: float
 ) -> None:
-    from simcore.world.opendrive import ParamPoly3
+    from simcore.world.road_geometry import ParamPoly3
 
     geo = ParamPoly3(0.0, 1.0, 2.0, 0.5, length, u, v, p_max)
     ps = np.linspace(0.0, p_max, len(geo._ps))
@@ -783,7 +785,7 @@ def test_param_poly3_table_matches_the_numpy_computation(
 
 @pytest.mark.parametrize(("k0", "k1", "length"), [(0.01, 0.0100000001, 200.0), (-0.3, -0.3000002, 900.0)])
 def test_numeric_spiral_matches_the_numpy_computation(k0: float, k1: float, length: float) -> None:
-    from simcore.world.opendrive import Spiral
+    from simcore.world.road_geometry import Spiral
 
     geo = Spiral(0.0, 3.0, -4.0, 1.1, length, k0, k1)
     assert geo._numeric
@@ -935,7 +937,7 @@ def test_geometry_span_is_the_range_geometry_at_gives_its_record_for() -> None:
 
 
 def test_a_constant_elevation_is_the_polynomial_value_at_every_s() -> None:
-    from simcore.world.opendrive import Poly3, _fixed_value
+    from simcore.world.road_model import Poly3, _fixed_value
 
     road = _two_section_road("").roads["1"]
     assert [road.elevation(s) for s in (0.0, 33.3, 120.0)] == [1.5, 1.5, 1.5]
@@ -949,7 +951,7 @@ def test_a_constant_elevation_is_the_polynomial_value_at_every_s() -> None:
 def test_a_param_poly3_answers_the_same_whatever_it_was_asked_before() -> None:
     """A paramPoly3 keeps its last evaluation: the point and curvature at a ``ds`` are the ones a fresh
     record gives, in any order of questions."""
-    from simcore.world.opendrive import ParamPoly3
+    from simcore.world.road_geometry import ParamPoly3
 
     def record() -> ParamPoly3:
         return ParamPoly3(0.0, 1.0, 2.0, 0.3, 50.0, (0.0, 1.0, 0.01, -0.0002), (0.0, 0.0, 0.02, 0.0001), None)
@@ -994,7 +996,7 @@ def test_lane_point_is_the_lane_centre_and_the_lane_at_its_t(second: bool) -> No
 def test_a_newton_step_on_a_straight_record_is_its_along_track_error() -> None:
     """`_project` steps by the along-track error on a line (no curvature asked): what the general step
     gives there, to the bit."""
-    from simcore.world.opendrive import Line
+    from simcore.world.road_geometry import Line
 
     class Bent(Line):  # a line taken for a curve: the general Newton step
         straight = False
@@ -1019,17 +1021,17 @@ def test_fresnel_small_arguments_are_the_polynomials_by_horner_loops() -> None:
     floats to the bit, signs of zero included."""
     import random
 
-    from simcore.world import opendrive as od
+    from simcore.world import road_geometry as rg
 
     def looped(xxa: float) -> tuple[float, float]:
         x = abs(xxa)
         x2 = x * x
         t = x2 * x2
-        ss = x * x2 * od._polevl(t, od._FRESNEL_SN) / od._p1evl(t, od._FRESNEL_SD)
-        cc = x * od._polevl(t, od._FRESNEL_CN) / od._polevl(t, od._FRESNEL_CD)
+        ss = x * x2 * rg._polevl(t, rg._FRESNEL_SN) / rg._p1evl(t, rg._FRESNEL_SD)
+        cc = x * rg._polevl(t, rg._FRESNEL_CN) / rg._polevl(t, rg._FRESNEL_CD)
         return (-ss, -cc) if xxa < 0.0 else (ss, cc)
 
     rng = random.Random(5)
     xs = [rng.uniform(-1.6, 1.6) for _ in range(20000)] + [10 ** rng.uniform(-300, 0.2) for _ in range(2000)]
     for x in [*xs, 0.0, -0.0, 1.6, -1.6, 5e-324, -5e-324]:
-        assert repr(od._fresnel(x)) == repr(looped(x)), x
+        assert repr(rg._fresnel(x)) == repr(looped(x)), x

@@ -8,7 +8,7 @@ import pickle
 import pytest
 
 from simcore.world.frozen import builder
-from simcore.world.opendrive import RoadCoordinates
+from simcore.world.road_model import RoadCoordinates
 from simcore.world.state import (
     BoundingBox,
     EntityState,

@@ -29,7 +29,8 @@ from typing import Any
 import numpy as np
 
 from simcore.sensors.classes import CLASS_IDS, REFLECTIVITY, SCENERY_CLASSES, entity_class, lane_class
-from simcore.world.opendrive import DRIVING_LANE_TYPES, OpenDrive
+from simcore.world.opendrive import OpenDrive
+from simcore.world.road_model import DRIVING_LANE_TYPES
 from simcore.world.state import WorldFrame
 
 FloatArray = np.ndarray
