@@ -9,7 +9,7 @@
     CARLOS hands it to SUMO, as the file asks). Each of BENCH_SWEEP_ROUNDS rounds (default 1) runs carlos,
     esmini, esmini, carlos, so that a drift of the host's speed weighs on both sides alike; means are shown.
 (c) simulated seconds per wall second per core, warm, in this process: the run pipeline
-    (`simcore.runner.simulate`, what `carlos run` workers and the simcore pod call) vs the bare engine
+    (`simcore.pipeline.simulate`, what `carlos run` workers and the simcore pod call) vs the bare engine
     (`ScenarioEngine.advance` in a loop) on the corpus cut-in.
 
 Wall seconds and CPU seconds (user + system of the processes started) are both reported: on a shared
@@ -155,8 +155,8 @@ def pipeline_vs_engine(scenario: Path, work: Path) -> tuple[float, float, float,
     parsed once sim-s/wall-s), warm, in this process. The bare engine parses its road each pass, as a
     program would that runs one scenario; the pipeline keeps a worker's parsed roads (`OpenDrive.shared`)."""
     from simcore.manifest import load_manifest
+    from simcore.pipeline import simulate
     from simcore.plan import Plan
-    from simcore.runner import simulate
     from simcore.scenario.engine import ScenarioEngine
     from simcore.scenario.xosc import load_scenario
     from simcore.world.opendrive import OpenDrive
@@ -167,7 +167,7 @@ def pipeline_vs_engine(scenario: Path, work: Path) -> tuple[float, float, float,
 
     def pipeline() -> float:
         with tempfile.TemporaryDirectory() as out:
-            return simulate(run, point, scenario, Path(out))[2]
+            return simulate(run, point, scenario, Path(out)).sim_seconds
 
     def engine(road_once: bool = False) -> float:
         loaded_scenario = load_scenario(scenario)

@@ -174,8 +174,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from simcore.manifest import parse_manifest  # noqa: E402
+from simcore.pipeline import simulate  # noqa: E402
 from simcore.plan import Plan  # noqa: E402
-from simcore.runner import simulate  # noqa: E402
 
 REPEAT = int(os.environ.get("BENCH_REPEAT", "3"))
 #: bytes of the last recording of a manifest (by id), for the bytes-per-sweep figures
@@ -233,7 +233,8 @@ def run_once(run: Any) -> tuple[float, float, dict[str, float], Any, float]:
     try:
         with tempfile.TemporaryDirectory() as out:
             started, cpu = time.perf_counter(), time.process_time()
-            metrics, _, sim, _ = simulate(run, Plan(run.spec)[0], SCENARIO, Path(out), base_dir=ROOT)
+            ran = simulate(run, Plan(run.spec)[0], SCENARIO, Path(out), base_dir=ROOT)
+            metrics, sim = ran.metrics, ran.sim_seconds
             wall, cpu = time.perf_counter() - started, time.process_time() - cpu
             recording = Path(out) / "recording.mcap"
             RECORDED_BYTES[id(run)] = recording.stat().st_size if recording.exists() else 0

@@ -27,8 +27,8 @@ sys.path.insert(0, str(ROOT))
 
 from simcore.evaluation.metrics import MetricsAccumulator  # noqa: E402
 from simcore.manifest import parse_manifest  # noqa: E402
+from simcore.pipeline import simulate  # noqa: E402
 from simcore.plan import Plan  # noqa: E402
-from simcore.runner import simulate  # noqa: E402
 from simcore.scenario.xosc import load_scenario  # noqa: E402
 from simcore.world.sumo import SumoWorld, prepare_network  # noqa: E402
 
@@ -62,7 +62,7 @@ def warm(name: str, recording: bool) -> tuple[float, float]:
     for attempt in range(REPEAT + 1):
         with tempfile.TemporaryDirectory() as out:
             started = time.perf_counter()
-            _, _, sim, _ = simulate(run, point, scenario_file, Path(out))
+            sim = simulate(run, point, scenario_file, Path(out)).sim_seconds
             elapsed = time.perf_counter() - started
         if attempt:  # the first run warms imports and caches
             times.append(elapsed)

@@ -1,7 +1,7 @@
 """One run, assembled in one place: scenario engine, road, SUMO, closed loop, bus, world publisher, recorder,
 sensors and metrics from a SimulationRun and one of its run points, then stepped to the end.
 
-`carlos run` workers and the `simcore` pod role (`simcore.runner.simulate`) and `carlos conformance`
+`carlos run` workers and the `simcore` pod role (through `simcore.runner.judge`) and `carlos conformance`
 (`simcore.conformance.run_scenario`: a run compared with a reference) all go through `assemble`, `drive`
 and `Assembly.close`.
 Each part starts only when something uses it: SUMO (libsumo, netconvert) when an entity is SUMO-driven; the

@@ -29,7 +29,7 @@ transport `CARLOS_TRANSPORT` names:
   as JSON) — or on SIGTERM — it closes the MCAP with everything received, uploads `recording.mcap` and
   `log.txt` to `<output>/<run>/<index>/`, then `summary.json` last, and answers `uploaded` or `error`.
 - `simcore` (main container): runs the pod's slice of indexes (`CARLOS_RUNS_PER_POD`, simcore.shards) one
-  after another in this warm process — each with simcore.runner.simulate, on the pod's transport when the
+  after another in this warm process — each with simcore.pipeline.simulate, on the pod's transport when the
   recorder records or a system under test has its own container, else on an in-process bus as a local
   worker — judges each, hands each verdict to the recorder and waits for its upload; it exits with the
   worst of DESIGN.md's codes over the slice: 0 passed, 1 test failure, 2 bad input (at once), 3

@@ -29,7 +29,7 @@ from simcore.spec import SimulationRun
 from simcore.store import Store
 from simcore.transport.bus import Bus
 
-__all__ = ["Progress", "RunOutcome", "error_outcome", "resolve_scenario_file", "run_index", "simulate",
+__all__ = ["Judged", "Progress", "RunOutcome", "error_outcome", "judge", "resolve_scenario_file", "run_index",
            "summary_bytes", "versions"]  # fmt: skip
 
 log = logging.getLogger("carlos.run")
@@ -108,34 +108,6 @@ def _fetch_from_s3(
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_bytes(store.get_bytes(road_key))
     return local
-
-
-def simulate(
-    run: SimulationRun,
-    point: RunPoint,
-    scenario_file: Path,
-    out_dir: Path,
-    *,
-    progress: Progress | None = None,
-    deadline: float | None = None,
-    bus: Bus | None = None,
-    base_dir: Path | None = None,
-) -> tuple[dict[str, float], str, float, list[str]]:
-    """Run the simulation of one index (`simcore.pipeline`), recording into `out_dir/recording.mcap`. The
-    world is published on `bus` (default: a new in-process bus); whatever subscribed to it before (a live
-    view, another process' transport) receives every message it subscribed to.
-
-    Sensors (`spec.sensors`) run every frame they are due; the system under test (`spec.systemUnderTest`,
-    its `pythonPath` relative to `base_dir`) runs on the same bus; `spec.evaluation.detection` adds the
-    `detection.*` metrics.
-
-    Returns (metrics, end reason, simulated seconds, storyboard log)."""
-    from simcore import pipeline
-
-    result = pipeline.simulate(
-        run, point, scenario_file, out_dir, progress=progress, deadline=deadline, bus=bus, base_dir=base_dir
-    )
-    return result.metrics, result.end_reason, result.sim_seconds, result.log
 
 
 def error_outcome(run: SimulationRun, index: int, attempt: int, message: str) -> RunOutcome:

@@ -20,8 +20,8 @@ import yaml
 from simcore.closedloop import ACKERMANN, TWIST, BicycleState, Command, Vehicle, bicycle_step, command_from
 from simcore.errors import SimulationError
 from simcore.manifest import parse_manifest
+from simcore.pipeline import simulate
 from simcore.plan import Plan
-from simcore.runner import simulate
 from simcore.transport.bus import InProcessBus, Message
 from simcore.transport.messages import TYPESTORE
 from tests.xosc_fixtures import (

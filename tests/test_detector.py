@@ -240,8 +240,8 @@ def test_a_crash_of_the_system_under_test_is_a_test_result(tmp_path: Path) -> No
     from rosbags.highlevel import AnyReader
 
     from simcore.manifest import load_manifest
+    from simcore.pipeline import simulate
     from simcore.plan import Plan
-    from simcore.runner import simulate
     from simcore.transport.messages import TYPESTORE
 
     manifest = _manifest(
@@ -255,9 +255,8 @@ def test_a_crash_of_the_system_under_test_is_a_test_result(tmp_path: Path) -> No
     )
     run = load_manifest(manifest)
     out = tmp_path / "out"
-    metrics, _, sim, log = simulate(
-        run, Plan(run.spec)[0], ROOT / "examples/scenarios/cut-in.xosc", out, base_dir=tmp_path
-    )
+    ran = simulate(run, Plan(run.spec)[0], ROOT / "examples/scenarios/cut-in.xosc", out, base_dir=tmp_path)
+    sim, metrics, log = ran.sim_seconds, ran.metrics, ran.log
     assert sim == pytest.approx(1.0)
     assert metrics["systemUnderTest.failed"] == 1.0
     assert metrics["detection.frames"] == 11 and metrics["detection.truePositives"] == 0
@@ -290,8 +289,8 @@ def test_system_under_test_env_is_set_for_the_in_process_node(
     the variable of the same name in the environment of `carlos run` (bad input naming the field and what to
     export when it is not there); the process environment is restored after the run."""
     from simcore.manifest import load_manifest
+    from simcore.pipeline import simulate
     from simcore.plan import Plan
-    from simcore.runner import simulate
 
     env = [
         {"name": "MODEL", "value": "/models/tiny.onnx"},
