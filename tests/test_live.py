@@ -124,8 +124,9 @@ def test_carlos_run_live_serves_the_run_and_still_writes_results(tmp_path: Path)
             "--live-port",
             "0",
             "--live-speed",
-            "4",  # the 20.7 s scenario in ~5 s: time for a client on a loaded machine to subscribe (at 8x,
-            # 2.6 s, the run once ended before the subscription: ConnectionClosedOK)
+            "2",  # the 20.7 s scenario in ~10 s: time for a client on a loaded machine to subscribe (at 8x,
+            # 2.6 s, the run once ended before the subscription: ConnectionClosedOK; at 4x, once under a load
+            # of 13 on 2 cores)
             "-o",
             f"file://{tmp_path}",
         ],
