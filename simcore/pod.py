@@ -660,13 +660,11 @@ def _open_recording(env: PodEnv, run: Any, plan: Any, index: int, attempt: str) 
     return _Recording(index, recorder, workdir, attempt, run_record)
 
 
-def _run_record(done: _Recording, verdict: dict[str, str]) -> dict[str, str]:
-    """The `carlos.run` metadata record, written when the verdict is known: with the summary's
+def _run_record(done: _Recording, summary: dict[str, Any] | None) -> dict[str, str]:
+    """The `carlos.run` metadata record, written when the verdict is known: with the index summary's
     `scenarioTimeOffsetSeconds` (scenario time = log time + it, as in a local recording; 0 without a
     verdict)."""
-    offset = 0.0
-    if verdict.get(SUMMARY_KEY):
-        offset = float(json.loads(verdict[SUMMARY_KEY]).get("scenarioTimeOffsetSeconds", 0.0))
+    offset = float((summary or {}).get("scenarioTimeOffsetSeconds", 0.0))
     return {**done.run_record, "scenarioTimeOffsetSeconds": repr(offset)}
 
 
@@ -680,17 +678,17 @@ def _finish(
         return "error", "no index was announced before its verdict"
     prefix = f"{run.name}/{done.index}"
     state, error = "uploaded", ""
+    summary = json.loads(verdict[SUMMARY_KEY]) if verdict.get(SUMMARY_KEY) else None
     try:
         if done.recorder is not None:
-            done.recorder.add_metadata("carlos.run", _run_record(done, verdict))
+            done.recorder.add_metadata("carlos.run", _run_record(done, summary))
             done.recorder.close()
         mcap = done.workdir / "recording.mcap"
         if mcap.is_file():
             store.put_file(f"{prefix}/recording.mcap", mcap)
         if verdict:
             store.put_bytes(f"{prefix}/log.txt", verdict.get("log", "").encode())
-            if verdict.get("writeSummary") == "true":
-                summary = json.loads(verdict[SUMMARY_KEY])
+            if verdict.get("writeSummary") == "true" and summary is not None:
                 from simcore.evaluation.report import summary_json
 
                 store.put_bytes(f"{prefix}/summary.json", summary_json(summary))

@@ -139,12 +139,12 @@ def test_pod_roles_run_an_index_and_upload_results(
 def test_the_recorder_writes_the_run_record_with_the_verdicts_scenario_time_offset(tmp_path: Path) -> None:
     """A FollowGhost's head start is known when simcore has run the index: the recorder pod writes the
     `carlos.run` metadata with the verdict, so the pod's MCAP says what a local one says."""
-    from simcore.pod import SUMMARY_KEY, _Recording, _run_record
+    from simcore.pod import _Recording, _run_record
 
     done = _Recording(3, None, tmp_path, "1", {"run": "r", "index": "3"})
-    verdict = {SUMMARY_KEY: json.dumps({"index": 3, "scenarioTimeOffsetSeconds": -1.5})}
-    assert _run_record(done, verdict) == {"run": "r", "index": "3", "scenarioTimeOffsetSeconds": "-1.5"}
-    assert _run_record(done, {})["scenarioTimeOffsetSeconds"] == "0.0"  # terminated before a verdict
+    summary = {"index": 3, "scenarioTimeOffsetSeconds": -1.5}
+    assert _run_record(done, summary) == {"run": "r", "index": "3", "scenarioTimeOffsetSeconds": "-1.5"}
+    assert _run_record(done, None)["scenarioTimeOffsetSeconds"] == "0.0"  # terminated before a verdict
 
 
 @pytest.mark.s3

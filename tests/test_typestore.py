@@ -6,11 +6,14 @@ from __future__ import annotations
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
+from rosbags.typesys.store import Typestore
 
 from simcore.transport import msgdefs
 from simcore.transport.typestore import LazyTypestore, definitions_from_sources, module_source
@@ -49,46 +52,51 @@ def test_lazy_store_equals_the_fully_built_store() -> None:
         lazy.types["no_such/msg/Type"]
 
 
+ODOMETRY = "nav_msgs/msg/Odometry"
+
+
+def _odometry(store: Typestore) -> Any:
+    t = store.types
+    return t[ODOMETRY](
+        header=t["std_msgs/msg/Header"](
+            stamp=t["builtin_interfaces/msg/Time"](sec=3, nanosec=5), frame_id="map"
+        ),
+        child_frame_id="ego/base_link",
+        pose=t["geometry_msgs/msg/PoseWithCovariance"](
+            pose=t["geometry_msgs/msg/Pose"](
+                position=t["geometry_msgs/msg/Point"](x=1.0, y=2.0, z=0.0),
+                orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            ),
+            covariance=np.zeros(36),
+        ),
+        twist=t["geometry_msgs/msg/TwistWithCovariance"](
+            twist=t["geometry_msgs/msg/Twist"](
+                linear=t["geometry_msgs/msg/Vector3"](x=1.0, y=0.0, z=0.0),
+                angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.1),
+            ),
+            covariance=np.zeros(36),
+        ),
+    )
+
+
 def test_lazy_store_serialises_as_rosbags_jazzy() -> None:
     lazy = LazyTypestore(msgdefs.FIELDDEFS)
     jazzy = get_typestore(Stores.ROS2_JAZZY)
-    for store in (lazy, jazzy):
-        t = store.types
-        msg = t["nav_msgs/msg/Odometry"](
-            header=t["std_msgs/msg/Header"](
-                stamp=t["builtin_interfaces/msg/Time"](sec=3, nanosec=5), frame_id="map"
-            ),
-            child_frame_id="ego/base_link",
-            pose=t["geometry_msgs/msg/PoseWithCovariance"](
-                pose=t["geometry_msgs/msg/Pose"](
-                    position=t["geometry_msgs/msg/Point"](x=1.0, y=2.0, z=0.0),
-                    orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
-                ),
-                covariance=__import__("numpy").zeros(36),
-            ),
-            twist=t["geometry_msgs/msg/TwistWithCovariance"](
-                twist=t["geometry_msgs/msg/Twist"](
-                    linear=t["geometry_msgs/msg/Vector3"](x=1.0, y=0.0, z=0.0),
-                    angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.1),
-                ),
-                covariance=__import__("numpy").zeros(36),
-            ),
-        )
-        store.last = bytes(store.serialize_cdr(msg, "nav_msgs/msg/Odometry"))  # type: ignore[attr-defined]
-        store.last_be = bytes(store.serialize_cdr(msg, "nav_msgs/msg/Odometry", little_endian=False))  # type: ignore[attr-defined]
-        store.ros1 = bytes(store.serialize_ros1(msg, "nav_msgs/msg/Odometry"))  # type: ignore[attr-defined]
-    assert lazy.last == jazzy.last  # type: ignore[attr-defined]
-    assert lazy.last_be == jazzy.last_be  # type: ignore[attr-defined]
-    # every serialiser rosbags generates, generated here when first used, gives rosbags' bytes
-    assert lazy.ros1 == jazzy.ros1  # type: ignore[attr-defined]
-    as_ros1 = bytes(lazy.cdr_to_ros1(lazy.last, "nav_msgs/msg/Odometry"))  # type: ignore[attr-defined]
-    assert as_ros1 == bytes(jazzy.cdr_to_ros1(jazzy.last, "nav_msgs/msg/Odometry"))  # type: ignore[attr-defined]
-    assert bytes(lazy.ros1_to_cdr(as_ros1, "nav_msgs/msg/Odometry")) == bytes(
-        jazzy.ros1_to_cdr(as_ros1, "nav_msgs/msg/Odometry")
+    ours, theirs = _odometry(lazy), _odometry(jazzy)
+    cdr = bytes(jazzy.serialize_cdr(theirs, ODOMETRY))
+    assert bytes(lazy.serialize_cdr(ours, ODOMETRY)) == cdr
+    assert bytes(lazy.serialize_cdr(ours, ODOMETRY, little_endian=False)) == bytes(
+        jazzy.serialize_cdr(theirs, ODOMETRY, little_endian=False)
     )
-    assert lazy.deserialize_ros1(jazzy.ros1, "nav_msgs/msg/Odometry").child_frame_id == "ego/base_link"  # type: ignore[attr-defined]
-    assert lazy.generate_msgdef("nav_msgs/msg/Odometry") == jazzy.generate_msgdef("nav_msgs/msg/Odometry")
-    back = lazy.deserialize_cdr(lazy.last, "nav_msgs/msg/Odometry")  # type: ignore[attr-defined]
+    # every serialiser rosbags generates, generated here when first used, gives rosbags' bytes
+    ros1 = bytes(jazzy.serialize_ros1(theirs, ODOMETRY))
+    assert bytes(lazy.serialize_ros1(ours, ODOMETRY)) == ros1
+    as_ros1 = bytes(lazy.cdr_to_ros1(cdr, ODOMETRY))
+    assert as_ros1 == bytes(jazzy.cdr_to_ros1(cdr, ODOMETRY))
+    assert bytes(lazy.ros1_to_cdr(as_ros1, ODOMETRY)) == bytes(jazzy.ros1_to_cdr(as_ros1, ODOMETRY))
+    assert lazy.deserialize_ros1(ros1, ODOMETRY).child_frame_id == "ego/base_link"
+    assert lazy.generate_msgdef(ODOMETRY) == jazzy.generate_msgdef(ODOMETRY)
+    back = lazy.deserialize_cdr(cdr, ODOMETRY)
     assert back.child_frame_id == "ego/base_link" and back.header.stamp.nanosec == 5
 
 

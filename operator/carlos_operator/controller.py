@@ -808,17 +808,14 @@ class Controller:
 
         sample = ReportSample(REPORT_INDEXES)
         # execution.repeat (not for searches): the runs of a flaky point are flagged, as by `carlos run`
-        plan = Plan(run.spec) if run.spec.search is None and run.spec.execution.repeat > 1 else None
-        repeats = RepeatTally(plan.repeat) if plan is not None else None
+        repeated = run.spec.search is None and run.spec.execution.repeat > 1
+        repeats = RepeatTally(run.spec.execution.repeat) if repeated else None
 
         def sampled() -> Iterator[dict[str, Any]]:
-            flagged = (
-                summaries()
-                if plan is None or repeats is None
-                else flag_repeats(
-                    summaries(), plan.point_of, repeats, recording_digests(state.store, run.name)
-                )
-            )
+            flagged = summaries()
+            if repeats is not None:
+                digests = recording_digests(state.store, run.name)
+                flagged = flag_repeats(flagged, Plan(run.spec).point_of, repeats, digests)
             for summary in flagged:
                 sample.add(summary)
                 yield summary

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Iterator, Mapping
+from functools import cache
 from importlib.util import module_from_spec, spec_from_loader
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -83,6 +84,7 @@ def _nested(desc: Any) -> Iterator[str]:
         yield from _nested(payload[0])
 
 
+@cache
 def _generators() -> dict[str, Any]:
     """Msgdef field → function(entries, typename, store) that generates it (rosbags' code generators, as in
     `Typestore.get_msgdef`)."""
