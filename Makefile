@@ -9,7 +9,7 @@ SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 TEST_SYSTEM_PACKAGES := chromium
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images clean
+.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images k8s cluster-up cluster-down e2e clean
 
 
 install: $(STAMP)
@@ -144,6 +144,25 @@ images:
 	  echo "== $(IMAGE_PREFIX)/carlos-$$image:$(VERSION)"; \
 	  docker build -f images/$$image/Dockerfile -t $(IMAGE_PREFIX)/carlos-$$image:$(VERSION) . || exit 1; \
 	done
+
+# The local single-node cluster (docs/kubernetes/local-cluster.md). `make k8s`: the pinned Kubernetes, etcd and
+# kwok binaries built from Go modules (tools/k8s/) into ~/.cache/carlos/k8s/<component>-<version>/ (the first
+# build takes tens of CPU-minutes; later ones reuse the cache). `make cluster-up` starts etcd, the control
+# plane, containerd, kubelet and kube-proxy as root (tools/localcluster.py) with the images of `make images`,
+# and prints `export KUBECONFIG=…` last; `make cluster-down` stops everything.
+k8s:
+	tools/k8s/build all
+
+cluster-up: install k8s images
+	$(PY) tools/localcluster.py up
+
+cluster-down:
+	$(PYTHON) tools/localcluster.py down
+
+# The end-to-end tests on that cluster (tests/e2e/): helm install of the chart, the examples, the CLI, faults,
+# bad input and tenancy. The tests start the cluster themselves and stop it at the end.
+e2e: install k8s images helm
+	$(PY) -m pytest -p no:xdist -m e2e tests/e2e
 
 clean:
 	rm -rf $(VENV) results dist build site .pytest_cache .mypy_cache .ruff_cache
