@@ -142,17 +142,23 @@ class Watch(threading.Thread):
         batch, core = client.BatchV1Api(api_client), client.CoreV1Api(api_client)
         threading.Thread(target=self._pods, args=(core, watch), daemon=True).start()
         while not self.stop.is_set():
-            for event in watch.Watch().stream(batch.list_namespaced_job, NS, timeout_seconds=30):
-                run = (event["object"].metadata.labels or {}).get("carlos.dev/run")
-                if run and run not in self.jobs:
-                    self.jobs[run] = time.time()
+            try:
+                for event in watch.Watch().stream(batch.list_namespaced_job, NS, timeout_seconds=30):
+                    run = (event["object"].metadata.labels or {}).get("carlos.dev/run")
+                    if run and run not in self.jobs:
+                        self.jobs[run] = time.time()
+            except Exception:  # a dropped watch (the API server closes them): watch again
+                time.sleep(0.2)
 
     def _pods(self, core: Any, watch: Any) -> None:
         while not self.stop.is_set():
-            for event in watch.Watch().stream(core.list_namespaced_pod, NS, timeout_seconds=30):
-                run = (event["object"].metadata.labels or {}).get("carlos.dev/run")
-                if run:
-                    self.pods.setdefault(run, set()).add(event["object"].metadata.name)
+            try:
+                for event in watch.Watch().stream(core.list_namespaced_pod, NS, timeout_seconds=30):
+                    run = (event["object"].metadata.labels or {}).get("carlos.dev/run")
+                    if run:
+                        self.pods.setdefault(run, set()).add(event["object"].metadata.name)
+            except Exception:  # a dropped watch: watch again
+                time.sleep(0.2)
 
 
 def proc_cpu_rss(pid: int) -> tuple[float, float]:
@@ -213,7 +219,11 @@ def main() -> None:
             check=True,
         ).stdout
         kubectl(admin, "apply", "-f", "-", stdin=crd)
-        kubectl(admin, "wait", "--for=condition=Established", f"crd/{PLURAL}.{GROUP}", "--timeout=60s")
+        for _ in range(120):  # the CRD is served once Established
+            crd_status = json.loads(kubectl(admin, "get", f"crd/{PLURAL}.{GROUP}", "-o", "json")).get("status", {})
+            if any(c["type"] == "Established" and c["status"] == "True" for c in crd_status.get("conditions", [])):
+                break
+            time.sleep(0.5)
         kubectl(admin, "create", "namespace", NS)
         kubectl(admin, "wait", "--for=condition=Ready", "node", "-l", "type=kwok", "--timeout=120s")
         s3_proc, s3 = start_s3_server(tmp / "s3")
@@ -314,7 +324,8 @@ def main() -> None:
                 proc.wait(30)
         if s3_proc is not None:
             stop_s3_server(s3_proc)
-        localcluster.down(layout, quiet=True)
+        if not os.environ.get("BENCH_KUBE_KEEP"):  # debugging: leave the cluster running
+            localcluster.down(layout, quiet=True)
 
 
 if __name__ == "__main__":

@@ -67,6 +67,7 @@ CONTROLLERS = (
     "endpoints-controller",
     "clusterrole-aggregation-controller",
     "resourcequota-controller",
+    "node-lifecycle-controller",  # takes the not-ready taint off a node once it is Ready
 )
 #: the components in start order; `down` stops them in reverse
 COMPONENTS = (
