@@ -353,7 +353,7 @@ def _decide(
                 f"{namespace!r}; the run starts when it exists",
             )
         if inputs.credentials is not None:  # its s3:// object is read with the run's credentials
-            raise inputs.credentials
+            raise Waiting(inputs.credentials.reason, inputs.credentials.message)
         if inputs.distribution_error is not None:
             raise Rejected("InvalidSpec", inputs.distribution_error)
         size = len(inputs.distribution or b"")
@@ -376,7 +376,7 @@ def _decide(
                 f"{namespace!r}; the run starts when it exists",
             )
     if inputs.credentials is not None:
-        raise inputs.credentials
+        raise Waiting(inputs.credentials.reason, inputs.credentials.message)
     search = None
     if run.spec.search is not None and not inputs.search_known:
         if inputs.search_error is not None:
@@ -405,7 +405,9 @@ def _decide(
     if run.spec.search is not None:  # a search creates one ConfigMap and Job per round (searching.py)
         return Decision("search", spec=to_store, **accepted)
     distribution = (
-        inputs.distribution.decode() if reads_distribution(submitted) and inputs.distribution else None
+        inputs.distribution.decode()
+        if reads_distribution(submitted) and inputs.distribution is not None
+        else None
     )
     configmap = build_configmap(submitted, dict(body), settings, distribution)
     job = build_job(run, dict(body), settings, output)
