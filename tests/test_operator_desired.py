@@ -291,3 +291,18 @@ def test_a_job_of_an_earlier_run_that_appears_before_the_create_is_deleted_and_w
     assert not c.runs[("default", "r")].ensured
     waiting = next(x for x in kube.status_patches[-1]["conditions"] if x["type"] == "Prerequisites")
     assert waiting["reason"] == "PreviousRunCleanup"
+
+
+def test_a_run_refused_by_the_policy_gets_nothing_read_for_it_not_even_its_distribution() -> None:
+    """A run naming its own endpoint without its own credentials is refused before the operator reads its
+    s3:// distribution: the operator's credentials never go to that endpoint."""
+    kube, store = FakeKube(), FakeStore()
+    store.put_bytes("inputs/speeds.xosc", DISTRIBUTION)
+    body = run_body("d", "uid-1", 1)
+    body["spec"]["output"] = {"url": "s3://bucket/out", "endpoint": "https://elsewhere.example"}
+    body["spec"]["sweep"]["distribution"] = "s3://bucket/inputs/speeds.xosc"
+    c = controller(kube, store)
+    c.observe_run("ADDED", body)
+    drain(c)
+    assert kube.status_patches[-1]["conditions"][0]["reason"] == "CredentialsRequired"
+    assert store.opened == 0 and store.gets == 0 and kube.jobs == {}

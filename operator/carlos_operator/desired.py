@@ -188,13 +188,10 @@ def with_copy(run: SimulationRun, path: str) -> SimulationRun:
 
 
 def refusal(run: SimulationRun, namespace: str, settings: OperatorSettings) -> Rejected | None:
-    """Why the run (its distribution read) is not accepted on this cluster, or None: what a cluster run
-    needs beyond the models, its own store named with its own credentials, Secrets only where allowed. The
-    reader asks before it opens the store or reads a Secret for the run."""
-    try:
-        check_cluster_spec(run)
-    except CarlosError as exc:
-        return Rejected("InvalidSpec", str(exc))
+    """Why the cluster's policy refuses the run, or None: a run that names its own object store names its
+    own credentials, and Secrets only where its namespace may. Asked before anything is read for the run
+    (its distribution, its Secret, its store): the operator's credentials never go to a store the run
+    chose."""
     chosen = run.spec.output.endpoint
     if chosen and not run.spec.output.credentials_secret_ref and chosen != settings.default_s3_endpoint:
         return Rejected(
@@ -210,6 +207,15 @@ def refusal(run: SimulationRun, namespace: str, settings: OperatorSettings) -> R
             f"{named[0]}: runs in namespace {namespace!r} may not name Secrets (the operator's "
             "administrator allows it per namespace: Helm value secretReferences.namespaces)",
         )
+    return None
+
+
+def unfit(run: SimulationRun) -> Rejected | None:
+    """Why the run (its distribution read) cannot run on a cluster (builders.check_cluster_spec), or None."""
+    try:
+        check_cluster_spec(run)
+    except CarlosError as exc:
+        return Rejected("InvalidSpec", str(exc))
     return None
 
 
@@ -344,6 +350,9 @@ def _decide(
     namespace = namespace_of(body)
     submitted, output = parse(body, settings)
     run = submitted
+    refused = refusal(run, namespace, settings)
+    if refused is not None:
+        raise refused
     if reads_distribution(run):
         ref = run.spec.sweep.distribution_config_map_ref
         if ref is not None and ref.name in inputs.absent_configmaps:
@@ -364,7 +373,7 @@ def _decide(
                 f"ConfigMap, which holds at most {MAX_DISTRIBUTION_BYTES:,}: split the sweep",
             )
         run = with_copy(run, inputs.distribution_copy or DISTRIBUTION_FILE)
-    refused = refusal(run, namespace, settings)
+    refused = unfit(run)
     if refused is not None:
         raise refused
     total = run.spec.search.budget if run.spec.search is not None else len(Plan(run.spec))

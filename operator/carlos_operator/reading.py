@@ -5,8 +5,10 @@ missing or unusable (what comes after it would not be looked at): the run's dist
 ConfigMap, then the file; its local copy is written here), the ConfigMaps its scenarios name, its object
 store (opening it reads the Secret the run names, where its namespace may name Secrets), a search's scenario,
 then, for a run whose Job is still to be made, the stored `run.yaml` and the ConfigMap and Job of its name.
-The run's policy (desired.refusal) is asked before the store is opened: a run that would be refused gets no
-Secret read and no store opened. Nothing is read for a run whose status is final or whose spec is invalid.
+The cluster's policy (desired.refusal) is asked before anything is read: a run it refuses gets no distribution,
+Secret or store read for it, so the operator's credentials never reach a store the run chose. Nothing is read
+for a run whose status is final or whose spec is invalid, and no store opened for one that cannot run on a
+cluster (desired.unfit).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from carlos_operator.desired import (
     reads_distribution,
     refusal,
     started,
+    unfit,
     with_copy,
 )
 from carlos_operator.inputs import read_input
@@ -55,13 +58,15 @@ def read_inputs(c: Host, state: RunState, *, prepare_search: PrepareSearch) -> R
     except Rejected:
         return RunInputs(**found)
     namespace = namespace_of(body)
+    if refusal(run, namespace, c.settings) is not None:
+        return RunInputs(**found)
     if reads_distribution(run):
         found.update(_distribution(c, run, namespace, output))
         if "distribution" not in found:
             return RunInputs(**found)
         if found.get("distribution_copy"):
             run = with_copy(run, found["distribution_copy"])
-    if refusal(run, namespace, c.settings) is not None:
+    if unfit(run) is not None:
         return RunInputs(**found)
     for name in scenario_configmaps(run):
         if _get(c.kube.read_configmap, namespace, name) is None:
