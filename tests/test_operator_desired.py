@@ -306,3 +306,30 @@ def test_a_run_refused_by_the_policy_gets_nothing_read_for_it_not_even_its_distr
     drain(c)
     assert kube.status_patches[-1]["conditions"][0]["reason"] == "CredentialsRequired"
     assert store.opened == 0 and store.gets == 0 and kube.jobs == {}
+
+
+def test_a_search_rounds_objects_are_claimed_by_the_same_rule() -> None:
+    """A round's Job of the run's name that is something else's refuses the run (NameConflict), as a plain
+    run's; one of an earlier run of the same name is deleted and waited for, then the round starts."""
+    from tests.test_operator_controller import search_kube
+
+    name = round_job_name("s", 0)
+    kube, store = search_kube(), FakeStore()
+    kube.jobs[name] = owned(name, "w", run="x", kind="Workflow")
+    c = controller(kube, store)
+    c.observe_run("ADDED", search_body("s", "uid-1"))
+    drain(c)
+    rejected = kube.status_patches[-1]
+    assert rejected["phase"] == "Failed" and rejected["conditions"][0]["reason"] == "NameConflict"
+    assert kube.jobs[name]["metadata"]["ownerReferences"][0]["kind"] == "Workflow"
+    kube, store = search_kube(), FakeStore()
+    kube.jobs[name] = owned(name, "uid-0", run="s")
+    c = controller(kube, store, backoff=600)
+    c.observe_run("ADDED", search_body("s", "uid-1"))
+    drain(c)
+    assert kube.deleted == [("Job", name, "object-of-uid-0")]
+    reason = next(x for x in kube.status_patches[-1]["conditions"] if x["type"] == "Prerequisites")["reason"]
+    assert reason == "PreviousRunCleanup"
+    c.enqueue(("default", "s"))
+    drain(c)
+    assert kube.jobs[name]["metadata"]["ownerReferences"][0]["uid"] == "uid-1"

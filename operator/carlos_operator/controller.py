@@ -43,7 +43,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from carlos_operator import metrics
-from carlos_operator.apply import apply, reject
+from carlos_operator.apply import apply, reject, wait
 from carlos_operator.builders import OperatorSettings, Output, job_name
 from carlos_operator.desired import (
     FINISHED_PHASES,
@@ -54,6 +54,7 @@ from carlos_operator.desired import (
     condition_status,
     decide,
     rejection,
+    waiting,
 )
 from carlos_operator.kube import Kube, NotFound, now_rfc3339
 from carlos_operator.reading import read_inputs
@@ -330,12 +331,27 @@ class Controller:
         if not state.ensured and not self.ensure(key, state):
             return  # rejected, waiting for a prerequisite, or held
         if state.search is not None:
+            now = now_rfc3339()
             try:
                 self.searches.update(key, state)
-            except CarlosError as exc:  # the stored study does not fit the run (another spec, optuna)
-                reject(
-                    self, state, rejection(state.last_status, "SearchStateMismatch", str(exc), now_rfc3339())
+            except Waiting as exc:  # a round's objects of an earlier run of the same name are being deleted
+                wait(
+                    self,
+                    key,
+                    state,
+                    waiting(
+                        state.last_status,
+                        exc.reason,
+                        exc.message,
+                        now,
+                        waits=state.waits,
+                        backoff=self.backoff,
+                    ),
                 )
+            except Rejected as exc:  # a round's object of the run's name is something else's
+                reject(self, state, rejection(state.last_status, exc.reason, exc.message, now))
+            except CarlosError as exc:  # the stored study does not fit the run (another spec, optuna)
+                reject(self, state, rejection(state.last_status, "SearchStateMismatch", str(exc), now))
             return
         self._update_status(key, state)
 
