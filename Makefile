@@ -9,7 +9,7 @@ SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 TEST_SYSTEM_PACKAGES := chromium
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images k8s cluster-up cluster-down e2e clean
+.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images k8s cluster-system-packages cluster-up cluster-down e2e clean
 
 
 install: $(STAMP)
@@ -150,10 +150,14 @@ images:
 # build takes tens of CPU-minutes; later ones reuse the cache). `make cluster-up` starts etcd, the control
 # plane, containerd, kubelet and kube-proxy as root (tools/localcluster.py) with the images of `make images`,
 # and prints `export KUBECONFIG=…` last; `make cluster-down` stops everything.
+CLUSTER_SYSTEM_PACKAGES := containerd runc containernetworking-plugins iptables conntrack iproute2 openssl docker.io debootstrap
+cluster-system-packages:
+	@$(MAKE) --no-print-directory system-packages PACKAGES="$(CLUSTER_SYSTEM_PACKAGES)"
+
 k8s:
 	tools/k8s/build all
 
-cluster-up: install k8s images
+cluster-up: install cluster-system-packages k8s images
 	$(PY) tools/localcluster.py up
 
 cluster-down:
@@ -161,7 +165,7 @@ cluster-down:
 
 # The end-to-end tests on that cluster (tests/e2e/): helm install of the chart, the examples, the CLI, faults,
 # bad input and tenancy. The tests start the cluster themselves and stop it at the end.
-e2e: install k8s images helm
+e2e: install cluster-system-packages k8s images helm
 	$(PY) -m pytest -p no:xdist -m e2e tests/e2e
 
 clean:
