@@ -670,3 +670,18 @@ def test_local_tags_are_what_the_chart_can_name() -> None:
         '-t "$IMAGE_PREFIX/carlos-$image:$VERSION"' in build
         and '-t "$LOCAL_PREFIX/carlos-$image:$VERSION"' in build
     )
+
+
+def test_local_values_name_the_local_images() -> None:
+    """tools/images/values-local.yaml points the chart at the carlos.local images (never pulled), and the chart's
+    values with it still satisfy values.schema.json."""
+    import jsonschema
+
+    local = yaml.safe_load((TOOLS / "values-local.yaml").read_text())
+    assert set(local["images"]) == set(chart_images())
+    for name, image in local["images"].items():
+        assert image == {"repository": f"carlos.local/carlos-{name}", "pullPolicy": "Never"}
+    values = yaml.safe_load((CHART / "values.yaml").read_text())
+    for name, image in local["images"].items():
+        values["images"][name].update(image)
+    jsonschema.validate(values, json.loads((CHART / "values.schema.json").read_text()))
