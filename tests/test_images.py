@@ -611,7 +611,7 @@ def test_make_images_runs_the_build_script() -> None:
     assert "debootstrap --variant=minbase" in build and "docker import" in build.replace(
         '"$DOCKER" import', "docker import"
     )
-    assert "images import -" in build and '-n "${NAMESPACE:-k8s.io}"' in build
+    assert "images import -" in build and 'NAMESPACE="${NAMESPACE:-k8s.io}"' in build
     usage = subprocess.run([str(TOOLS / "build"), "--help"], capture_output=True, text=True, check=True)
     assert "import-containerd ADDRESS" in usage.stdout and "set -euo" not in usage.stdout
 
