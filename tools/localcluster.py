@@ -320,6 +320,9 @@ state = "{layout.containerd_state}"
 [plugins."io.containerd.grpc.v1.cri"]
   sandbox_image = "{PAUSE_IMAGE}"
   enable_unprivileged_ports = false
+  # no CAP_SYS_RESOURCE in a sandboxed machine: a negative oom_score_adj (the pod sandbox's -998, a Guaranteed
+  # pod's -997) fails runc's init ("can't get final child's PID from pipe"); clamp it at containerd's own
+  restrict_oom_score_adj = true
   [plugins."io.containerd.grpc.v1.cri".containerd]
     snapshotter = "overlayfs"
     default_runtime_name = "runc"
@@ -760,11 +763,12 @@ def up(layout: Layout | None = None, images: bool = True) -> Path:
         for name in ("kube-controller-manager", "kube-scheduler", "containerd"):
             _start(layout, name, cmds[name])
         _wait(layout, "containerd", layout.containerd_socket.exists)
-        if images:
-            _import_images(layout)
         _start(layout, "kubelet", cmds["kubelet"])
         _start(layout, "kube-proxy", cmds["kube-proxy"])
         _wait(layout, "kubelet", lambda: _node_ready(layout))
+        ready = time.monotonic() - started
+        if images:  # before `up` returns, so that no pod is created before its image is there
+            _import_images(layout)
         time.sleep(1.0)
         for name in COMPONENTS:
             if _pid(layout, name) is None:
@@ -775,7 +779,8 @@ def up(layout: Layout | None = None, images: bool = True) -> Path:
         down(layout, quiet=True)
         raise
     print(
-        f"node {NODE_NAME} Ready {time.monotonic() - started:.1f} s after start; logs in {layout.logs}",
+        f"node {NODE_NAME} Ready {ready:.1f} s after start, images there {time.monotonic() - started:.1f} s "
+        f"after start; logs in {layout.logs}",
         file=sys.stderr,
     )
     return layout.admin_kubeconfig
