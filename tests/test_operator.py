@@ -433,3 +433,23 @@ def test_a_killed_shard_is_retried_without_rerunning_its_finished_runs(
     assert "pod attempt 1" in store.get_bytes("shard/0/log.txt").decode()
     assert "pod attempt 1" in store.get_bytes("shard/1/log.txt").decode()
     assert "pod attempt 2" in store.get_bytes("shard/2/log.txt").decode()
+
+
+def test_login_in_a_pod_uses_the_service_address_not_cluster_dns(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A real cluster without DNS: kopf's service-account login names https://kubernetes.default.svc, which
+    does not resolve; the operator takes KUBERNETES_SERVICE_HOST/PORT as client-go does."""
+    import kopf
+
+    from carlos_operator import handlers
+
+    monkeypatch.setattr(
+        kopf,
+        "login_with_service_account",
+        lambda **_: kopf.ConnectionInfo(server="https://kubernetes.default.svc", token="t", default_namespace="ns"),
+    )
+    monkeypatch.setenv("KUBERNETES_SERVICE_HOST", "10.96.0.1")
+    monkeypatch.setenv("KUBERNETES_SERVICE_PORT", "443")
+    info = handlers.login()
+    assert info is not None and info.server == "https://10.96.0.1:443" and info.token == "t"
+    monkeypatch.setenv("KUBERNETES_SERVICE_HOST", "fd00::1")
+    assert handlers.login().server == "https://[fd00::1]:443"  # type: ignore[union-attr]

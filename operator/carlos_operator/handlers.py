@@ -11,6 +11,7 @@ the cluster would be streamed), the JobWatch has the API server select them. `WA
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -70,8 +71,14 @@ def startup(
 
 @kopf.on.login()
 def login(**kwargs: Any) -> kopf.ConnectionInfo | None:
-    """The service account in a pod, else the kubeconfig (KUBECONFIG), as the controller's client."""
-    return kopf.login_with_service_account(**kwargs) or kopf.login_with_kubeconfig(**kwargs)
+    """The service account in a pod, else the kubeconfig (KUBECONFIG), as the controller's client. In a pod
+    the API server is the address in KUBERNETES_SERVICE_HOST/PORT, as client-go's in-cluster config and the
+    controller's own client take it: kopf names `kubernetes.default.svc`, which needs cluster DNS."""
+    info = kopf.login_with_service_account(**kwargs)
+    host, port = os.environ.get("KUBERNETES_SERVICE_HOST"), os.environ.get("KUBERNETES_SERVICE_PORT")
+    if info is not None and host and port:
+        info = dataclasses.replace(info, server=f"https://{f'[{host}]' if ':' in host else host}:{port}")
+    return info or kopf.login_with_kubeconfig(**kwargs)
 
 
 @kopf.on.cleanup()

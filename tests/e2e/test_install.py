@@ -57,7 +57,9 @@ def test_operator_is_a_pod_under_the_charts_service_account(cluster: Cluster) ->
 def test_operator_rbac_is_least_privilege(
     cluster: Cluster, verb: str, resource: str, namespace: str, allowed: bool
 ) -> None:
+    resource, _, subresource = resource.partition("/")
     args = ["auth", "can-i", verb, resource, f"--as={OPERATOR_SA}"]
+    args += [f"--subresource={subresource}"] if subresource else []
     args += ["-n", namespace] if namespace else []
     answer = cluster.kubectl(*args, check=False).stdout.strip()
     assert answer == ("yes" if allowed else "no"), (
