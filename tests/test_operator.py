@@ -445,7 +445,9 @@ def test_login_in_a_pod_uses_the_service_address_not_cluster_dns(monkeypatch: py
     monkeypatch.setattr(
         kopf,
         "login_with_service_account",
-        lambda **_: kopf.ConnectionInfo(server="https://kubernetes.default.svc", token="t", default_namespace="ns"),
+        lambda **_: kopf.ConnectionInfo(
+            server="https://kubernetes.default.svc", token="t", default_namespace="ns"
+        ),
     )
     monkeypatch.setenv("KUBERNETES_SERVICE_HOST", "10.96.0.1")
     monkeypatch.setenv("KUBERNETES_SERVICE_PORT", "443")

@@ -12,6 +12,10 @@ beside `properties`, and every node typed unless it is `x-kubernetes-int-or-stri
   OpenSCENARIO parameter value: bool | int | float | string; a criterion: string or object) becomes
   `x-kubernetes-preserve-unknown-fields` with the union described. The operator validates every spec with
   the pydantic models before it creates anything, so such values are still checked.
+- no `default`: the API server would store defaults in every object, and then a field the user never set
+  reads as set (a real API server gave every run the local default `output.url: file://./results`, which the
+  operator then refused on the cluster). An absent field means the model's default, applied where the spec
+  is parsed (the operator, the pods), exactly as `carlos run` does; descriptions say the default.
 - `const` becomes a one-value `enum`; `additionalProperties: false` (unknown fields rejected) is dropped:
   the API server prunes unknown fields, and `kubectl apply` (strict field validation) rejects them.
 
@@ -35,7 +39,6 @@ CRD_NAME = f"{PLURAL}.{API_GROUP}"
 _KEEP = {
     "type",
     "description",
-    "default",
     "enum",
     "format",
     "pattern",
@@ -98,8 +101,6 @@ def _translate(node: dict[str, Any], defs: dict[str, Any], path: str) -> dict[st
             inner = dict(options[0])
             if "description" in outer:
                 inner["description"] = outer["description"]
-            if outer.get("default") is not None:
-                inner["default"] = outer["default"]
             return _translate(inner, defs, path)
         kinds = _type_names(options, defs)
         out: dict[str, Any] = {}
@@ -109,8 +110,6 @@ def _translate(node: dict[str, Any], defs: dict[str, Any], path: str) -> dict[st
             out["x-kubernetes-preserve-unknown-fields"] = True
         union = " | ".join(dict.fromkeys("bool" if k == "boolean" else k for k in kinds))
         out["description"] = f"{description} ({union})" if description else union
-        if outer.get("default") is not None:
-            out["default"] = outer["default"]
         return out
     if ref_name in _STRING_FORMS:
         text = (
@@ -133,8 +132,6 @@ def _translate(node: dict[str, Any], defs: dict[str, Any], path: str) -> dict[st
             return out
         raise SchemaError(f"{path}: no type in {node}")
     out = {k: v for k, v in node.items() if k in _KEEP}
-    if out.get("default") is None:
-        out.pop("default", None)
     if "exclusiveMinimum" in node:
         out["minimum"], out["exclusiveMinimum"] = node["exclusiveMinimum"], True
     if "exclusiveMaximum" in node:

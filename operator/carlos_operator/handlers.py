@@ -55,6 +55,9 @@ def startup(
     settings.watching.connect_timeout = 30
     settings.networking.request_timeout = 60
     settings.peering.standalone = True
+    # the SimulationRun CRD exists before the operator starts (the chart installs it): no watch on CRDs, which
+    # its RBAC does not grant (least privilege); the namespaces served are the ones named, or all
+    settings.scanning.disabled = True
     settings.posting.level = logging.WARNING
     settings.execution.max_workers = 8
     _controller = Controller(

@@ -26,6 +26,7 @@ from typing import Any
 import pytest
 import yaml
 
+from simcore import kubeyaml
 from tests.s3server import S3Server, start_s3_server, stop_s3_server
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -129,7 +130,7 @@ class Cluster:
             return proc.stdout
         docs = list(yaml.safe_load_all(proc.stdout))
         old = next(d for d in docs if d["kind"] == "SimulationRun")["metadata"]["name"]
-        return yaml.safe_dump_all(docs).replace(old, name)
+        return kubeyaml.dump_all(docs, sort_keys=False).replace(old, name)
 
     def delete_run(self, name: str, namespace: str = RUNS_NS) -> None:
         self.kubectl("-n", namespace, "delete", "simulationrun", name, "--ignore-not-found", "--wait=false")
