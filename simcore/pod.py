@@ -18,12 +18,13 @@ transport `CARLOS_TRANSPORT` names:
   In lockstep (spec.control) simcore waits before the first frame until a node subscribed to each
   driven entity's odometry by name (the system under test's reader of /carlos/<entity>/odometry).
 
-- `bridge` (first sidecar): loopback: runs the hub on 127.0.0.1:`CARLOS_BUS_PORT` until SIGTERM. dds: joins
-  the domain, accepts connections on 127.0.0.1:`CARLOS_BUS_PORT` for its startup probe, and logs every
+- `bridge` (first sidecar): loopback: runs the hub on 127.0.0.1:`CARLOS_BUS_PORT` until SIGTERM (its startup
+  probe: the same port on the pod's own address, which the kubelet connects to). dds: joins
+  the domain, accepts connections on `CARLOS_BUS_PORT` (every address of the pod) for its startup probe, and logs every
   ROS 2 topic (name, type) that appears on the domain until SIGTERM: it is the pod's view of the ROS 2
   graph (ROS 2 nodes talk to simcore's and the recorder's participants directly, nothing is relayed).
 - `recorder` (second sidecar): subscribes to every topic (only to `/carlos/status` when the spec does not
-  record), then opens 127.0.0.1:`CARLOS_RECORDER_READY_PORT` for its startup probe. It serves the pod's
+  record), then opens `CARLOS_RECORDER_READY_PORT` (every address of the pod) for its startup probe. It serves the pod's
   slice: for each index simcore announces (`start` on `/carlos/status`) it opens the index's MCAP and answers
   `ready` on `/carlos/recorder/status`; when the index's verdict arrives (its values carry the index summary
   as JSON) — or on SIGTERM — it closes the MCAP with everything received, uploads `recording.mcap` and
@@ -258,11 +259,16 @@ def run_bridge(env: PodEnv) -> int:
     if env.transport == "dds":
         return _run_dds_bridge(env, stop)
     hub = LoopbackHub("127.0.0.1", env.bus_port).start()
-    log.info("bridge: topic hub on 127.0.0.1:%d", hub.port)
+    # the topics stay on loopback; the kubelet's startup probe connects to the pod's own address
+    address = _pod_address()
+    ready = _ReadyPort(env.bus_port, address) if address else None
+    log.info("bridge: topic hub on 127.0.0.1:%d, startup probe on %s", hub.port, address or "loopback")
     try:
         while not stop.wait(1.0):
             pass
     finally:
+        if ready is not None:
+            ready.close()
         hub.close()
     log.info("bridge: %d messages relayed", hub.relayed)
     return 0
@@ -275,7 +281,7 @@ def _run_dds_bridge(env: PodEnv, stop: threading.Event) -> int:
         print(f"error: {exc}", flush=True)
         return int(ExitCode.INFRASTRUCTURE)
     ready = _ReadyPort(env.bus_port)
-    log.info("bridge: on DDS domain %d; startup probe on 127.0.0.1:%d", env.domain_id, env.bus_port)
+    log.info("bridge: on DDS domain %d; startup probe on port %d", env.domain_id, env.bus_port)
     logged: set[str] = set()
 
     def log_new() -> None:
@@ -507,11 +513,23 @@ def _run_one(
 # --- recorder --------------------------------------------------------------------------------------------
 
 
-class _ReadyPort:
-    """Accepts (and closes) connections on the startup-probe port."""
+def _pod_address() -> str | None:
+    """The pod's own (non-loopback) address, as the kubelet writes it into the pod's /etc/hosts; None
+    outside a pod network (processes on one host share the loopback: the probe reaches 127.0.0.1 there)."""
+    try:
+        address = socket.gethostbyname(socket.gethostname())
+    except OSError:
+        return None
+    return None if address.startswith("127.") else address
 
-    def __init__(self, port: int) -> None:
-        self.server = socket.create_server(("127.0.0.1", port))
+
+class _ReadyPort:
+    """Accepts (and closes) connections on the startup-probe port. The kubelet probes the pod's address, not
+    its loopback, so by default it listens on every address of the pod's network namespace (it carries no
+    data: a connection is closed at once)."""
+
+    def __init__(self, port: int, host: str = "") -> None:
+        self.server = socket.create_server((host, port))
         threading.Thread(target=self._serve, name="ready-port", daemon=True).start()
 
     def _serve(self) -> None:
@@ -588,7 +606,7 @@ def run_recorder(env: PodEnv) -> int:
         bus.subscribe(STATUS_TOPIC, on_message)
     report = bus.advertise(RECORDER_TOPIC, STATUS_TYPE)
     ready = _ReadyPort(env.ready_port)
-    log.info("recorder: subscribed, ready on 127.0.0.1:%d", env.ready_port)
+    log.info("recorder: subscribed, ready on port %d", env.ready_port)
     failed = False
     while not stop.is_set():
         try:
