@@ -218,10 +218,17 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
     proc = None
     try:
         proc, s3 = start_s3_server(tmp / "s3", ip=localcluster.NODE_IP)
+        saved = {k: os.environ.get(k) for k in s3.env()}
+        os.environ.update(s3.env())  # this process reads the results (Cluster.store) as the CLI would
         env = Cluster(kubeconfig, layout, s3, tmp)
         _install_chart(env)
         yield env
     finally:
         if proc is not None:
             stop_s3_server(proc)
+            for key, value in saved.items():
+                if value is None:
+                    os.environ.pop(key, None)
+                else:
+                    os.environ[key] = value
         localcluster.down(layout, quiet=True)

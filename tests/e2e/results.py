@@ -37,3 +37,18 @@ def digest(data: bytes) -> str:
 
 def summaries(files: dict[int, dict[str, bytes]]) -> dict[int, dict[str, Any]]:
     return {i: verdict(json.loads(f["summary.json"])) for i, f in files.items() if "summary.json" in f}
+
+
+def messages(recording: bytes) -> list[tuple[str, int, str]]:
+    """Every message of a recording as (topic, log time, digest of its bytes), in a canonical order: the pod
+    path carries topics over DDS, which delivers messages of the same instant on different topics in no
+    fixed order, so the file's bytes differ where the messages do not."""
+    import io
+
+    from mcap.reader import make_reader
+
+    reader = make_reader(io.BytesIO(recording))
+    return sorted(
+        (channel.topic, message.log_time, digest(message.data))
+        for _, channel, message in reader.iter_messages(log_time_order=False)
+    )
