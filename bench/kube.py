@@ -87,8 +87,18 @@ def fake_node(i: int) -> dict[str, Any]:
 def operator_kubeconfig(admin: Path, tmp: Path) -> Path:
     """A kubeconfig with a token of the chart's ServiceAccount (RBAC from `helm template`)."""
     rendered = subprocess.run(
-        [HELM, "template", "carlos", str(ROOT / "helm/carlos"), "--namespace", OPERATOR_NS]
-        + ["--show-only", "templates/serviceaccount.yaml", "--show-only", "templates/rbac.yaml"],
+        [
+            HELM,
+            "template",
+            "carlos",
+            str(ROOT / "helm/carlos"),
+            "--namespace",
+            OPERATOR_NS,
+            "--show-only",
+            "templates/serviceaccount.yaml",
+            "--show-only",
+            "templates/rbac.yaml",
+        ],
         capture_output=True,
         text=True,
         check=True,
@@ -204,9 +214,14 @@ def main() -> None:
         version = json.loads(kubectl(admin, "version", "-o", "json"))["serverVersion"]["gitVersion"]
         kubectl(admin, "cordon", localcluster.NODE_NAME)
         kwok = subprocess.Popen(
-            [str(bins["kwok"]), f"--kubeconfig={admin}", "--manage-all-nodes=false"]
-            + ["--manage-nodes-with-annotation-selector=kwok.x-k8s.io/node=fake", "--cidr=10.90.0.1/16"]
-            + ["--node-lease-duration-seconds=40"],
+            [
+                str(bins["kwok"]),
+                f"--kubeconfig={admin}",
+                "--manage-all-nodes=false",
+                "--manage-nodes-with-annotation-selector=kwok.x-k8s.io/node=fake",
+                "--cidr=10.90.0.1/16",
+                "--node-lease-duration-seconds=40",
+            ],
             stdout=(tmp / "kwok.log").open("wb"),
             stderr=subprocess.STDOUT,
         )
@@ -220,8 +235,12 @@ def main() -> None:
         ).stdout
         kubectl(admin, "apply", "-f", "-", stdin=crd)
         for _ in range(120):  # the CRD is served once Established
-            crd_status = json.loads(kubectl(admin, "get", f"crd/{PLURAL}.{GROUP}", "-o", "json")).get("status", {})
-            if any(c["type"] == "Established" and c["status"] == "True" for c in crd_status.get("conditions", [])):
+            crd_status = json.loads(kubectl(admin, "get", f"crd/{PLURAL}.{GROUP}", "-o", "json")).get(
+                "status", {}
+            )
+            if any(
+                c["type"] == "Established" and c["status"] == "True" for c in crd_status.get("conditions", [])
+            ):
                 break
             time.sleep(0.5)
         kubectl(admin, "create", "namespace", NS)
@@ -242,8 +261,9 @@ def main() -> None:
                 "--all-namespaces",
                 "--liveness-port",
                 "0",
-            ]
-            + ["--metrics-port", "0"],
+                "--metrics-port",
+                "0",
+            ],
             env=env,
             stdout=(tmp / "operator.log").open("wb"),
             stderr=subprocess.STDOUT,
@@ -315,7 +335,7 @@ def main() -> None:
         print(f"{'figure':<28} {'value':>14}  goal")
         for key, value in result.items():
             goal = next((f"{g} {'met' if ok else 'NOT met'}" for k, g, ok in goals if k == key), "")
-            print(f"{key:<28} {str(value):>14}  {goal}")
+            print(f"{key:<28} {value!s:>14}  {goal}")
         print(json.dumps(result))
     finally:
         for proc in (operator, kwok):

@@ -224,7 +224,6 @@ def test_crd_yaml_reads_the_same_with_yaml_1_1_booleans() -> None:
     import re
 
     import yaml
-
     from carlos_operator.crd import crd, crd_yaml
 
     class Yaml11(yaml.SafeLoader):

@@ -439,7 +439,6 @@ def test_login_in_a_pod_uses_the_service_address_not_cluster_dns(monkeypatch: py
     """A real cluster without DNS: kopf's service-account login names https://kubernetes.default.svc, which
     does not resolve; the operator takes KUBERNETES_SERVICE_HOST/PORT as client-go does."""
     import kopf
-
     from carlos_operator import handlers
 
     monkeypatch.setattr(

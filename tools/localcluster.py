@@ -225,8 +225,15 @@ def _cert(pki: Path, name: str, subject: str, usage: str, sans: Sequence[str] = 
             str(pki / "ca.crt"),
             "-CAkey",
             str(pki / "ca.key"),
+            "-CAcreateserial",
+            "-days",
+            "365",
+            "-sha256",
+            "-extfile",
+            str(ext),
+            "-out",
+            str(crt),
         ]
-        + ["-CAcreateserial", "-days", "365", "-sha256", "-extfile", str(ext), "-out", str(crt)]
     )
     csr.unlink()
     ext.unlink()
@@ -237,9 +244,25 @@ def make_pki(pki: Path) -> None:
     pki.mkdir(parents=True, exist_ok=True)
     _ec_key(pki / "ca.key")
     _run(
-        ["openssl", "req", "-x509", "-new", "-key", str(pki / "ca.key"), "-subj", "/CN=carlos-local-ca"]
-        + ["-days", "3650", "-sha256", "-out", str(pki / "ca.crt")]
-        + ["-addext", "basicConstraints=critical,CA:TRUE", "-addext", "keyUsage=critical,keyCertSign,cRLSign"]
+        [
+            "openssl",
+            "req",
+            "-x509",
+            "-new",
+            "-key",
+            str(pki / "ca.key"),
+            "-subj",
+            "/CN=carlos-local-ca",
+            "-days",
+            "3650",
+            "-sha256",
+            "-out",
+            str(pki / "ca.crt"),
+            "-addext",
+            "basicConstraints=critical,CA:TRUE",
+            "-addext",
+            "keyUsage=critical,keyCertSign,cRLSign",
+        ]
     )
     api_sans = [
         f"IP:{NODE_IP}",

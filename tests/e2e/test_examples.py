@@ -48,8 +48,13 @@ def applied(cluster: Cluster) -> dict[str, str]:
 def _local(tmp: Path, example: str) -> tuple[int, Path]:
     out = tmp / "local"
     proc = subprocess.run(
-        [str(Path(__import__("sys").executable).with_name("carlos")), "run", f"examples/runs/{example}.yaml"]
-        + ["--output", f"file://{out}"],
+        [
+            str(Path(__import__("sys").executable).with_name("carlos")),
+            "run",
+            f"examples/runs/{example}.yaml",
+            "--output",
+            f"file://{out}",
+        ],
         cwd=ROOT,
         capture_output=True,
         text=True,
