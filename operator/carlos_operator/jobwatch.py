@@ -3,7 +3,7 @@
 kopf filters a watch's labels on the client, so every Job of the cluster would be streamed to the operator;
 this watch sends the label selector with the list and the watch, as `kubectl get jobs -l` does. One thread
 per watched namespace (or one for every namespace): list (every Job → ADDED), then watch from the list's
-resourceVersion; a 410 Gone (the version expired) lists again; other errors retry with backoff.
+resourceVersion; a 410 Gone (the version expired) lists again; other errors list again after a backoff.
 """
 
 from __future__ import annotations
@@ -99,15 +99,18 @@ class JobWatch:
                     self.on_event(str(event.get("type")), job)
                 failures = 0
             except ApiException as exc:
+                version = None  # list again: the version may be gone (410, an API server restarted)
                 if exc.status == 410:
-                    version = None
                     continue
                 failures += 1
                 log.warning(
                     "watching Jobs (%s) failed: %s; retrying", namespace or "all namespaces", exc.reason
                 )
             except Exception as exc:
+                # a restarted API server answers a watch from an expired version with an ERROR event, which
+                # the client library fails to read without deserialising (KeyError 'raw_object'): list again
+                version = None
                 failures += 1
-                log.warning("watching Jobs (%s) failed: %s; retrying", namespace or "all namespaces", exc)
+                log.warning("watching Jobs (%s) failed: %r; listing again", namespace or "all namespaces", exc)
             if failures:
                 self.stop_flag.wait(min(2.0**failures, MAX_BACKOFF_S))
