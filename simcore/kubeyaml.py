@@ -34,8 +34,8 @@ _Dumper.add_representer(str, _str)
 
 def dump(data: Any, **kwargs: Any) -> str:
     """`yaml.safe_dump` whose output Go's YAML parser reads back as the same data."""
-    return yaml.dump(data, Dumper=_Dumper, **kwargs)  # type: ignore[no-any-return]
+    return str(yaml.dump(data, Dumper=_Dumper, **kwargs))
 
 
 def dump_all(documents: Any, **kwargs: Any) -> str:
-    return yaml.dump_all(documents, Dumper=_Dumper, **kwargs)  # type: ignore[no-any-return]
+    return str(yaml.dump_all(documents, Dumper=_Dumper, **kwargs))
