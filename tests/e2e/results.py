@@ -52,3 +52,26 @@ def messages(recording: bytes) -> list[tuple[str, int, str]]:
         (channel.topic, message.log_time, digest(message.data))
         for _, channel, message in reader.iter_messages(log_time_order=False)
     )
+
+
+def by_point(files: dict[int, dict[str, bytes]]) -> dict[str, dict[str, Any]]:
+    """Per-index files keyed by what the index ran (scenario and parameter values), not by its number: the
+    API server stores `spec.sweep.matrix` with its keys sorted, so on a cluster the permutations are numbered
+    in that order, while `carlos run` numbers them in the manifest's order."""
+    found = {}
+    for data in files.values():
+        summary = json.loads(data["summary.json"])
+        key = json.dumps([summary["scenario"], sorted(summary["parameters"].items()), summary["seed"]])
+        found[key] = {"summary": verdict(summary), "recording": data.get("recording.mcap")}
+    return found
+
+
+def junit_cases(text: str) -> list[str]:
+    """junit.xml's test cases, each with its parameters in a canonical order, without wall times and index
+    numbers (see `by_point`)."""
+
+    def canonical(match: re.Match[str]) -> str:
+        return match.group(1) + ",".join(sorted(match.group(2).split(","))) + '"'
+
+    cases = re.findall(r"<testcase name=\"[^\"]*\"[^>]*>", junit(text))
+    return sorted(re.sub(r'^(<testcase name="[^\[]*)\[\d+\] ?([^"]*)"', canonical, case) for case in cases)

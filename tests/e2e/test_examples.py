@@ -3,8 +3,8 @@
 Each manifest goes through `carlos submit --dry-run -o yaml` (its local scenarios and roads packed into a
 ConfigMap owned by the run: the objects a GitOps repository holds) and then `kubectl apply -f`. The pods run
 in real containers on the node; their results land in the S3 server. Compared with a local `carlos run` of
-the same manifest: the phase against the exit code, every index's verdict (criteria, metrics, end reason),
-junit.xml (without wall times), and every recorded message byte for byte (topic, time, data; the file's
+the same manifest: the phase against the exit code, every run's verdict (criteria, metrics, end reason),
+junit.xml's cases (without wall times), and every recorded message byte for byte (topic, time, data; the file's
 bytes differ: DDS delivers same-instant messages of different topics in no fixed order, and the file names
 the run).
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from tests.e2e.conftest import IMAGE_PREFIX, ROOT, RUNS_NS, Cluster
-from tests.e2e.results import index_files, junit, messages, summaries
+from tests.e2e.results import by_point, index_files, junit_cases, messages
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(1500)]
 
@@ -27,8 +27,10 @@ EXAMPLES = {
     "automated-testing-failing": 1,
     "data-generation": 0,
     "prototyping": 0,
-    "perception": 0,
 }
+# Not here: perception.yaml (its detector, a container beside simcore, keeps up with the lidar only on a node
+# with cores to spare: on two shared cores it saw 0.5% of the frames, so its recall criterion fails there),
+# closed-loop.yaml (needs a controller process), cooperative-perception.yaml and search-cut-in.yaml (minutes).
 PHASE = {0: "Succeeded", 1: "Failed"}
 
 
@@ -80,14 +82,14 @@ def test_example_on_the_cluster_equals_carlos_run(
     local_run = next(p.name for p in out.iterdir())
     remote, local = index_files(remote_store, name), index_files(local_store, local_run)
     assert sorted(remote) == sorted(local) == list(range(status["total"]))
-    assert summaries(remote) == summaries(local)
-    assert junit(remote_store.get_bytes(f"{name}/junit.xml").decode()).replace(name, local_run) == junit(
-        local_store.get_bytes(f"{local_run}/junit.xml").decode()
-    )
-    recorded = {i for i, f in local.items() if "recording.mcap" in f}
-    assert {i for i, f in remote.items() if "recording.mcap" in f} == recorded
-    for index in sorted(recorded):  # every message, byte for byte
-        assert messages(remote[index]["recording.mcap"]) == messages(local[index]["recording.mcap"]), index
+    remote_points, local_points = by_point(remote), by_point(local)
+    assert sorted(remote_points) == sorted(local_points)
+    for point, ran in local_points.items():
+        assert remote_points[point]["summary"] | {"index": None} == ran["summary"] | {"index": None}, point
+        if ran["recording"] is not None:  # every message, byte for byte
+            assert messages(remote_points[point]["recording"]) == messages(ran["recording"]), point
+    remote_junit = remote_store.get_bytes(f"{name}/junit.xml").decode().replace(name, local_run)
+    assert junit_cases(remote_junit) == junit_cases(local_store.get_bytes(f"{local_run}/junit.xml").decode())
 
 
 def test_printer_columns_and_conditions(cluster: Cluster, applied: dict[str, str]) -> None:
@@ -101,8 +103,8 @@ def test_printer_columns_and_conditions(cluster: Cluster, applied: dict[str, str
     assert row[1] == "Failed"
     conditions = {c["type"]: c for c in cluster.run_object(name)["status"]["conditions"]}
     assert conditions["Accepted"]["status"] == "True"
-    assert conditions["Failed"]["status"] == "True"
-    assert conditions["Complete"]["status"] == "False" or "Complete" not in conditions
+    assert (conditions["Failed"]["status"], conditions["Failed"]["reason"]) == ("True", "TestFailures")
+    assert conditions["Complete"]["status"] == "True"  # every index finished
     events = cluster.kubectl_json(
         "-n", RUNS_NS, "get", "events", "--field-selector", f"involvedObject.name={name}"
     )["items"]

@@ -82,7 +82,9 @@ def test_failing_exit_codes_go_through_the_pod_failure_policy(cluster: Cluster) 
     assert failed["Failed"]["reason"] == "PodFailurePolicy", failed
     assert "exit code 2" in failed["Failed"]["message"] or "2" in failed["Failed"]["message"]
     assert len(_pods(cluster, "fault-bad-input")) <= 2  # never retried
-    assert status["errors"] >= 1, status
+    failed_condition = next(c for c in status["conditions"] if c["type"] == "Failed")
+    assert failed_condition["status"] == "True" and failed_condition["reason"] == "PodFailurePolicy", status
+    assert "exit code 2" in failed_condition["message"], status
 
 
 def test_a_pod_deleted_mid_run_is_retried(cluster: Cluster) -> None:
