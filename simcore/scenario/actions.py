@@ -164,8 +164,17 @@ class AssignRouteRuntime(Instant):
     def targets(self) -> list[m.Position]:
         return [w.position for w in self.action.route.waypoints]
 
+    def strategies(self) -> list[str]:
+        return [w.strategy for w in self.action.route.waypoints]
+
     def start(self) -> None:
-        self.actor.route = self.world.plan_route(self.actor, self.targets())
+        from simcore.scenario.controllers.follow_route import route_points
+
+        targets = self.targets()
+        self.actor.route = self.world.plan_route(self.actor, targets)
+        # the waypoints as esmini keeps them for a FollowRouteController (resolved now)
+        self.actor.route_points = route_points(self.world, targets)  # type: ignore[arg-type]
+        self.actor.route_strategies = self.strategies()
         self.done = True
 
 
@@ -178,6 +187,9 @@ class AcquirePositionRuntime(AssignRouteRuntime):
 
     def targets(self) -> list[m.Position]:
         return [self.position]
+
+    def strategies(self) -> list[str]:
+        return ["shortest"]
 
     def start_in_init(self) -> bool:
         return False

@@ -74,6 +74,9 @@ class Body:
     extra: dict[str, float] = field(default_factory=dict)
     mover: Any = None  # a runtime that moves the entity itself (a trajectory) instead of lane following
     route: list[tuple[str, int]] = field(default_factory=list)  # roads ahead (id, direction) of a route
+    # the assigned route's waypoints as road points (lane_router.RoadPoint) and their route strategies
+    route_points: list[Any] = field(default_factory=list)
+    route_strategies: list[str] = field(default_factory=list)
     external: bool = False  # an external controller is active on it: moved by its control input only
 
     name: str = field(init=False)  # the entity's (a plain attribute: read on every step)

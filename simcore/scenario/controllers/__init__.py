@@ -32,6 +32,7 @@ class EsminiController(Protocol):
 OPERATING_DOMAINS: dict[str, frozenset[str]] = {
     "ALKS_R157SM_Controller": frozenset({"longitudinal"}),
     "SloppyDriverController": frozenset({"longitudinal", "lateral"}),
+    "FollowRouteController": frozenset({"longitudinal", "lateral"}),
 }
 KINDS = frozenset(OPERATING_DOMAINS)  # simcore.scenario.model.REGISTERED_CONTROLLERS names the same
 
@@ -59,6 +60,10 @@ def make(
         from simcore.scenario.controllers.alks_r157 import AlksR157Controller
 
         return AlksR157Controller(world, actor, properties)
+    if kind == "FollowRouteController":
+        from simcore.scenario.controllers.follow_route import FollowRouteController
+
+        return FollowRouteController(world, actor, properties, domains)
     from simcore.scenario.controllers.sloppy import SloppyDriver
 
     return SloppyDriver(world, actor, properties, domains, rng_for(seed, actor.name))
