@@ -27,7 +27,9 @@ if TYPE_CHECKING:
     from simcore.world.road_model import LaneSection, Road
 
 # esmini's Lane::IsDriving: the lane types a vehicle drives in
-DRIVING_TYPES = frozenset({"driving", "entry", "exit", "onRamp", "offRamp", "bidirectional"})
+DRIVING_TYPES = frozenset(
+    {"driving", "entry", "exit", "onRamp", "offRamp", "bidirectional", "mwyEntry", "mwyExit"}
+)
 DEFAULT_SPEED = 19.444  # m/s, esmini's speed of a road without a speed record (a rural road)
 
 
