@@ -187,6 +187,9 @@ class ScenarioEngine:
             # esmini's first frame steps the controllers activated in Init with a zero time step
             driver.step(0.0)
             self._start_lane_change(driver)
+        for controller in list(self.esmini_controllers.values()):
+            if getattr(controller, "steps_in_init", False) and not controller.actor.gone:
+                controller.step(0.0)
         for body in self.bodies.values():
             if body.external and not self._has_input(body) and not body.gone:
                 self._move_external(body, 0.0)  # that first frame rolls an interactive vehicle's speed down

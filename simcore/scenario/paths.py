@@ -359,3 +359,73 @@ def plan(road: OpenDrive, start: State, goal_road: str, max_roads: int = 2000) -
                 counter += 1
                 heapq.heappush(heap, (new_cost, counter, state))
     return None
+
+
+def plan_in_lane(
+    road: OpenDrive, start: State, lane: int, goal_road: str, max_nodes: int = 4000
+) -> list[State] | None:
+    """As `plan`, but a way esmini's route planner takes: it leaves every road but the start's in the lane it
+    entered it by (along that lane's links through the road's lane sections), starting from `lane` on the
+    start road; onto the goal road any lane will do. None when no such way exists."""
+    import heapq
+
+    if start[0] == goal_road:
+        return [start]
+    Key = tuple[str, int, int]
+    first: Key = (start[0], start[1], lane)
+    best: dict[Key, float] = {first: 0.0}
+    previous: dict[Key, Key | None] = {first: None}
+    heap: list[tuple[float, int, Key]] = [(0.0, 0, first)]
+    counter = 0
+    while heap and len(previous) < max_nodes:
+        cost, _, current = heapq.heappop(heap)
+        if cost > best.get(current, math.inf):
+            continue
+        road_id, direction, entered = current
+        if road_id == goal_road:
+            out: list[State] = []
+            back: Key | None = current
+            while back is not None:
+                out.append((back[0], back[1]))
+                back = previous[back]
+            return out[::-1]
+        length = road.road_length(road_id)
+        if current == first:
+            leaving, step = entered, 0.0
+        else:
+            start_s, end_s = (0.0, length) if direction > 0 else (length, 0.0)
+            leaving, step = _lane_through(road, road_id, entered, start_s, end_s), length
+        if leaving == 0:
+            continue
+        for nxt_road, nxt_lane, nxt_dir in road.connections(road_id, leaving, direction):
+            state = (nxt_road, nxt_dir, nxt_lane)
+            if nxt_road == goal_road:
+                state = (nxt_road, nxt_dir, 0)  # landing on the goal road: its lane does not matter
+            new_cost = cost + step
+            if new_cost < best.get(state, math.inf):
+                best[state] = new_cost
+                previous[state] = current
+                counter += 1
+                heapq.heappush(heap, (new_cost, counter, state))
+    return None
+
+
+def _lane_through(road: OpenDrive, road_id: str, lane: int, s_from: float, s_to: float) -> int:
+    """The lane `lane` at `s_from` is at `s_to` along its links through the road's lane sections (0: it
+    ends before)."""
+    if lane == 0:
+        return 0
+    r = road.road(road_id)
+    side = 1 if lane > 0 else -1
+    sections = r.side_sections(side)
+    i, j = sections.index(r.section_at(s_from, side)), sections.index(r.section_at(s_to, side))
+    step = 1 if j >= i else -1
+    for k in range(i, j, step):
+        here = sections[k].lane(lane)
+        if here is None:
+            return 0
+        link = here.successor if step > 0 else here.predecessor
+        if link is None or sections[k + step].lane(link) is None:
+            return 0
+        lane = link
+    return lane if sections[j].lane(lane) is not None else 0

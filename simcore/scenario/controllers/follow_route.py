@@ -62,6 +62,8 @@ def connected_lane(odr: OpenDrive, road_id: str, lane_id: int, s_from: float, s_
 class FollowRouteController:
     """esmini's FollowRouteController on one entity (see the module's doc)."""
 
+    steps_in_init = True  # esmini's first frame steps it (with no time step) when Init activates it
+
     def __init__(self, world: ScenarioWorld, actor: Body, properties: dict[str, str], domains: frozenset[str]) -> None:
         self.world = world
         self.actor = actor
@@ -113,7 +115,7 @@ class FollowRouteController:
                     dynamics=m.TransitionDynamics("sinusoidal", "time", self.lane_change_time),
                     target=m.AbsoluteTargetLane(target.lane_id),
                 )
-                self.lane_change = LaneChangeRuntime(self.world, body, change)  # type: ignore[arg-type]
+                self.lane_change = _RouteLaneChange(self.world, body, change)  # type: ignore[arg-type]
                 self._started_at = -1
                 self.changing_lane = True
         self._change_lane(dt)
@@ -124,9 +126,11 @@ class FollowRouteController:
         if runtime is None:
             return
         step = self.world.step_index
-        if self._started_at < 0:
+        if self._started_at == -1:
             runtime.start()
-            self._started_at = step
+            # started in esmini's first frame (the controllers step at Init with no time step): it moves
+            # the entity from the first step on
+            self._started_at = -2 if dt == 0.0 else step
             self.world.log.append(
                 f"t={self.world.time:.2f} {self.actor.name}: FollowRoute changes to lane {runtime.target_lane}"
             )
@@ -233,6 +237,31 @@ class FollowRouteController:
         if self.test_mode:
             self.actor.speed = 0.0
         self.world.log.append(f"t={self.world.time:.2f} {self.actor.name}: FollowRouteController deactivated ({why})")
+
+
+class _RouteLaneChange(LaneChangeRuntime):
+    """The controller's lane change: to a lane that exists in the lane section, whatever its width there
+    (esmini's check of the width is the controller's, and only with the collision check on)."""
+
+    def start(self) -> None:
+        actor, road = self.actor, self.world.road
+        assert road is not None and actor.road_id is not None
+        lane = self.action.target.lane_id  # type: ignore[union-attr]
+        t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
+        actor.lane_id = lane
+        actor.offset = t_now - road.lane_center_t(actor.road_id, lane, actor.s)
+        self.offset0, self.offset1 = actor.offset, 0.0
+        self.start_odometer = actor.odometer
+        self.target_lane = lane
+        self.direction = actor.direction
+
+    def step(self, dt: float) -> None:
+        # onto a road that runs the other way (a junction's connecting road) the offsets keep their side of
+        # the travel direction, as the entity's own offset does
+        if self.actor.direction != self.direction:
+            self.offset0, self.offset1 = -self.offset0, -self.offset1
+            self.direction = self.actor.direction
+        super().step(dt)
 
 
 def route_points(world: ScenarioWorld, positions: list[m.Position]) -> list[RoadPoint]:
