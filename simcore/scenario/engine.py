@@ -461,6 +461,7 @@ class ScenarioEngine:
             vx, vy = (body.x - px) / dt, (body.y - py) / dt
             if vx * vx + vy * vy > (2.0 * abs(speed) + 1.0) ** 2:
                 vx, vy = speed * math.cos(body.heading), speed * math.sin(body.heading)
+            body.previous_velocity = (body.vx, body.vy)
             body.vx, body.vy = vx, vy
             if abs(speed) < 1e-3:
                 if body.standstill_since is None:

@@ -56,6 +56,7 @@ class Body:
     yaw_rate: float = 0.0
     vx: float = 0.0  # world velocity over the last step (its displacement / dt), m/s
     vy: float = 0.0
+    previous_velocity: tuple[float, float] = (0.0, 0.0)  # (vx, vy) of the step before the last
     # road following (None when the entity is off every road)
     road_id: str | None = None
     lane_id: int = 0
