@@ -138,6 +138,8 @@ class ScenarioEngine:
         # the properties of each entity's controller assigned during the run (AssignControllerAction), and
         # the ACC/ALKS driver models (esmini's ACCController) active on the longitudinal domain now
         self.assigned_controller: dict[str, dict[str, str]] = {}
+        # per entity: its controllers (name → properties, domains active on), `controller_actions.slots_of`
+        self.controller_slots: dict[str, dict[str, tuple[dict[str, str], set[str]]]] = {}
         self.acc_drivers: dict[str, drivers.AccDriver] = {}
         # esmini's controllers that drive a vehicle model of their own (OffroadFollower), active now
         self.vehicle_drivers: dict[str, drivers.OffroadFollower] = {}
@@ -390,6 +392,9 @@ class ScenarioEngine:
         )
         if ghosts is not None:
             deferred = ghosts.frozen().union(deferred)
+        # entities an external controller steers (lateral only) while a driver model sets their speed: moved
+        # after it (esmini steps the longitudinal controller first)
+        steered = self._steered() if self.esmini_controllers or self.natural_drivers else ()
         if self.vehicle_drivers:
             deferred = set(self.vehicle_drivers).union(deferred)
         if self.natural_drivers:
@@ -400,6 +405,8 @@ class ScenarioEngine:
             if body.gone:
                 continue
             if body.external:
+                if body.name in steered:
+                    continue  # moved once its longitudinal controller has set the speed (below)
                 self._move_external(body, dt)
                 if sumo is not None:
                     sumo.place(body)
@@ -443,6 +450,11 @@ class ScenarioEngine:
             self._step_drivers(self.natural_drivers.values(), dt, now)
         if self.esmini_controllers:
             self._step_controllers(dt, now)
+        for name in steered:
+            self._move_external(self.bodies[name], dt)
+            if sumo is not None:
+                sumo.place(self.bodies[name])
+            self.moved()
         if self.vehicle_drivers:
             for follower in list(self.vehicle_drivers.values()):
                 if not follower.actor.gone and not follower.actor.external:
@@ -484,6 +496,17 @@ class ScenarioEngine:
             return True
         return False
 
+    def _steered(self) -> list[str]:
+        """Entities an external controller drives on the lateral domain only while a driver model of
+        CARLOS' holds the longitudinal one."""
+        out = []
+        for name in (*self.natural_drivers, *self.esmini_controllers):
+            body = self.bodies[name]
+            control = self.controllers[name]
+            if body.external and not control[1] and control[2] and not body.gone and name not in out:
+                out.append(name)
+        return out
+
     def _step_drivers(
         self, stepped: Iterable[drivers.AccDriver | drivers.NaturalDriver], dt: float, now: float
     ) -> None:
@@ -493,10 +516,14 @@ class ScenarioEngine:
         step (esmini injects it as an action)."""
         for driver in list(stepped):
             body = driver.actor
-            if body.gone or body.external:
+            # an external controller steering only (esmini's InteractiveController on the lateral domain) moves
+            # the entity at the speed a longitudinal driver model sets
+            if body.gone or (body.external and self.controllers[body.name][1]):
                 continue
             self.measure.clear()
             driver.step(dt)
+            if body.external:
+                continue
             if isinstance(driver, drivers.NaturalDriver):
                 self._move_body(body, dt, now)
                 self._start_lane_change(driver)
@@ -509,11 +536,11 @@ class ScenarioEngine:
         its entity's speed and, when it moves it, moves it with that speed."""
         for controller in list(self.esmini_controllers.values()):
             body = controller.actor
-            if body.gone or body.external:
+            if body.gone or (body.external and self.controllers[body.name][1]):
                 continue
             self.measure.clear()
             controller.step(dt)
-            if controller.moves_itself:
+            if controller.moves_itself and not body.external:
                 self._move_body(body, dt, now)
         self.moved()
 
@@ -570,6 +597,14 @@ class ScenarioEngine:
                 f"entity {name!r} is not in the scenario (entities: {', '.join(self.bodies)})",
                 field="spec.control.entities",
             )
+        from simcore.scenario.controller_actions import slots_of
+
+        for _, domains in slots_of(self, body).values():
+            domains.clear()  # the system under test takes both domains
+        slots_of(self, body)["carlos.driver=external"] = (
+            {"name": "carlos.driver=external", "carlos.driver": "external"},
+            {"longitudinal", "lateral"},
+        )
         self.controllers[name] = ["external", True, True]
         body.external = True
         body.mover = None
@@ -581,6 +616,9 @@ class ScenarioEngine:
         external = self.external
         if external is None or not external.has_input(body.entity.name):
             assigned = self.assigned_controller.get(body.name, body.entity.controller)
+            for properties, domains in self.controller_slots.get(body.name, {}).values():
+                if domains and m.controller_type(properties) in m.EXTERNAL_CONTROLLERS:
+                    assigned = properties  # the external controller active on the entity
             if m.controller_type(assigned) == "InteractiveController":
                 self._coast(body, dt)
             else:

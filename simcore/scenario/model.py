@@ -50,6 +50,9 @@ class Entity:
     performance: Performance
     properties: dict[str, str] = field(default_factory=dict)
     controller: dict[str, str] = field(default_factory=dict)  # the assigned controller's properties
+    # every ObjectController's properties, in file order (OpenSCENARIO 1.3 allows several; `controller` is the
+    # last of them, the one an ActivateControllerAction without objectControllerRef activates, as esmini's)
+    controllers: tuple[dict[str, str], ...] = ()
     wheelbase: float | None = None  # vehicles: FrontAxle.positionX − RearAxle.positionX, m
     max_steering: float | None = None  # vehicles: FrontAxle.maxSteering, rad
     source: str = ""  # "file:line" of its ScenarioObject (for messages)
@@ -465,6 +468,7 @@ class ControllerAction:
     longitudinal: bool | None = None
     lateral: bool | None = None
     controller: tuple[tuple[str, str], ...] = ()  # the assigned controller's properties (with its "name")
+    ref: str | None = None  # ActivateControllerAction objectControllerRef: the controller it activates
     domain = "none"
 
 
@@ -881,8 +885,8 @@ def controller_kinds(scenario: Scenario) -> dict[str, set[str]]:
         return f"carlos.driver={driver}" if driver != "scenario" else controller_type(properties)
 
     for entity in scenario.entities:
-        if entity.controller:
-            out.setdefault(entity.name, set()).add(kind(entity.controller))
+        for properties in entity.controllers or ((entity.controller,) if entity.controller else ()):
+            out.setdefault(entity.name, set()).add(kind(properties))
     for item in scenario.init:
         if isinstance(item.action, ControllerAction) and item.action.controller:
             out.setdefault(item.entity, set()).add(kind(dict(item.action.controller)))

@@ -91,10 +91,8 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
     finally:
         if pushed:
             reader.pop()
-    controller: dict[str, str] = {}
-    oc = obj.find("ObjectController")
-    if oc is not None:
-        controller = _controller(reader, oc)
+    controllers = [c for c in (_controller(reader, oc) for oc in obj.findall("ObjectController")) if c]
+    controller: dict[str, str] = controllers[-1] if controllers else {}
     return m.Entity(
         source=reader.source(obj),
         name=name,
@@ -104,6 +102,7 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         performance=performance,
         properties=properties,
         controller=controller,
+        controllers=tuple(controllers),
         wheelbase=wheelbase,
         max_steering=max_steering,
         trailer_hitch=hitch,
