@@ -131,7 +131,9 @@ def main() -> None:
     for row in rows:
         rmse = {k: v for k, v in row.get("rmse", {}).items() if v is not None}  # type: ignore[union-attr]
         worst = max(rmse.items(), key=lambda kv: kv[1], default=("", 0.0))
-        print(f"| {row['file']} | {row['status']} | {row.get('end')} / {row.get('reference_end')} | {worst[1]:.3f} | {worst[0]} |")
+        print(
+            f"| {row['file']} | {row['status']} | {row.get('end')} / {row.get('reference_end')} | {worst[1]:.3f} | {worst[0]} |"
+        )
     print(json.dumps(rows))
 
 

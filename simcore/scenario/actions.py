@@ -173,7 +173,7 @@ class AssignRouteRuntime(Instant):
         targets = self.targets()
         self.actor.route = self.world.plan_route(self.actor, targets)
         # the waypoints as esmini keeps them for a FollowRouteController (resolved now)
-        self.actor.route_points = route_points(self.world, targets)  # type: ignore[arg-type]
+        self.actor.route_points = route_points(self.world, targets)
         self.actor.route_strategies = self.strategies()
         self.done = True
 

@@ -74,7 +74,9 @@ class ControllerRuntime(Instant):
             target = action.ref if action.ref is not None else (next(reversed(slots)) if slots else "")
             if target not in slots:
                 which = f"controller {target!r}" if action.ref is not None else "a controller"
-                e.log.append(f"t={e.time:.2f} {name}: ActivateControllerAction: {which} is not assigned to it")
+                e.log.append(
+                    f"t={e.time:.2f} {name}: ActivateControllerAction: {which} is not assigned to it"
+                )
                 return
             # a domain switched on is first taken from any other controller active on it
             for domain, on in requested.items():
@@ -127,7 +129,9 @@ class ControllerRuntime(Instant):
 
         def active(kinds: frozenset[str], domain: str | None) -> tuple[str, dict[str, str]] | None:
             for key, (properties, domains) in slots.items():
-                if m.controller_type(properties) in kinds and (domains if domain is None else domain in domains):
+                if m.controller_type(properties) in kinds and (
+                    domains if domain is None else domain in domains
+                ):
                     return key, properties
             return None
 
@@ -162,7 +166,7 @@ class ControllerRuntime(Instant):
         entity: it runs on the domains it operates that are active; an activation or assignment restarts it
         (as esmini's Activate)."""
         e, name = self.world, self.actor.name
-        chosen = None
+        chosen: tuple[str, str, dict[str, str], frozenset[str]] | None = None
         for key, (properties, domains) in slots.items():
             kind = m.controller_type(properties)
             free = domains - external  # the domains an external controller does not hold
@@ -172,11 +176,15 @@ class ControllerRuntime(Instant):
             if e.esmini_controllers.pop(name, None) is not None:
                 e.log.append(f"t={e.time:.2f} {name}: its controller deactivated")
             return
-        key, kind, properties, domains = chosen
+        key, kind, properties, active = chosen
         running = e.esmini_controllers.get(name)
-        if running is not None and key != restarted and running.domains == domains & controllers.OPERATING_DOMAINS[kind]:
+        if (
+            running is not None
+            and key != restarted
+            and running.domains == active & controllers.OPERATING_DOMAINS[kind]
+        ):
             return
-        made = controllers.make(kind, e, self.actor, properties, domains, e.seed)
+        made = controllers.make(kind, e, self.actor, properties, active, e.seed)
         if made is not None:
             e.esmini_controllers[name] = made
             e.log.append(f"t={e.time:.2f} {name}: {kind} activated ({', '.join(sorted(made.domains))})")

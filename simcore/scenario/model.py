@@ -77,7 +77,9 @@ class Entity:
 EXTERNAL_CONTROLLERS = frozenset({"ExternalController", "InteractiveController"})
 # esmini's controllers of the registry (simcore.scenario.controllers), one module each: ALKS_R157SM (the UN R157
 # driver models), SloppyDriver
-REGISTERED_CONTROLLERS = frozenset({"ALKS_R157SM_Controller", "SloppyDriverController", "FollowRouteController"})
+REGISTERED_CONTROLLERS = frozenset(
+    {"ALKS_R157SM_Controller", "SloppyDriverController", "FollowRouteController"}
+)
 # esmini's driver controllers CARLOS runs with esmini's algorithm (simcore.scenario.actions.AccDriver): the
 # ALKS controller is esmini's ACC controller under another name
 ACC_CONTROLLERS = frozenset({"ACCController", "ALKSController"})

@@ -23,7 +23,11 @@ class EsminiController(Protocol):
 
     actor: Body
     domains: frozenset[str]  # the domains it is active on
-    moves_itself: bool  # it moves its entity (the engine skips the entity's default motion)
+
+    @property
+    def moves_itself(self) -> bool:
+        """It moves its entity (the engine skips the entity's default motion)."""
+        ...
 
     def step(self, dt: float) -> None: ...
 

@@ -64,7 +64,9 @@ class FollowRouteController:
 
     steps_in_init = True  # esmini's first frame steps it (with no time step) when Init activates it
 
-    def __init__(self, world: ScenarioWorld, actor: Body, properties: dict[str, str], domains: frozenset[str]) -> None:
+    def __init__(
+        self, world: ScenarioWorld, actor: Body, properties: dict[str, str], domains: frozenset[str]
+    ) -> None:
         self.world = world
         self.actor = actor
         self.domains = domains
@@ -110,7 +112,11 @@ class FollowRouteController:
             connected = connected_lane(odr, body.road_id, body.lane_id, body.s, target.s)
             same_lane = target.lane_id in (body.lane_id, connected)
             reach = max(self.lane_change_time * body.speed, 25.0)
-            if not same_lane and abs(body.s - target.s) < reach and self._can_change_lane(odr, target.lane_id):
+            if (
+                not same_lane
+                and abs(body.s - target.s) < reach
+                and self._can_change_lane(odr, target.lane_id)
+            ):
                 change = m.LaneChangeAction(
                     dynamics=m.TransitionDynamics("sinusoidal", "time", self.lane_change_time),
                     target=m.AbsoluteTargetLane(target.lane_id),
@@ -236,7 +242,9 @@ class FollowRouteController:
             self._end_lane_change(self.world.step_index)
         if self.test_mode:
             self.actor.speed = 0.0
-        self.world.log.append(f"t={self.world.time:.2f} {self.actor.name}: FollowRouteController deactivated ({why})")
+        self.world.log.append(
+            f"t={self.world.time:.2f} {self.actor.name}: FollowRouteController deactivated ({why})"
+        )
 
 
 class _RouteLaneChange(LaneChangeRuntime):

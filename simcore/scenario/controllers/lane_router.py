@@ -88,7 +88,9 @@ def _entered_at_start(odr: OpenDrive, node: Node) -> bool | None:
     return None if contact is None else contact == "start"
 
 
-def calculate_path(odr: OpenDrive, start: RoadPoint, target: RoadPoint, strategy: str = "shortest") -> list[Node]:
+def calculate_path(
+    odr: OpenDrive, start: RoadPoint, target: RoadPoint, strategy: str = "shortest"
+) -> list[Node]:
     """The nodes from the start road to the target road and lane, both included; [] when there is no path (or
     start and target are in the same lane of the same road)."""
     if not _valid(odr, start) or not _valid(odr, target):
@@ -99,8 +101,11 @@ def calculate_path(odr: OpenDrive, start: RoadPoint, target: RoadPoint, strategy
     if _exit_link(road, start.direction) is None:
         return []
     to_end = road.length - start.s if start.direction > 0 else start.s
-    first = Node(start.road_id, start.lane_id, 0, 0.0 if strategy == "leastIntersections" else 0.0, start.direction, True, None)
-    first.weight = to_end if strategy == "shortest" else (to_end / (odr.speed_limit(start.road_id, 0.0) or DEFAULT_SPEED) if strategy == "fastest" else 0.0)
+    if strategy == "fastest":
+        weight = to_end / (odr.speed_limit(start.road_id, 0.0) or DEFAULT_SPEED)
+    else:
+        weight = to_end if strategy != "leastIntersections" else 0.0
+    first = Node(start.road_id, start.lane_id, 0, weight, start.direction, True, None)
     counter = itertools.count()
     heap: list[tuple[float, int, int, Node]] = [(first.weight, 0, next(counter), first)]
     visited: set[tuple[str, int, int, int, bool]] = set()
