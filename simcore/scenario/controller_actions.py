@@ -72,6 +72,8 @@ class ControllerRuntime(Instant):
             e.assigned_controller[name] = properties
         else:
             target = action.ref if action.ref is not None else (next(reversed(slots)) if slots else "")
+            if target not in slots:  # objectControllerRef names the ObjectController
+                target = next((k for k, (p, _) in slots.items() if p.get(m.OBJECT_CONTROLLER) == target), target)
             if target not in slots:
                 which = f"controller {target!r}" if action.ref is not None else "a controller"
                 e.log.append(

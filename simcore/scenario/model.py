@@ -101,6 +101,10 @@ MODELLED_CONTROLLERS = (
 )
 
 
+# the key under which a controller's properties keep the name of the ObjectController that gives it
+OBJECT_CONTROLLER = "carlos.objectController"
+
+
 def controller_type(properties: dict[str, str]) -> str:
     """The kind of a controller: its `esminiController` property, else its name (as esmini decides)."""
     return properties.get("esminiController") or properties.get("name", "")

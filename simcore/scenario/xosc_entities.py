@@ -91,7 +91,14 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
     finally:
         if pushed:
             reader.pop()
-    controllers = [c for c in (_controller(reader, oc) for oc in obj.findall("ObjectController")) if c]
+    controllers = []
+    for oc in obj.findall("ObjectController"):
+        properties = _controller(reader, oc)
+        if properties and oc.get("name"):
+            # an ActivateControllerAction's objectControllerRef names the ObjectController (OpenSCENARIO 1.3)
+            properties[m.OBJECT_CONTROLLER] = reader.attr(oc, "name", "")
+        if properties:
+            controllers.append(properties)
     controller: dict[str, str] = controllers[-1] if controllers else {}
     return m.Entity(
         source=reader.source(obj),
