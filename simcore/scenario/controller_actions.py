@@ -73,7 +73,9 @@ class ControllerRuntime(Instant):
         else:
             target = action.ref if action.ref is not None else (next(reversed(slots)) if slots else "")
             if target not in slots:  # objectControllerRef names the ObjectController
-                target = next((k for k, (p, _) in slots.items() if p.get(m.OBJECT_CONTROLLER) == target), target)
+                target = next(
+                    (k for k, (p, _) in slots.items() if p.get(m.OBJECT_CONTROLLER) == target), target
+                )
             if target not in slots:
                 which = f"controller {target!r}" if action.ref is not None else "a controller"
                 e.log.append(

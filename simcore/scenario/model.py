@@ -78,7 +78,7 @@ EXTERNAL_CONTROLLERS = frozenset({"ExternalController", "InteractiveController"}
 # esmini's controllers of the registry (simcore.scenario.controllers), one module each: ALKS_R157SM (the UN R157
 # driver models), SloppyDriver
 REGISTERED_CONTROLLERS = frozenset(
-    {"ALKS_R157SM_Controller", "SloppyDriverController", "FollowRouteController"}
+    {"ALKS_R157SM_Controller", "SloppyDriverController", "FollowRouteController", "LoomingController"}
 )
 # esmini's driver controllers CARLOS runs with esmini's algorithm (simcore.scenario.actions.AccDriver): the
 # ALKS controller is esmini's ACC controller under another name

@@ -37,6 +37,7 @@ OPERATING_DOMAINS: dict[str, frozenset[str]] = {
     "ALKS_R157SM_Controller": frozenset({"longitudinal"}),
     "SloppyDriverController": frozenset({"longitudinal", "lateral"}),
     "FollowRouteController": frozenset({"longitudinal", "lateral"}),
+    "LoomingController": frozenset({"longitudinal"}),
 }
 KINDS = frozenset(OPERATING_DOMAINS)  # simcore.scenario.model.REGISTERED_CONTROLLERS names the same
 
@@ -64,6 +65,10 @@ def make(
         from simcore.scenario.controllers.alks_r157 import AlksR157Controller
 
         return AlksR157Controller(world, actor, properties)
+    if kind == "LoomingController":
+        from simcore.scenario.controllers.looming import LoomingController
+
+        return LoomingController(world, actor, properties, domains)
     if kind == "FollowRouteController":
         from simcore.scenario.controllers.follow_route import FollowRouteController
 
