@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from simcore.scenario import model as m
 from simcore.scenario.controllers.lane_router import RoadPoint, calculate_path, waypoints
-from simcore.scenario.core_actions import LaneChangeRuntime
+from simcore.scenario.motion import shape_value
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
@@ -79,7 +79,7 @@ class FollowRouteController:
         self.index = 0  # the next waypoint
         self.scenario_index = 0  # the route's waypoint planned to
         self.changing_lane = False
-        self.lane_change: LaneChangeRuntime | None = None
+        self.lane_change: _RouteLaneChange | None = None
         self._started_at = -1  # the step the lane change started in (the entity already moved in it)
         self._ended_at = -1  # the step the lane change ended in (it moved the entity in it)
 
@@ -117,11 +117,7 @@ class FollowRouteController:
                 and abs(body.s - target.s) < reach
                 and self._can_change_lane(odr, target.lane_id)
             ):
-                change = m.LaneChangeAction(
-                    dynamics=m.TransitionDynamics("sinusoidal", "time", self.lane_change_time),
-                    target=m.AbsoluteTargetLane(target.lane_id),
-                )
-                self.lane_change = _RouteLaneChange(self.world, body, change)  # type: ignore[arg-type]
+                self.lane_change = _RouteLaneChange(self.world, body, target.lane_id, self.lane_change_time)
                 self._started_at = -1
                 self.changing_lane = True
         self._change_lane(dt)
@@ -247,29 +243,47 @@ class FollowRouteController:
         )
 
 
-class _RouteLaneChange(LaneChangeRuntime):
-    """The controller's lane change: to a lane that exists in the lane section, whatever its width there
-    (esmini's check of the width is the controller's, and only with the collision check on)."""
+class _RouteLaneChange:
+    """The controller's lane change: sinusoidal over its duration, to a lane that exists in the lane section
+    whatever its width there (esmini's check of the width is the controller's, and only with the collision
+    check on); the entity moves at its speed along the lane meanwhile."""
+
+    def __init__(self, world: ScenarioWorld, actor: Body, lane: int, duration: float) -> None:
+        self.world, self.actor, self.target_lane, self.duration = world, actor, lane, duration
+        self.elapsed = 0.0
+        self.offset0 = self.offset1 = 0.0
+        self.direction = actor.direction
+        self.done = False
 
     def start(self) -> None:
         actor, road = self.actor, self.world.road
         assert road is not None and actor.road_id is not None
-        lane = self.action.target.lane_id  # type: ignore[union-attr]
         t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
-        actor.lane_id = lane
-        actor.offset = t_now - road.lane_center_t(actor.road_id, lane, actor.s)
+        actor.lane_id = self.target_lane
+        actor.offset = t_now - road.lane_center_t(actor.road_id, self.target_lane, actor.s)
         self.offset0, self.offset1 = actor.offset, 0.0
-        self.start_odometer = actor.odometer
-        self.target_lane = lane
         self.direction = actor.direction
+        if self.duration <= 0.0:
+            actor.offset = 0.0
+            self.done = True
 
     def step(self, dt: float) -> None:
+        actor = self.actor
         # onto a road that runs the other way (a junction's connecting road) the offsets keep their side of
         # the travel direction, as the entity's own offset does
-        if self.actor.direction != self.direction:
+        if actor.direction != self.direction:
             self.offset0, self.offset1 = -self.offset0, -self.offset1
-            self.direction = self.actor.direction
-        super().step(dt)
+            self.direction = actor.direction
+        actor.extra["move_speed"] = actor.speed
+        self.elapsed += dt
+        progress = self.elapsed / self.duration
+        offset = self.offset0 + (self.offset1 - self.offset0) * shape_value("sinusoidal", progress)
+        actor.lateral_velocity = (offset - actor.offset) / dt
+        actor.offset = offset
+        if progress >= 1.0 - 1e-9:
+            actor.offset = self.offset1
+            actor.lateral_velocity = 0.0
+            self.done = True
 
 
 def route_points(world: ScenarioWorld, positions: list[m.Position]) -> list[RoadPoint]:
