@@ -265,13 +265,15 @@ def next_road(road: OpenDrive, body: Body) -> tuple[str, int, int] | None:
         want_road, want_dir = body.route[0]
         options = road.connections(body.road_id, body.lane_id, body.direction)
         chosen = [o for o in options if o[0] == want_road and o[2] == want_dir]
-        if not chosen:
-            # the route turns from another lane: take the connection from the nearest lane that has one
+        if not chosen and not options:
+            # the lane ends here: the route's connection from the nearest lane that has one
             others = [o for o in road.connections(body.road_id, None, body.direction) if o[0] == want_road]
             chosen = sorted(others, key=lambda o: abs(o[1] - body.lane_id))
         if chosen:
             body.route.pop(0)
             return chosen[0]
+        # the route turns from another lane: the entity goes where its lane leads and leaves the route (esmini
+        # "moved away from route")
         body.route.clear()
     return onward(road, body.road_id, body.lane_id, body.direction)
 
