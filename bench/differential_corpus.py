@@ -39,7 +39,9 @@ END_LIMIT = 0.05  # s, one step
 def scenarios(features: list[str]) -> list[Path]:
     """The corpus' scenarios (of `features`, else all), in a stable order."""
     folders = [CORPUS / f for f in features] if features else [p for p in CORPUS.iterdir() if p.is_dir()]
-    return sorted(p for d in folders if d.name not in ("roads", "reference", "catalogs") for p in d.glob("*.xosc"))
+    return sorted(
+        p for d in folders if d.name not in ("roads", "reference", "catalogs") for p in d.glob("*.xosc")
+    )
 
 
 def read_index() -> dict[str, dict[str, str]]:
