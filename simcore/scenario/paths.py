@@ -362,11 +362,16 @@ def plan(road: OpenDrive, start: State, goal_road: str, max_roads: int = 2000) -
 
 
 def plan_in_lane(
-    road: OpenDrive, start: State, lane: int, goal_road: str, max_nodes: int = 4000
+    road: OpenDrive,
+    start: State,
+    lane: int,
+    goal_road: str,
+    s: float | None = None,
+    max_nodes: int = 4000,
 ) -> list[State] | None:
-    """As `plan`, but a way esmini's route planner takes: it leaves every road but the start's in the lane it
-    entered it by (along that lane's links through the road's lane sections), starting from `lane` on the
-    start road; onto the goal road any lane will do. None when no such way exists."""
+    """As `plan`, but a way esmini's route planner takes: it leaves every road in the lane it is in (along
+    that lane's links through the road's lane sections), starting from `lane` at `s` on the start road (its
+    far end when None); onto the goal road any lane will do. None when no such way exists."""
     import heapq
 
     if start[0] == goal_road:
@@ -391,7 +396,9 @@ def plan_in_lane(
             return out[::-1]
         length = road.road_length(road_id)
         if current == first:
-            leaving, step = entered, 0.0
+            end_s = length if direction > 0 else 0.0
+            leaving = entered if s is None else _lane_through(road, road_id, entered, s, end_s)
+            step = 0.0
         else:
             start_s, end_s = (0.0, length) if direction > 0 else (length, 0.0)
             leaving, step = _lane_through(road, road_id, entered, start_s, end_s), length

@@ -208,7 +208,7 @@ def plan_route(world: ScenarioWorld, body: Body, targets: list[m.Position]) -> l
     if road is None or body.road_id is None:
         return []
     state = (body.road_id, body.direction)
-    lane = body.lane_id
+    lane, s_on = body.lane_id, body.s
     out: list[tuple[str, int]] = []
     for position in targets:
         x, y, _, _ = world.resolve_position(position)
@@ -217,12 +217,13 @@ def plan_route(world: ScenarioWorld, body: Body, targets: list[m.Position]) -> l
         if rc is None:
             continue
         target_lane = position.lane_id if isinstance(position, m.LanePosition) else rc.lane_id
+        target_s = position.s if isinstance(position, m.LanePosition) else rc.s
         if state[0] == rc.road_id and not out:
-            lane = target_lane
+            lane, s_on = target_lane, target_s
             continue
         # esmini plans a route's legs lane by lane (from the lane of the leg's start): a road its lanes do
         # not lead to makes the route invalid, and its entities drive on without one
-        leg = paths.plan_in_lane(road, state, lane, rc.road_id)
+        leg = paths.plan_in_lane(road, state, lane, rc.road_id, s_on)
         if leg is None:
             world.warnings.append(
                 f"{world.source}: route of {body.name!r}: no way in lane {lane} to road {rc.road_id}: "
@@ -231,7 +232,7 @@ def plan_route(world: ScenarioWorld, body: Body, targets: list[m.Position]) -> l
             return []
         out.extend(leg[1:])
         state = leg[-1]
-        lane = target_lane
+        lane, s_on = target_lane, target_s
     return out
 
 
