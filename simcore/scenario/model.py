@@ -101,6 +101,12 @@ MODELLED_CONTROLLERS = (
 )
 
 
+def partly_modelled(properties: dict[str, str]) -> bool:
+    """A controller CARLOS runs only in part: esmini's LoomingController in override mode, which also steers
+    its entity (CARLOS runs its speed)."""
+    return controller_type(properties) == "LoomingController" and properties.get("mode") == "override"
+
+
 # the key under which a controller's properties keep the name of the ObjectController that gives it
 OBJECT_CONTROLLER = "carlos.objectController"
 
@@ -888,6 +894,8 @@ def controller_kinds(scenario: Scenario) -> dict[str, set[str]]:
 
     def kind(properties: dict[str, str]) -> str:
         driver = properties.get("carlos.driver", "scenario")
+        if partly_modelled(properties):
+            return f"{controller_type(properties)} (override mode)"  # not among MODELLED_CONTROLLERS
         return f"carlos.driver={driver}" if driver != "scenario" else controller_type(properties)
 
     for entity in scenario.entities:

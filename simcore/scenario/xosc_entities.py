@@ -186,6 +186,12 @@ def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
         known = True  # a ghost runs the actions ahead, the entity follows it (simcore.scenario.ghost)
     if kind in m.REGISTERED_CONTROLLERS:
         known = True  # runs as esmini's (simcore.scenario.controllers)
+    if m.partly_modelled(properties):
+        reader.warn(
+            f"controller {kind!r} in override mode: its steering (esmini's near and far points) is not "
+            "modelled, only its speed; the entity keeps to its lane and is not compared in conformance",
+            parent,
+        )
     if not known and kind not in ("", "DefaultController"):
         reader.warn(
             f"controller {kind!r} is not modelled: the entity follows the scenario's actions "
