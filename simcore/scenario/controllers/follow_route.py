@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from simcore.scenario import model as m
 from simcore.scenario.controllers.lane_router import RoadPoint, calculate_path, waypoints
-from simcore.scenario.motion import shape_value
+from simcore.scenario.motion import lane_at_t, shape_value
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
@@ -284,6 +284,38 @@ class _RouteLaneChange:
             actor.offset = self.offset1
             actor.lateral_velocity = 0.0
             self.done = True
+        elif self._leaves_road(dt):
+            self._abandon()
+
+    def _leaves_road(self, dt: float) -> bool:
+        """The entity reaches its road's end this step (s units, as near as the step needs)."""
+        actor, road = self.actor, self.world.road
+        assert road is not None and actor.road_id is not None
+        left = road.road_length(actor.road_id) - actor.s if actor.direction > 0 else actor.s
+        return abs(actor.speed) * dt >= left
+
+    def _abandon(self) -> None:
+        """At the end of its road mid-change, esmini's entity goes on from the lane it is in by position: in
+        another lane than the target one it leaves by that lane's link, and the lane change ends where it is
+        (its offset and heading kept)."""
+        actor, road = self.actor, self.world.road
+        assert road is not None and actor.road_id is not None
+        t = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
+        lane, offset = lane_at_t(road, actor.road_id, actor.s, t)
+        if lane == actor.lane_id or lane == 0:
+            return
+        drift = (
+            math.atan2(actor.lateral_velocity * actor.direction, abs(actor.speed))
+            if abs(actor.speed) > 0.1
+            else 0.0
+        )
+        actor.lane_id, actor.offset = lane, offset
+        actor.heading_offset += drift
+        actor.lateral_velocity = 0.0
+        self.done = True
+        self.world.log.append(
+            f"t={self.world.time:.2f} {actor.name}: FollowRoute lane change ends in lane {lane} at the road's end"
+        )
 
 
 def route_points(world: ScenarioWorld, positions: list[m.Position]) -> list[RoadPoint]:
