@@ -36,9 +36,11 @@ class NoMotionRuntime(Instant):
 
 class FollowTrajectoryRuntime(Runtime):
     """Moves the actor's reference point along the trajectory: at its own speed (no timing) or at the
-    trajectory's times. At the end the actor goes back to following the road it is on."""
+    trajectory's times. At the end the actor goes back to following the road it is on. Lateral and
+    longitudinal (as esmini's): a speed action started during it ends it."""
 
     domain = "lateral"
+    also = ("longitudinal",)
 
     def __init__(self, world: ActionWorld, actor: Body, action: m.FollowTrajectoryAction) -> None:
         super().__init__(world, actor)
@@ -128,6 +130,11 @@ class FollowTrajectoryRuntime(Runtime):
             _, _, _, h_end = self.path.at(self.path.length)
             a.x += over * math.cos(h_end)
             a.y += over * math.sin(h_end)
+            self.finish()
+
+    def stop(self) -> None:
+        # overridden (a speed action, another trajectory): the entity goes on along the road from where it is
+        if self.actor.mover is self:
             self.finish()
 
     def finish(self) -> None:

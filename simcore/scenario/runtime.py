@@ -13,6 +13,11 @@ if TYPE_CHECKING:
 
 class Runtime:
     domain = "other"  # the domain it controls: a new action of the same domain on the actor overrides it
+    also: tuple[str, ...] = ()  # further domains it controls (esmini's FollowTrajectoryAction: both)
+
+    @property
+    def domains(self) -> tuple[str, ...]:
+        return (self.domain, *self.also)
 
     def __init__(self, world: ActionWorld, actor: Body) -> None:
         self.world = world
@@ -22,6 +27,9 @@ class Runtime:
     def start(self) -> None: ...
 
     def step(self, dt: float) -> None: ...
+
+    def stop(self) -> None:
+        """Another action took over (or the storyboard element stopped) before this one was done."""
 
     def start_in_init(self) -> bool:
         """As an action of Storyboard/Init: take effect now and return True, or return False to be started
