@@ -134,7 +134,10 @@ class LaneChangeRuntime(Runtime):
                 base = reference.lane_id if reference.road_id == actor.road_id else actor.lane_id
                 lane = lane_shift(road, actor.road_id, actor.s, base, target.value, reference.direction)
         except ValueError as exc:
-            raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source) from None
+            if isinstance(target, m.AbsoluteTargetLane):
+                raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source) from None
+            self._to_missing_lane(str(exc))
+            return
         t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
         centre = road.lane_center_t(actor.road_id, lane, actor.s)
         actor.lane_id = lane
@@ -147,6 +150,34 @@ class LaneChangeRuntime(Runtime):
             self.world.sumo_change_lane(actor, lane, self.action.dynamics.value)
             self.done = True
             return
+        if self.action.dynamics.shape == "step" or self.action.dynamics.value <= 0:
+            actor.offset = self.offset1
+            self.done = True
+
+    def _to_missing_lane(self, why: str) -> None:
+        """A relative target lane beyond the road's last lane: esmini runs on. It measures the offset from
+        the road's outer edge on that side (the centre of a lane of no width), puts the entity at that offset
+        in the lane it is in (a jump sideways) and then changes to the target offset in its own lane."""
+        actor, road = self.actor, self.world.road
+        assert road is not None and actor.road_id is not None
+        lanes = road.lane_ids(actor.road_id, actor.s)
+        target = self.action.target
+        assert isinstance(target, m.RelativeTargetLane)
+        reference = self.world.body(target.entity)
+        to_left = (target.value > 0) == (reference.direction > 0)
+        outer = lanes[-1] if to_left else lanes[0]
+        centre = road.lane_center_t(actor.road_id, outer, actor.s)
+        half = 0.5 * road.lane_width(actor.road_id, outer, actor.s)
+        edge = max(centre + half, centre - half) if to_left else min(centre + half, centre - half)
+        t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
+        actor.offset += t_now - edge  # from the lane's centre: the offset it had from the edge
+        self.offset0 = actor.offset
+        self.offset1 = self.action.target_lane_offset * actor.direction
+        self.start_odometer = actor.odometer
+        self.target_lane = actor.lane_id
+        warning = f"{self.world.source}: LaneChangeAction on {actor.name!r}: {why}: it runs on in its lane (as esmini)"
+        if warning not in self.world.warnings:
+            self.world.warnings.append(warning)
         if self.action.dynamics.shape == "step" or self.action.dynamics.value <= 0:
             actor.offset = self.offset1
             self.done = True
