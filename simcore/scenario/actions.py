@@ -36,11 +36,9 @@ class NoMotionRuntime(Instant):
 
 class FollowTrajectoryRuntime(Runtime):
     """Moves the actor's reference point along the trajectory: at its own speed (no timing) or at the
-    trajectory's times. At the end the actor goes back to following the road it is on. Lateral and
-    longitudinal (as esmini's): a speed action started during it ends it."""
+    trajectory's times. At the end the actor goes back to following the road it is on."""
 
     domain = "lateral"
-    also = ("longitudinal",)
 
     def __init__(self, world: ActionWorld, actor: Body, action: m.FollowTrajectoryAction) -> None:
         super().__init__(world, actor)

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 from simcore.errors import BadInput
 from simcore.scenario import model as m
-from simcore.scenario.motion import Body, lane_shift, shape_peak_rate_factor, shape_value
+from simcore.scenario.motion import Body, lane_shift, shape_peak_rate_factor, shape_slope, shape_value, wrap_angle
 from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
@@ -99,7 +100,11 @@ class SpeedRuntime(Runtime):
         """In Init, a step (or zero-time) change to a fixed target is the initial speed: reached at once; with a
         transition shape the speed changes over time from the start, as in a story."""
         dyn = self.action.dynamics
-        if (dyn.shape == "step" or dyn.value == 0) and not self._continuous:
+        if isinstance(self.action.target, m.RelativeTargetSpeed):
+            # relative to another entity: esmini starts every Init action before it steps them, so the other
+            # entity's Init speed counts wherever it stands in Init
+            return False
+        if dyn.shape == "step" or dyn.value == 0:
             self.actor.speed = self.target()
             return True
         return False
@@ -138,6 +143,7 @@ class LaneChangeRuntime(Runtime):
                 raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source) from None
             self._to_missing_lane(str(exc))
             return
+        actor.heading_offset = 0.0  # esmini aligns the entity with the road when a lane change starts
         t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
         centre = road.lane_center_t(actor.road_id, lane, actor.s)
         actor.lane_id = lane
@@ -153,6 +159,16 @@ class LaneChangeRuntime(Runtime):
         if self.action.dynamics.shape == "step" or self.action.dynamics.value <= 0:
             actor.offset = self.offset1
             self.done = True
+
+    def stop(self) -> None:
+        # stopped midway (another lateral action, an overriding event): the entity keeps its offset and the
+        # heading it has relative to the road (as esmini)
+        a, road = self.actor, self.world.road
+        if road is not None and a.road_id is not None:
+            lane_heading = road.road_to_world(a.road_id, a.s, 0.0).heading
+            travel = lane_heading if a.direction > 0 else lane_heading + math.pi
+            a.heading_offset = wrap_angle(a.heading - travel)
+        a.lateral_velocity = 0.0
 
     def _to_missing_lane(self, why: str) -> None:
         """A relative target lane beyond the road's last lane: esmini runs on. It measures the offset from
@@ -189,16 +205,26 @@ class LaneChangeRuntime(Runtime):
         # storyboard's order changes the speed from the next step on (as esmini)
         self.actor.extra["move_speed"] = self.actor.speed
         dyn = self.action.dynamics
+        before = self.elapsed
         self.elapsed += dt
+        span = self.offset1 - self.offset0
         if dyn.dimension == "distance":
-            progress = (self.actor.odometer - self.start_odometer + abs(self.actor.speed) * dt) / dyn.value
-        elif dyn.dimension == "rate":  # lateral rate in m/s: duration from the lateral distance
-            duration = abs(self.offset1 - self.offset0) / dyn.value * shape_peak_rate_factor(dyn.shape)
-            progress = self.elapsed / max(duration, 1e-9)
+            travelled = self.actor.odometer - self.start_odometer
+            progress = (travelled + abs(self.actor.speed) * dt) / dyn.value
+            # lateral per metre along the road at the start of the step, as a velocity at the entity's speed
+            rate = span * shape_slope(dyn.shape, travelled / dyn.value) / dyn.value * abs(self.actor.speed)
         else:
-            progress = self.elapsed / dyn.value
-        new_offset = self.offset0 + (self.offset1 - self.offset0) * shape_value(dyn.shape, progress)
-        self.actor.lateral_velocity = (new_offset - self.actor.offset) / dt
+            if dyn.dimension == "rate":  # lateral rate in m/s: duration from the lateral distance
+                duration = abs(span) / dyn.value * shape_peak_rate_factor(dyn.shape)
+            else:
+                duration = dyn.value
+            duration = max(duration, 1e-9)
+            progress = self.elapsed / duration
+            rate = span * shape_slope(dyn.shape, before / duration) / duration
+        new_offset = self.offset0 + span * shape_value(dyn.shape, progress)
+        # esmini takes the heading, and the share of the speed the lateral motion takes, from the transition's
+        # rate at the start of the step (before it advances the transition)
+        self.actor.lateral_velocity = rate if dyn.shape != "step" else (new_offset - self.actor.offset) / dt
         self.actor.offset = new_offset
         if progress >= 1.0 - 1e-9:
             self.actor.offset = self.offset1

@@ -13,11 +13,6 @@ if TYPE_CHECKING:
 
 class Runtime:
     domain = "other"  # the domain it controls: a new action of the same domain on the actor overrides it
-    also: tuple[str, ...] = ()  # further domains it controls (esmini's FollowTrajectoryAction: both)
-
-    @property
-    def domains(self) -> tuple[str, ...]:
-        return (self.domain, *self.also)
 
     def __init__(self, world: ActionWorld, actor: Body) -> None:
         self.world = world

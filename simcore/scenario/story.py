@@ -137,7 +137,7 @@ class StoryRun:
                 self._stepped = None
         for runtime in node.runtime or ():
             if not runtime.done:
-                runtime.stop()
+                runtime.stop()  # stopped before it was done (overridden, or its event stopped)
         node.runtime = None
 
     def start_group(self, group: Node) -> None:
@@ -181,22 +181,17 @@ class StoryRun:
             body = self.world.body(actor_name)
             runtime = make_runtime(self.world, body, action.private)
             self.world.owner = body
-            domains = runtime.domains
-            for domain in domains:
-                previous = self.running.get((actor_name, domain))
-                if previous is not None and previous is not node:
-                    # a new action with a domain in common on the same actor overrides the running one (a
-                    # trajectory, lateral and longitudinal, overrides a speed action and is overridden by one)
-                    self.release(previous)
-                    self.set(previous, STOP, COMPLETE)
-            for domain in domains:
-                self.running[(actor_name, domain)] = node
+            key = (actor_name, runtime.domain)
+            previous = self.running.get(key)
+            if previous is not None and previous is not node:
+                # a new action of the same domain on the same actor overrides the running one
+                self.release(previous)
+                self.set(previous, STOP, COMPLETE)
+            self.running[key] = node
             self._stepped = None
-            # an Init action still running in these domains (a distance kept from the start) is overridden too
+            # an Init action still running in this domain (a distance kept from the start) is overridden too
             self.world.init_runtimes = [
-                r
-                for r in self.world.init_runtimes
-                if not (r.actor is body and set(r.domains) & set(domains))
+                r for r in self.world.init_runtimes if not (r.actor is body and r.domain == runtime.domain)
             ]
             runtime.start()
             runtimes.append(runtime)
