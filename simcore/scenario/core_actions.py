@@ -23,6 +23,7 @@ class SpeedRuntime(Runtime):
         self.v0 = 0.0
         self.elapsed = 0.0
         self.duration = 0.0
+        self.rate = 0.0  # the rate of a rate-dimension transition, within the vehicle's performance
 
     def target(self) -> float:
         target = self.action.target
@@ -41,6 +42,7 @@ class SpeedRuntime(Runtime):
             perf = self.actor.entity.performance
             limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
             rate = min(dyn.value, limit) if limit > 0 else dyn.value
+            self.rate = rate
             self.duration = dv / rate * shape_peak_rate_factor(dyn.shape) if rate > 0 else 0.0
         elif dyn.dimension == "distance":
             # every shape is symmetric, so the mean speed over the transition is (v0 + v1) / 2: the
@@ -88,8 +90,11 @@ class SpeedRuntime(Runtime):
             return
         self.elapsed += dt
         dyn = self.action.dynamics
-        progress = self.elapsed / max(self.duration, 1e-9)
         target = self.target()
+        if dyn.dimension == "rate" and self.rate > 0 and isinstance(self.action.target, m.RelativeTargetSpeed):
+            # a moving target changes how long the transition at this rate lasts, not the rate (as esmini)
+            self.duration = abs(target - self.v0) / self.rate * shape_peak_rate_factor(dyn.shape)
+        progress = self.elapsed / max(self.duration, 1e-9)
         self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress), dt)
         if progress >= 1.0 - 1e-9:
             self._set(target, dt)
