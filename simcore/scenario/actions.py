@@ -281,6 +281,12 @@ class LateralDistanceRuntime(Runtime):
             return
         t_ref = road.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
         t_me = road.lane_center_t(a.road_id, a.lane_id, a.s) + a.offset
+        road_system = self.action.coordinate_system == "road"
+        if not road_system:
+            # in entity coordinates the distance is across the actor's own heading (as esmini): an actor
+            # beside and behind a turning entity measures it along its own turned axis
+            across = -math.sin(a.heading) * (a.x - ref.x) + math.cos(a.heading) * (a.y - ref.y)
+            t_me = t_ref + across * a.direction
         distance = self.action.distance
         if self.action.freespace:
             distance += (a.entity.box.width + ref.entity.box.width) / 2
@@ -296,7 +302,6 @@ class LateralDistanceRuntime(Runtime):
         c = self.action.constraints or m.DynamicConstraints()
         # in road coordinates maxSpeed alone limits the lateral speed; in entity coordinates (the default)
         # only maxAcceleration brings dynamics, else the distance is taken at once in the first step (as esmini)
-        road_system = self.action.coordinate_system == "road"
         dynamic = c.max_acceleration is not None or (road_system and c.max_speed is not None)
         if self.world.step_index == self.first_step and dynamic:
             return
@@ -317,7 +322,16 @@ class LateralDistanceRuntime(Runtime):
         else:
             move = error
         a.offset += move
-        a.lateral_velocity = move / dt
+        if road_system or c.max_acceleration is not None:
+            a.lateral_velocity = move / dt
+        else:
+            # taken at once: the actor takes the other entity's heading relative to the road (as esmini),
+            # not one of its own sideways motion, and the sideways move takes its length off the way along
+            a.extra["lateral_step"] = abs(move)
+            a.lateral_velocity = 0.0
+            pose = road.road_to_world(ref.road_id, ref.s, 0.0)
+            travel = pose.heading if ref.direction > 0 else pose.heading + math.pi
+            a.heading_offset = wrap_angle(ref.heading - travel)
 
     @staticmethod
     def _reference_lateral_speed(road: OpenDrive, ref: Body) -> float:

@@ -406,11 +406,13 @@ class ScenarioEngine:
             if deferred and body.name in deferred:
                 continue
             extra = body.extra
+            lateral_step = None
             if extra:
                 if extra.pop("teleported", 0.0):
                     extra.pop("move_speed", 0.0)
                     continue
                 speed = extra.pop("move_speed", body.speed)
+                lateral_step = extra.pop("lateral_step", None)
             else:
                 speed = body.speed
             distance = speed * dt
@@ -418,7 +420,11 @@ class ScenarioEngine:
             if mover is not None:
                 mover.move(dt, now)
             else:
-                if body.lateral_velocity != 0.0:
+                if lateral_step is not None:
+                    # a sideways move of this step takes its length off the way along (esmini's lateral
+                    # distance action)
+                    distance = math.copysign(max(abs(distance) - lateral_step, 0.0), speed)
+                elif body.lateral_velocity != 0.0:
                     # the entity moves at its speed along its path: a lateral motion takes its share of it
                     lateral = min(abs(body.lateral_velocity), abs(speed))
                     distance = math.copysign(math.sqrt(speed * speed - lateral * lateral), speed) * dt
