@@ -38,14 +38,19 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from simcore.scenario import model as m
 from simcore.scenario.drivers import Vehicle, put
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
+
+    class GhostWorld(ScenarioWorld, Protocol):
+        def run_alone(self, body: Body, dt: float, steps: int, sample: Callable[[int], None]) -> None: ...
 
 FOLLOW_GHOST = "FollowGhostController"
 SAMPLE_TIME = 0.2  # s between trail samples (esmini's GHOST_TRAIL_SAMPLE_TIME)
@@ -409,7 +414,7 @@ class GhostFollower:
 class Ghosts:
     """The ghost of a scenario run: its trail, esmini's clock (the head start's restart), the follower."""
 
-    def __init__(self, world: ScenarioWorld, setup: GhostSetup) -> None:
+    def __init__(self, world: GhostWorld, setup: GhostSetup) -> None:
         self.world = world
         self.setup = setup
         self.ghost = world.bodies[setup.ghost]
@@ -420,7 +425,8 @@ class Ghosts:
         self.restarting = setup.headstart > 0.0
         self.follower: GhostFollower | None = None
         self.names = frozenset({setup.ghost})
-        self.warned = False
+        self.restart = False  # the ghost was put back on its entity after time 0: its head start runs again
+        self.rerun = False  # … before the next step
 
     def start(self) -> None:
         """The initial sample (esmini's first frame, before any step)."""
@@ -446,9 +452,23 @@ class Ghosts:
     def begin_step(self) -> None:
         if self.restarting and self.clock > -SMALL:
             self.restarting = False
+        g = self.ghost
+        if self.rerun and not g.gone:
+            # the restart's head start, before this step: the ghost alone, on esmini's clock rewound by it
+            self.rerun = False
+            dt = self.world.dt
+            steps = round(self.setup.headstart / dt)
+            first = self.clock - steps * dt
+
+            def sample(k: int) -> None:
+                self.trail.sample(g.x, g.y, first + (k + 1) * dt, g.speed)
+
+            self.world.run_alone(g, dt, steps, sample)
 
     def end_step(self, dt: float) -> None:
-        """After default motion: esmini's clock on, the follower steps, the ghost leaves its sample."""
+        """After default motion: esmini's clock on, the follower steps, the ghost leaves its sample; after
+        a restart the ghost runs its head start again alone (esmini rewinds its clock by the head start and
+        runs the ghost only until it is back: the storyboard's time goes on from where it was)."""
         clock = self.clock + dt
         if -SMALL < clock < 0.0:
             clock = 0.0
@@ -458,19 +478,22 @@ class Ghosts:
             follower.step(dt, self.trail, clock)
             put(self.world, self.entity, follower.vehicle)
         g = self.ghost
+        if self.restart:
+            self.restart, self.rerun = False, True  # its head start runs again before the next step
+            return
         if not g.gone:
             self.trail.sample(g.x, g.y, clock, g.speed)
 
     def teleport(self, ghost: Body) -> None:
-        """The ghost put on its entity when an event it acts in starts (esmini's AddedGhostTeleport)."""
+        """The ghost put on its entity when an event it acts in starts (esmini's AddedGhostTeleport); after
+        time 0 this restarts it: its trail starts anew, at its entity's speed."""
         e = self.entity
         for attr in ("x", "y", "z", "heading", "road_id", "lane_id", "s", "offset", "direction"):
             setattr(ghost, attr, getattr(e, attr))
         ghost.heading_offset = e.heading_offset
         ghost.posed = None
-        if self.clock > SMALL and not self.warned:
-            self.warned = True
-            self.world.warnings.append(
-                f"{self.world.source}: the ghost of {e.name!r} is put back on it at "
-                f"t={self.clock:.2f} s: esmini then restarts the ghost's head start (not modelled)"
-            )
+        if self.clock > SMALL:
+            self.restart = True
+            self.trail = Trail()
+            ghost.speed = e.speed
+            self.world.log.append(f"t={self.world.time:.2f} {ghost.name}: restarts its head start")
