@@ -207,8 +207,10 @@ class LaneChangeRuntime(Runtime):
         if self.done:
             return
         # the lane change moves the entity at the speed it has now: a speed action stepped after it in the
-        # storyboard's order changes the speed from the next step on (as esmini)
+        # storyboard's order changes the speed from the next step on (as esmini); esmini's lane change moves
+        # its entity itself, also in a step it was teleported in
         self.actor.extra["move_speed"] = self.actor.speed
+        self.actor.extra.pop("teleported", None)
         dyn = self.action.dynamics
         before = self.elapsed
         self.elapsed += dt

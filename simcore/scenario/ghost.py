@@ -496,4 +496,5 @@ class Ghosts:
             self.restart = True
             self.trail = Trail()
             ghost.speed = e.speed
+            ghost.extra["teleported"] = 1.0  # it stays there this step
             self.world.log.append(f"t={self.world.time:.2f} {ghost.name}: restarts its head start")
