@@ -500,7 +500,9 @@ def test_differential_corpus_references_are_what_esmini_makes_of_the_cases() -> 
         spec = differential_cases.read_index()[case]
         played = run_esmini(esmini, spec.file, step=conformance.STEP_SECONDS)
         assert played.ok and played.end == pytest.approx(spec.end, abs=1e-6)
-        stored = conformance.read_reference(differential_cases.REFERENCE / conformance.reference_name(spec.file))
+        stored = conformance.read_reference(
+            differential_cases.REFERENCE / conformance.reference_name(spec.file)
+        )
         for name, track in stored.items():
             rmse, _, count = conformance.track_error(track, played.tracks[name])
             assert count and rmse is not None and rmse < 1e-3

@@ -17,7 +17,7 @@ from simcore.errors import BadInput
 from simcore.evaluation.metrics import boxes_overlap
 from simcore.scenario import model as m
 from simcore.scenario.measure import LARGE, directional
-from simcore.scenario.motion import lane_shift, wrap_angle
+from simcore.scenario.motion import wrap_angle
 from simcore.scenario.positions import fixed_point
 from simcore.scenario.storyboard import state_of, transition_of
 

@@ -7,7 +7,14 @@ from typing import TYPE_CHECKING
 
 from simcore.errors import BadInput
 from simcore.scenario import model as m
-from simcore.scenario.motion import Body, lane_shift, shape_peak_rate_factor, shape_slope, shape_value, wrap_angle
+from simcore.scenario.motion import (
+    Body,
+    lane_shift,
+    shape_peak_rate_factor,
+    shape_slope,
+    shape_value,
+    wrap_angle,
+)
 from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
@@ -91,7 +98,11 @@ class SpeedRuntime(Runtime):
         self.elapsed += dt
         dyn = self.action.dynamics
         target = self.target()
-        if dyn.dimension == "rate" and self.rate > 0 and isinstance(self.action.target, m.RelativeTargetSpeed):
+        if (
+            dyn.dimension == "rate"
+            and self.rate > 0
+            and isinstance(self.action.target, m.RelativeTargetSpeed)
+        ):
             # a moving target changes how long the transition at this rate lasts, not the rate (as esmini)
             self.duration = abs(target - self.v0) / self.rate * shape_peak_rate_factor(dyn.shape)
         progress = self.elapsed / max(self.duration, 1e-9)

@@ -378,7 +378,7 @@ class ScenarioEngine:
         self.story.step_actions(dt)
         self.moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
-        sumo, road, tow_of = self.sumo, self.road, self.tow_of
+        sumo, tow_of = self.sumo, self.tow_of
         # entities an override-mode ACC moves itself, after the others (below)
         deferred: set[str] | tuple[()] = (
             {n for n, d in self.acc_drivers.items() if d.override and not d.virtual}

@@ -52,6 +52,7 @@ if TYPE_CHECKING:
     class GhostWorld(ScenarioWorld, Protocol):
         def run_alone(self, body: Body, dt: float, steps: int, sample: Callable[[int], None]) -> None: ...
 
+
 FOLLOW_GHOST = "FollowGhostController"
 SAMPLE_TIME = 0.2  # s between trail samples (esmini's GHOST_TRAIL_SAMPLE_TIME)
 SMALL = 1e-10  # esmini's SMALL_NUMBER
