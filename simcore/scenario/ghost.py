@@ -15,8 +15,9 @@ Semantics as esmini implements them (ScenarioWorld::SetupGhost, ControllerFollow
   axis (on the storyboard's time it is later by the head start);
 - in those triggers, speed, acceleration, traveled distance, reach position, collision, end of road, off road
   and standstill conditions on the entity are handed over to the ghost; an event the ghost acts in whose
-  trigger has any other condition first teleports the ghost to the entity (esmini then restarts the ghost's
-  head start when this happens after time 0: not modelled, a warning says so);
+  trigger has any other condition first teleports the ghost to the entity; after time 0 this restarts the
+  ghost: a new trail at the entity's speed, and the head start run again by the ghost alone before the next
+  step (esmini rewinds its clock for it while every other entity stands still);
 - the ghost leaves a trail: its position, heading and speed whenever more than 0.2 s of esmini's simulation
   time passed since the last sample and it is not standing still (a sample more than 0.4 s old is repeated
   0.2 s before the new one), the trail's s being the length of the polyline;
