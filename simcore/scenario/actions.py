@@ -48,6 +48,7 @@ class FollowTrajectoryRuntime(Runtime):
         self.t0 = 0.0
         self.t_start = 0.0  # trajectory time where a relative timing's clock starts
         self.step_speed: float | None = None
+        self.backward_heading: float | None = None
 
     def start(self) -> None:
         a = self.actor
@@ -73,6 +74,26 @@ class FollowTrajectoryRuntime(Runtime):
         a.mover = self
         a.placed = True
         self._pose(self.s)
+        self.backward_heading = None if timed else self._explicit_heading_against()
+        if self.backward_heading is not None:
+            a.heading = self.backward_heading
+
+    def _explicit_heading_against(self) -> float | None:
+        """The heading a polyline's first vertex gives explicitly (a WorldPosition's `h`) when it and the
+        entity's speed make esmini drive the trajectory backwards from its start (a heading more than 90° off
+        the trajectory's direction and a forward speed, or a heading along it and a reverse speed), which
+        ends it at once (None otherwise)."""
+        shape = self.action.trajectory.shape
+        assert self.path is not None
+        if not isinstance(shape, m.Polyline) or not shape.vertices or self.s > 0.0:
+            return None
+        first = shape.vertices[0].position
+        if not isinstance(first, m.WorldPosition) or first.h is None:
+            return None
+        heading = self.world.resolve_position(first)[3]
+        against = abs(wrap_angle(heading - self.path.at(0.0)[3])) > math.pi / 2 + _EPS
+        # esmini's direction of motion along it: the speed's sign (0 counts as forward) times the heading's
+        return heading if against == (self.actor.speed >= 0.0) else None
 
     def step(self, dt: float) -> None:
         # the entity moves along the trajectory at the speed it has when this action steps: a speed action
@@ -100,6 +121,11 @@ class FollowTrajectoryRuntime(Runtime):
     def move(self, dt: float, now: float) -> None:
         assert self.path is not None
         a = self.actor
+        if self.backward_heading is not None:
+            # driven backwards from its start: it ends at once where it starts, facing the heading given
+            a.heading = self.backward_heading
+            self.finish()
+            return
         over_time = 0.0
         if self.timed:
             assert self.path.t is not None
