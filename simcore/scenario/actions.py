@@ -308,6 +308,7 @@ class LateralDistanceRuntime(Runtime):
         t_ref = road.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
         t_me = road.lane_center_t(a.road_id, a.lane_id, a.s) + a.offset
         road_system = self.action.coordinate_system == "road"
+        c = self.action.constraints or m.DynamicConstraints()
         if not road_system:
             # in entity coordinates the distance is across the actor's own heading (as esmini): an actor
             # beside and behind a turning entity measures it along its own turned axis
@@ -325,7 +326,6 @@ class LateralDistanceRuntime(Runtime):
         error = target - t_me
         if not self.action.continuous and abs(error) < self.THRESHOLD:
             self.done = True
-        c = self.action.constraints or m.DynamicConstraints()
         # in road coordinates maxSpeed alone limits the lateral speed; in entity coordinates (the default)
         # only maxAcceleration brings dynamics, else the distance is taken at once in the first step (as esmini)
         dynamic = c.max_acceleration is not None or (road_system and c.max_speed is not None)
@@ -358,6 +358,9 @@ class LateralDistanceRuntime(Runtime):
             pose = road.road_to_world(ref.road_id, ref.s, 0.0)
             travel = pose.heading if ref.direction > 0 else pose.heading + math.pi
             a.heading_offset = wrap_angle(ref.heading - travel)
+            # the rest of the step it drives along that heading: sideways too, relative to the road
+            along = max(abs(a.speed) * dt - abs(move), 0.0)
+            a.offset += a.direction * along * math.sin(a.heading_offset)
 
     @staticmethod
     def _reference_lateral_speed(road: OpenDrive, ref: Body) -> float:
