@@ -62,8 +62,10 @@ class FollowTrajectoryRuntime(Runtime):
         )
         if self.action.following_mode == "position":
             # timed vertices in position mode: each segment at its own constant speed; in follow mode the
-            # speed changes linearly from vertex to vertex (as esmini)
+            # speed changes linearly from vertex to vertex, from the speed the entity has now (as esmini)
             self.path.v = None
+        elif self.path.v is not None:
+            self.path.v = paths.vertex_speeds(self.path, abs(a.speed))
         self.t0 = self.world.time
         self.s = min(max(self.action.initial_distance_offset, 0.0), self.path.length)
         timed = self.action.timing != "none" and self.path.t is not None
