@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from simcore.errors import BadInput
 from simcore.scenario import model as m
 from simcore.scenario import paths
-from simcore.scenario.motion import Body, shape_value, wrap_angle
+from simcore.scenario.motion import Body, lane_at_t, shape_value, wrap_angle
 from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
@@ -49,6 +49,7 @@ class FollowTrajectoryRuntime(Runtime):
         self.t_start = 0.0  # trajectory time where a relative timing's clock starts
         self.step_speed: float | None = None
         self.backward_heading: float | None = None
+        self.last_road: tuple[str, float] | None = None  # the road (and s) it was last on
 
     def start(self) -> None:
         a = self.actor
@@ -119,6 +120,8 @@ class FollowTrajectoryRuntime(Runtime):
         if self.world.road is not None:
             a.z = z if z != 0.0 else a.z
         self.world.track_road(a)
+        if a.road_id is not None:
+            self.last_road = (a.road_id, a.s)
 
     def move(self, dt: float, now: float) -> None:
         assert self.path is not None
@@ -170,7 +173,19 @@ class FollowTrajectoryRuntime(Runtime):
         if a.mover is self:
             a.mover = None
         self.world.track_road(a, lock_lane=True)
-        if a.road_id is not None and self.world.road is not None:
+        road = self.world.road
+        if a.road_id is None and road is not None and self.last_road is not None:
+            # ended beside the lanes of the road it drove on: it goes on along that road at that distance
+            # from it (as esmini)
+            road_id, s_hint = self.last_road
+            found = road.project_on(road_id, a.x, a.y, s_hint)
+            if found is not None:
+                a.road_id, a.s = road_id, found[0]
+                a.lane_id, a.offset = lane_at_t(road, road_id, found[0], found[1])
+                lane_heading = road.road_to_world(road_id, a.s, 0.0).heading
+                a.direction = 1 if math.cos(a.heading - lane_heading) >= 0 else -1
+                a.posed = None
+        if a.road_id is not None and road is not None:
             # it goes on along the lane keeping the heading it has relative to it (as esmini)
             lane_heading = self.world.road.road_to_world(a.road_id, a.s, 0.0).heading
             travel = lane_heading if a.direction > 0 else lane_heading + math.pi
