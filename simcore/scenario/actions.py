@@ -297,12 +297,14 @@ class LaneOffsetRuntime(Runtime):
 
 
 class LateralDistanceRuntime(Runtime):
-    """Keeps a lateral distance (in road t) to another entity on the same road. Without maxAcceleration the
-    distance is taken at once, or in road coordinates at no more than maxSpeed; with maxAcceleration a
-    critically damped spring (stiffness scaled by the limit) pulls the entity there, damped on the lateral
-    speed relative to the other entity's (its velocity across its own heading, as esmini's
-    LateralDistanceAction takes it). The lateral speed stays below maxSpeed and the entity's own speed. The
-    spring's first step moves nothing (as esmini, which steps it with the time elapsed since its start)."""
+    """Keeps a lateral distance to another entity on the same road: in road t (road coordinates) or across
+    the actor's own heading (entity coordinates, the default). Without maxAcceleration the distance is taken
+    at once, or in road coordinates at no more than maxSpeed; with maxAcceleration a spring (stiffness scaled
+    by the limit; critically damped in road coordinates, overdamped in entity coordinates) pulls the entity
+    there, damped on the lateral speed relative to the other entity's (its velocity across its own heading,
+    as esmini's LateralDistanceAction takes it). The lateral speed stays below maxSpeed and the entity's own
+    speed. The spring's first step moves nothing (as esmini, which steps it with the time elapsed since its
+    start)."""
 
     domain = "lateral"
     SPRING = 0.4
@@ -356,7 +358,10 @@ class LateralDistanceRuntime(Runtime):
         if c.max_acceleration is not None:
             stiffness = c.max_acceleration * self.SPRING
             relative = self.velocity - self._reference_lateral_speed(road, ref)
-            acc = error * stiffness - relative * 2.0 * math.sqrt(stiffness)
+            # damped on sqrt(stiffness) in road coordinates, on the limit itself in entity coordinates (an
+            # overdamped spring there: esmini closes the distance slowly)
+            damping = 2.0 * math.sqrt(stiffness if road_system else c.max_acceleration)
+            acc = error * stiffness - relative * damping
             acc = min(max(acc, -c.max_acceleration), c.max_acceleration)
             self.velocity = min(max(self.velocity + acc * dt, -max_speed), max_speed)
             move = self.velocity * dt
