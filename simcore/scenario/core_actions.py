@@ -155,9 +155,14 @@ class LaneChangeRuntime(Runtime):
                 base = reference.lane_id if reference.road_id == actor.road_id else actor.lane_id
                 lane = lane_shift(road, actor.road_id, actor.s, base, target.value, reference.direction)
         except ValueError as exc:
+            lanes = road.lane_ids(actor.road_id, actor.s)
             if isinstance(target, m.AbsoluteTargetLane):
-                raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source) from None
-            self._to_missing_lane(str(exc))
+                if not lanes or lanes[0] <= target.lane_id <= lanes[-1]:
+                    raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source) from None
+                to_left = target.lane_id > lanes[-1]
+            else:
+                to_left = (target.value > 0) == (self.world.body(target.entity).direction > 0)
+            self._to_missing_lane(str(exc), to_left)
             return
         actor.heading_offset = 0.0  # esmini aligns the entity with the road when a lane change starts
         t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
@@ -186,17 +191,14 @@ class LaneChangeRuntime(Runtime):
             a.heading_offset = wrap_angle(a.heading - travel)
         a.lateral_velocity = 0.0
 
-    def _to_missing_lane(self, why: str) -> None:
-        """A relative target lane beyond the road's last lane: esmini runs on. It measures the offset from
-        the road's outer edge on that side (the centre of a lane of no width), puts the entity at that offset
-        in the lane it is in (a jump sideways) and then changes to the target offset in its own lane."""
+    def _to_missing_lane(self, why: str, to_left: bool) -> None:
+        """A target lane beyond the road's last lane (to the left of it with `to_left`): esmini runs on. It
+        measures the offset from the road's outer edge on that side (the centre of a lane of no width), puts
+        the entity at that offset in the lane it is in (a jump sideways) and then changes to the target offset
+        in its own lane."""
         actor, road = self.actor, self.world.road
         assert road is not None and actor.road_id is not None
         lanes = road.lane_ids(actor.road_id, actor.s)
-        target = self.action.target
-        assert isinstance(target, m.RelativeTargetLane)
-        reference = self.world.body(target.entity)
-        to_left = (target.value > 0) == (reference.direction > 0)
         outer = lanes[-1] if to_left else lanes[0]
         centre = road.lane_center_t(actor.road_id, outer, actor.s)
         half = 0.5 * road.lane_width(actor.road_id, outer, actor.s)
