@@ -187,7 +187,7 @@ class FollowTrajectoryRuntime(Runtime):
                 a.posed = None
         if a.road_id is not None and road is not None:
             # it goes on along the lane keeping the heading it has relative to it (as esmini)
-            lane_heading = self.world.road.road_to_world(a.road_id, a.s, 0.0).heading
+            lane_heading = road.road_to_world(a.road_id, a.s, 0.0).heading
             travel = lane_heading if a.direction > 0 else lane_heading + math.pi
             a.heading_offset = wrap_angle(a.heading - travel)
         if a.road_id is None and self.world.road is None:

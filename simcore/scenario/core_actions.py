@@ -158,7 +158,9 @@ class LaneChangeRuntime(Runtime):
             lanes = road.lane_ids(actor.road_id, actor.s)
             if isinstance(target, m.AbsoluteTargetLane):
                 if not lanes or lanes[0] <= target.lane_id <= lanes[-1]:
-                    raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source) from None
+                    raise BadInput(
+                        f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source
+                    ) from None
                 to_left = target.lane_id > lanes[-1]
             else:
                 to_left = (target.value > 0) == (self.world.body(target.entity).direction > 0)
