@@ -11,7 +11,7 @@ position resolution (`positions`) live in their own modules; the engine is the `
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any, Protocol
 
 from simcore.errors import BadInput, SimulationError
@@ -383,7 +383,7 @@ class ScenarioEngine:
         self.story.step_actions(dt)
         self.moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
-        sumo, road, tow_of = self.sumo, self.road, self.tow_of
+        sumo, tow_of = self.sumo, self.tow_of
         # entities an override-mode ACC moves itself, after the others (below)
         deferred: set[str] | tuple[()] = (
             {n for n, d in self.acc_drivers.items() if d.override and not d.virtual}
@@ -415,29 +415,8 @@ class ScenarioEngine:
                 continue  # SUMO moves it, or its tow vehicle drags it (below)
             if deferred and body.name in deferred:
                 continue
-            extra = body.extra
-            if extra:
-                if extra.pop("teleported", 0.0):
-                    extra.pop("move_speed", 0.0)
-                    continue
-                speed = extra.pop("move_speed", body.speed)
-            else:
-                speed = body.speed
-            distance = speed * dt
-            mover = body.mover
-            if mover is not None:
-                mover.move(dt, now)
-            else:
-                if body.lateral_velocity != 0.0:
-                    # the entity moves at its speed along its path: a lateral motion takes its share of it
-                    lateral = min(abs(body.lateral_velocity), abs(speed))
-                    distance = math.copysign(math.sqrt(speed * speed - lateral * lateral), speed) * dt
-                if road is not None and body.road_id is not None:
-                    advance_on_road(road, body, distance, now)
-                elif distance != 0.0:
-                    body.x += distance * math.cos(body.heading)
-                    body.y += distance * math.sin(body.heading)
-                body.odometer += abs(distance)
+            if not self._default_move(body, dt, now):
+                continue
             if sumo is not None:
                 sumo.place(body)
         if self.trailer_of:
@@ -506,6 +485,60 @@ class ScenarioEngine:
             if body.external and not control[1] and control[2] and not body.gone and name not in out:
                 out.append(name)
         return out
+
+    def run_alone(self, body: Body, dt: float, steps: int, sample: Callable[[int], None]) -> None:
+        """esmini's ghost restart: `body` alone runs its actions and moves, `steps` steps of `dt`, the time
+        going over the last head start again (every other entity stands); `sample(k)` after each."""
+        start = self.time - steps * dt
+        for k in range(steps):
+            now = start + (k + 1) * dt
+            body.lateral_velocity = 0.0
+            runtimes = [r for r in self.init_runtimes if r.actor is body]
+            for node in {id(n): n for n in self.story.running.values()}.values():
+                runtimes.extend(r for r in node.runtime or () if r.actor is body)
+            for runtime in runtimes:
+                if not runtime.done:
+                    self.owner = body
+                    runtime.step(dt)
+            self.moved()
+            self._default_move(body, dt, now)
+            self.moved()
+            sample(k)
+
+    def _default_move(self, body: Body, dt: float, now: float) -> bool:
+        """Move one entity by its action mover, else along its road at its speed (the default controller);
+        False when it stays where a teleport put it this step."""
+        road = self.road
+        extra = body.extra
+        lateral_step = None
+        if extra:
+            if extra.pop("teleported", 0.0):
+                extra.pop("move_speed", 0.0)
+                return False
+            speed = extra.pop("move_speed", body.speed)
+            lateral_step = extra.pop("lateral_step", None)
+        else:
+            speed = body.speed
+        distance = speed * dt
+        mover = body.mover
+        if mover is not None:
+            mover.move(dt, now)
+        else:
+            if lateral_step is not None:
+                # a sideways move of this step takes its length off the way along (esmini's lateral
+                # distance action)
+                distance = math.copysign(max(abs(distance) - lateral_step, 0.0), speed)
+            elif body.lateral_velocity != 0.0:
+                # the entity moves at its speed along its path: a lateral motion takes its share of it
+                lateral = min(abs(body.lateral_velocity), abs(speed))
+                distance = math.copysign(math.sqrt(speed * speed - lateral * lateral), speed) * dt
+            if road is not None and body.road_id is not None:
+                advance_on_road(road, body, distance, now)
+            elif distance != 0.0:
+                body.x += distance * math.cos(body.heading)
+                body.y += distance * math.sin(body.heading)
+            body.odometer += abs(distance)
+        return True
 
     def _step_drivers(
         self, stepped: Iterable[drivers.AccDriver | drivers.NaturalDriver], dt: float, now: float

@@ -28,6 +28,19 @@ def shape_value(shape: str, p: float) -> float:
     raise ValueError(shape)
 
 
+def shape_slope(shape: str, p: float) -> float:
+    """d shape_value / d p at progress p ∈ [0, 1] (0 outside and for a step)."""
+    if not 0.0 <= p <= 1.0 or shape == "step":
+        return 0.0
+    if shape == "linear":
+        return 1.0
+    if shape == "cubic":
+        return 6.0 * p * (1.0 - p)
+    if shape == "sinusoidal":
+        return 0.5 * math.pi * math.sin(math.pi * p)
+    raise ValueError(shape)
+
+
 def shape_peak_rate_factor(shape: str) -> float:
     """Peak slope of a shape relative to the linear one (rate dimension means the peak rate)."""
     return {"linear": 1.0, "cubic": 1.5, "sinusoidal": math.pi / 2, "step": 1.0}[shape]

@@ -156,18 +156,25 @@ def polyline(shape: m.Polyline, resolve: Resolver) -> tuple[SampledPath, float |
     timed = all(not math.isnan(t) for t in times)
     path = _from_points(points, times if timed else None)
     if path.t is not None and len(path.s) > 1:
-        # vertex speeds such that each segment's mean speed covers it: v0 = L0/T0, v(i+1) = 2 Li/Ti - v(i)
-        speeds = [0.0] * len(path.s)
-        for i in range(len(path.s) - 1):
-            span = path.t[i + 1] - path.t[i]
-            mean = (path.s[i + 1] - path.s[i]) / span if span > 0 else 0.0
-            if i == 0:
-                speeds[0] = mean
-            speeds[i + 1] = max(2 * mean - speeds[i], 0.0)
-        path.v = speeds
+        path.v = vertex_speeds(path, None)
     if len(path.x) == 1:
         path.h = [first_heading or 0.0]
     return path, first_heading
+
+
+def vertex_speeds(path: SampledPath, first: float | None) -> list[float]:
+    """Speeds at a timed path's samples such that each segment's mean speed covers it: v(i+1) = 2 Li/Ti -
+    v(i), from `first` (esmini's follow mode: the entity's speed when the action starts), else from the first
+    segment's mean speed."""
+    assert path.t is not None
+    speeds = [0.0] * len(path.s)
+    for i in range(len(path.s) - 1):
+        span = path.t[i + 1] - path.t[i]
+        mean = (path.s[i + 1] - path.s[i]) / span if span > 0 else 0.0
+        if i == 0:
+            speeds[0] = mean if first is None else first
+        speeds[i + 1] = max(2 * mean - speeds[i], 0.0)
+    return speeds
 
 
 def clothoid(
