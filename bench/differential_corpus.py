@@ -179,7 +179,7 @@ def main() -> None:
         "features", nargs="*", help="folders of tests/differential_corpus or case path globs (default: all)"
     )
     parser.add_argument("--esmini", type=Path, default=None)
-    args = parser.parse_args()
+    args = parser.parse_intermixed_args()  # FEATUREs before or after --esmini
     files = scenarios(args.features)
     esmini = find_esmini(args.esmini)
     if args.command == "record":
