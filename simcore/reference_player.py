@@ -86,9 +86,12 @@ def parse_csv(text: str, period: float = 0.1) -> tuple[Tracks, float | None]:
             name = cells[block + at_name]
             if not name:
                 continue
-            tracks.setdefault(name, []).append(
-                (round(t, 6), float(cells[block + at_x]), float(cells[block + at_y]))
-            )
+            track = tracks.setdefault(name, [])
+            if track and round(t, 6) <= track[-1][0]:
+                # a ghost restart: esmini's clock goes back by the head start while only the ghost moves;
+                # the first pass over those times is the one the scenario's time line has
+                continue
+            track.append((round(t, 6), float(cells[block + at_x]), float(cells[block + at_y])))
     return tracks, end
 
 

@@ -493,7 +493,8 @@ def test_timed_polyline_speed_per_segment_in_position_mode_and_linear_in_follow_
     tmp_path: Path, road: OpenDrive
 ) -> None:
     # 20 m in 2 s, then 5 m in 1 s: position mode runs each segment at its mean speed (10, then 5 m/s);
-    # follow mode changes the speed linearly between vertices (10 → 10 → 0: the mean of the second is 5)
+    # follow mode changes the speed linearly between vertices from the entity's speed at the start (as
+    # esmini): 20 → 0 (a mean of 10) → 10 (a mean of 5)
     points = [(0.0, 100.0), (2.0, 120.0), (3.0, 125.0)]
     speeds = {}
     for mode in ("position", "follow"):
@@ -501,8 +502,9 @@ def test_timed_polyline_speed_per_segment_in_position_mode_and_linear_in_follow_
         _, trace = run(path, road, 3.1)
         speeds[mode] = trace
     assert speeds["position"][2.55]["speed"] == pytest.approx(5.0, abs=1e-6)
+    assert speeds["follow"][1.05]["speed"] == pytest.approx(10.0, abs=0.6)
     assert speeds["follow"][2.55]["speed"] == pytest.approx(5.0, abs=0.3)
-    assert speeds["follow"][2.3]["speed"] == pytest.approx(7.5, abs=0.3)
+    assert speeds["follow"][2.3]["speed"] == pytest.approx(2.5, abs=0.3)
     assert speeds["position"][2.3]["speed"] == pytest.approx(5.0, abs=1e-6)
     for trace in speeds.values():
         assert trace[3.05]["s"] == pytest.approx(125.0, abs=1e-6)  # started at 0.05

@@ -56,7 +56,16 @@ def overridden(world: ActionWorld, actor: Body, action: m.PrivateAction) -> bool
     if isinstance(action, m.ControllerAction):
         return False
     if actor.external:
-        return not isinstance(action, _KEPT_UNDER_EXTERNAL_CONTROL)
+        if isinstance(action, _KEPT_UNDER_EXTERNAL_CONTROL):
+            return False
+        # an external controller on one domain only (esmini's InteractiveController steering) leaves the
+        # other to the scenario's actions and the entity's other controllers
+        _, longitudinal, lateral = world.controllers[actor.name]
+        domain = getattr(action, "domain", "")
+        if domain == "lateral" and not lateral:
+            return False
+        if domain != "longitudinal" or longitudinal:
+            return True
     if getattr(action, "domain", "") != "longitudinal":
         return False
     acc = world.acc_drivers.get(actor.name)

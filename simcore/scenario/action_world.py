@@ -18,6 +18,9 @@ class ActionWorld(ScenarioWorld, Protocol):
     # per entity: [driver of its assigned controller, active longitudinally, active laterally]
     controllers: dict[str, list[Any]]
     assigned_controller: dict[str, dict[str, str]]  # controller properties assigned during the run
+    controller_slots: dict[
+        str, dict[str, tuple[dict[str, str], set[str]]]
+    ]  # per entity: controllers, domains
     acc_drivers: dict[str, AccDriver]
     natural_drivers: dict[str, NaturalDriver]
     vehicle_drivers: dict[str, OffroadFollower]

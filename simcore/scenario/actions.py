@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from simcore.errors import BadInput
 from simcore.scenario import model as m
 from simcore.scenario import paths
-from simcore.scenario.motion import Body, shape_value, wrap_angle
+from simcore.scenario.motion import Body, lane_at_t, shape_value, wrap_angle
 from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
@@ -48,6 +48,8 @@ class FollowTrajectoryRuntime(Runtime):
         self.t0 = 0.0
         self.t_start = 0.0  # trajectory time where a relative timing's clock starts
         self.step_speed: float | None = None
+        self.backward_heading: float | None = None
+        self.last_road: tuple[str, float] | None = None  # the road (and s) it was last on
 
     def start(self) -> None:
         a = self.actor
@@ -61,8 +63,10 @@ class FollowTrajectoryRuntime(Runtime):
         )
         if self.action.following_mode == "position":
             # timed vertices in position mode: each segment at its own constant speed; in follow mode the
-            # speed changes linearly from vertex to vertex (as esmini)
+            # speed changes linearly from vertex to vertex, from the speed the entity has now (as esmini)
             self.path.v = None
+        elif self.path.v is not None:
+            self.path.v = paths.vertex_speeds(self.path, abs(a.speed))
         self.t0 = self.world.time
         self.s = min(max(self.action.initial_distance_offset, 0.0), self.path.length)
         timed = self.action.timing != "none" and self.path.t is not None
@@ -73,6 +77,26 @@ class FollowTrajectoryRuntime(Runtime):
         a.mover = self
         a.placed = True
         self._pose(self.s)
+        self.backward_heading = None if timed else self._explicit_heading_against()
+        if self.backward_heading is not None:
+            a.heading = self.backward_heading
+
+    def _explicit_heading_against(self) -> float | None:
+        """The heading a polyline's first vertex gives explicitly (a WorldPosition's `h`) when it and the
+        entity's speed make esmini drive the trajectory backwards from its start (a heading more than 90° off
+        the trajectory's direction and a forward speed, or a heading along it and a reverse speed), which
+        ends it at once (None otherwise)."""
+        shape = self.action.trajectory.shape
+        assert self.path is not None
+        if not isinstance(shape, m.Polyline) or not shape.vertices or self.s > 0.0:
+            return None
+        first = shape.vertices[0].position
+        if not isinstance(first, m.WorldPosition) or first.h is None:
+            return None
+        heading = self.world.resolve_position(first)[3]
+        against = abs(wrap_angle(heading - self.path.at(0.0)[3])) > math.pi / 2 + _EPS
+        # esmini's direction of motion along it: the speed's sign (0 counts as forward) times the heading's
+        return heading if against == (self.actor.speed >= 0.0) else None
 
     def step(self, dt: float) -> None:
         # the entity moves along the trajectory at the speed it has when this action steps: a speed action
@@ -96,10 +120,17 @@ class FollowTrajectoryRuntime(Runtime):
         if self.world.road is not None:
             a.z = z if z != 0.0 else a.z
         self.world.track_road(a)
+        if a.road_id is not None:
+            self.last_road = (a.road_id, a.s)
 
     def move(self, dt: float, now: float) -> None:
         assert self.path is not None
         a = self.actor
+        if self.backward_heading is not None:
+            # driven backwards from its start: it ends at once where it starts, facing the heading given
+            a.heading = self.backward_heading
+            self.finish()
+            return
         over_time = 0.0
         if self.timed:
             assert self.path.t is not None
@@ -130,6 +161,11 @@ class FollowTrajectoryRuntime(Runtime):
             a.y += over * math.sin(h_end)
             self.finish()
 
+    def stop(self) -> None:
+        # overridden (a speed action, another trajectory): the entity goes on along the road from where it is
+        if self.actor.mover is self:
+            self.finish()
+
     def finish(self) -> None:
         a = self.actor
         a.extra["trajectory_end_time"] = self.world.time + self.world.dt
@@ -137,9 +173,21 @@ class FollowTrajectoryRuntime(Runtime):
         if a.mover is self:
             a.mover = None
         self.world.track_road(a, lock_lane=True)
-        if a.road_id is not None and self.world.road is not None:
+        road = self.world.road
+        if a.road_id is None and road is not None and self.last_road is not None:
+            # ended beside the lanes of the road it drove on: it goes on along that road at that distance
+            # from it (as esmini)
+            road_id, s_hint = self.last_road
+            found = road.project_on(road_id, a.x, a.y, s_hint)
+            if found is not None:
+                a.road_id, a.s = road_id, found[0]
+                a.lane_id, a.offset = lane_at_t(road, road_id, found[0], found[1])
+                lane_heading = road.road_to_world(road_id, a.s, 0.0).heading
+                a.direction = 1 if math.cos(a.heading - lane_heading) >= 0 else -1
+                a.posed = None
+        if a.road_id is not None and road is not None:
             # it goes on along the lane keeping the heading it has relative to it (as esmini)
-            lane_heading = self.world.road.road_to_world(a.road_id, a.s, 0.0).heading
+            lane_heading = road.road_to_world(a.road_id, a.s, 0.0).heading
             travel = lane_heading if a.direction > 0 else lane_heading + math.pi
             a.heading_offset = wrap_angle(a.heading - travel)
         if a.road_id is None and self.world.road is None:
@@ -164,8 +212,17 @@ class AssignRouteRuntime(Instant):
     def targets(self) -> list[m.Position]:
         return [w.position for w in self.action.route.waypoints]
 
+    def strategies(self) -> list[str]:
+        return [w.strategy for w in self.action.route.waypoints]
+
     def start(self) -> None:
-        self.actor.route = self.world.plan_route(self.actor, self.targets())
+        from simcore.scenario.controllers.follow_route import route_points
+
+        targets = self.targets()
+        self.actor.route = self.world.plan_route(self.actor, targets)
+        # the waypoints as esmini keeps them for a FollowRouteController (resolved now)
+        self.actor.route_points = route_points(self.world, targets)
+        self.actor.route_strategies = self.strategies()
         self.done = True
 
 
@@ -178,6 +235,9 @@ class AcquirePositionRuntime(AssignRouteRuntime):
 
     def targets(self) -> list[m.Position]:
         return [self.position]
+
+    def strategies(self) -> list[str]:
+        return ["shortest"]
 
     def start_in_init(self) -> bool:
         return False
@@ -249,12 +309,14 @@ class LaneOffsetRuntime(Runtime):
 
 
 class LateralDistanceRuntime(Runtime):
-    """Keeps a lateral distance (in road t) to another entity on the same road. Without maxAcceleration the
-    distance is taken at once, or in road coordinates at no more than maxSpeed; with maxAcceleration a
-    critically damped spring (stiffness scaled by the limit) pulls the entity there, damped on the lateral
-    speed relative to the other entity's (its velocity across its own heading, as esmini's
-    LateralDistanceAction takes it). The lateral speed stays below maxSpeed and the entity's own speed. The
-    spring's first step moves nothing (as esmini, which steps it with the time elapsed since its start)."""
+    """Keeps a lateral distance to another entity on the same road: in road t (road coordinates) or across
+    the actor's own heading (entity coordinates, the default). Without maxAcceleration the distance is taken
+    at once, or in road coordinates at no more than maxSpeed; with maxAcceleration a spring (stiffness scaled
+    by the limit; critically damped in road coordinates, overdamped in entity coordinates) pulls the entity
+    there, damped on the lateral speed relative to the other entity's (its velocity across its own heading,
+    as esmini's LateralDistanceAction takes it). The lateral speed stays below maxSpeed and the entity's own
+    speed. The spring's first step moves nothing (as esmini, which steps it with the time elapsed since its
+    start)."""
 
     domain = "lateral"
     SPRING = 0.4
@@ -276,6 +338,13 @@ class LateralDistanceRuntime(Runtime):
             return
         t_ref = road.lane_center_t(ref.road_id, ref.lane_id, ref.s) + ref.offset
         t_me = road.lane_center_t(a.road_id, a.lane_id, a.s) + a.offset
+        road_system = self.action.coordinate_system == "road"
+        c = self.action.constraints or m.DynamicConstraints()
+        if not road_system:
+            # in entity coordinates the distance is across the actor's own heading (as esmini): an actor
+            # beside and behind a turning entity measures it along its own turned axis
+            across = -math.sin(a.heading) * (a.x - ref.x) + math.cos(a.heading) * (a.y - ref.y)
+            t_me = t_ref + across * a.direction
         distance = self.action.distance
         if self.action.freespace:
             distance += (a.entity.box.width + ref.entity.box.width) / 2
@@ -288,10 +357,8 @@ class LateralDistanceRuntime(Runtime):
         error = target - t_me
         if not self.action.continuous and abs(error) < self.THRESHOLD:
             self.done = True
-        c = self.action.constraints or m.DynamicConstraints()
         # in road coordinates maxSpeed alone limits the lateral speed; in entity coordinates (the default)
         # only maxAcceleration brings dynamics, else the distance is taken at once in the first step (as esmini)
-        road_system = self.action.coordinate_system == "road"
         dynamic = c.max_acceleration is not None or (road_system and c.max_speed is not None)
         if self.world.step_index == self.first_step and dynamic:
             return
@@ -303,7 +370,10 @@ class LateralDistanceRuntime(Runtime):
         if c.max_acceleration is not None:
             stiffness = c.max_acceleration * self.SPRING
             relative = self.velocity - self._reference_lateral_speed(road, ref)
-            acc = error * stiffness - relative * 2.0 * math.sqrt(stiffness)
+            # damped on sqrt(stiffness) in road coordinates, on the limit itself in entity coordinates (an
+            # overdamped spring there: esmini closes the distance slowly)
+            damping = 2.0 * math.sqrt(stiffness if road_system else c.max_acceleration)
+            acc = error * stiffness - relative * damping
             acc = min(max(acc, -c.max_acceleration), c.max_acceleration)
             self.velocity = min(max(self.velocity + acc * dt, -max_speed), max_speed)
             move = self.velocity * dt
@@ -312,7 +382,19 @@ class LateralDistanceRuntime(Runtime):
         else:
             move = error
         a.offset += move
-        a.lateral_velocity = move / dt
+        if road_system or c.max_acceleration is not None:
+            a.lateral_velocity = move / dt
+        else:
+            # taken at once: the actor takes the other entity's heading relative to the road (as esmini),
+            # not one of its own sideways motion, and the sideways move takes its length off the way along
+            a.extra["lateral_step"] = abs(move)
+            a.lateral_velocity = 0.0
+            pose = road.road_to_world(ref.road_id, ref.s, 0.0)
+            travel = pose.heading if ref.direction > 0 else pose.heading + math.pi
+            a.heading_offset = wrap_angle(ref.heading - travel)
+            # the rest of the step it drives along that heading: sideways too, relative to the road
+            along = max(abs(a.speed) * dt - abs(move), 0.0)
+            a.offset += a.direction * along * math.sin(a.heading_offset)
 
     @staticmethod
     def _reference_lateral_speed(road: OpenDrive, ref: Body) -> float:

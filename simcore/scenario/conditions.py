@@ -17,7 +17,7 @@ from simcore.errors import BadInput
 from simcore.evaluation.metrics import boxes_overlap
 from simcore.scenario import model as m
 from simcore.scenario.measure import LARGE, directional
-from simcore.scenario.motion import lane_shift, wrap_angle
+from simcore.scenario.motion import wrap_angle
 from simcore.scenario.positions import fixed_point
 from simcore.scenario.storyboard import state_of, transition_of
 
@@ -401,41 +401,34 @@ def _outside_driving_lanes(world: ScenarioWorld, body: Body) -> bool:
 
 def relative_clearance(c: m.RelativeClearanceCondition, world: ScenarioWorld, body: Body) -> bool:
     """True when the lanes and distances given are clear of the listed (else of all) entities; freeSpace
-    chooses bounding-box distances over reference points."""
+    chooses bounding-box distances over reference points. As esmini: without a RelativeLaneRange it never
+    holds; the range must hold at least one driving lane (lane ids from the entity's own id + from to + to,
+    the opposite direction's only with oppositeLanes)."""
+    road = world.road
+    if c.lanes is None or road is None or body.road_id is None:
+        return False
+    low, high = body.lane_id + c.lanes[0], body.lane_id + c.lanes[1]
+    if not any(
+        low <= lane <= high and (c.opposite_lanes or (lane > 0) == (body.lane_id > 0))
+        for lane in road.lane_ids(body.road_id, body.s, driving_only=True)
+    ):
+        return False
     others = [world.body(n) for n in c.entities] if c.entities else list(world.bodies.values())
-    if c.lanes is not None and world.road is not None and body.road_id is not None:
-        # the lanes checked must exist (in the travel direction unless oppositeLanes): no lane, no clearance
-        for d_lane in range(max(c.lanes[0], -20), min(c.lanes[1], 20) + 1):
-            if d_lane == 0:
-                continue
-            try:
-                lane = lane_shift(world.road, body.road_id, body.s, body.lane_id, d_lane, body.direction)
-            except ValueError:
-                return False
-            same_way = world.road.drives_backward(body.road_id, lane) == (body.direction < 0)
-            if not c.opposite_lanes and not same_way:
-                return False
-    occupied = False
+    lanes = sorted(road.lane_ids(body.road_id, body.s))
     for other in others:
         if other is body or other.gone:
             continue
         lon = world.measure.relative_distance(body, other, "longitudinal", c.free_space, signed=True)
         if not (-c.distance_backward <= lon <= c.distance_forward):
             continue
-        if c.lanes is not None and world.road is not None and body.road_id is not None:
-            if other.road_id != body.road_id:
-                continue
-            lanes = sorted(world.road.lane_ids(body.road_id, body.s))
-            if other.lane_id not in lanes or body.lane_id not in lanes:
-                continue
-            d_lane = (lanes.index(other.lane_id) - lanes.index(body.lane_id)) * body.direction
-            if not c.opposite_lanes and other.direction != body.direction:
-                continue
-            if not (c.lanes[0] <= d_lane <= c.lanes[1]):
-                continue
-        occupied = True
-        break
-    return not occupied
+        if other.road_id != body.road_id or other.lane_id not in lanes or body.lane_id not in lanes:
+            continue
+        d_lane = (lanes.index(other.lane_id) - lanes.index(body.lane_id)) * body.direction
+        if not c.opposite_lanes and other.direction != body.direction:
+            continue
+        if c.lanes[0] <= d_lane <= c.lanes[1]:
+            return False  # occupied
+    return True
 
 
 ValueEvaluator = Callable[[Any, "ScenarioWorld"], bool]

@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 from simcore.errors import BadInput
 from simcore.scenario import model as m
-from simcore.scenario.motion import Body, lane_shift, shape_peak_rate_factor, shape_value
+from simcore.scenario.motion import (
+    Body,
+    lane_shift,
+    shape_peak_rate_factor,
+    shape_slope,
+    shape_value,
+    wrap_angle,
+)
 from simcore.scenario.runtime import Instant, Runtime
 
 if TYPE_CHECKING:
@@ -22,6 +30,7 @@ class SpeedRuntime(Runtime):
         self.v0 = 0.0
         self.elapsed = 0.0
         self.duration = 0.0
+        self.rate = 0.0  # the rate of a rate-dimension transition, within the vehicle's performance
 
     def target(self) -> float:
         target = self.action.target
@@ -40,6 +49,7 @@ class SpeedRuntime(Runtime):
             perf = self.actor.entity.performance
             limit = perf.max_acceleration if target >= self.v0 else perf.max_deceleration
             rate = min(dyn.value, limit) if limit > 0 else dyn.value
+            self.rate = rate
             self.duration = dv / rate * shape_peak_rate_factor(dyn.shape) if rate > 0 else 0.0
         elif dyn.dimension == "distance":
             # every shape is symmetric, so the mean speed over the transition is (v0 + v1) / 2: the
@@ -87,8 +97,15 @@ class SpeedRuntime(Runtime):
             return
         self.elapsed += dt
         dyn = self.action.dynamics
-        progress = self.elapsed / max(self.duration, 1e-9)
         target = self.target()
+        if (
+            dyn.dimension == "rate"
+            and self.rate > 0
+            and isinstance(self.action.target, m.RelativeTargetSpeed)
+        ):
+            # a moving target changes how long the transition at this rate lasts, not the rate (as esmini)
+            self.duration = abs(target - self.v0) / self.rate * shape_peak_rate_factor(dyn.shape)
+        progress = self.elapsed / max(self.duration, 1e-9)
         self._set(self.v0 + (target - self.v0) * shape_value(dyn.shape, progress), dt)
         if progress >= 1.0 - 1e-9:
             self._set(target, dt)
@@ -99,7 +116,11 @@ class SpeedRuntime(Runtime):
         """In Init, a step (or zero-time) change to a fixed target is the initial speed: reached at once; with a
         transition shape the speed changes over time from the start, as in a story."""
         dyn = self.action.dynamics
-        if (dyn.shape == "step" or dyn.value == 0) and not self._continuous:
+        if isinstance(self.action.target, m.RelativeTargetSpeed):
+            # relative to another entity: esmini starts every Init action before it steps them, so the other
+            # entity's Init speed counts wherever it stands in Init
+            return False
+        if dyn.shape == "step" or dyn.value == 0:
             self.actor.speed = self.target()
             return True
         return False
@@ -134,7 +155,18 @@ class LaneChangeRuntime(Runtime):
                 base = reference.lane_id if reference.road_id == actor.road_id else actor.lane_id
                 lane = lane_shift(road, actor.road_id, actor.s, base, target.value, reference.direction)
         except ValueError as exc:
-            raise BadInput(f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source) from None
+            lanes = road.lane_ids(actor.road_id, actor.s)
+            if isinstance(target, m.AbsoluteTargetLane):
+                if not lanes or lanes[0] <= target.lane_id <= lanes[-1]:
+                    raise BadInput(
+                        f"LaneChangeAction on {actor.name!r}: {exc}", file=self.world.source
+                    ) from None
+                to_left = target.lane_id > lanes[-1]
+            else:
+                to_left = (target.value > 0) == (self.world.body(target.entity).direction > 0)
+            self._to_missing_lane(str(exc), to_left)
+            return
+        actor.heading_offset = 0.0  # esmini aligns the entity with the road when a lane change starts
         t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
         centre = road.lane_center_t(actor.road_id, lane, actor.s)
         actor.lane_id = lane
@@ -151,23 +183,70 @@ class LaneChangeRuntime(Runtime):
             actor.offset = self.offset1
             self.done = True
 
+    def stop(self) -> None:
+        # stopped midway (another lateral action, an overriding event): the entity keeps its offset and the
+        # heading it has relative to the road (as esmini)
+        a, road = self.actor, self.world.road
+        if road is not None and a.road_id is not None:
+            lane_heading = road.road_to_world(a.road_id, a.s, 0.0).heading
+            travel = lane_heading if a.direction > 0 else lane_heading + math.pi
+            a.heading_offset = wrap_angle(a.heading - travel)
+        a.lateral_velocity = 0.0
+
+    def _to_missing_lane(self, why: str, to_left: bool) -> None:
+        """A target lane beyond the road's last lane (to the left of it with `to_left`): esmini runs on. It
+        measures the offset from the road's outer edge on that side (the centre of a lane of no width), puts
+        the entity at that offset in the lane it is in (a jump sideways) and then changes to the target offset
+        in its own lane."""
+        actor, road = self.actor, self.world.road
+        assert road is not None and actor.road_id is not None
+        lanes = road.lane_ids(actor.road_id, actor.s)
+        outer = lanes[-1] if to_left else lanes[0]
+        centre = road.lane_center_t(actor.road_id, outer, actor.s)
+        half = 0.5 * road.lane_width(actor.road_id, outer, actor.s)
+        edge = max(centre + half, centre - half) if to_left else min(centre + half, centre - half)
+        t_now = road.lane_center_t(actor.road_id, actor.lane_id, actor.s) + actor.offset
+        actor.offset += t_now - edge  # from the lane's centre: the offset it had from the edge
+        self.offset0 = actor.offset
+        self.offset1 = self.action.target_lane_offset * actor.direction
+        self.start_odometer = actor.odometer
+        self.target_lane = actor.lane_id
+        warning = f"{self.world.source}: LaneChangeAction on {actor.name!r}: {why}: it runs on in its lane (as esmini)"
+        if warning not in self.world.warnings:
+            self.world.warnings.append(warning)
+        if self.action.dynamics.shape == "step" or self.action.dynamics.value <= 0:
+            actor.offset = self.offset1
+            self.done = True
+
     def step(self, dt: float) -> None:
         if self.done:
             return
         # the lane change moves the entity at the speed it has now: a speed action stepped after it in the
-        # storyboard's order changes the speed from the next step on (as esmini)
+        # storyboard's order changes the speed from the next step on (as esmini); esmini's lane change moves
+        # its entity itself, also in a step it was teleported in
         self.actor.extra["move_speed"] = self.actor.speed
+        self.actor.extra.pop("teleported", None)
         dyn = self.action.dynamics
+        before = self.elapsed
         self.elapsed += dt
+        span = self.offset1 - self.offset0
         if dyn.dimension == "distance":
-            progress = (self.actor.odometer - self.start_odometer + abs(self.actor.speed) * dt) / dyn.value
-        elif dyn.dimension == "rate":  # lateral rate in m/s: duration from the lateral distance
-            duration = abs(self.offset1 - self.offset0) / dyn.value * shape_peak_rate_factor(dyn.shape)
-            progress = self.elapsed / max(duration, 1e-9)
+            travelled = self.actor.odometer - self.start_odometer
+            progress = (travelled + abs(self.actor.speed) * dt) / dyn.value
+            # lateral per metre along the road at the start of the step, as a velocity at the entity's speed
+            rate = span * shape_slope(dyn.shape, travelled / dyn.value) / dyn.value * abs(self.actor.speed)
         else:
-            progress = self.elapsed / dyn.value
-        new_offset = self.offset0 + (self.offset1 - self.offset0) * shape_value(dyn.shape, progress)
-        self.actor.lateral_velocity = (new_offset - self.actor.offset) / dt
+            if dyn.dimension == "rate":  # lateral rate in m/s: duration from the lateral distance
+                duration = abs(span) / dyn.value * shape_peak_rate_factor(dyn.shape)
+            else:
+                duration = dyn.value
+            duration = max(duration, 1e-9)
+            progress = self.elapsed / duration
+            rate = span * shape_slope(dyn.shape, before / duration) / duration
+        new_offset = self.offset0 + span * shape_value(dyn.shape, progress)
+        # esmini takes the heading, and the share of the speed the lateral motion takes, from the transition's
+        # rate at the start of the step (before it advances the transition)
+        self.actor.lateral_velocity = rate if dyn.shape != "step" else (new_offset - self.actor.offset) / dt
         self.actor.offset = new_offset
         if progress >= 1.0 - 1e-9:
             self.actor.offset = self.offset1

@@ -11,7 +11,7 @@ position resolution (`positions`) live in their own modules; the engine is the `
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any, Protocol
 
 from simcore.errors import BadInput, SimulationError
@@ -138,6 +138,8 @@ class ScenarioEngine:
         # the properties of each entity's controller assigned during the run (AssignControllerAction), and
         # the ACC/ALKS driver models (esmini's ACCController) active on the longitudinal domain now
         self.assigned_controller: dict[str, dict[str, str]] = {}
+        # per entity: its controllers (name → properties, domains active on), `controller_actions.slots_of`
+        self.controller_slots: dict[str, dict[str, tuple[dict[str, str], set[str]]]] = {}
         self.acc_drivers: dict[str, drivers.AccDriver] = {}
         # esmini's controllers that drive a vehicle model of their own (OffroadFollower), active now
         self.vehicle_drivers: dict[str, drivers.OffroadFollower] = {}
@@ -187,6 +189,9 @@ class ScenarioEngine:
             # esmini's first frame steps the controllers activated in Init with a zero time step
             driver.step(0.0)
             self._start_lane_change(driver)
+        for controller in list(self.esmini_controllers.values()):
+            if getattr(controller, "steps_in_init", False) and not controller.actor.gone:
+                controller.step(0.0)
         for body in self.bodies.values():
             if body.external and not self._has_input(body) and not body.gone:
                 self._move_external(body, 0.0)  # that first frame rolls an interactive vehicle's speed down
@@ -378,7 +383,7 @@ class ScenarioEngine:
         self.story.step_actions(dt)
         self.moved()
         now = (self.step_index + 1) * dt  # no accumulated rounding: step k is at exactly k·dt
-        sumo, road, tow_of = self.sumo, self.road, self.tow_of
+        sumo, tow_of = self.sumo, self.tow_of
         # entities an override-mode ACC moves itself, after the others (below)
         deferred: set[str] | tuple[()] = (
             {n for n, d in self.acc_drivers.items() if d.override and not d.virtual}
@@ -387,6 +392,9 @@ class ScenarioEngine:
         )
         if ghosts is not None:
             deferred = ghosts.frozen().union(deferred)
+        # entities an external controller steers (lateral only) while a driver model sets their speed: moved
+        # after it (esmini steps the longitudinal controller first)
+        steered = self._steered() if self.esmini_controllers or self.natural_drivers else ()
         if self.vehicle_drivers:
             deferred = set(self.vehicle_drivers).union(deferred)
         if self.natural_drivers:
@@ -397,6 +405,8 @@ class ScenarioEngine:
             if body.gone:
                 continue
             if body.external:
+                if body.name in steered:
+                    continue  # moved once its longitudinal controller has set the speed (below)
                 self._move_external(body, dt)
                 if sumo is not None:
                     sumo.place(body)
@@ -405,29 +415,8 @@ class ScenarioEngine:
                 continue  # SUMO moves it, or its tow vehicle drags it (below)
             if deferred and body.name in deferred:
                 continue
-            extra = body.extra
-            if extra:
-                if extra.pop("teleported", 0.0):
-                    extra.pop("move_speed", 0.0)
-                    continue
-                speed = extra.pop("move_speed", body.speed)
-            else:
-                speed = body.speed
-            distance = speed * dt
-            mover = body.mover
-            if mover is not None:
-                mover.move(dt, now)
-            else:
-                if body.lateral_velocity != 0.0:
-                    # the entity moves at its speed along its path: a lateral motion takes its share of it
-                    lateral = min(abs(body.lateral_velocity), abs(speed))
-                    distance = math.copysign(math.sqrt(speed * speed - lateral * lateral), speed) * dt
-                if road is not None and body.road_id is not None:
-                    advance_on_road(road, body, distance, now)
-                elif distance != 0.0:
-                    body.x += distance * math.cos(body.heading)
-                    body.y += distance * math.sin(body.heading)
-                body.odometer += abs(distance)
+            if not self._default_move(body, dt, now):
+                continue
             if sumo is not None:
                 sumo.place(body)
         if self.trailer_of:
@@ -440,6 +429,11 @@ class ScenarioEngine:
             self._step_drivers(self.natural_drivers.values(), dt, now)
         if self.esmini_controllers:
             self._step_controllers(dt, now)
+        for name in steered:
+            self._move_external(self.bodies[name], dt)
+            if sumo is not None:
+                sumo.place(self.bodies[name])
+            self.moved()
         if self.vehicle_drivers:
             for follower in list(self.vehicle_drivers.values()):
                 if not follower.actor.gone and not follower.actor.external:
@@ -458,6 +452,7 @@ class ScenarioEngine:
             vx, vy = (body.x - px) / dt, (body.y - py) / dt
             if vx * vx + vy * vy > (2.0 * abs(speed) + 1.0) ** 2:
                 vx, vy = speed * math.cos(body.heading), speed * math.sin(body.heading)
+            body.previous_velocity = (body.vx, body.vy)
             body.vx, body.vy = vx, vy
             if abs(speed) < 1e-3:
                 if body.standstill_since is None:
@@ -480,6 +475,71 @@ class ScenarioEngine:
             return True
         return False
 
+    def _steered(self) -> list[str]:
+        """Entities an external controller drives on the lateral domain only while a driver model of
+        CARLOS' holds the longitudinal one."""
+        out = []
+        for name in (*self.natural_drivers, *self.esmini_controllers):
+            body = self.bodies[name]
+            control = self.controllers[name]
+            if body.external and not control[1] and control[2] and not body.gone and name not in out:
+                out.append(name)
+        return out
+
+    def run_alone(self, body: Body, dt: float, steps: int, sample: Callable[[int], None]) -> None:
+        """esmini's ghost restart: `body` alone runs its actions and moves, `steps` steps of `dt`, the time
+        going over the last head start again (every other entity stands); `sample(k)` after each."""
+        start = self.time - steps * dt
+        for k in range(steps):
+            now = start + (k + 1) * dt
+            body.lateral_velocity = 0.0
+            runtimes = [r for r in self.init_runtimes if r.actor is body]
+            for node in {id(n): n for n in self.story.running.values()}.values():
+                runtimes.extend(r for r in node.runtime or () if r.actor is body)
+            for runtime in runtimes:
+                if not runtime.done:
+                    self.owner = body
+                    runtime.step(dt)
+            self.moved()
+            self._default_move(body, dt, now)
+            self.moved()
+            sample(k)
+
+    def _default_move(self, body: Body, dt: float, now: float) -> bool:
+        """Move one entity by its action mover, else along its road at its speed (the default controller);
+        False when it stays where a teleport put it this step."""
+        road = self.road
+        extra = body.extra
+        lateral_step = None
+        if extra:
+            if extra.pop("teleported", 0.0):
+                extra.pop("move_speed", 0.0)
+                return False
+            speed = extra.pop("move_speed", body.speed)
+            lateral_step = extra.pop("lateral_step", None)
+        else:
+            speed = body.speed
+        distance = speed * dt
+        mover = body.mover
+        if mover is not None:
+            mover.move(dt, now)
+        else:
+            if lateral_step is not None:
+                # a sideways move of this step takes its length off the way along (esmini's lateral
+                # distance action)
+                distance = math.copysign(max(abs(distance) - lateral_step, 0.0), speed)
+            elif body.lateral_velocity != 0.0:
+                # the entity moves at its speed along its path: a lateral motion takes its share of it
+                lateral = min(abs(body.lateral_velocity), abs(speed))
+                distance = math.copysign(math.sqrt(speed * speed - lateral * lateral), speed) * dt
+            if road is not None and body.road_id is not None:
+                advance_on_road(road, body, distance, now)
+            elif distance != 0.0:
+                body.x += distance * math.cos(body.heading)
+                body.y += distance * math.sin(body.heading)
+            body.odometer += abs(distance)
+        return True
+
     def _step_drivers(
         self, stepped: Iterable[drivers.AccDriver | drivers.NaturalDriver], dt: float, now: float
     ) -> None:
@@ -489,10 +549,14 @@ class ScenarioEngine:
         step (esmini injects it as an action)."""
         for driver in list(stepped):
             body = driver.actor
-            if body.gone or body.external:
+            # an external controller steering only (esmini's InteractiveController on the lateral domain) moves
+            # the entity at the speed a longitudinal driver model sets
+            if body.gone or (body.external and self.controllers[body.name][1]):
                 continue
             self.measure.clear()
             driver.step(dt)
+            if body.external:
+                continue
             if isinstance(driver, drivers.NaturalDriver):
                 self._move_body(body, dt, now)
                 self._start_lane_change(driver)
@@ -505,11 +569,11 @@ class ScenarioEngine:
         its entity's speed and, when it moves it, moves it with that speed."""
         for controller in list(self.esmini_controllers.values()):
             body = controller.actor
-            if body.gone or body.external:
+            if body.gone or (body.external and self.controllers[body.name][1]):
                 continue
             self.measure.clear()
             controller.step(dt)
-            if controller.moves_itself:
+            if controller.moves_itself and not body.external:
                 self._move_body(body, dt, now)
         self.moved()
 
@@ -566,6 +630,14 @@ class ScenarioEngine:
                 f"entity {name!r} is not in the scenario (entities: {', '.join(self.bodies)})",
                 field="spec.control.entities",
             )
+        from simcore.scenario.controller_actions import slots_of
+
+        for _, domains in slots_of(self, body).values():
+            domains.clear()  # the system under test takes both domains
+        slots_of(self, body)["carlos.driver=external"] = (
+            {"name": "carlos.driver=external", "carlos.driver": "external"},
+            {"longitudinal", "lateral"},
+        )
         self.controllers[name] = ["external", True, True]
         body.external = True
         body.mover = None
@@ -577,6 +649,9 @@ class ScenarioEngine:
         external = self.external
         if external is None or not external.has_input(body.entity.name):
             assigned = self.assigned_controller.get(body.name, body.entity.controller)
+            for properties, domains in self.controller_slots.get(body.name, {}).values():
+                if domains and m.controller_type(properties) in m.EXTERNAL_CONTROLLERS:
+                    assigned = properties  # the external controller active on the entity
             if m.controller_type(assigned) == "InteractiveController":
                 self._coast(body, dt)
             else:

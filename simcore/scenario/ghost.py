@@ -15,8 +15,9 @@ Semantics as esmini implements them (ScenarioWorld::SetupGhost, ControllerFollow
   axis (on the storyboard's time it is later by the head start);
 - in those triggers, speed, acceleration, traveled distance, reach position, collision, end of road, off road
   and standstill conditions on the entity are handed over to the ghost; an event the ghost acts in whose
-  trigger has any other condition first teleports the ghost to the entity (esmini then restarts the ghost's
-  head start when this happens after time 0: not modelled, a warning says so);
+  trigger has any other condition first teleports the ghost to the entity; after time 0 this restarts the
+  ghost: a new trail at the entity's speed, and the head start run again by the ghost alone before the next
+  step (esmini rewinds its clock for it while every other entity stands still);
 - the ghost leaves a trail: its position, heading and speed whenever more than 0.2 s of esmini's simulation
   time passed since the last sample and it is not standing still (a sample more than 0.4 s old is repeated
   0.2 s before the new one), the trail's s being the length of the polyline;
@@ -38,14 +39,20 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from simcore.scenario import model as m
 from simcore.scenario.drivers import Vehicle, put
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
+
+    class GhostWorld(ScenarioWorld, Protocol):
+        def run_alone(self, body: Body, dt: float, steps: int, sample: Callable[[int], None]) -> None: ...
+
 
 FOLLOW_GHOST = "FollowGhostController"
 SAMPLE_TIME = 0.2  # s between trail samples (esmini's GHOST_TRAIL_SAMPLE_TIME)
@@ -409,7 +416,7 @@ class GhostFollower:
 class Ghosts:
     """The ghost of a scenario run: its trail, esmini's clock (the head start's restart), the follower."""
 
-    def __init__(self, world: ScenarioWorld, setup: GhostSetup) -> None:
+    def __init__(self, world: GhostWorld, setup: GhostSetup) -> None:
         self.world = world
         self.setup = setup
         self.ghost = world.bodies[setup.ghost]
@@ -420,7 +427,8 @@ class Ghosts:
         self.restarting = setup.headstart > 0.0
         self.follower: GhostFollower | None = None
         self.names = frozenset({setup.ghost})
-        self.warned = False
+        self.restart = False  # the ghost was put back on its entity after time 0: its head start runs again
+        self.rerun = False  # … before the next step
 
     def start(self) -> None:
         """The initial sample (esmini's first frame, before any step)."""
@@ -446,9 +454,23 @@ class Ghosts:
     def begin_step(self) -> None:
         if self.restarting and self.clock > -SMALL:
             self.restarting = False
+        g = self.ghost
+        if self.rerun and not g.gone:
+            # the restart's head start, before this step: the ghost alone, on esmini's clock rewound by it
+            self.rerun = False
+            dt = self.world.dt
+            steps = round(self.setup.headstart / dt)
+            first = self.clock - steps * dt
+
+            def sample(k: int) -> None:
+                self.trail.sample(g.x, g.y, first + (k + 1) * dt, g.speed)
+
+            self.world.run_alone(g, dt, steps, sample)
 
     def end_step(self, dt: float) -> None:
-        """After default motion: esmini's clock on, the follower steps, the ghost leaves its sample."""
+        """After default motion: esmini's clock on, the follower steps, the ghost leaves its sample; after
+        a restart the ghost runs its head start again alone (esmini rewinds its clock by the head start and
+        runs the ghost only until it is back: the storyboard's time goes on from where it was)."""
         clock = self.clock + dt
         if -SMALL < clock < 0.0:
             clock = 0.0
@@ -458,19 +480,23 @@ class Ghosts:
             follower.step(dt, self.trail, clock)
             put(self.world, self.entity, follower.vehicle)
         g = self.ghost
+        if self.restart:
+            self.restart, self.rerun = False, True  # its head start runs again before the next step
+            return
         if not g.gone:
             self.trail.sample(g.x, g.y, clock, g.speed)
 
     def teleport(self, ghost: Body) -> None:
-        """The ghost put on its entity when an event it acts in starts (esmini's AddedGhostTeleport)."""
+        """The ghost put on its entity when an event it acts in starts (esmini's AddedGhostTeleport); after
+        time 0 this restarts it: its trail starts anew, at its entity's speed."""
         e = self.entity
         for attr in ("x", "y", "z", "heading", "road_id", "lane_id", "s", "offset", "direction"):
             setattr(ghost, attr, getattr(e, attr))
         ghost.heading_offset = e.heading_offset
         ghost.posed = None
-        if self.clock > SMALL and not self.warned:
-            self.warned = True
-            self.world.warnings.append(
-                f"{self.world.source}: the ghost of {e.name!r} is put back on it at "
-                f"t={self.clock:.2f} s: esmini then restarts the ghost's head start (not modelled)"
-            )
+        if self.clock > SMALL:
+            self.restart = True
+            self.trail = Trail()
+            ghost.speed = e.speed
+            ghost.extra["teleported"] = 1.0  # it stays there this step
+            self.world.log.append(f"t={self.world.time:.2f} {ghost.name}: restarts its head start")

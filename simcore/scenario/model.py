@@ -50,6 +50,9 @@ class Entity:
     performance: Performance
     properties: dict[str, str] = field(default_factory=dict)
     controller: dict[str, str] = field(default_factory=dict)  # the assigned controller's properties
+    # every ObjectController's properties, in file order (OpenSCENARIO 1.3 allows several; `controller` is the
+    # last of them, the one an ActivateControllerAction without objectControllerRef activates, as esmini's)
+    controllers: tuple[dict[str, str], ...] = ()
     wheelbase: float | None = None  # vehicles: FrontAxle.positionX − RearAxle.positionX, m
     max_steering: float | None = None  # vehicles: FrontAxle.maxSteering, rad
     source: str = ""  # "file:line" of its ScenarioObject (for messages)
@@ -74,7 +77,9 @@ class Entity:
 EXTERNAL_CONTROLLERS = frozenset({"ExternalController", "InteractiveController"})
 # esmini's controllers of the registry (simcore.scenario.controllers), one module each: ALKS_R157SM (the UN R157
 # driver models), SloppyDriver
-REGISTERED_CONTROLLERS = frozenset({"ALKS_R157SM_Controller", "SloppyDriverController"})
+REGISTERED_CONTROLLERS = frozenset(
+    {"ALKS_R157SM_Controller", "SloppyDriverController", "FollowRouteController", "LoomingController"}
+)
 # esmini's driver controllers CARLOS runs with esmini's algorithm (simcore.scenario.actions.AccDriver): the
 # ALKS controller is esmini's ACC controller under another name
 ACC_CONTROLLERS = frozenset({"ACCController", "ALKSController"})
@@ -94,6 +99,16 @@ MODELLED_CONTROLLERS = (
     # esmini's ExternalController with no input holds its entity, as the engine does until a command arrives
     | {"", "DefaultController", "ExternalController"}
 )
+
+
+def partly_modelled(properties: dict[str, str]) -> bool:
+    """A controller CARLOS runs only in part: esmini's LoomingController in override mode, which also steers
+    its entity (CARLOS runs its speed)."""
+    return controller_type(properties) == "LoomingController" and properties.get("mode") == "override"
+
+
+# the key under which a controller's properties keep the name of the ObjectController that gives it
+OBJECT_CONTROLLER = "carlos.objectController"
 
 
 def controller_type(properties: dict[str, str]) -> str:
@@ -465,6 +480,7 @@ class ControllerAction:
     longitudinal: bool | None = None
     lateral: bool | None = None
     controller: tuple[tuple[str, str], ...] = ()  # the assigned controller's properties (with its "name")
+    ref: str | None = None  # ActivateControllerAction objectControllerRef: the controller it activates
     domain = "none"
 
 
@@ -878,11 +894,13 @@ def controller_kinds(scenario: Scenario) -> dict[str, set[str]]:
 
     def kind(properties: dict[str, str]) -> str:
         driver = properties.get("carlos.driver", "scenario")
+        if partly_modelled(properties):
+            return f"{controller_type(properties)} (override mode)"  # not among MODELLED_CONTROLLERS
         return f"carlos.driver={driver}" if driver != "scenario" else controller_type(properties)
 
     for entity in scenario.entities:
-        if entity.controller:
-            out.setdefault(entity.name, set()).add(kind(entity.controller))
+        for properties in entity.controllers or ((entity.controller,) if entity.controller else ()):
+            out.setdefault(entity.name, set()).add(kind(properties))
     for item in scenario.init:
         if isinstance(item.action, ControllerAction) and item.action.controller:
             out.setdefault(item.entity, set()).add(kind(dict(item.action.controller)))

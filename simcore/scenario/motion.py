@@ -28,6 +28,19 @@ def shape_value(shape: str, p: float) -> float:
     raise ValueError(shape)
 
 
+def shape_slope(shape: str, p: float) -> float:
+    """d shape_value / d p at progress p ∈ [0, 1] (0 outside and for a step)."""
+    if not 0.0 <= p <= 1.0 or shape == "step":
+        return 0.0
+    if shape == "linear":
+        return 1.0
+    if shape == "cubic":
+        return 6.0 * p * (1.0 - p)
+    if shape == "sinusoidal":
+        return 0.5 * math.pi * math.sin(math.pi * p)
+    raise ValueError(shape)
+
+
 def shape_peak_rate_factor(shape: str) -> float:
     """Peak slope of a shape relative to the linear one (rate dimension means the peak rate)."""
     return {"linear": 1.0, "cubic": 1.5, "sinusoidal": math.pi / 2, "step": 1.0}[shape]
@@ -56,6 +69,7 @@ class Body:
     yaw_rate: float = 0.0
     vx: float = 0.0  # world velocity over the last step (its displacement / dt), m/s
     vy: float = 0.0
+    previous_velocity: tuple[float, float] = (0.0, 0.0)  # (vx, vy) of the step before the last
     # road following (None when the entity is off every road)
     road_id: str | None = None
     lane_id: int = 0
@@ -74,6 +88,9 @@ class Body:
     extra: dict[str, float] = field(default_factory=dict)
     mover: Any = None  # a runtime that moves the entity itself (a trajectory) instead of lane following
     route: list[tuple[str, int]] = field(default_factory=list)  # roads ahead (id, direction) of a route
+    # the assigned route's waypoints as road points (lane_router.RoadPoint) and their route strategies
+    route_points: list[Any] = field(default_factory=list)
+    route_strategies: list[str] = field(default_factory=list)
     external: bool = False  # an external controller is active on it: moved by its control input only
 
     name: str = field(init=False)  # the entity's (a plain attribute: read on every step)
@@ -261,13 +278,15 @@ def next_road(road: OpenDrive, body: Body) -> tuple[str, int, int] | None:
         want_road, want_dir = body.route[0]
         options = road.connections(body.road_id, body.lane_id, body.direction)
         chosen = [o for o in options if o[0] == want_road and o[2] == want_dir]
-        if not chosen:
-            # the route turns from another lane: take the connection from the nearest lane that has one
+        if not chosen and not options:
+            # the lane ends here: the route's connection from the nearest lane that has one
             others = [o for o in road.connections(body.road_id, None, body.direction) if o[0] == want_road]
             chosen = sorted(others, key=lambda o: abs(o[1] - body.lane_id))
         if chosen:
             body.route.pop(0)
             return chosen[0]
+        # the route turns from another lane: the entity goes where its lane leads and leaves the route (esmini
+        # "moved away from route")
         body.route.clear()
     return onward(road, body.road_id, body.lane_id, body.direction)
 

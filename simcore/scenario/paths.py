@@ -156,18 +156,25 @@ def polyline(shape: m.Polyline, resolve: Resolver) -> tuple[SampledPath, float |
     timed = all(not math.isnan(t) for t in times)
     path = _from_points(points, times if timed else None)
     if path.t is not None and len(path.s) > 1:
-        # vertex speeds such that each segment's mean speed covers it: v0 = L0/T0, v(i+1) = 2 Li/Ti - v(i)
-        speeds = [0.0] * len(path.s)
-        for i in range(len(path.s) - 1):
-            span = path.t[i + 1] - path.t[i]
-            mean = (path.s[i + 1] - path.s[i]) / span if span > 0 else 0.0
-            if i == 0:
-                speeds[0] = mean
-            speeds[i + 1] = max(2 * mean - speeds[i], 0.0)
-        path.v = speeds
+        path.v = vertex_speeds(path, None)
     if len(path.x) == 1:
         path.h = [first_heading or 0.0]
     return path, first_heading
+
+
+def vertex_speeds(path: SampledPath, first: float | None) -> list[float]:
+    """Speeds at a timed path's samples such that each segment's mean speed covers it: v(i+1) = 2 Li/Ti -
+    v(i), from `first` (esmini's follow mode: the entity's speed when the action starts), else from the first
+    segment's mean speed."""
+    assert path.t is not None
+    speeds = [0.0] * len(path.s)
+    for i in range(len(path.s) - 1):
+        span = path.t[i + 1] - path.t[i]
+        mean = (path.s[i + 1] - path.s[i]) / span if span > 0 else 0.0
+        if i == 0:
+            speeds[0] = mean if first is None else first
+        speeds[i + 1] = max(2 * mean - speeds[i], 0.0)
+    return speeds
 
 
 def clothoid(
@@ -359,3 +366,80 @@ def plan(road: OpenDrive, start: State, goal_road: str, max_roads: int = 2000) -
                 counter += 1
                 heapq.heappush(heap, (new_cost, counter, state))
     return None
+
+
+def plan_in_lane(
+    road: OpenDrive,
+    start: State,
+    lane: int,
+    goal_road: str,
+    s: float | None = None,
+    max_nodes: int = 4000,
+) -> list[State] | None:
+    """As `plan`, but a way esmini's route planner takes: it leaves every road in the lane it is in (along
+    that lane's links through the road's lane sections), starting from `lane` at `s` on the start road (its
+    far end when None); onto the goal road any lane will do. None when no such way exists."""
+    import heapq
+
+    if start[0] == goal_road:
+        return [start]
+    Key = tuple[str, int, int]
+    first: Key = (start[0], start[1], lane)
+    best: dict[Key, float] = {first: 0.0}
+    previous: dict[Key, Key | None] = {first: None}
+    heap: list[tuple[float, int, Key]] = [(0.0, 0, first)]
+    counter = 0
+    while heap and len(previous) < max_nodes:
+        cost, _, current = heapq.heappop(heap)
+        if cost > best.get(current, math.inf):
+            continue
+        road_id, direction, entered = current
+        if road_id == goal_road:
+            out: list[State] = []
+            back: Key | None = current
+            while back is not None:
+                out.append((back[0], back[1]))
+                back = previous[back]
+            return out[::-1]
+        length = road.road_length(road_id)
+        if current == first:
+            end_s = length if direction > 0 else 0.0
+            leaving = entered if s is None else _lane_through(road, road_id, entered, s, end_s)
+            step = 0.0
+        else:
+            start_s, end_s = (0.0, length) if direction > 0 else (length, 0.0)
+            leaving, step = _lane_through(road, road_id, entered, start_s, end_s), length
+        if leaving == 0:
+            continue
+        for nxt_road, nxt_lane, nxt_dir in road.connections(road_id, leaving, direction):
+            state = (nxt_road, nxt_dir, nxt_lane)
+            if nxt_road == goal_road:
+                state = (nxt_road, nxt_dir, 0)  # landing on the goal road: its lane does not matter
+            new_cost = cost + step
+            if new_cost < best.get(state, math.inf):
+                best[state] = new_cost
+                previous[state] = current
+                counter += 1
+                heapq.heappush(heap, (new_cost, counter, state))
+    return None
+
+
+def _lane_through(road: OpenDrive, road_id: str, lane: int, s_from: float, s_to: float) -> int:
+    """The lane `lane` at `s_from` is at `s_to` along its links through the road's lane sections (0: it
+    ends before)."""
+    if lane == 0:
+        return 0
+    r = road.road(road_id)
+    side = 1 if lane > 0 else -1
+    sections = r.side_sections(side)
+    i, j = sections.index(r.section_at(s_from, side)), sections.index(r.section_at(s_to, side))
+    step = 1 if j >= i else -1
+    for k in range(i, j, step):
+        here = sections[k].lane(lane)
+        if here is None:
+            return 0
+        link = here.successor if step > 0 else here.predecessor
+        if link is None or sections[k + step].lane(link) is None:
+            return 0
+        lane = link
+    return lane if sections[j].lane(lane) is not None else 0

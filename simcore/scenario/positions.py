@@ -208,6 +208,7 @@ def plan_route(world: ScenarioWorld, body: Body, targets: list[m.Position]) -> l
     if road is None or body.road_id is None:
         return []
     state = (body.road_id, body.direction)
+    lane, s_on = body.lane_id, body.s
     out: list[tuple[str, int]] = []
     for position in targets:
         x, y, _, _ = world.resolve_position(position)
@@ -215,16 +216,23 @@ def plan_route(world: ScenarioWorld, body: Body, targets: list[m.Position]) -> l
         rc = road.world_to_road(x, y, None, road_hint=hint)
         if rc is None:
             continue
+        target_lane = position.lane_id if isinstance(position, m.LanePosition) else rc.lane_id
+        target_s = position.s if isinstance(position, m.LanePosition) else rc.s
         if state[0] == rc.road_id and not out:
+            lane, s_on = target_lane, target_s
             continue
-        leg = paths.plan(road, state, rc.road_id)
+        # esmini plans a route's legs lane by lane (from the lane of the leg's start): a road its lanes do
+        # not lead to makes the route invalid, and its entities drive on without one
+        leg = paths.plan_in_lane(road, state, lane, rc.road_id, s_on)
         if leg is None:
             world.warnings.append(
-                f"{world.source}: route of {body.name!r}: no way found to road {rc.road_id}"
+                f"{world.source}: route of {body.name!r}: no way in lane {lane} to road {rc.road_id}: "
+                "the route is ignored (as esmini does)"
             )
-            continue
+            return []
         out.extend(leg[1:])
         state = leg[-1]
+        lane, s_on = target_lane, target_s
     return out
 
 

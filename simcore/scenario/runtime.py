@@ -23,6 +23,9 @@ class Runtime:
 
     def step(self, dt: float) -> None: ...
 
+    def stop(self) -> None:
+        """Another action took over (or the storyboard element stopped) before this one was done."""
+
     def start_in_init(self) -> bool:
         """As an action of Storyboard/Init: take effect now and return True, or return False to be started
         with the Init actions that run from the first step (the default: actions with a duration)."""

@@ -135,6 +135,9 @@ class StoryRun:
             if running is node:
                 del self.running[key]
                 self._stepped = None
+        for runtime in node.runtime or ():
+            if not runtime.done:
+                runtime.stop()  # stopped before it was done (overridden, or its event stopped)
         node.runtime = None
 
     def start_group(self, group: Node) -> None:

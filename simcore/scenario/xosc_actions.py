@@ -99,12 +99,18 @@ def _controller_action(reader: _Reader, inner: ET.Element) -> m.PrivateAction:
             raise reader.fail(f"{name}={raw!r} is not a boolean", element)
         return raw.lower() in ("true", "1")
 
+    def ref(activate: ET.Element) -> str | None:
+        return activate.get("objectControllerRef") or activate.get("controllerRef") or None
+
     if inner.tag == "ActivateControllerAction":
-        return m.ControllerAction(longitudinal=flag(inner, "longitudinal"), lateral=flag(inner, "lateral"))
+        return m.ControllerAction(
+            longitudinal=flag(inner, "longitudinal"), lateral=flag(inner, "lateral"), ref=ref(inner)
+        )
     assign: str | None = None
     longitudinal: bool | None = None
     lateral: bool | None = None
     controller: tuple[tuple[str, str], ...] = ()
+    activated: str | None = None
     for child in inner:
         if child.tag == "AssignControllerAction":
             properties = _controller(reader, child)
@@ -122,10 +128,11 @@ def _controller_action(reader: _Reader, inner: ET.Element) -> m.PrivateAction:
         elif child.tag == "ActivateControllerAction":
             longitudinal = flag(child, "longitudinal")
             lateral = flag(child, "lateral")
+            activated = ref(child)
         elif child.tag.startswith("Override"):
             reader.warn(f"{child.tag} is ignored (no driver model to override)", child)
     return m.ControllerAction(
-        assign=assign, longitudinal=longitudinal, lateral=lateral, controller=controller
+        assign=assign, longitudinal=longitudinal, lateral=lateral, controller=controller, ref=activated
     )
 
 

@@ -91,10 +91,15 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
     finally:
         if pushed:
             reader.pop()
-    controller: dict[str, str] = {}
-    oc = obj.find("ObjectController")
-    if oc is not None:
-        controller = _controller(reader, oc)
+    controllers = []
+    for oc in obj.findall("ObjectController"):
+        properties = _controller(reader, oc)
+        if properties and oc.get("name"):
+            # an ActivateControllerAction's objectControllerRef names the ObjectController (OpenSCENARIO 1.3)
+            properties[m.OBJECT_CONTROLLER] = reader.attr(oc, "name", "")
+        if properties:
+            controllers.append(properties)
+    controller: dict[str, str] = controllers[-1] if controllers else {}
     return m.Entity(
         source=reader.source(obj),
         name=name,
@@ -104,6 +109,7 @@ def _entity(reader: _Reader, obj: ET.Element, name: str, catalogs: dict[str, Pat
         performance=performance,
         properties=properties,
         controller=controller,
+        controllers=tuple(controllers),
         wheelbase=wheelbase,
         max_steering=max_steering,
         trailer_hitch=hitch,
@@ -180,6 +186,12 @@ def _controller(reader: _Reader, parent: ET.Element) -> dict[str, str]:
         known = True  # a ghost runs the actions ahead, the entity follows it (simcore.scenario.ghost)
     if kind in m.REGISTERED_CONTROLLERS:
         known = True  # runs as esmini's (simcore.scenario.controllers)
+    if m.partly_modelled(properties):
+        reader.warn(
+            f"controller {kind!r} in override mode: its steering (esmini's near and far points) is not "
+            "modelled, only its speed; the entity keeps to its lane and is not compared in conformance",
+            parent,
+        )
     if not known and kind not in ("", "DefaultController"):
         reader.warn(
             f"controller {kind!r} is not modelled: the entity follows the scenario's actions "

@@ -33,6 +33,8 @@ class _Reader:
         self._catalog_files: dict[Path, ET.Element | None] = {}
         self._catalog_roots: list[ET.Element] = []
         self.variables: dict[str, ParamValue] = {}
+        # parameters declared numeric whose value is not a number ("None"): read as 0 where a number is needed
+        self.not_numbers: set[str] = set()
         # inline trailers met while reading an entity: (their entity name, the Trailer element defining them)
         self.inline_trailers: list[tuple[str, ET.Element]] = []
 
@@ -77,11 +79,14 @@ class _Reader:
                     try:
                         number = float(value)
                     except ValueError:
+                        # esmini converts it as C's strtod does (0) and keeps the text for string uses
                         self.warn(
-                            f"parameter {name!r} is declared {kind} but its value {value!r} is not a number: kept as a string",
+                            f"parameter {name!r} is declared {kind} but its value {value!r} is not a number: "
+                            "read as 0 where a number is needed, as esmini does",
                             item,
                         )
                         kind = "string"
+                        self.not_numbers.add(name)
                     else:
                         if kind != "double" and math.isfinite(number) and number != int(number):
                             # generators write decimals into integer parameters; esmini reads the number
@@ -128,6 +133,9 @@ class _Reader:
         try:
             value = float(raw)
         except ValueError:
+            text = element.get(name) or ""
+            if text[:1] == "$" and text[1:].strip("{}") in self.not_numbers:
+                return 0.0  # a numeric parameter whose value is no number (warned where it is declared)
             raise self.fail(f"{name}={raw!r} is not a number", element) from None
         if not math.isfinite(value):
             raise self.fail(f"{name}={raw!r} is not finite", element)

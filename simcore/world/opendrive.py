@@ -569,6 +569,17 @@ class OpenDrive:
         near = self.near_lane(x, y, road_id, s_previous)
         return None if near is None else _road_coordinates(self.roads[road_id].id, *near)
 
+    def project_on(self, road_id: str, x: float, y: float, s_hint: float) -> tuple[float, float] | None:
+        """(s, t) of a point projected on one road's reference line from `s_hint`, whether or not a lane is
+        there; None off the road's ends."""
+        road = self.roads.get(road_id)
+        if road is None:
+            return None
+        s, t, along, _ = self._project(road, x, y, min(max(s_hint, 0.0), road.length), 50.0)
+        if abs(along) > 1e-6:
+            return None
+        return s, t
+
     def near_lane(
         self, x: float, y: float, road_id: str, s_previous: float
     ) -> tuple[int, float, float, float, float] | None:

@@ -23,7 +23,11 @@ class EsminiController(Protocol):
 
     actor: Body
     domains: frozenset[str]  # the domains it is active on
-    moves_itself: bool  # it moves its entity (the engine skips the entity's default motion)
+
+    @property
+    def moves_itself(self) -> bool:
+        """It moves its entity (the engine skips the entity's default motion)."""
+        ...
 
     def step(self, dt: float) -> None: ...
 
@@ -32,6 +36,8 @@ class EsminiController(Protocol):
 OPERATING_DOMAINS: dict[str, frozenset[str]] = {
     "ALKS_R157SM_Controller": frozenset({"longitudinal"}),
     "SloppyDriverController": frozenset({"longitudinal", "lateral"}),
+    "FollowRouteController": frozenset({"longitudinal", "lateral"}),
+    "LoomingController": frozenset({"longitudinal"}),
 }
 KINDS = frozenset(OPERATING_DOMAINS)  # simcore.scenario.model.REGISTERED_CONTROLLERS names the same
 
@@ -59,6 +65,14 @@ def make(
         from simcore.scenario.controllers.alks_r157 import AlksR157Controller
 
         return AlksR157Controller(world, actor, properties)
+    if kind == "LoomingController":
+        from simcore.scenario.controllers.looming import LoomingController
+
+        return LoomingController(world, actor, properties, domains)
+    if kind == "FollowRouteController":
+        from simcore.scenario.controllers.follow_route import FollowRouteController
+
+        return FollowRouteController(world, actor, properties, domains)
     from simcore.scenario.controllers.sloppy import SloppyDriver
 
     return SloppyDriver(world, actor, properties, domains, rng_for(seed, actor.name))

@@ -156,11 +156,10 @@ class Model:
         backwards = abs(own.h_relative) > math.pi / 2
         info.dv_s = (own.vel_s - theirs.vel_s) * (-1.0 if backwards else 1.0)
         info.dv_t = (own.vel_t - theirs.vel_t) * sign(theirs.t - own.t)
-        if info.dv_s > 0.0:
-            info.ttc = info.dist_long / info.dv_s
-            info.thw = info.dist_long / own.vel_s if own.vel_s != 0.0 else LARGE
-        else:
-            info.ttc = info.thw = LARGE
+        # the time headway whatever the relative speed (esmini's player measures it so: a vehicle braking
+        # ahead that is still no slower than its follower is within the headway of a deceleration scenario)
+        info.thw = info.dist_long / own.vel_s if own.vel_s != 0.0 else LARGE
+        info.ttc = info.dist_long / info.dv_s if info.dv_s > 0.0 else LARGE
         return True
 
     def detect(self) -> None:

@@ -51,7 +51,9 @@ def road_pose(world: ScenarioWorld, body: Body) -> RoadPose | None:
     h_road = r.reference_xyh(s)[2]
     c, sn = math.cos(h_road), math.sin(h_road)
     vx, vy = body.vx, body.vy  # over the last step (0 before the first, as esmini's)
-    acc_s = body.acceleration * math.cos(body.heading - h_road)
+    # along s: the change of the velocity over the last step (from displacements, as esmini's)
+    pvx, pvy = body.previous_velocity
+    acc_s = ((vx - pvx) * c + (vy - pvy) * sn) / world.dt
     return RoadPose(
         road_id=body.road_id,
         s=s,
