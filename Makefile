@@ -22,12 +22,15 @@ system-packages:
 	  else echo "missing system packages:$$missing (run: sudo apt-get install$$missing)"; exit 1; fi; \
 	fi
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml setup.py
 	@$(MAKE) --no-print-directory system-packages PACKAGES="$(SYSTEM_PACKAGES)"
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[dev]'
-	touch $(STAMP)
+	@test -x $(PY) || { echo "creating $(VENV) ($$($(PYTHON) --version))"; $(PYTHON) -m venv $(VENV); }
+	@echo "installing carlos-sim and its dependencies into $(VENV): about 3.5 GB, a few minutes the first time (pip's output: $(VENV)/install.log)"
+	@{ $(PY) -m pip install -q --disable-pip-version-check --upgrade pip \
+	  && $(PY) -m pip install -q --disable-pip-version-check -e '.[dev]'; } > $(VENV)/install.log 2>&1 \
+	  || { tail -n 40 $(VENV)/install.log; echo "pip install failed: the whole output is in $(VENV)/install.log"; exit 1; }
+	@touch $(STAMP)
+	@echo "installed: $$($(VENV)/bin/carlos --version) in $(VENV) ($$(du -sh $(VENV) | cut -f1))"
 
 demo: install
 	$(VENV)/bin/carlos run examples/runs/data-generation.yaml --output file://./results
@@ -75,7 +78,7 @@ reference: install
 msgdefs: install
 	$(PY) -m simcore.transport.typestore > simcore/transport/msgdefs.py
 
-# the wheel (dist/carlos-VERSION-py3-none-any.whl), built from a clean copy of the sources
+# the wheel (dist/carlos_sim-VERSION-py3-none-any.whl), built from the files git tracks
 wheel:
 	PYTHON=$(PYTHON) tools/build-wheel dist
 

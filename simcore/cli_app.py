@@ -73,6 +73,24 @@ console = Console(stderr=True, emoji=False)
 out = Console(emoji=False)
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from simcore import DISTRIBUTION, version
+
+        out.print(Text(f"carlos {version()} ({DISTRIBUTION})"), highlight=False)
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _main(
+    show_version: Annotated[
+        bool,
+        typer.Option("--version", callback=_print_version, is_eager=True, help="Print the version and exit."),
+    ] = False,
+) -> None:
+    """CARLOS: simulation runs for cooperative intelligent transport systems, locally or on Kubernetes."""
+
+
 def _line(label: str, style: str, text: object) -> Text:
     """`label text` with the label styled and the text literal: file names, entity names and messages are
     user-controlled, so never read as rich markup (`[/x]`) or emoji codes (`:100:`)."""

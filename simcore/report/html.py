@@ -421,12 +421,9 @@ def _repeats(results: RunResults) -> str:
 
 
 def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+    from simcore import version
 
-    try:
-        return version("carlos")
-    except PackageNotFoundError:
-        return "unknown"
+    return version()
 
 
 def _header(results: RunResults, relative: bool) -> str:
