@@ -137,7 +137,9 @@ def run(
     live: Annotated[
         bool,
         typer.Option(
-            "--live", help="Serve the run live (Foxglove WebSocket on 127.0.0.1), paced to real time."
+            "--live",
+            help="Serve the run live (Foxglove WebSocket on 127.0.0.1), paced to real time; the index runs "
+            "again even if it has finished.",
         ),
     ] = False,
     live_port: Annotated[
@@ -310,7 +312,7 @@ def run(
                 base_dir=manifest.parent.resolve(),
                 output_url=output,
                 parallel=parallel,
-                fresh=fresh,
+                fresh=fresh or live,  # a live view runs its index again: a finished one is not resumed
                 indexes=list(index) if index else None,
                 events=Events(on_start=on_start, on_progress=on_progress, on_done=on_done, on_retry=on_retry),
                 bus=bus,
