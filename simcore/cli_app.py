@@ -327,8 +327,24 @@ def run(
             server.stop()
         if hub is not None:
             hub.close()
+    _record_scenario_digests(simulation_run, manifest, report.output_url)
     _print_report(report)
     raise typer.Exit(report.exit_code)
+
+
+def _record_scenario_digests(simulation_run: Any, manifest: Path, run_url: str) -> None:
+    """The SHA-256 of every local scenario file next to run.yaml (`carlos compare` lists changed ones)."""
+    from simcore.spec_diff import SCENARIO_DIGESTS_KEY, scenario_digests
+    from simcore.store import open_store
+
+    try:
+        files = {
+            s.name: (str(s.openscenario), path) for _, s, path in _local_scenarios(simulation_run, manifest)
+        }
+        data = json.dumps(scenario_digests(files), indent=2, sort_keys=True) + "\n"
+        open_store(run_url).put_bytes(SCENARIO_DIGESTS_KEY, data.encode())
+    except (CarlosError, OSError, ValueError) as exc:  # the run's verdict stands; compare will not know them
+        console.print(_line("note:", "yellow", f"scenario file digests not stored: {exc}"), highlight=False)
 
 
 class _NotLive:
