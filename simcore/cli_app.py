@@ -41,6 +41,17 @@ class _Commands(TyperGroup):
 
         return {ep.name: ep for ep in entry_points(group=COMMAND_ENTRY_POINTS)}
 
+    def format_commands(self, ctx: "_click.Context", formatter: "_click.HelpFormatter") -> None:
+        """Each command with its first sentence whole (click would cut it to the terminal's width)."""
+        rows = []
+        for name in self.list_commands(ctx):
+            command = self.get_command(ctx, name)
+            if command is not None and not command.hidden:
+                rows.append((name, command.get_short_help_str(limit=1_000)))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
     def list_commands(self, ctx: "_click.Context") -> list[str]:
         return sorted({*super().list_commands(ctx), *self._plugins()})
 
@@ -66,6 +77,9 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # click's plain help: it wraps at word boundaries and never cuts a field name or URL short ("…"), as
+    # rich's help panels do in an 80-column terminal
+    rich_markup_mode=None,
 )
 # no emoji codes: the messages hold file, run and entity names (`:x:` stays `:x:`; nor is rich's emoji table
 # loaded for the report table)
@@ -427,10 +441,12 @@ def _local_scenarios(simulation_run: object, manifest: Path) -> list[tuple[int, 
         source = scenario.openscenario
         if source is None or source.startswith("s3://"):
             continue
-        path = (
-            Path(source.removeprefix("file://")).expanduser()
-            if source.startswith("file://")
-            else base_dir / source
+        path = Path(
+            os.path.normpath(
+                Path(source.removeprefix("file://")).expanduser()
+                if source.startswith("file://")
+                else base_dir / source
+            )
         )
         if not path.is_file():
             raise BadInput(

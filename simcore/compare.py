@@ -74,7 +74,7 @@ class RunVerdict:
     @property
     def name(self) -> str:
         """The run's test name (the candidate's index, else the baseline's)."""
-        return testcase_name(self.run)
+        return testcase_name(self.run, 4)
 
     @property
     def optional(self) -> bool:
@@ -352,7 +352,9 @@ def junit_xml(comparison: Comparison) -> str:
             skipped=str(sum(r.verdict in ("still failing", "removed") for r in rows)),
         )
         for r in rows:
-            case = ET.SubElement(suite, "testcase", name=r.name, classname=f"carlos.compare.{scenario}")
+            case = ET.SubElement(
+                suite, "testcase", name=testcase_name(r.run), classname=f"carlos.compare.{scenario}"
+            )
             if r.verdict == "new failure":
                 text = failure_text(r.candidate)
                 ET.SubElement(case, "failure", message=f"new failure: {text}", type="newFailure").text = text

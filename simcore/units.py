@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-from simcore.evaluation.criteria import format_measured
-
 #: units of the built-in metrics (simcore.evaluation.metrics.METRICS); "0/1" marks a yes/no metric
 UNITS: dict[str, str] = {
     "collision": "0/1",
@@ -30,6 +28,12 @@ PREFIX_UNITS: tuple[tuple[str, str], ...] = (
 )
 
 
+def spoken(metric: str) -> str:
+    """The unit after a number in a sentence: "" for yes/no metrics (`collision = 1`)."""
+    u = unit(metric)
+    return "" if u == "0/1" else u
+
+
 def unit(metric: str) -> str:
     """The unit of a metric ("" for counts, shares and unknown metrics; "0/1" for yes/no ones)."""
     if metric in UNITS:
@@ -39,6 +43,8 @@ def unit(metric: str) -> str:
 
 def with_unit(metric: str, value: float | None, digits: int = 4) -> str:
     """`0.9705 s`, `12.35 m/s²`, `1` (yes/no and unitless metrics as bare numbers), `absent` for None."""
+    from simcore.evaluation.criteria import format_measured
+
     if value is None:
         return "absent"
     text = format_measured(float(value), digits=digits)
@@ -48,6 +54,8 @@ def with_unit(metric: str, value: float | None, digits: int = 4) -> str:
 
 def change_with_unit(metric: str, delta: float) -> str:
     """A signed change: `+0.0035 m/s²`."""
+    from simcore.evaluation.criteria import format_measured
+
     text = format_measured(abs(float(delta)))
     sign = "+" if delta >= 0 else "-"
     u = unit(metric)
