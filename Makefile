@@ -9,7 +9,7 @@ SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 TEST_SYSTEM_PACKAGES := chromium
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images clean
+.PHONY: install system-packages test-system-packages docs-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images clean
 
 
 install: $(STAMP)
@@ -64,8 +64,15 @@ typecheck: install
 
 # the documentation site (mkdocs.yml, pages under docs/) into site/ (git-ignored); --strict: a broken link or
 # anchor fails the build
-docs: install
+# The pictures (docs/images/generated/, git-ignored) are made first from a real run (tools/docs_pictures.py: the
+# report in headless Chromium, the report's figures): a page showing one fails the strict build without it.
+docs: install docs-system-packages
+	$(PY) tools/docs_pictures.py docs/images/generated
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
+# as root it installs Debian's chromium (the report's picture); as another user it says what to install
+docs-system-packages:
+	@$(MAKE) --no-print-directory system-packages PACKAGES="$(TEST_SYSTEM_PACKAGES)"
 
 # the reference pages generated from the code (tests/test_docs.py and tests/test_reference.py check drift)
 reference: install

@@ -347,7 +347,9 @@ def _birds_eye(results: RunResults, worst: int) -> str:
             ys = [v for tr in recording.trajectories.values() for v in tr.y] or [0.0]
             extent = max(max(xs) - min(xs), max(ys) - min(ys)) + 20.0
             roads[source] = road_outline(recording.scenario_file, step=min(max(extent / 300.0, 2.0), 10.0))
-        varying = ",".join(f"{k}={v}" for k, v in (s.get("parameters") or {}).items() if k not in constant)
+        varying = ",".join(
+            f"{k}={_parameter(v)}" for k, v in (s.get("parameters") or {}).items() if k not in constant
+        )
         title = f"{s['scenario']}[{s['index']}] {varying} · {s['status']}"
         figures.append(plots.birds_eye(recording, roads[source], title, reason))
     if not figures:
