@@ -127,7 +127,7 @@ def worst_runs(indexes: Sequence[Mapping[str, Any]], count: int) -> list[tuple[M
                 out.append((m + 0.0, str(c["name"])))  # + 0.0: never a "-0"
         return out
 
-    def measured(s: Mapping[str, Any], name: str) -> str:
+    def measured_text(s: Mapping[str, Any], name: str) -> str:
         """`minTimeToCollision = 0.9546 s`: what a reason says instead of an abstract margin."""
         c = next((c for c in s.get("criteria", []) if str(c["name"]) == name), None)
         if c is None or c.get("actual") is None:
@@ -142,13 +142,15 @@ def worst_runs(indexes: Sequence[Mapping[str, Any]], count: int) -> list[tuple[M
     failed = [s for s in by_index if s["status"] == "failed"]
     for s in sorted(failed, key=lambda s: min((m for m, _ in margins(s)), default=0.0)):
         tightest = min(margins(s), default=None)
-        pick(s, f"failed {tightest[1]}{measured(s, tightest[1])}" if tightest else "failed")
+        pick(s, f"failed {tightest[1]}{measured_text(s, tightest[1])}" if tightest else "failed")
     for s in by_index:
         if float(s.get("metrics", {}).get("collision", 0.0)) > 0:
             pick(s, "collision")
     criteria: dict[str, list[tuple[float, int, Mapping[str, Any]]]] = {}
     for s in by_index:
-        ordered = {str(c["name"]) for c in s.get("criteria", []) if str(c.get("expected", ""))[:1] in "<>"}
+        ordered = {
+            str(c["name"]) for c in s.get("criteria", []) if str(c.get("expected", "")).startswith(("<", ">"))
+        }
         for m, name in margins(s):
             # the failures are already chosen: the near misses that passed, of criteria with a side to
             # approach from (an equality that holds, `collision == 0`, is not close to anything)
@@ -156,7 +158,7 @@ def worst_runs(indexes: Sequence[Mapping[str, Any]], count: int) -> list[tuple[M
                 criteria.setdefault(name, []).append((m, int(s["index"]), s))
     for name, ranked in criteria.items():
         m, _, s = min(ranked, key=lambda r: (r[0], r[1]))
-        pick(s, f"closest to {name}{measured(s, name)}")
+        pick(s, f"closest to {name}{measured_text(s, name)}")
     for metric in NEAR_MISS_METRICS:
         measured = [
             (float(s["metrics"][metric]), int(s["index"]), s)
