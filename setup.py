@@ -12,11 +12,19 @@ Folders of data only (simcore/transport/msg/*, examples/runs, …) are listed as
 warns about every folder that is importable but not listed.
 """
 
+from pathlib import Path
+
 from setuptools import find_namespace_packages, setup
 
 EXAMPLES = "simcore._examples"
 CACHES = ["*__pycache__"]
-examples = [EXAMPLES, *(f"{EXAMPLES}.{name}" for name in find_namespace_packages("examples", exclude=CACHES))]
+# a source tree without examples/ (a container build that copies only the packages) installs without them:
+# `carlos examples` then says so (exit 2)
+examples = (
+    [EXAMPLES, *(f"{EXAMPLES}.{name}" for name in find_namespace_packages("examples", exclude=CACHES))]
+    if Path("examples").is_dir()
+    else []
+)
 simcore = find_namespace_packages(".", include=["simcore", "simcore.*"], exclude=CACHES)
 operator = find_namespace_packages(
     "operator", include=["carlos_operator", "carlos_operator.*"], exclude=CACHES
@@ -24,7 +32,11 @@ operator = find_namespace_packages(
 
 setup(
     packages=[*simcore, *operator, *examples],
-    package_dir={"simcore": "simcore", "carlos_operator": "operator/carlos_operator", EXAMPLES: "examples"},
+    package_dir={
+        "simcore": "simcore",
+        "carlos_operator": "operator/carlos_operator",
+        **({EXAMPLES: "examples"} if examples else {}),
+    },
     package_data={
         "simcore": ["py.typed"],
         **{p: ["*.msg"] for p in simcore if p.startswith("simcore.transport.msg.")},
