@@ -722,6 +722,17 @@ def plan(
         simulation_run = load_manifest(manifest)
     except CarlosError as exc:
         raise _fail(exc) from None
+    search = simulation_run.spec.search
+    if search is not None:  # its points are chosen while it runs: there is no plan to show
+        out.print(
+            Text(
+                f"{simulation_run.name}: a search of {plural(search.budget, 'run')} in rounds of "
+                f"{search.batch_size}, its points chosen as it runs (strategy {search.strategy}); each "
+                "evaluated point is an index of the results"
+            ),
+            highlight=False,
+        )
+        return
     runs = Plan(simulation_run.spec)
     chosen = list(index) if index else list(range(min(limit, len(runs))))
     table = Table(title=f"{simulation_run.name}: {plural(len(runs), 'run')}", show_edge=False)

@@ -329,3 +329,12 @@ def test_help_is_whole_in_80_columns_and_the_version_is_printed() -> None:
     assert "..." not in commands and "…" not in commands  # every command's first sentence whole
     version = carlos("--version")
     assert version.returncode == 0 and version.stdout.strip() == "carlos 0.1.0 (carlos-sim)"
+
+
+def test_plan_of_a_search_says_its_points_are_chosen_as_it_runs() -> None:
+    done = carlos("plan", "examples/runs/search-cut-in.yaml")
+    assert done.returncode == 0, done.stderr
+    assert "a search of 64 runs in rounds of 16, its points chosen as it runs" in " ".join(
+        done.stdout.split()
+    )
+    assert "(defaults)" not in done.stdout
