@@ -27,7 +27,7 @@ color:#212121;padding:0 16px}
 h1{margin-bottom:4px}h2{margin-top:32px;border-bottom:1px solid #ddd;padding-bottom:4px}
 table{border-collapse:collapse;font-size:13px;margin:8px 0}
 th,td{border:1px solid #ddd;padding:3px 8px;text-align:left;vertical-align:top}
-th{background:#f5f5f5}td.num{text-align:right;font-variant-numeric:tabular-nums}
+th{background:#f5f5f5}td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 .badge{display:inline-block;padding:2px 10px;border-radius:10px;color:#fff;font-weight:600}
 .passed{background:#2e7d32}.failed{background:#c62828}.error{background:#6a1b9a}.optional{background:#757575}
 .muted{color:#757575}svg.plot{max-width:100%;height:auto;display:block;margin:8px 0}
@@ -274,18 +274,23 @@ def _failures(results: RunResults, limit: int = 50) -> str:
     if not failed:
         return '<p class="muted">None.</p>'
     out = ["<table><tr><th>index</th><th>status</th><th>criterion</th><th>value</th><th>message</th></tr>"]
+    constant = constant_parameters(results.indexes)  # shown once in the header, not in every row
     for s in failed[:limit]:
         status = "optional" if s.get("optional") else s["status"]
+        name = testcase_name(
+            {**s, "parameters": {k: v for k, v in (s.get("parameters") or {}).items() if k not in constant}},
+            4,
+        )
         if s["status"] == "error":
             out.append(
-                f"<tr><td>{_e(testcase_name(s, 4))}</td><td>{_badge(status)}</td><td></td><td></td>"
+                f"<tr><td>{_e(name)}</td><td>{_badge(status)}</td><td></td><td></td>"
                 f"<td>{_e(s.get('error'))}</td></tr>"
             )
             continue
         for c in s.get("criteria", []):
             if not c["passed"]:
                 out.append(
-                    f"<tr><td>{_e(testcase_name(s, 4))}</td><td>{_badge(status)}</td><td>{_e(c['name'])}</td>"
+                    f"<tr><td>{_e(name)}</td><td>{_badge(status)}</td><td>{_e(c['name'])}</td>"
                     f"<td class=num>{_e(with_unit(str(c.get('metric', '')), c.get('actual')))}</td>"
                     f"<td>{_e(c.get('message'))}</td></tr>"
                 )
