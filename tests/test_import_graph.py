@@ -152,3 +152,53 @@ def test_simcore_has_no_import_cycle() -> None:
 def test_no_lazy_import_hides_a_cycle_in_the_scenario_package() -> None:
     found = cycles(import_graph(lazy_within="simcore.scenario"))
     assert found == [], f"import cycles in simcore.scenario once its function-level imports count: {found}"
+
+
+OPERATOR = ROOT / "operator" / "carlos_operator"
+
+
+def operator_graph() -> dict[str, set[str]]:
+    """carlos_operator's modules → the carlos_operator modules they import (module level, `if TYPE_CHECKING:`
+    included) and, separately, every module any of their imports names (functions' too) under `*`."""
+    graph: dict[str, set[str]] = {}
+    for path in sorted(OPERATOR.glob("*.py")):
+        name = f"carlos_operator.{path.stem}"
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        edges: set[str] = set()
+
+        def visit(statements: list[ast.stmt], edges: set[str] = edges) -> None:
+            for stmt in statements:
+                if isinstance(stmt, ast.ImportFrom) and (stmt.module or "").startswith("carlos_operator"):
+                    module = stmt.module or ""
+                    edges.update(
+                        f"{module}.{a.name}" if module == "carlos_operator" else module for a in stmt.names
+                    )
+                elif isinstance(stmt, ast.If | ast.Try):
+                    visit(stmt.body)
+                    visit(stmt.orelse)
+
+        visit(tree.body)
+        graph[name] = edges - {name}
+        graph[f"{name}*"] = {
+            alias.name if isinstance(node, ast.Import) else (node.module or "")
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Import | ast.ImportFrom)
+            for alias in node.names
+        }
+    return graph
+
+
+def test_the_operator_has_no_import_cycle() -> None:
+    graph = {k: v for k, v in operator_graph().items() if not k.endswith("*")}
+    assert "carlos_operator.desired" in graph["carlos_operator.controller"]
+    found = cycles(graph)
+    assert found == [], f"import cycles among carlos_operator's modules: {found}"
+
+
+def test_the_operators_decision_does_no_io() -> None:
+    """desired.py (what a run should have) imports nothing that talks to Kubernetes or the object store, and
+    none of the operator's modules that do (reading, apply, kube, the controller)."""
+    imported = operator_graph()["carlos_operator.desired*"]
+    io = {"kubernetes", "kopf", "boto3", "botocore", "threading", "simcore.store"}
+    io |= {f"carlos_operator.{m}" for m in ("kube", "reading", "apply", "controller", "hosting", "inputs")}
+    assert not {m for m in imported if m in io or m.split(".")[0] in io}, imported

@@ -37,10 +37,8 @@ from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
-import yaml
-
 from carlos_operator.status import RUNS_ANNOTATION, RUNS_PER_POD_ANNOTATION
-from simcore import shards
+from simcore import kubeyaml, shards
 from simcore.errors import BadInput, ExitCode
 from simcore.plan import Plan
 from simcore.spec import API_GROUP, API_VERSION, KIND, EnvVar, SimulationRun, Sweep
@@ -382,7 +380,7 @@ def manifest_yaml(run: SimulationRun) -> str:
         "metadata": {"name": run.name},
         "spec": run.spec.model_dump(mode="json", by_alias=True, exclude_none=True),
     }
-    return yaml.safe_dump(document, sort_keys=False)
+    return kubeyaml.dump(document, sort_keys=False)
 
 
 def _labels(run: SimulationRun, settings: OperatorSettings) -> dict[str, str]:

@@ -2,15 +2,18 @@
 
 kopf delivers the watch events (handlers.py); this module does the work on a pool of threads:
 
-- `ensure`: validate the spec (invalid → `Accepted=False` with the reason and a Warning event, nothing
-  created); wait, with backoff, for what the run names but may not exist yet (its Secret, its scenario
-  ConfigMaps: External Secrets, sealed-secrets) and show it as the `Prerequisites` condition; write `run.yaml`
-  to the object store; create the ConfigMap and the Indexed Job under deterministic names with owner
-  references. A 409 means the object exists: it is adopted when its owner is this run (a restarted operator
-  never creates a second Job); when its owner is an earlier run of the same name (deleted and created again
-  before the garbage collector got to it) it is deleted and the creation retried. A run held by
-  `spec.suspend` with a Kueue `queueName` gets its Job only when resumed (Kueue owns a queued Job's
-  `suspend`). A Job is created once: a run whose status shows it started never gets a second one.
+- `ensure` (a run without its objects yet), in three steps, as the operators we learn from shape it:
+  reading.read_inputs reads every input once (its distribution file, the ConfigMaps and Secret it names, a
+  search's scenario, the stored `run.yaml`, the existing ConfigMap and Job) into a `RunInputs`;
+  desired.decide (pure) turns the run and its inputs into a `Decision`: not accepted (`Accepted=False`
+  with the field to fix and a Warning event, nothing created), waiting with backoff for what the run names
+  but may not exist yet (its Secret, its ConfigMaps: External Secrets, sealed-secrets; the `Prerequisites`
+  condition), replacing an earlier run's objects of the same name (deleted and created again before the
+  garbage collector got to them), held (`spec.suspend` with a Kueue `queueName`: the Job is created when
+  resumed, Kueue owns a queued Job's `suspend`), or the ConfigMap and Indexed Job to create or adopt under
+  deterministic names with owner references (a restarted operator never creates a second Job; a run whose
+  status shows it started never gets a second one); apply.apply does the writes (a 409 on create is
+  adopted or refused there, by the same pure rule).
 - A run whose recorded status is terminal is finished: nothing is read or written for it again, after a
   restart too (the run-level summary is written before the terminal status). A Job that disappears before
   the run finished (deleted, or expired) leaves the run `Unknown`, never back to `Pending`.
@@ -30,7 +33,6 @@ Runs are re-queued when their Job changes (watch events) and every `resync` seco
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 import os
@@ -41,28 +43,26 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from carlos_operator import metrics
-from carlos_operator.builders import (
-    DISTRIBUTION_FILE,
-    OperatorSettings,
-    Output,
-    build_configmap,
-    build_job,
-    check_cluster_spec,
-    job_name,
-    manifest_yaml,
-    resolve_output,
-    round_job_name,
-    scenario_configmaps,
-    secret_references,
+from carlos_operator.apply import apply, reject, wait
+from carlos_operator.builders import OperatorSettings, Output, job_name
+from carlos_operator.desired import (
+    FINISHED_PHASES,
+    MAX_BACKOFF_S,
+    MAX_DISTRIBUTION_BYTES,
+    Rejected,
+    Waiting,
+    condition_status,
+    decide,
+    rejection,
+    waiting,
 )
-from carlos_operator.inputs import read_input
-from carlos_operator.kube import Conflict, Kube, NotFound, now_rfc3339
+from carlos_operator.kube import Kube, NotFound, now_rfc3339
+from carlos_operator.reading import read_inputs
 from carlos_operator.runstate import RunState, slim_job
 from carlos_operator.scratch import ScratchFolders
 from carlos_operator.searching import SearchRuns
 from carlos_operator.status import (
     TERMINAL_PHASES,
-    Tally,
     aggregate,
     condition,
     job_finished,
@@ -71,18 +71,14 @@ from carlos_operator.status import (
 from simcore.errors import BadInput, CarlosError
 from simcore.evaluation.flaky import RepeatTally, flag_flaky, flag_repeats, recording_digests
 from simcore.evaluation.report import junit_xml, run_summary
-from simcore.manifest import parse_manifest
 from simcore.plan import Plan
 from simcore.spec import SimulationRun
-from simcore.wording import plural
 
 log = logging.getLogger("carlos.operator")
 
 Key = tuple[str, str]  # (namespace, name)
 
 
-#: phases after which a run is never reconciled again
-FINISHED_PHASES = (*TERMINAL_PHASES, "Unknown")
 #: container waiting reasons that do not pass by themselves (a pod in them never starts)
 STUCK_REASONS = frozenset(
     {
@@ -103,23 +99,6 @@ REPORT_INDEXES = 1000
 REPORT_WORST = 6
 #: tries of writing report.html before the run finishes without it
 REPORT_ATTEMPTS = 3
-#: a distribution file the operator copies into a Job's ConfigMap (1 MiB at most, with the spec)
-MAX_DISTRIBUTION_BYTES = 900 * 1024
-#: a missing prerequisite is looked for again after 5 s, 10 s, 20 s … at most this often
-MAX_BACKOFF_S = 300.0
-
-
-class Rejected(Exception):
-    """The run cannot be accepted: `reason` (CamelCase) and a message naming the field to fix."""
-
-    def __init__(self, reason: str, message: str) -> None:
-        super().__init__(message)
-        self.reason = reason
-        self.message = message
-
-
-class Waiting(Rejected):
-    """Something the run names does not exist yet (or is being deleted): retried with backoff."""
 
 
 def _store_for(kube: Kube, namespace: str, output: Output) -> Any:
@@ -343,33 +322,47 @@ class Controller:
         status = dict(body.get("status") or {})
         if not state.last_status and status:
             state.last_status = status
-        if _condition(status, "Accepted") == "False":
+        if condition_status(status, "Accepted") == "False":
             return  # rejected: nothing to do until a new run (the spec is immutable)
         if state.last_status.get("phase") in FINISHED_PHASES:
             # finished: the verdict and the run-level summary are recorded; nothing is read again
             self._observe_generation(state)
             return
-        if not state.ensured:
-            try:
-                self.ensure(state)
-            except Waiting as exc:
-                self._wait(key, state, exc.reason, exc.message)
-                return
-            except Rejected as exc:
-                self._reject(state, exc.reason, exc.message)
-                return
-            if state.waits:
-                state.waits = 0
-        if state.held:
-            self._hold(state)
-            return
+        if not state.ensured and not self.ensure(key, state):
+            return  # rejected, waiting for a prerequisite, or held
         if state.search is not None:
+            now = now_rfc3339()
             try:
                 self.searches.update(key, state)
+            except Waiting as exc:  # a round's objects of an earlier run of the same name are being deleted
+                wait(
+                    self,
+                    key,
+                    state,
+                    waiting(
+                        state.last_status,
+                        exc.reason,
+                        exc.message,
+                        now,
+                        waits=state.waits,
+                        backoff=self.backoff,
+                    ),
+                )
+            except Rejected as exc:  # a round's object of the run's name is something else's
+                reject(self, state, rejection(state.last_status, exc.reason, exc.message, now))
             except CarlosError as exc:  # the stored study does not fit the run (another spec, optuna)
-                self._reject(state, "SearchStateMismatch", str(exc))
+                reject(self, state, rejection(state.last_status, "SearchStateMismatch", str(exc), now))
             return
         self._update_status(key, state)
+
+    def ensure(self, key: Key, state: RunState) -> bool:
+        """Read every input of a run without its objects once (reading.py), decide what it should have
+        (desired.decide, pure), apply the decision (apply.py): True when its objects are there (created or
+        adopted) and its status pass follows; False when it is rejected, waits for a prerequisite or is
+        held."""
+        inputs = read_inputs(self, state, prepare_search=self.searches.prepare)
+        decision = decide(state.body, inputs, self.settings, now=now_rfc3339(), backoff=self.backoff)
+        return apply(self, key, state, inputs, decision)
 
     def _observe_generation(self, state: RunState) -> None:
         """A finished run whose spec.suspend changed: only observedGeneration moves."""
@@ -388,251 +381,6 @@ class Controller:
             meta = state.body["metadata"]
             self.kube.patch_run_status(meta.get("namespace"), meta["name"], status)
             state.last_status = status
-
-    def _wait(self, key: Key, state: RunState, reason: str, message: str) -> None:
-        """A prerequisite is missing: Pending with the `Prerequisites` condition; retried with backoff."""
-        previous = {c.get("type"): c for c in state.last_status.get("conditions") or []}
-        before = previous.get("Prerequisites")
-        status = {
-            **{k: v for k, v in state.last_status.items() if k != "conditions"},
-            "phase": "Pending",
-            "conditions": [
-                *(c for c in state.last_status.get("conditions") or [] if c.get("type") != "Prerequisites"),
-                condition(previous, "Prerequisites", False, reason, message, now_rfc3339()),
-            ],
-        }
-        self._publish(state, status)
-        if before is None or before.get("reason") != reason:
-            self.kube.event(state.body, "Warning", reason, message)
-        delay = min(self.backoff * 2**state.waits, MAX_BACKOFF_S)
-        state.waits += 1
-        metrics.ERRORS.labels(kind=reason).inc()
-        log.info("%s/%s waits %.0f s: %s", *key, delay, message)
-        timer = threading.Timer(delay, self.enqueue, args=(key,))
-        timer.daemon = True
-        timer.start()
-
-    def _hold(self, state: RunState) -> None:
-        """Suspended with a queueName: no Job until resumed (Kueue would unsuspend a queued Job)."""
-        status = {
-            "phase": "Suspended",
-            "total": state.tally.total if state.tally else None,
-            "jobName": (
-                (round_job_name(state.run.name, 0) if state.search is not None else job_name(state.run.name))
-                if state.run
-                else None
-            ),
-            "conditions": [
-                condition(
-                    {c.get("type"): c for c in state.last_status.get("conditions") or []},
-                    "Accepted",
-                    True,
-                    "Held",
-                    "spec.suspend: the Job is submitted to its Kueue queue when the run is resumed",
-                    now_rfc3339(),
-                )
-            ],
-        }
-        phase_before = state.last_status.get("phase")
-        self._publish(state, {k: v for k, v in status.items() if v is not None})
-        if phase_before != "Suspended":
-            self.kube.event(state.body, "Normal", "Suspended", "held: the Job is created when resumed")
-
-    def _reject(self, state: RunState, reason: str, message: str) -> None:
-        now = now_rfc3339()
-        status = {
-            "phase": "Failed",
-            "conditions": [
-                {
-                    "type": "Accepted",
-                    "status": "False",
-                    "reason": reason,
-                    "message": message,
-                    "lastTransitionTime": now,
-                }
-            ],
-        }
-        meta = state.body["metadata"]
-        self._publish(state, status)
-        self.kube.event(state.body, "Warning", reason, message)
-        metrics.set_phase(state.uid, "Failed")
-        log.info("rejected %s/%s: %s", meta.get("namespace"), meta["name"], message)
-
-    def ensure(self, state: RunState) -> None:
-        body = state.body
-        meta = body["metadata"]
-        namespace = meta.get("namespace") or "default"
-        document = {k: body[k] for k in ("apiVersion", "kind", "metadata", "spec") if k in body}
-        try:
-            run = parse_manifest(json.loads(json.dumps(document)), source=f"{namespace}/{meta['name']}")
-            output = resolve_output(run, self.settings, namespace=namespace)
-        except CarlosError as exc:
-            raise Rejected("InvalidSpec", str(exc)) from None
-        submitted = run
-        distribution = self._distribution(run, namespace, output)
-        if distribution is not None:
-            run = distribution[1]  # the sweep expands from the operator's copy of the file
-        try:
-            check_cluster_spec(run)
-        except CarlosError as exc:
-            raise Rejected("InvalidSpec", str(exc)) from None
-        chosen = run.spec.output.endpoint
-        if (
-            chosen
-            and not run.spec.output.credentials_secret_ref
-            and chosen != self.settings.default_s3_endpoint
-        ):
-            raise Rejected(
-                "CredentialsRequired",
-                f"spec.output.endpoint {chosen!r}: a run that names its own object store must name its "
-                "credentials too (spec.output.credentialsSecretRef); the operator's own are only for its "
-                "default store",
-            )
-        allowed = namespace in self.settings.secret_namespaces
-        named = secret_references(run)
-        if named and not allowed:
-            raise Rejected(
-                "SecretReferencesNotAllowed",
-                f"{named[0]}: runs in namespace {namespace!r} may not name Secrets (the operator's "
-                "administrator allows it per namespace: Helm value secretReferences.namespaces)",
-            )
-        state.run, state.output = run, output
-        total = run.spec.search.budget if run.spec.search is not None else len(Plan(run.spec))
-        if state.tally is None or state.tally.total != total:
-            state.tally = Tally(total)
-        for position, name in enumerate(scenario_configmaps(run)):
-            try:
-                self.kube.read_configmap(namespace, name)
-            except NotFound:
-                raise Waiting(
-                    "ConfigMapNotFound",
-                    f"spec.scenarios[{position}].configMapRef: ConfigMap {name!r} not found in namespace "
-                    f"{namespace!r}; the run starts when it exists",
-                ) from None
-        # the operator reads a Secret only where allowed; elsewhere its own credentials reach its default store
-        state.store = self.store_factory(
-            self.kube, namespace, output if allowed else dataclasses.replace(output, secret=None)
-        )
-        if run.spec.search is not None and state.search is None:
-            try:
-                state.search = self.searches.prepare(state, namespace)
-            except CarlosError as exc:
-                raise Rejected("InvalidSpec", str(exc)) from None
-        started = bool(state.last_status.get("startTime")) or state.last_status.get("phase") == "Running"
-        if started:
-            state.job_seen = True  # its Job ran: adopt it if it is still there, never create another
-            state.ensured = True
-            return
-        suspended = bool(state.body.get("spec", {}).get("suspend"))
-        state.held = bool(suspended and run.spec.execution.queue_name)
-        if state.held:
-            return  # Kueue would admit (unsuspend) a queued Job: it is created when the run is resumed
-        spec_bytes = manifest_yaml(submitted).encode()
-        run_yaml = f"{run.name}/run.yaml"
-        if state.store.exists(run_yaml):
-            if state.store.get_bytes(run_yaml) != spec_bytes:
-                raise Rejected(
-                    "ResultsExist",
-                    f"results for run {run.name!r} already exist at {state.store.url_for(run.name)} with a "
-                    "different spec: choose another metadata.name (or metadata.generateName)",
-                )
-        else:
-            state.store.put_bytes(run_yaml, spec_bytes)
-        if state.search is not None:
-            state.ensured = True  # a search creates one Job per round (searching.py)
-            return
-        cm = build_configmap(submitted, body, self.settings, distribution[0] if distribution else None)
-        try:
-            self.kube.create_configmap(namespace, cm)
-        except Conflict:
-            self._check_owned(self.kube.read_configmap(namespace, cm["metadata"]["name"]), state, "ConfigMap")
-        job = build_job(run, body, self.settings, output)
-        created = False
-        try:
-            job = self.kube.create_job(namespace, job)
-            created = True
-        except Conflict:
-            job = self.kube.read_job(namespace, job["metadata"]["name"])
-            self._check_owned(job, state, "Job")
-        with self._lock:
-            self.jobs.setdefault((namespace, job["metadata"]["name"]), slim_job(job))
-        state.ensured = True
-        state.job_seen = True
-        if created:
-            metrics.JOBS_CREATED.inc()
-            self.kube.event(
-                body,
-                "Normal",
-                "JobCreated",
-                f"Job {job['metadata']['name']} with {plural(total, 'run')} (parallelism {job['spec']['parallelism']})",
-            )
-            log.info("created Job %s/%s (%d runs)", namespace, job["metadata"]["name"], total)
-        else:
-            log.info("adopted Job %s/%s", namespace, job["metadata"]["name"])
-
-    def _distribution(
-        self, run: SimulationRun, namespace: str, output: Output
-    ) -> tuple[str, SimulationRun] | None:
-        """A distribution the pods cannot read as a path (a ConfigMap key, s3://): (its text, the run with
-        the operator's copy of it as `spec.sweep.distribution`); None when there is none such."""
-        sweep = run.spec.sweep
-        ref = sweep.distribution_config_map_ref
-        if ref is None and not (sweep.distribution or "").startswith("s3://"):
-            return None
-        if ref is not None:
-            try:
-                self.kube.read_configmap(namespace, ref.name)
-            except NotFound:
-                raise Waiting(
-                    "ConfigMapNotFound",
-                    f"spec.sweep.distributionConfigMapRef: ConfigMap {ref.name!r} not found in namespace "
-                    f"{namespace!r}; the run starts when it exists",
-                ) from None
-        try:
-            _, data = read_input(
-                self,
-                namespace,
-                output,
-                ref=ref,
-                source=sweep.distribution,
-                field="spec.sweep.distribution",
-                ref_field="spec.sweep.distributionConfigMapRef",
-                why="to expand the sweep",
-            )
-            text = data.decode("utf-8")
-        except UnicodeDecodeError:
-            raise Rejected("InvalidSpec", "spec.sweep.distribution: the file is not UTF-8 text") from None
-        except CarlosError as exc:
-            raise Rejected("InvalidSpec", str(exc)) from None
-        if len(data) > MAX_DISTRIBUTION_BYTES:
-            raise Rejected(
-                "InvalidSpec",
-                f"spec.sweep.distribution: the file is {len(data):,} bytes; the pods read it from the Job's "
-                f"ConfigMap, which holds at most {MAX_DISTRIBUTION_BYTES:,}: split the sweep",
-            )
-        local = self.scratch.folder(namespace, run.name) / DISTRIBUTION_FILE
-        local.write_bytes(data)
-        moved = sweep.model_copy(update={"distribution": str(local), "distribution_config_map_ref": None})
-        return text, run.model_copy(update={"spec": run.spec.model_copy(update={"sweep": moved})})
-
-    def _check_owned(self, obj: dict[str, Any], state: RunState, what: str) -> None:
-        meta = obj.get("metadata", {})
-        owners = meta.get("ownerReferences") or []
-        if any(o.get("uid") == state.uid for o in owners):
-            return
-        run_name = state.body["metadata"]["name"]
-        if any(o.get("kind") == "SimulationRun" and o.get("name") == run_name for o in owners):
-            # an earlier run of the same name (deleted, created again before the garbage collector came)
-            namespace = state.body["metadata"].get("namespace") or "default"
-            self.kube.delete(what, namespace, meta["name"], str(meta.get("uid")))
-            raise Waiting(
-                "PreviousRunCleanup",
-                f"{what} {meta['name']!r} of an earlier run named {run_name!r} is being deleted; retrying",
-            )
-        raise Rejected(
-            "NameConflict",
-            f"{what} {meta['name']!r} exists and belongs to something else: delete it or rename the run",
-        )
 
     def _job(self, state: RunState) -> dict[str, Any] | None:
         assert state.run is not None
@@ -755,7 +503,7 @@ class Controller:
             if pods is not None:
                 state.stuck = stuck_reason(pods)
                 if state.stuck is not None:
-                    before = _condition(state.last_status, "PodsStuck")
+                    before = condition_status(state.last_status, "PodsStuck")
                     if before != "True":
                         self.kube.event(state.body, "Warning", *state.stuck)
         previous = {c.get("type"): c for c in state.last_status.get("conditions") or []}
@@ -900,13 +648,6 @@ def slim_run(body: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _condition(status: dict[str, Any], kind: str) -> str | None:
-    for entry in status.get("conditions") or []:
-        if entry.get("type") == kind:
-            return str(entry.get("status"))
-    return None
-
-
 def _comparable(status: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in status.items() if k != "conditions"} | {
         "conditions": [
@@ -916,4 +657,4 @@ def _comparable(status: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-__all__ = ["BadInput", "Controller", "Rejected"]
+__all__ = ["MAX_BACKOFF_S", "MAX_DISTRIBUTION_BYTES", "BadInput", "Controller", "Rejected", "Waiting"]

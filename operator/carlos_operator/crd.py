@@ -23,8 +23,7 @@ from __future__ import annotations
 import copy
 from typing import Any
 
-import yaml
-
+from simcore import kubeyaml
 from simcore.spec import API_GROUP, API_VERSION, KIND, SimulationRun
 
 PLURAL = "simulationruns"
@@ -299,4 +298,4 @@ HEADER = "# Generated from simcore/spec.py by `make crds` (carlos crds): do not 
 
 def crd_yaml() -> str:
     """The CRD as YAML, with a header saying it is generated."""
-    return HEADER + yaml.safe_dump(crd(), sort_keys=False, allow_unicode=True, width=110)
+    return HEADER + kubeyaml.dump(crd(), sort_keys=False, allow_unicode=True, width=110)

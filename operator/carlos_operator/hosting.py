@@ -1,5 +1,6 @@
-"""What the search rounds (searching.py) and input reading (inputs.py) use of the controller: a Protocol, so
-neither imports controller.py (which imports both) — no import circle."""
+"""What the search rounds (searching.py), input reading (inputs.py, reading.py) and the writes (apply.py) use
+of the controller: a Protocol, so none of them imports controller.py (which imports them) — no import
+circle."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from typing import Any, Protocol
 from carlos_operator.builders import OperatorSettings, Output
 from carlos_operator.kube import Kube
 from carlos_operator.runstate import RunState
+from carlos_operator.scratch import ScratchFolders
 
 Key = tuple[str, str]
 
@@ -21,6 +23,8 @@ class Host(Protocol):
     kube: Kube
     settings: OperatorSettings
     batch: int
+    backoff: float
+    scratch: ScratchFolders
     store_factory: Callable[[Kube, str, Output], Any]
     jobs: dict[Key, dict[str, Any]]
     _lock: threading.Lock
@@ -28,7 +32,7 @@ class Host(Protocol):
 
     def _publish(self, state: RunState, status: dict[str, Any]) -> None: ...
 
-    def _check_owned(self, obj: dict[str, Any], state: RunState, what: str) -> None: ...
+    def enqueue(self, key: Key) -> None: ...
 
     def _job_gone(self, state: RunState, name: str | None = None) -> None: ...
 

@@ -24,14 +24,16 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from carlos_operator.apply import create_owned
 from carlos_operator.builders import (
+    Output,
     SearchRound,
     build_job,
     build_round_configmap,
     round_job_name,
 )
 from carlos_operator.inputs import read_input
-from carlos_operator.kube import Conflict, NotFound, now_rfc3339
+from carlos_operator.kube import NotFound, now_rfc3339
 from carlos_operator.runstate import RunState, SearchProgress, slim_job
 from carlos_operator.scratch import ScratchFolders
 from carlos_operator.status import (
@@ -49,7 +51,7 @@ from carlos_operator.status import (
 )
 from simcore.search import driver
 from simcore.search.export import distribution_xml
-from simcore.spec import Search
+from simcore.spec import Search, SimulationRun
 from simcore.wording import plural
 
 if TYPE_CHECKING:
@@ -228,11 +230,9 @@ class SearchRuns:
 
     # --- acceptance ------------------------------------------------------------------------------------
 
-    def prepare(self, state: RunState, namespace: str) -> SearchProgress:
+    def prepare(self, run: SimulationRun, output: Output, namespace: str) -> SearchProgress:
         """The search space from the scenario (read from its ConfigMap, s3:// or a file the operator can
         read): bad input raises BadInput naming the field."""
-        run, output = state.run, state.output
-        assert run is not None and output is not None
         ref = run.spec.scenarios[0]
         name, text = read_input(
             self.c,
@@ -384,11 +384,7 @@ class SearchRuns:
             Path(progress.scenario_name), asked.asked, f"search {run.name}: round {current.number}"
         )
         cm = build_round_configmap(run, state.body, self.c.settings, current, points)
-        try:
-            self.c.kube.create_configmap(namespace, cm)
-        except Conflict:
-            existing = self.c.kube.read_configmap(namespace, cm["metadata"]["name"])
-            self.c._check_owned(existing, state, "ConfigMap")
+        create_owned(self.c, state, namespace, "ConfigMap", cm)
         job = build_job(
             run,
             state.body,
@@ -397,13 +393,7 @@ class SearchRuns:
             search_round=current,
             measured=progress.wall_seconds[-1000:],
         )
-        created = False
-        try:
-            job = self.c.kube.create_job(namespace, job)
-            created = True
-        except Conflict:
-            job = self.c.kube.read_job(namespace, job["metadata"]["name"])
-            self.c._check_owned(job, state, "Job")
+        job, created = create_owned(self.c, state, namespace, "Job", job)
         with self.c._lock:
             self.c.jobs.setdefault((namespace, job["metadata"]["name"]), slim_job(job))
         progress.created.add(current.number)

@@ -21,8 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from simcore import kubeyaml
 from simcore.errors import BadInput
 from simcore.spec import SimulationRun
 
@@ -218,7 +217,7 @@ def _to_object_store(packed: Packed, simulation_run: SimulationRun, manifest: st
 def objects_yaml(packed: Packed) -> str:
     """`-o yaml`: the ConfigMap (its ownerReference to the run is set when it is created) and the run."""
     docs = [d for d in (packed.configmap(), packed.run) if d is not None]
-    return "---\n".join(yaml.safe_dump(d, sort_keys=False) for d in docs)
+    return "---\n".join(kubeyaml.dump(d, sort_keys=False) for d in docs)
 
 
 def current_namespace() -> str:
