@@ -9,7 +9,7 @@ SYSTEM_PACKAGES := libusb-1.0-0 libgl1 libegl1 libx11-6 libxext6 libxrender1
 TEST_SYSTEM_PACKAGES := chromium
 NPROC := $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: install system-packages test-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images images-check images-import k8s cluster-system-packages cluster-up cluster-down e2e clean
+.PHONY: install system-packages test-system-packages docs-system-packages demo test test-slow fuzz lint typecheck docs reference msgdefs wheel wheel-check bench conformance differential crds helm lint-chart images images-check images-import k8s cluster-system-packages cluster-up cluster-down e2e clean
 
 
 install: $(STAMP)
@@ -22,12 +22,15 @@ system-packages:
 	  else echo "missing system packages:$$missing (run: sudo apt-get install$$missing)"; exit 1; fi; \
 	fi
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml setup.py
 	@$(MAKE) --no-print-directory system-packages PACKAGES="$(SYSTEM_PACKAGES)"
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[dev]'
-	touch $(STAMP)
+	@test -x $(PY) || { echo "creating $(VENV) ($$($(PYTHON) --version))"; $(PYTHON) -m venv $(VENV); }
+	@echo "installing carlos-sim and its dependencies into $(VENV): about 3.5 GB, a few minutes the first time (pip's output: $(VENV)/install.log)"
+	@{ $(PY) -m pip install -q --disable-pip-version-check --upgrade pip \
+	  && $(PY) -m pip install -q --disable-pip-version-check -e '.[dev]'; } > $(VENV)/install.log 2>&1 \
+	  || { tail -n 40 $(VENV)/install.log; echo "pip install failed: the whole output is in $(VENV)/install.log"; exit 1; }
+	@touch $(STAMP)
+	@echo "installed: $$($(VENV)/bin/carlos --version) in $(VENV) ($$(du -sh $(VENV) | cut -f1))"
 
 demo: install
 	$(VENV)/bin/carlos run examples/runs/data-generation.yaml --output file://./results
@@ -61,8 +64,15 @@ typecheck: install
 
 # the documentation site (mkdocs.yml, pages under docs/) into site/ (git-ignored); --strict: a broken link or
 # anchor fails the build
-docs: install
+# The pictures (docs/images/generated/, git-ignored) are made first from a real run (tools/docs_pictures.py: the
+# report in headless Chromium, the report's figures): a page showing one fails the strict build without it.
+docs: install docs-system-packages
+	$(PY) tools/docs_pictures.py docs/images/generated
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
+# as root it installs Debian's chromium (the report's picture); as another user it says what to install
+docs-system-packages:
+	@$(MAKE) --no-print-directory system-packages PACKAGES="$(TEST_SYSTEM_PACKAGES)"
 
 # the reference pages generated from the code (tests/test_docs.py and tests/test_reference.py check drift)
 reference: install
@@ -75,7 +85,7 @@ reference: install
 msgdefs: install
 	$(PY) -m simcore.transport.typestore > simcore/transport/msgdefs.py
 
-# the wheel (dist/carlos-VERSION-py3-none-any.whl), built from a clean copy of the sources
+# the wheel (dist/carlos_sim-VERSION-py3-none-any.whl), built from the files git tracks
 wheel:
 	PYTHON=$(PYTHON) tools/build-wheel dist
 

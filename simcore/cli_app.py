@@ -41,6 +41,17 @@ class _Commands(TyperGroup):
 
         return {ep.name: ep for ep in entry_points(group=COMMAND_ENTRY_POINTS)}
 
+    def format_commands(self, ctx: "_click.Context", formatter: "_click.HelpFormatter") -> None:
+        """Each command with its first sentence whole (click would cut it to the terminal's width)."""
+        rows = []
+        for name in self.list_commands(ctx):
+            command = self.get_command(ctx, name)
+            if command is not None and not command.hidden:
+                rows.append((name, command.get_short_help_str(limit=1_000)))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
     def list_commands(self, ctx: "_click.Context") -> list[str]:
         return sorted({*super().list_commands(ctx), *self._plugins()})
 
@@ -66,11 +77,32 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # click's plain help: it wraps at word boundaries and never cuts a field name or URL short ("…"), as
+    # rich's help panels do in an 80-column terminal
+    rich_markup_mode=None,
 )
 # no emoji codes: the messages hold file, run and entity names (`:x:` stays `:x:`; nor is rich's emoji table
 # loaded for the report table)
 console = Console(stderr=True, emoji=False)
 out = Console(emoji=False)
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from simcore import DISTRIBUTION, version
+
+        out.print(Text(f"carlos {version()} ({DISTRIBUTION})"), highlight=False)
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _main(
+    show_version: Annotated[
+        bool,
+        typer.Option("--version", callback=_print_version, is_eager=True, help="Print the version and exit."),
+    ] = False,
+) -> None:
+    """CARLOS: simulation runs for cooperative intelligent transport systems, locally or on Kubernetes."""
 
 
 def _line(label: str, style: str, text: object) -> Text:
@@ -119,7 +151,9 @@ def run(
     live: Annotated[
         bool,
         typer.Option(
-            "--live", help="Serve the run live (Foxglove WebSocket on 127.0.0.1), paced to real time."
+            "--live",
+            help="Serve the run live (Foxglove WebSocket on 127.0.0.1), paced to real time; the index runs "
+            "again even if it has finished.",
         ),
     ] = False,
     live_port: Annotated[
@@ -292,7 +326,7 @@ def run(
                 base_dir=manifest.parent.resolve(),
                 output_url=output,
                 parallel=parallel,
-                fresh=fresh,
+                fresh=fresh or live,  # a live view runs its index again: a finished one is not resumed
                 indexes=list(index) if index else None,
                 events=Events(on_start=on_start, on_progress=on_progress, on_done=on_done, on_retry=on_retry),
                 bus=bus,
@@ -307,8 +341,24 @@ def run(
             server.stop()
         if hub is not None:
             hub.close()
+    _record_scenario_digests(simulation_run, manifest, report.output_url)
     _print_report(report)
     raise typer.Exit(report.exit_code)
+
+
+def _record_scenario_digests(simulation_run: Any, manifest: Path, run_url: str) -> None:
+    """The SHA-256 of every local scenario file next to run.yaml (`carlos compare` lists changed ones)."""
+    from simcore.spec_diff import SCENARIO_DIGESTS_KEY, scenario_digests
+    from simcore.store import open_store
+
+    try:
+        files = {
+            s.name: (str(s.openscenario), path) for _, s, path in _local_scenarios(simulation_run, manifest)
+        }
+        data = json.dumps(scenario_digests(files), indent=2, sort_keys=True) + "\n"
+        open_store(run_url).put_bytes(SCENARIO_DIGESTS_KEY, data.encode())
+    except (CarlosError, OSError, ValueError) as exc:  # the run's verdict stands; compare will not know them
+        console.print(_line("note:", "yellow", f"scenario file digests not stored: {exc}"), highlight=False)
 
 
 class _NotLive:
@@ -391,10 +441,12 @@ def _local_scenarios(simulation_run: object, manifest: Path) -> list[tuple[int, 
         source = scenario.openscenario
         if source is None or source.startswith("s3://"):
             continue
-        path = (
-            Path(source.removeprefix("file://")).expanduser()
-            if source.startswith("file://")
-            else base_dir / source
+        path = Path(
+            os.path.normpath(
+                Path(source.removeprefix("file://")).expanduser()
+                if source.startswith("file://")
+                else base_dir / source
+            )
         )
         if not path.is_file():
             raise BadInput(
@@ -670,6 +722,17 @@ def plan(
         simulation_run = load_manifest(manifest)
     except CarlosError as exc:
         raise _fail(exc) from None
+    search = simulation_run.spec.search
+    if search is not None:  # its points are chosen while it runs: there is no plan to show
+        out.print(
+            Text(
+                f"{simulation_run.name}: a search of {plural(search.budget, 'run')} in rounds of "
+                f"{search.batch_size}, its points chosen as it runs (strategy {search.strategy}); each "
+                "evaluated point is an index of the results"
+            ),
+            highlight=False,
+        )
+        return
     runs = Plan(simulation_run.spec)
     chosen = list(index) if index else list(range(min(limit, len(runs))))
     table = Table(title=f"{simulation_run.name}: {plural(len(runs), 'run')}", show_edge=False)

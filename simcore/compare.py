@@ -10,8 +10,10 @@ Runs are matched by scenario, parameters (names and values, order aside) and see
 - `added`: no baseline run matches it; `removed`: a baseline run no candidate run matches.
 
 Metric changes: a metric both runs measured whose values differ by more than
-`max(tolerance * |baseline|, absolute)`. The exit code is 1 when a required (non-optional) candidate run is
-a new failure, else 0.
+`max(tolerance * |baseline|, absolute)` (relative 0.05 and absolute 0.01 in the metric's unit by default:
+near-zero noise, 0.0254 → 0.0289 m/s², is not a change). The exit code is 1 when a required (non-optional)
+candidate run is a new failure, else 0. What differs between the two specs (simcore.spec_diff) comes first
+in every rendering: a changed threshold is not a regression of the software.
 """
 
 from __future__ import annotations
@@ -24,12 +26,23 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from simcore.evaluation.report import testcase_name
+from simcore.units import change_with_unit, with_unit
+from simcore.wording import plural
 
 Verdict = Literal["new failure", "fixed", "still failing", "still passing", "added", "removed"]
 VERDICTS: tuple[Verdict, ...] = ("new failure", "fixed", "still failing", "still passing", "added", "removed")
 
 #: key of the comparison next to the candidate's summary.json (read by its report.html)
 COMPARISON_KEY = "comparison.json"
+#: default tolerances of a metric change: a share of the baseline's value, and in the metric's unit
+TOLERANCE = 0.05
+ABSOLUTE_TOLERANCE = 0.01
+MATCHED: tuple[Verdict, ...] = ("new failure", "fixed", "still failing", "still passing")
+
+
+def verdict_count(count: int, verdict: str) -> str:
+    """`1 new failure`, `3 new failures`, `2 still failing` (pure)."""
+    return plural(count, verdict) if verdict == "new failure" else f"{count} {verdict}"
 
 
 @dataclass(frozen=True)
@@ -61,7 +74,7 @@ class RunVerdict:
     @property
     def name(self) -> str:
         """The run's test name (the candidate's index, else the baseline's)."""
-        return testcase_name(self.run)
+        return testcase_name(self.run, 4)
 
     @property
     def optional(self) -> bool:
@@ -74,6 +87,8 @@ class Comparison:
     candidate: str
     tolerance: float
     runs: tuple[RunVerdict, ...] = field(default_factory=tuple)
+    absolute: float = ABSOLUTE_TOLERANCE
+    spec_differences: tuple[str, ...] = ()
 
     def of(self, verdict: Verdict) -> list[RunVerdict]:
         return [r for r in self.runs if r.verdict == verdict]
@@ -81,6 +96,19 @@ class Comparison:
     @property
     def counts(self) -> dict[str, int]:
         return {v: sum(r.verdict == v for r in self.runs) for v in VERDICTS}
+
+    @property
+    def matched(self) -> int:
+        """Candidate runs that have a baseline run to compare with."""
+        return sum(r.verdict in MATCHED for r in self.runs)
+
+    def counts_line(self) -> str:
+        """`1 new failure · 0 fixed · … · 2 with metric changes` (pure)."""
+        counts = self.counts
+        return (
+            " · ".join(verdict_count(counts[v], v) for v in VERDICTS)
+            + f" · {len(self.changed_metrics)} with metric changes"
+        )
 
     @property
     def changed_metrics(self) -> list[RunVerdict]:
@@ -96,6 +124,8 @@ class Comparison:
             "baseline": self.baseline,
             "candidate": self.candidate,
             "tolerance": self.tolerance,
+            "absoluteTolerance": self.absolute,
+            "specDifferences": list(self.spec_differences),
             "exitCode": self.exit_code,
             "counts": self.counts,
             "runs": [
@@ -140,7 +170,10 @@ def classify(baseline_status: str | None, candidate_status: str | None) -> Verdi
 
 
 def metric_changes(
-    baseline: Mapping[str, float], candidate: Mapping[str, float], tolerance: float, absolute: float = 1e-9
+    baseline: Mapping[str, float],
+    candidate: Mapping[str, float],
+    tolerance: float = TOLERANCE,
+    absolute: float = ABSOLUTE_TOLERANCE,
 ) -> tuple[MetricChange, ...]:
     """Metrics measured on both sides that differ by more than `max(tolerance·|baseline|, absolute)`, by
     the candidate's metric order (pure)."""
@@ -158,9 +191,11 @@ def compare(
     baseline: Sequence[Mapping[str, Any]],
     candidate: Sequence[Mapping[str, Any]],
     *,
-    tolerance: float = 0.05,
+    tolerance: float = TOLERANCE,
+    absolute: float = ABSOLUTE_TOLERANCE,
     baseline_name: str = "baseline",
     candidate_name: str = "candidate",
+    spec_differences: Sequence[str] = (),
 ) -> Comparison:
     """Every candidate run's verdict (by candidate index), then the removed baseline runs (by baseline
     index) (pure)."""
@@ -173,14 +208,16 @@ def compare(
         before = queue.popleft() if queue else None
         verdict = classify(None if before is None else before["status"], summary["status"])
         changes = (
-            metric_changes(before.get("metrics", {}), summary.get("metrics", {}), tolerance)
+            metric_changes(before.get("metrics", {}), summary.get("metrics", {}), tolerance, absolute)
             if before is not None
             else ()
         )
         runs.append(RunVerdict(verdict, before, summary, changes))
     removed = sorted((s for queue in waiting.values() for s in queue), key=lambda s: int(s["index"]))
     runs.extend(RunVerdict("removed", s, None) for s in removed)
-    return Comparison(baseline_name, candidate_name, tolerance, tuple(runs))
+    return Comparison(
+        baseline_name, candidate_name, tolerance, tuple(runs), absolute, tuple(spec_differences)
+    )
 
 
 def failure_text(summary: Mapping[str, Any] | None) -> str:
@@ -190,7 +227,7 @@ def failure_text(summary: Mapping[str, Any] | None) -> str:
     if summary["status"] == "error":
         return str(summary.get("error") or "error")
     parts = [
-        f"{c['name']}: " + ("absent" if c.get("actual") is None else f"{float(c['actual']):.4g}")
+        f"{c['name']}: " + with_unit(str(c.get("metric", "")), c.get("actual"))
         for c in summary.get("criteria", [])
         if not c["passed"]
     ]
@@ -212,14 +249,22 @@ def markdown(comparison: Comparison, limit: int = 50) -> str:
     added/removed and (folded) the runs still failing."""
     counts = comparison.counts
     new = comparison.of("new failure")
-    head = "❌ new failures" if comparison.exit_code else "✅ no new failures"
+    head = f"❌ {verdict_count(len(new), 'new failure')}" if comparison.exit_code else "✅ no new failures"
     lines = [
         f"### CARLOS compare: {head}",
         "",
         f"Baseline `{comparison.baseline}` → candidate `{comparison.candidate}`",
-        "",
-        *_md_table(["verdict", "runs"], [(v, counts[v]) for v in VERDICTS]),
     ]
+    if comparison.spec_differences:
+        lines += [
+            "",
+            f"#### The specs differ ({len(comparison.spec_differences)})",
+            "",
+            "A changed criterion, parameter or scenario file changes verdicts by itself:",
+            "",
+            *(f"- {_md(d)}" for d in comparison.spec_differences),
+        ]
+    lines += ["", *_md_table(["verdict", "runs"], [(v, counts[v]) for v in VERDICTS])]
 
     def section(title: str, rows: list[RunVerdict], folded: bool = False) -> None:
         if not rows:
@@ -257,14 +302,21 @@ def markdown(comparison: Comparison, limit: int = 50) -> str:
     changed = comparison.changed_metrics
     if changed:
         rows = [
-            (r.name, c.metric, f"{c.baseline:.4g}", f"{c.candidate:.4g}", f"{c.delta:+.4g}")
+            (
+                r.name,
+                c.metric,
+                with_unit(c.metric, c.baseline),
+                with_unit(c.metric, c.candidate),
+                change_with_unit(c.metric, c.delta),
+            )
             for r in changed
             for c in r.metric_changes
         ]
         lines.extend(
             [
                 "",
-                f"#### Metric changes beyond {comparison.tolerance:g} × |baseline| ({len(rows)})",
+                f"#### Metric changes beyond {comparison.tolerance:g} × \\|baseline\\| and "
+                f"{comparison.absolute:g} in the metric's unit ({len(rows)})",
                 "",
                 *_md_table(["run", "metric", "baseline", "candidate", "change"], rows[:limit]),
             ]
@@ -300,7 +352,9 @@ def junit_xml(comparison: Comparison) -> str:
             skipped=str(sum(r.verdict in ("still failing", "removed") for r in rows)),
         )
         for r in rows:
-            case = ET.SubElement(suite, "testcase", name=r.name, classname=f"carlos.compare.{scenario}")
+            case = ET.SubElement(
+                suite, "testcase", name=testcase_name(r.run), classname=f"carlos.compare.{scenario}"
+            )
             if r.verdict == "new failure":
                 text = failure_text(r.candidate)
                 ET.SubElement(case, "failure", message=f"new failure: {text}", type="newFailure").text = text

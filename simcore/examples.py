@@ -1,7 +1,8 @@
 """`carlos examples DIR`: the example manifests, scenarios, maps and nodes, written from the installed package.
 
-The wheel carries the repository's `examples/` folder as `simcore/_examples` (tools/build-wheel copies it in);
-a source checkout (an editable install) reads `examples/` beside the `simcore` package. Either way the files
+Every installed copy carries the repository's `examples/` folder as the package data `simcore/_examples`
+(setup.py maps it, for `pip install .`, `pip install git+URL` and `make wheel` alike); an editable install
+reads `examples/` beside the `simcore` package. Either way the files
 are written to `DIR/examples/`, the layout of the repository, so every command of the documentation
 (`carlos run examples/runs/perception.yaml`, `python -m examples.controller`) works from DIR.
 """
@@ -15,7 +16,8 @@ from importlib import resources
 from importlib.resources.abc import Traversable
 from pathlib import Path
 
-from simcore.errors import BadInput, CarlosError
+from simcore import DISTRIBUTION
+from simcore.errors import BadInput
 
 PACKAGED = "_examples"  # inside the simcore package, in the wheel
 SKIPPED_PARTS = frozenset({"__pycache__"})
@@ -30,7 +32,10 @@ def source() -> Traversable:
     checkout = Path(__file__).resolve().parents[1] / "examples"
     if checkout.is_dir():
         return checkout
-    raise CarlosError(f"this installation of carlos has no examples ({packaged} and {checkout} are missing)")
+    raise BadInput(
+        f"this installation of {DISTRIBUTION} has no examples ({packaged} is missing): reinstall it "
+        f"(pip install --force-reinstall {DISTRIBUTION}), or copy examples/ from the source repository"
+    )
 
 
 def example_files(root: Traversable) -> list[tuple[str, bytes]]:

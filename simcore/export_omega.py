@@ -17,7 +17,7 @@ What goes in, from the index's `recording.mcap`:
 A recording with its own OSI channel (`spec.recording.osi`) for every step: those GroundTruth messages are
 taken as they are (the engine's longitudinal acceleration instead of differences).
 
-Needs the optional extra `carlos[omega]` (betterosi); without it the export is bad input (exit 2) naming it.
+Needs the optional extra `carlos-sim[omega]` (betterosi); without it the export is bad input (exit 2) naming it.
 """
 
 from __future__ import annotations

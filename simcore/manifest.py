@@ -11,7 +11,7 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
-from simcore.errors import BadInput
+from simcore.errors import BadInput, shorten
 from simcore.spec import SimulationRun
 
 MAX_MANIFEST_BYTES = 4 * 1024 * 1024
@@ -43,6 +43,10 @@ def format_validation_error(error: ValidationError) -> str:
             message = "unknown field (check the spelling; fields are camelCase: see `carlos docs`)"
         elif item["type"] == "missing":
             message = "required field is missing"
+        elif item["type"] == "string_pattern_mismatch" and loc == "spec.output.url":
+            given = shorten(str(item.get("input")))
+            folder = f": a folder is file://{given}" if "://" not in given else ""
+            message = f"{given!r} is not a results URL (file://PATH or s3://bucket/prefix){folder}"
         lines.append(f"{loc}: {message}" if loc else message)
     return "; ".join(lines)
 

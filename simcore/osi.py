@@ -10,7 +10,7 @@ bounding box (length, width, height), `base.position` = the box centre in the ma
 `base.velocity` = the speed along the entity's x axis in the map frame, `base.acceleration` along it too;
 `source_reference` names the entity; `host_vehicle_id` = the ego.
 
-betterosi is the optional extra `carlos[omega]`: without it, asking for OSI is bad input naming the extra.
+betterosi is the optional extra `carlos-sim[omega]`: without it, asking for OSI is bad input naming the extra.
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def betterosi(what: str) -> Any:
     try:
         import betterosi as bo
     except ImportError:
-        raise BadInput(f"{what} needs betterosi: pip install 'carlos[omega]'", field=what) from None
+        raise BadInput(f"{what} needs betterosi: pip install 'carlos-sim[omega]'", field=what) from None
     return bo
 
 

@@ -21,6 +21,7 @@ from importlib.metadata import version
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from simcore import DISTRIBUTION
 from simcore.errors import BadInput, SimulationError
 from simcore.plan import RunPoint
 from simcore.spec import SimulationRun, SimulationRunSpec
@@ -155,7 +156,7 @@ def versions() -> dict[str, str]:
     out = {"python": platform.python_version()}
     for package in ("carlos", "eclipse-sumo", "libsumo", "mcap", "rosbags"):
         try:
-            out[package] = version(package)
+            out[package] = version(DISTRIBUTION if package == "carlos" else package)
         except Exception:  # a package missing from the environment is reported, not fatal
             out[package] = "unknown"
     return out

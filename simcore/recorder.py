@@ -44,7 +44,6 @@ import threading
 import zlib
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from importlib import metadata as importlib_metadata
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, Literal, Self
@@ -115,11 +114,9 @@ def _record(opcode: int, content: bytes) -> bytes:
 
 
 def _library() -> str:
-    try:
-        carlos = importlib_metadata.version("carlos")
-    except importlib_metadata.PackageNotFoundError:
-        carlos = "unknown"
-    return f"carlos {carlos}"
+    from simcore import version
+
+    return f"carlos {version()}"
 
 
 def _ns(time_s: float) -> int:

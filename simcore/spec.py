@@ -518,7 +518,7 @@ class Recording(Model):
         None,
         description=(
             "Also record ASAM OSI ground truth: channel `/carlos/osi/ground_truth`, protobuf `osi3.GroundTruth` "
-            "(OSI 3.8.0), one message per step (needs `pip install 'carlos[omega]'`). Default false."
+            "(OSI 3.8.0), one message per step (needs `pip install 'carlos-sim[omega]'`). Default false."
         ),
     )
 

@@ -239,3 +239,25 @@ def test_system_under_test_parameters_are_checked_by_validate(
     assert code == 2, stderr
     assert expected in stderr.replace(str(tmp_path) + "/", "")
     assert stderr.startswith(f"error: {tmp_path / 'm.yaml'}")
+
+
+def test_an_output_url_without_a_scheme_gets_the_hint_of_the_command_line(tmp_path: Path) -> None:
+    code, message = _validate(
+        tmp_path, HEAD + "metadata: {name: r}\n" + SCENARIO + "  output: {url: ./results}\n"
+    )
+    assert code == 2 and len(message.splitlines()) == 1
+    assert "spec.output.url: './results' is not a results URL" in message and "file://./results" in message
+    assert "^(file|s3)" not in message  # not the raw pattern
+
+
+def test_a_missing_scenario_path_is_printed_normalised(tmp_path: Path) -> None:
+    (tmp_path / "runs").mkdir()
+    text = (
+        HEAD + "metadata: {name: r}\nspec:\n  scenarios: [{name: a, openscenario: ../scenarios/nope.xosc}]\n"
+    )
+    manifest = tmp_path / "runs" / "m.yaml"
+    manifest.write_text(text)
+    outcome = carlos_in_process("validate", manifest)
+    assert outcome.exit_code == 2
+    assert f"scenario file '{tmp_path / 'scenarios' / 'nope.xosc'}' not found" in outcome.stderr
+    assert "/../" not in outcome.stderr

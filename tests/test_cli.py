@@ -316,3 +316,25 @@ def test_the_collector_is_paused_for_start_up_only(command: str, tmp_path: Path)
     )
     assert result.returncode in (0, 1), result.stderr
     assert "GC [False] True True" in result.stderr, result.stderr
+
+
+def test_help_is_whole_in_80_columns_and_the_version_is_printed() -> None:
+    """Help in an 80-column terminal wraps at word boundaries: no field name or sentence cut short."""
+    narrow = {"COLUMNS": "80"}
+    run_help = carlos("run", "--help", env=narrow).stdout
+    assert "spec.execution.parallelism" in run_help and "paralleli…" not in run_help
+    assert all(len(line) <= 80 for line in run_help.splitlines() if " " in line.strip())
+    top = carlos("--help", env=narrow).stdout
+    commands = top[top.index("Commands:") :]
+    assert "..." not in commands and "…" not in commands  # every command's first sentence whole
+    version = carlos("--version")
+    assert version.returncode == 0 and version.stdout.strip() == "carlos 0.1.0 (carlos-sim)"
+
+
+def test_plan_of_a_search_says_its_points_are_chosen_as_it_runs() -> None:
+    done = carlos("plan", "examples/runs/search-cut-in.yaml")
+    assert done.returncode == 0, done.stderr
+    assert "a search of 64 runs in rounds of 16, its points chosen as it runs" in " ".join(
+        done.stdout.split()
+    )
+    assert "(defaults)" not in done.stdout

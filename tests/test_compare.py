@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from simcore.compare import classify, compare, metric_changes, run_key
+from simcore.compare import classify, compare, markdown, metric_changes, run_key
 from tests.s3server import S3Server
 from tests.test_cli import ROOT, carlos
 
@@ -58,7 +58,7 @@ def test_new_failure_added_and_removed_runs_exit_1_with_markdown_and_junit(
     assert "1 new failure · 0 fixed · 0 still failing · 0 still passing · 1 added · 1 removed" in done.stdout
     assert "new failure: cut-in[0] EgoSpeed=20: minDistance >= 1000" in done.stdout
     text = md.read_text()
-    assert text.startswith("### CARLOS compare: ❌ new failures")
+    assert text.startswith("### CARLOS compare: ❌ 1 new failure\n")
     assert "#### New failures (1)" in text and "| cut-in[0] EgoSpeed=20 | passed | failed |" in text
     assert "#### Added runs (1)" in text and "cut-in[1] EgoSpeed=24" in text
     assert "#### Removed runs (1)" in text and "cut-in[1] EgoSpeed=28" in text
@@ -70,14 +70,66 @@ def test_new_failure_added_and_removed_runs_exit_1_with_markdown_and_junit(
     assert cases["cut-in[1] EgoSpeed=28"].find("skipped") is not None  # removed
 
 
+def test_the_spec_differences_come_first(runs: tuple[Path, Path], tmp_path: Path) -> None:
+    """A changed threshold explains a changed verdict: it is listed before the verdicts, in the terminal and
+    in the Markdown."""
+    base, cand = runs
+    done = carlos("compare", base.as_uri(), cand.as_uri(), "--markdown", tmp_path / "c.md")
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith("the specs differ"), done.stdout
+    assert (
+        "  criteria: removed 'minDistance >= 0.0'" in lines
+        and "  criteria: added 'minDistance >= 1000.0'" in lines
+    )
+    assert "  sweep.matrix EgoSpeed: [20.0, 28.0] → [20.0, 24.0]" in lines
+    assert lines.index("  sweep.matrix EgoSpeed: [20.0, 28.0] → [20.0, 24.0]") < next(
+        i for i, line in enumerate(lines) if "new failure" in line
+    )
+    text = (tmp_path / "c.md").read_text()
+    assert text.index("#### The specs differ") < text.index("| verdict | runs |")
+    # the same spec, the same scenario file: nothing listed
+    same = carlos("compare", cand.as_uri(), cand.as_uri())
+    assert "the specs differ" not in same.stdout
+
+
+def test_a_changed_scenario_file_is_listed_by_its_digest(tmp_path: Path) -> None:
+    (tmp_path / "scenarios").mkdir()
+    (tmp_path / "maps").symlink_to(ROOT / "examples" / "maps")
+    scenario = tmp_path / "scenarios" / "s.xosc"
+    scenario.write_bytes(SCENARIO.read_bytes())
+    outputs = []
+    for name in ("one", "two"):
+        manifest = _manifest(tmp_path, name, [20.0], 0.0)
+        text = manifest.read_text().replace(json.dumps(str(SCENARIO)), json.dumps(str(scenario)))
+        manifest.write_text(text.replace(f"name: {name}", "name: same"))
+        done = carlos("run", manifest, "-q", "--output", (tmp_path / name).as_uri())
+        assert done.returncode == 0, done.stderr
+        outputs.append(tmp_path / name / "same")
+        scenario.write_bytes(scenario.read_bytes() + b"\n")  # the same scenario, other bytes
+    done = carlos("compare", outputs[0].as_uri(), outputs[1].as_uri())
+    assert done.returncode == 0, done.stderr
+    assert "  scenario cut-in: file contents differ" in done.stdout
+
+
+def test_nothing_matched_is_bad_input_not_a_pass(runs: tuple[Path, Path], tmp_path: Path) -> None:
+    """A gate that compared nothing must not pass: two runs with no run in common are exit 2, one line."""
+    manifest = _manifest(tmp_path, "other", [21.0, 22.0], 0.0)
+    assert carlos("run", manifest, "-q").returncode == 0
+    done = carlos("compare", runs[0].as_uri(), (tmp_path / "results" / "other").as_uri())
+    assert done.returncode == 2, done.stdout + done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "nothing was compared" in lines[0] and "2 added, 2 removed" in lines[0]
+    assert "EgoSpeed" in lines[0] and "Traceback" not in done.stderr
+
+
 def test_fixed_and_still_failing_exit_0(runs: tuple[Path, Path]) -> None:
     base, cand = runs
     done = carlos("compare", cand.as_uri(), base.as_uri(), "--markdown", "-")
     assert done.returncode == 0, done.stderr
-    assert "0 new failure · 1 fixed" in done.stdout and "✅ no new failures" in done.stdout
+    assert "0 new failures · 1 fixed" in done.stdout and "✅ no new failures" in done.stdout
     done = carlos("compare", cand.as_uri(), cand.as_uri())
     assert done.returncode == 0, done.stderr
-    assert "0 new failure · 0 fixed · 2 still failing · 0 still passing · 0 added · 0 removed" in done.stdout
+    assert "0 new failures · 0 fixed · 2 still failing · 0 still passing · 0 added · 0 removed" in done.stdout
     assert "0 with metric changes" in done.stdout  # the same results: no metric moved
 
 
@@ -138,6 +190,20 @@ def test_metric_changes_beyond_the_tolerance() -> None:
     assert [(c.metric, c.baseline, c.candidate) for c in changes] == [("maxSpeed", 20.0, 23.0)]
     result = compare([_summary(0, "passed", minDistance=1.0)], [_summary(0, "passed", minDistance=2.0)])
     assert len(result.changed_metrics) == 1 and result.exit_code == 0
+    # near-zero noise is no change: 14 % relative, but 0.0035 m/s² absolute
+    assert metric_changes({"maxAcceleration": 0.0254}, {"maxAcceleration": 0.0289}) == ()
+    assert metric_changes({"maxAcceleration": 0.0254}, {"maxAcceleration": 0.0289}, absolute=0.001) != ()
+    text = markdown(result)
+    assert "| 1 m | 2 m | +1 m |" in text  # with units
+
+
+def test_counts_read_as_words() -> None:
+    baseline = [_summary(i, "passed", seed=i) for i in range(3)]
+    result = compare(baseline, [_summary(i, "failed", seed=i) for i in range(3)])
+    assert result.counts_line().startswith("3 new failures · 0 fixed")
+    assert markdown(result).startswith("### CARLOS compare: ❌ 3 new failures")
+    one = compare(baseline[:1], [_summary(0, "failed")])
+    assert one.counts_line().startswith("1 new failure · 0 fixed")
 
 
 pytest_plugins = ["tests.s3server"]

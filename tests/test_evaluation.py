@@ -452,7 +452,7 @@ def test_criteria_operators() -> None:
         2.0,
         False,
     )
-    assert results[1].message == "minDistance = 2: > 2 does not hold"
+    assert results[1].message == "minDistance = 2 m: > 2 m does not hold"
     assert results[4].expected == "== 0"
     assert verdict(results, None) == "failed"
 
@@ -493,7 +493,7 @@ def test_optional_criterion_and_verdict() -> None:
         actual=0.4,
         passed=False,
         optional=True,
-        message="minTimeHeadway = 0.4: >= 1 does not hold",
+        message="minTimeHeadway = 0.4 s: >= 1 s does not hold",
     )
     assert verdict(results, None) == "passed"
     assert verdict(results, "simulator crashed") == "error"
@@ -557,7 +557,7 @@ def test_index_summary_fields() -> None:
         "actual": 1.5,
         "passed": False,
         "optional": False,
-        "message": "minDistance = 1.5: >= 2 does not hold",
+        "message": "minDistance = 1.5 m: >= 2 m does not hold",
     }
     assert json.loads(json.dumps(s)) == s
     with pytest.raises(ValueError, match="needs the error message"):

@@ -69,3 +69,17 @@ def test_the_written_examples_run_from_the_folder_the_docs_name(tmp_path: Path) 
     summary = json.loads((tmp_path / "results" / "prototyping" / "summary.json").read_text())
     assert summary["exitCode"] == 0
     assert (tmp_path / "results" / "prototyping" / "0" / "recording.mcap").stat().st_size > 0
+
+
+def test_an_installation_without_the_examples_is_one_line_and_exit_2(tmp_path: Path, monkeypatch) -> None:
+    """Exit 3 is a retryable infrastructure error: a missing data file is not one."""
+    from simcore import examples as module
+    from tests.inprocess import carlos_in_process
+
+    monkeypatch.setattr(module.resources, "files", lambda _package: tmp_path / "site" / "simcore")
+    monkeypatch.setattr(module, "__file__", str(tmp_path / "site" / "simcore" / "examples.py"))
+    outcome = carlos_in_process("examples", tmp_path / "work")
+    assert outcome.exception is None
+    assert outcome.exit_code == 2
+    lines = outcome.stderr.strip().splitlines()
+    assert len(lines) == 1 and "has no examples" in lines[0] and "pip install" in lines[0], outcome.stderr

@@ -296,7 +296,7 @@ def test_export_of_s3_results_with_an_s3_scenario(s3_server: object, tmp_path: P
 def test_without_betterosi_the_export_and_the_osi_channel_are_bad_input(
     exported: tuple[Path, Path], tmp_path: Path
 ) -> None:
-    """Without the extra: one line naming `carlos[omega]`, exit 2, no traceback."""
+    """Without the extra: one line naming `carlos-sim[omega]`, exit 2, no traceback."""
     recording, _ = exported
     run = recording.parents[1]
     manifest = tmp_path / "osi.yaml"
@@ -320,7 +320,7 @@ def test_without_betterosi_the_export_and_the_osi_channel_are_bad_input(
             cwd=ROOT,
             check=False,
         )
-        assert "carlos[omega]" in done.stderr + done.stdout, done.stderr
+        assert "carlos-sim[omega]" in done.stderr + done.stdout, done.stderr
         assert "Traceback" not in done.stderr
         assert done.returncode == 2
 

@@ -196,3 +196,26 @@ def test_spec_live_is_refused_for_more_than_one_run(tmp_path: Path) -> None:
     )
     assert done.returncode == 2, done.stdout + done.stderr
     assert "spec.live" in done.stderr and "choose one with --index N" in done.stderr
+
+
+def test_live_runs_a_finished_index_again_and_keeps_the_others(tmp_path: Path) -> None:
+    """After `make demo`, `--live -i 4` has something to watch: the finished index runs again (it is not
+    resumed), and the sweep's other indexes keep their results."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    manifest = str(root / "examples" / "runs" / "data-generation.yaml")
+
+    def carlos(*args: str) -> subprocess.CompletedProcess[str]:
+        command = [sys.executable, "-m", "simcore.cli", "run", manifest, "-o", f"file://{tmp_path}", *args]
+        return subprocess.run(command, capture_output=True, text=True, timeout=600)
+
+    first = carlos("-i", "4", "-i", "5", "-q")
+    assert first.returncode == 0, first.stderr
+    before = (tmp_path / "data-generation" / "5" / "summary.json").read_bytes()
+    live = carlos("--live", "-i", "4", "--live-port", "0", "--live-speed", "0")
+    assert live.returncode == 0, live.stderr
+    assert "resuming" not in live.stdout + live.stderr and "(0 resumed)" in live.stdout
+    assert (tmp_path / "data-generation" / "5" / "summary.json").read_bytes() == before
+    assert json.loads((tmp_path / "data-generation" / "summary.json").read_text())["counts"]["total"] == 2

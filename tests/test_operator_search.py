@@ -148,6 +148,6 @@ def test_search_runs_in_rounds_survives_restarts_and_succeeds(
     )
     line = state_of_object(obj).line()
     assert (
-        f"{name}: Succeeded 6/6 · passed 6" in line
+        f"{name}: Succeeded · 6 finished · 6 passed" in line
         and f"rounds 2/2 · best {search['bestObjective']:.3g}" in line
     )

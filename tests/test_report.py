@@ -105,9 +105,11 @@ def test_report_renders_its_plots_in_headless_chromium(
         assert wanted in colours, wanted
 
 
-def _criterion(name: str, expected: str, actual: float | None) -> dict[str, object]:
+def _criterion(
+    name: str, expected: str, actual: float | None, metric: str = "minTimeHeadway"
+) -> dict[str, object]:
     passed = actual is not None and margin(expected, actual) is not None and margin(expected, actual) >= 0  # type: ignore[operator]
-    return {"name": name, "expected": expected, "actual": actual, "passed": passed}
+    return {"name": name, "metric": metric, "expected": expected, "actual": actual, "passed": passed}
 
 
 def test_worst_runs_rank_errors_failures_by_margin_collisions_then_the_tightest_per_criterion_and_ttc() -> (
@@ -131,14 +133,27 @@ def test_worst_runs_rank_errors_failures_by_margin_collisions_then_the_tightest_
     ranked = [(s["index"], reason) for s, reason in worst_runs(indexes, 7)]
     assert ranked == [
         (5, "error"),
-        (3, "failed THW (margin -0.8)"),  # further outside the threshold than index 2
-        (2, "failed THW (margin -0.1)"),
+        (3, "failed THW (minTimeHeadway = 0.2 s)"),  # further outside the threshold than index 2
+        (2, "failed THW (minTimeHeadway = 0.9 s)"),
         (4, "collision"),
-        (1, "closest to THW (margin +0.1)"),  # the tightest passed headway, not the smallest distance
+        (
+            1,
+            "closest to THW (minTimeHeadway = 1.1 s)",
+        ),  # the tightest passed headway, not the smallest distance
         (6, "smallest minTimeToCollision (0.8 s)"),
         (0, "next tightest"),  # the smallest headway (3) and distance (4) are already shown
     ]
     assert [s["index"] for s, _ in worst_runs(indexes, 3)] == [5, 3, 2]
+    # an equality that holds is close to nothing: no "margin -0" title
+    held = [
+        {
+            "index": 0,
+            "status": "passed",
+            "metrics": {},
+            "criteria": [_criterion("collision == 0", "== 0", 0.0, "collision")],
+        }
+    ]
+    assert worst_runs(held, 1) == [(held[0], "next tightest")]
 
 
 def test_constant_parameters_are_those_every_run_shares() -> None:
@@ -172,6 +187,7 @@ def test_criteria_rows_and_swept_parameters() -> None:
         {
             "scenario": "s",
             "criterion": "minDistance >= 2",
+            "metric": "minDistance",
             "expected": ">= 2",
             "optional": False,
             "passed": 1,
@@ -201,3 +217,22 @@ def test_sweep_plots_are_svg_with_a_cell_per_value_pair_and_a_bar_per_bin() -> N
     assert many.count("a2.4 2.4") == 2 * 30
     hist = distributions({"minDistance": [1.0, 2.0, 2.5, 3.0, 9.0], "flat": [0.0, 1.0]})
     assert hist.count('fill="#1565c0"') >= 4 and ">minDistance<" in hist and ">flat<" in hist
+
+
+def test_runs_table_columns_are_stable_with_units_and_a_missing_birds_eye_says_why(tmp_path: Path) -> None:
+    """The same metric columns in every report (the criteria's other metrics after them), units in the
+    headers, headers never broken inside a word; without recordings the bird's-eye section says why."""
+    from simcore.report.html import RUNS_TABLE_METRICS
+    from tests.test_cli import carlos
+    from tests.test_compare import _manifest
+
+    done = carlos("run", _manifest(tmp_path, "plain", [20.0, 28.0], 0.5), "-q", "-j", "1")
+    assert done.returncode == 0, done.stderr
+    page = (tmp_path / "results" / "plain" / "report.html").read_text()
+    assert "overflow-wrap:anywhere" not in page
+    header = page[page.index("<table class=runs>") :].split("</tr>")[0]
+    columns = re.findall(r"<th>([A-Za-z.]+)", header)
+    assert columns[-len(RUNS_TABLE_METRICS) :] == list(RUNS_TABLE_METRICS)
+    assert "minTimeToCollision<br><span class=unit>(s)</span>" in header
+    assert "Not drawn: this run recorded nothing" in page and "spec.recording.enabled: false" in page
+    assert "margin -0" not in page and "margin +" not in page

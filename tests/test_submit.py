@@ -164,7 +164,7 @@ def test_submitted_example_runs_to_succeeded_with_results_in_s3(
     assert summary["status"] == "passed" and summary["counts"]["total"] == 1
     assert store.exists("prototyping/0/recording.mcap")
     # the same run through its name on the cluster
-    assert "prototyping: Succeeded 1/1 · passed 1 failed 0 errors 0" in carlos("get", "-n", "default").stdout
+    assert "prototyping: Succeeded · 1 finished · 1 passed" in carlos("get", "-n", "default").stdout
     assert carlos("watch", "prototyping", "-n", "default").returncode == 0
     log = carlos("logs", "prototyping", "-i", "0", "-n", "default")
     assert log.returncode == 0 and "index 0" in log.stdout, log.stderr

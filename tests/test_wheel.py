@@ -20,6 +20,8 @@ PACKAGE_ROOTS = {
     ROOT / "operator" / "carlos_operator": "carlos_operator",
     ROOT / "examples": "simcore/_examples",  # package data: `carlos examples DIR` writes it out
 }
+#: the distribution is carlos-sim (`carlos` on PyPI is another project); the command stays `carlos`
+DIST_INFO = "carlos_sim-0.1.0.dist-info/"
 
 
 def build_wheel(out: Path) -> Path:
@@ -39,12 +41,18 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return build_wheel(tmp_path_factory.mktemp("dist"))
 
 
+def tracked() -> set[Path]:
+    listed = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
+    return {ROOT / name for name in listed.decode().split("\0") if name}
+
+
 def source_files() -> dict[str, Path]:
-    """Every file the wheel must hold, by its path inside the wheel (caches and bytecode excluded)."""
+    """Every file the wheel must hold, by its path inside the wheel: the files git tracks in the package
+    folders (untracked scratch files, caches and bytecode stay out)."""
     files: dict[str, Path] = {}
-    for directory, package in PACKAGE_ROOTS.items():
-        for path in directory.rglob("*"):
-            if path.is_file() and "__pycache__" not in path.parts and path.suffix != ".pyc":
+    for path in sorted(tracked()):
+        for directory, package in PACKAGE_ROOTS.items():
+            if path.is_file() and path.is_relative_to(directory):
                 files[f"{package}/{path.relative_to(directory).as_posix()}"] = path
     return files
 
@@ -55,16 +63,20 @@ def test_wheel_holds_every_module_and_data_file(wheel: Path) -> None:
         expected = source_files()
         missing = sorted(set(expected) - names)
         assert not missing, f"{wheel.name} lacks {missing}"
+        packed = {n for n in names if not n.startswith(DIST_INFO)}
+        assert packed == set(expected), (
+            f"not tracked by git, yet in the wheel: {sorted(packed - set(expected))}"
+        )
         for name, path in expected.items():
             assert archive.read(name) == path.read_bytes(), f"{name} differs from {path}"
-        entry_points = archive.read("carlos-0.1.0.dist-info/entry_points.txt").decode()
+        entry_points = archive.read(f"{DIST_INFO}entry_points.txt").decode()
     assert "carlos = simcore.cli:main" in entry_points
     # what the issue found missing, and the data files a run loads
     for required in ("simcore/sensors/kernels.py", "simcore/py.typed", "carlos_operator/py.typed"):
         assert required in names
     assert sum(n.endswith(".msg") for n in names) >= 18
     # nothing from outside the two packages (tests, examples, the operator/ folder as a package)
-    tops = {n.split("/")[0] for n in names if not n.startswith("carlos-0.1.0.dist-info/")}
+    tops = {n.split("/")[0] for n in names if not n.startswith(DIST_INFO)}
     assert tops == {"simcore", "carlos_operator"}
 
 
@@ -154,3 +166,34 @@ print(simcore.__file__, carlos_operator.__file__)
     )
     assert result.returncode == 0, result.stderr[-3000:]
     assert all(path.startswith(str(site)) for path in result.stdout.split()), result.stdout
+
+
+def test_pip_install_of_the_source_folder_carries_the_examples(tmp_path: Path) -> None:
+    """`pip install <source folder>` (and so `pip install git+URL`), not only `make wheel`, installs the
+    examples: `carlos examples .` writes them in another folder, and an example runs from there."""
+    source = tmp_path / "source"
+    for path in tracked():
+        if path.is_file():
+            (source / path.relative_to(ROOT)).parent.mkdir(parents=True, exist_ok=True)
+            (source / path.relative_to(ROOT)).write_bytes(path.read_bytes())
+    site = tmp_path / "site"
+    _install(source, site)
+    assert (site / "simcore" / "_examples" / "runs" / "prototyping.yaml").is_file()
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    env = {**os.environ, "PYTHONPATH": str(site)}
+
+    def carlos(*args: str) -> subprocess.CompletedProcess[str]:
+        command = [sys.executable, "-m", "simcore.cli", *args]
+        return subprocess.run(command, cwd=work, env=env, capture_output=True, text=True, timeout=600)
+
+    version = carlos("--version")
+    assert version.stdout.strip() == "carlos 0.1.0 (carlos-sim)", version.stdout + version.stderr
+    written = carlos("examples", ".")
+    assert written.returncode == 0, written.stderr
+    assert (work / "examples" / "runs" / "prototyping.yaml").read_bytes() == (
+        ROOT / "examples" / "runs" / "prototyping.yaml"
+    ).read_bytes()
+    ran = carlos("run", "examples/runs/prototyping.yaml", "--quiet")
+    assert ran.returncode == 0, ran.stderr[-3000:]
+    assert (work / "results" / "prototyping" / "0" / "summary.json").is_file()

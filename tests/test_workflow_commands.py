@@ -54,12 +54,12 @@ def run_dir(tmp_path: Path) -> Path:
 def test_get_of_a_running_run_counts_indexes_and_lists_failures(run_dir: Path) -> None:
     result = carlos("get", run_dir.as_uri())
     assert result.returncode == 0, result.stderr
-    assert "demo: Running 2/3 · passed 1 failed 1 errors 0" in result.stdout
+    assert "demo: Running · 2 of 3 finished · 1 passed · 1 failed" in result.stdout
     assert (
         "failed cut-in[1] Speed=11: minDistance >= 2: minDistance = 1.5: >= 2 does not hold" in result.stdout
     )
     # the output URL holding one run is enough
-    assert "demo: Running 2/3" in carlos("get", run_dir.parent.as_uri()).stdout
+    assert "demo: Running · 2 of 3 finished" in carlos("get", run_dir.parent.as_uri()).stdout
 
 
 def test_watch_ends_with_the_run_and_its_exit_code(run_dir: Path) -> None:
@@ -69,7 +69,7 @@ def test_watch_ends_with_the_run_and_its_exit_code(run_dir: Path) -> None:
         json.dumps({"run": "demo", "status": "failed", "exitCode": 1, "counts": {"total": 2}})
     )
     result = carlos("watch", run_dir.as_uri())
-    assert result.returncode == 1 and "demo: Failed 2/2" in result.stdout
+    assert result.returncode == 1 and "demo: Failed · 2 finished" in result.stdout
 
 
 def test_logs_and_results(run_dir: Path, tmp_path: Path) -> None:

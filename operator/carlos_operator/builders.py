@@ -138,7 +138,7 @@ def container_resources(
 
 def _package_version() -> str:
     try:
-        return version("carlos")
+        return version("carlos-sim")  # the distribution (simcore.DISTRIBUTION)
     except PackageNotFoundError:
         return "0.0.0"
 

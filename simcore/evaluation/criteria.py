@@ -18,6 +18,7 @@ from typing import Literal
 
 from simcore.evaluation.metrics import KNOWN_METRICS, METRICS
 from simcore.spec import CriterionModel
+from simcore.units import spoken
 
 Status = Literal["passed", "failed", "error"]
 
@@ -97,7 +98,8 @@ def _evaluate_one(criterion: CriterionModel, metrics: Mapping[str, float]) -> Cr
         else:
             passed = _OPERATORS[criterion.operator](actual, criterion.value)
             verb = "holds" if passed else "does not hold"
-            message = f"{metric} = {format_measured(actual, criterion.value)}: {expected} {verb}"
+            u = f" {spoken(metric)}" if spoken(metric) else ""
+            message = f"{metric} = {format_measured(actual, criterion.value)}{u}: {expected}{u} {verb}"
     return CriterionResult(
         name=criterion.label,
         metric=metric,

@@ -218,21 +218,25 @@ def _xml_text(value: object) -> str:
     return _XML_INVALID.sub("\ufffd", str(value))
 
 
-def _format_value(value: Any) -> str:
+def _format_value(value: Any, digits: int | None = None) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):
+        if digits is not None and math.isfinite(value):
+            return f"{value:.{digits}g}"
         short = f"{value:g}"
         return short if float(short) == value else repr(value)
     return str(value)
 
 
-def testcase_name(summary: Mapping[str, Any]) -> str:
-    """`cut-in[3] speed=30,gap=15` (parameters in their order; no suffix without parameters)."""
+def testcase_name(summary: Mapping[str, Any], digits: int | None = None) -> str:
+    """`cut-in[3] speed=30,gap=15` (parameters in their order; no suffix without parameters). JUnit names
+    keep every digit (a search's 7.0720762150555725); what a person reads takes `digits` significant digits
+    (`CutInGap=7.072`): the index names the run exactly."""
     parameters = summary.get("parameters") or {}
     name = f"{summary['scenario']}[{summary['index']}]"
     if parameters:
-        name += " " + ",".join(f"{key}={_format_value(value)}" for key, value in parameters.items())
+        name += " " + ",".join(f"{key}={_format_value(value, digits)}" for key, value in parameters.items())
     return name
 
 

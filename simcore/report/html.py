@@ -15,6 +15,7 @@ from simcore.report.trajectories import RoadOutline, read_recording, road_outlin
 from simcore.results import PrefixedStore, RunResults
 from simcore.spec import SimulationRun
 from simcore.store import Store, StoreError
+from simcore.units import spoken, unit, with_unit
 from simcore.wording import plural
 
 #: name of the report next to the run-level summary.json
@@ -26,12 +27,13 @@ color:#212121;padding:0 16px}
 h1{margin-bottom:4px}h2{margin-top:32px;border-bottom:1px solid #ddd;padding-bottom:4px}
 table{border-collapse:collapse;font-size:13px;margin:8px 0}
 th,td{border:1px solid #ddd;padding:3px 8px;text-align:left;vertical-align:top}
-th{background:#f5f5f5}td.num{text-align:right;font-variant-numeric:tabular-nums}
+th{background:#f5f5f5}td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 .badge{display:inline-block;padding:2px 10px;border-radius:10px;color:#fff;font-weight:600}
 .passed{background:#2e7d32}.failed{background:#c62828}.error{background:#6a1b9a}.optional{background:#757575}
 .muted{color:#757575}svg.plot{max-width:100%;height:auto;display:block;margin:8px 0}
-table.runs{width:100%;font-size:12px}table.runs td{overflow-wrap:break-word}
-table.runs th{font-size:11px;overflow-wrap:anywhere}.badge{white-space:nowrap}
+table.runs{width:100%;font-size:12px}table.runs td{overflow-wrap:break-word}div.wide{overflow-x:auto}
+table.runs th{font-size:11px;white-space:nowrap;vertical-align:bottom}.unit{font-weight:400}
+.badge{white-space:nowrap}
 table.runs td:first-child{white-space:nowrap}p.links a{font-weight:600}
 
 """
@@ -66,6 +68,7 @@ def criteria_rows(indexes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
                 {
                     "scenario": summary["scenario"],
                     "criterion": c["name"],
+                    "metric": c.get("metric", ""),
                     "expected": c["expected"],
                     "optional": bool(c.get("optional")) or bool(summary.get("optional")),
                     "passed": 0,
@@ -121,8 +124,16 @@ def worst_runs(indexes: Sequence[Mapping[str, Any]], count: int) -> list[tuple[M
         for c in s.get("criteria", []):
             m = margin(str(c.get("expected", "")), c.get("actual"))
             if m is not None:
-                out.append((m, str(c["name"])))
+                out.append((m + 0.0, str(c["name"])))  # + 0.0: never a "-0"
         return out
+
+    def measured_text(s: Mapping[str, Any], name: str) -> str:
+        """`minTimeToCollision = 0.9546 s`: what a reason says instead of an abstract margin."""
+        c = next((c for c in s.get("criteria", []) if str(c["name"]) == name), None)
+        if c is None or c.get("actual") is None:
+            return ""
+        metric = str(c.get("metric") or name)
+        return f" ({metric} = {with_unit(metric, float(c['actual']))})"
 
     by_index = sorted(indexes, key=lambda s: int(s["index"]))
     for s in by_index:
@@ -131,18 +142,23 @@ def worst_runs(indexes: Sequence[Mapping[str, Any]], count: int) -> list[tuple[M
     failed = [s for s in by_index if s["status"] == "failed"]
     for s in sorted(failed, key=lambda s: min((m for m, _ in margins(s)), default=0.0)):
         tightest = min(margins(s), default=None)
-        pick(s, f"failed {tightest[1]} (margin {tightest[0]:+.3g})" if tightest else "failed")
+        pick(s, f"failed {tightest[1]}{measured_text(s, tightest[1])}" if tightest else "failed")
     for s in by_index:
         if float(s.get("metrics", {}).get("collision", 0.0)) > 0:
             pick(s, "collision")
     criteria: dict[str, list[tuple[float, int, Mapping[str, Any]]]] = {}
     for s in by_index:
+        ordered = {
+            str(c["name"]) for c in s.get("criteria", []) if str(c.get("expected", "")).startswith(("<", ">"))
+        }
         for m, name in margins(s):
-            if m >= 0:  # the failures are already chosen: the near misses that passed
+            # the failures are already chosen: the near misses that passed, of criteria with a side to
+            # approach from (an equality that holds, `collision == 0`, is not close to anything)
+            if m >= 0 and name in ordered:
                 criteria.setdefault(name, []).append((m, int(s["index"]), s))
     for name, ranked in criteria.items():
         m, _, s = min(ranked, key=lambda r: (r[0], r[1]))
-        pick(s, f"closest to {name} (margin {m:+.3g})")
+        pick(s, f"closest to {name}{measured_text(s, name)}")
     for metric in NEAR_MISS_METRICS:
         measured = [
             (float(s["metrics"][metric]), int(s["index"]), s)
@@ -151,7 +167,7 @@ def worst_runs(indexes: Sequence[Mapping[str, Any]], count: int) -> list[tuple[M
         ]
         if measured:
             value, _, s = min(measured, key=lambda r: (r[0], r[1]))
-            pick(s, f"smallest {metric} ({value:.3g} {plots.UNITS.get(metric, '')})".replace(" )", ")"))
+            pick(s, f"smallest {metric} ({with_unit(metric, value)})")
 
     def tightness(s: Mapping[str, Any]) -> tuple[float, ...]:
         metrics = s.get("metrics", {})
@@ -219,6 +235,12 @@ def _verdict(results: RunResults) -> str:
     return f"<p>{_badge(summary['status'])} exit code {summary['exitCode']} · {' · '.join(parts)}</p>"
 
 
+def _with_spoken_unit(text: str, metric: str) -> str:
+    """`>= 1.5 s` for a threshold `>= 1.5` of a metric in seconds."""
+    u = spoken(metric)
+    return f"{text} {u}" if u else text
+
+
 def _criteria_table(results: RunResults) -> str:
     rows = criteria_rows(results.indexes)
     if not rows:
@@ -229,15 +251,17 @@ def _criteria_table(results: RunResults) -> str:
     ]
     for r in rows:
         status = "optional" if r["optional"] and r["failed"] else "failed" if r["failed"] else "passed"
+        metric = str(r.get("metric", ""))
         measured = (
-            f"{_short(min(r['values']))} … {_short(max(r['values']))}"
+            f"{_short(min(r['values']))} … {with_unit(metric, max(r['values']))}"
             if len(set(r["values"])) > 1
-            else _short(r["values"][0])
+            else with_unit(metric, r["values"][0])
             if r["values"]
             else "absent"
         )
         out.append(
-            f"<tr><td>{_e(r['scenario'])}</td><td>{_e(r['criterion'])}</td><td>{_e(r['expected'])}</td>"
+            f"<tr><td>{_e(r['scenario'])}</td><td>{_e(r['criterion'])}</td>"
+            f"<td>{_e(_with_spoken_unit(str(r['expected']), metric))}</td>"
             f"<td>{_badge(status)}</td><td class=num>{r['passed']}</td><td class=num>{r['failed']}</td>"
             f"<td class=num>{_e(measured)}</td></tr>"
         )
@@ -250,19 +274,25 @@ def _failures(results: RunResults, limit: int = 50) -> str:
     if not failed:
         return '<p class="muted">None.</p>'
     out = ["<table><tr><th>index</th><th>status</th><th>criterion</th><th>value</th><th>message</th></tr>"]
+    constant = constant_parameters(results.indexes)  # shown once in the header, not in every row
     for s in failed[:limit]:
         status = "optional" if s.get("optional") else s["status"]
+        name = testcase_name(
+            {**s, "parameters": {k: v for k, v in (s.get("parameters") or {}).items() if k not in constant}},
+            4,
+        )
         if s["status"] == "error":
             out.append(
-                f"<tr><td>{_e(testcase_name(s))}</td><td>{_badge(status)}</td><td></td><td></td>"
+                f"<tr><td>{_e(name)}</td><td>{_badge(status)}</td><td></td><td></td>"
                 f"<td>{_e(s.get('error'))}</td></tr>"
             )
             continue
         for c in s.get("criteria", []):
             if not c["passed"]:
                 out.append(
-                    f"<tr><td>{_e(testcase_name(s))}</td><td>{_badge(status)}</td><td>{_e(c['name'])}</td>"
-                    f"<td class=num>{_number(c.get('actual'))}</td><td>{_e(c.get('message'))}</td></tr>"
+                    f"<tr><td>{_e(name)}</td><td>{_badge(status)}</td><td>{_e(c['name'])}</td>"
+                    f"<td class=num>{_e(with_unit(str(c.get('metric', '')), c.get('actual')))}</td>"
+                    f"<td>{_e(c.get('message'))}</td></tr>"
                 )
     out.append("</table>")
     if len(failed) > limit:
@@ -324,11 +354,22 @@ def _birds_eye(results: RunResults, worst: int) -> str:
             ys = [v for tr in recording.trajectories.values() for v in tr.y] or [0.0]
             extent = max(max(xs) - min(xs), max(ys) - min(ys)) + 20.0
             roads[source] = road_outline(recording.scenario_file, step=min(max(extent / 300.0, 2.0), 10.0))
-        varying = ",".join(f"{k}={v}" for k, v in (s.get("parameters") or {}).items() if k not in constant)
+        varying = ",".join(
+            f"{k}={_parameter(v)}" for k, v in (s.get("parameters") or {}).items() if k not in constant
+        )
         title = f"{s['scenario']}[{s['index']}] {varying} · {s['status']}"
         figures.append(plots.birds_eye(recording, roads[source], title, reason))
     if not figures:
-        return ""
+        if not results.indexes:
+            return ""
+        recording_off = results.spec is not None and not results.spec.spec.recording.enabled
+        why = (
+            "this run recorded nothing (<code>spec.recording.enabled: false</code>), and the plots are drawn "
+            "from each run's recording.mcap: turn recording on to see them"
+            if recording_off
+            else "none of the chosen runs has a recording.mcap with trajectories in the results"
+        )
+        return f"<h2>Bird's-eye view</h2><p class=muted>Not drawn: {why}.</p>"
     note = (
         ""
         if any(roads.values())
@@ -345,26 +386,41 @@ def _birds_eye(results: RunResults, worst: int) -> str:
     )
 
 
-def _index_table(results: RunResults, relative: bool, metric_limit: int = 5) -> str:
-    metric_names: list[str] = []
-    for s in results.indexes:
-        for name in s.get("metrics", {}):
-            if name not in metric_names:
-                metric_names.append(name)
-    criteria_metrics = [c.get("metric") for s in results.indexes for c in s.get("criteria", [])]
-    preferred = [*criteria_metrics, "collision", *NEAR_MISS_METRICS]
-    rank = {name: k for k, name in reversed(list(enumerate(preferred)))}
-    metric_names = sorted(metric_names, key=lambda n: rank.get(n, len(rank)))[:metric_limit]
+#: the metric columns of every report's runs table, in this order (then the criteria's other metrics)
+RUNS_TABLE_METRICS = ("collision", "minDistance", "minTimeHeadway", "minTimeToCollision", "maxDeceleration")
+
+
+def runs_table_metrics(results: RunResults, extra_limit: int = 3) -> list[str]:
+    """The same columns in every report: RUNS_TABLE_METRICS, then the metrics of the spec's criteria that are
+    not among them (in the spec's order, at most `extra_limit`) (pure but for reading the spec)."""
+    named: list[str] = []
+    if results.spec is not None:
+        spec = results.spec.spec
+        criteria = [*spec.evaluation.criteria, *(c for sc in spec.scenarios for c in sc.criteria)]
+        named = [c.metric for c in criteria]
+    else:  # a spec of another version: the criteria the summaries name
+        named = [str(c.get("metric")) for s in results.indexes for c in s.get("criteria", [])]
+    extra = [m for m in dict.fromkeys(named) if m not in RUNS_TABLE_METRICS]
+    return [*RUNS_TABLE_METRICS, *extra[:extra_limit]]
+
+
+def _index_table(results: RunResults, relative: bool) -> str:
+    metric_names = runs_table_metrics(results)
     constant = constant_parameters(results.indexes)
     flaky = _flaky_indexes(results)
-    head = "".join(f"<th>{_e(n)}</th>" for n in metric_names)
+    head = "".join(
+        f"<th>{_e(n)}" + (f"<br><span class=unit>({_e(unit(n))})</span>" if unit(n) else "") + "</th>"
+        for n in metric_names
+    )
     out = [
-        f"<table class=runs><tr><th>files</th><th>index</th><th>scenario</th><th>status</th>"
+        f"<div class=wide><table class=runs><tr><th>files</th><th>index</th><th>scenario</th><th>status</th>"
         f"<th>parameters</th><th>seed</th>{head}</tr>"
     ]
     for s in results.indexes:
         i = s["index"]
-        params = ", ".join(f"{k}={v}" for k, v in (s.get("parameters") or {}).items() if k not in constant)
+        params = ", ".join(
+            f"{k}={_parameter(v)}" for k, v in (s.get("parameters") or {}).items() if k not in constant
+        )
         cells = "".join(
             f"<td class=num>{_short(float(s['metrics'][n])) if n in s.get('metrics', {}) else '—'}</td>"
             for n in metric_names
@@ -378,8 +434,12 @@ def _index_table(results: RunResults, relative: bool, metric_limit: int = 5) -> 
             f"<tr><td>{' '.join(links)}</td><td class=num>{i}</td><td>{_e(s['scenario'])}</td>"
             f"<td>{_badge(s['status'])}{' flaky' if i in flaky else ''}</td><td>{_e(params)}</td><td class=num>{_e(s.get('seed'))}</td>{cells}</tr>"
         )
-    out.append("</table>")
+    out.append("</table></div>")
     return "".join(out)
+
+
+def _parameter(value: Any) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
 def _flaky_indexes(results: RunResults) -> set[int]:
@@ -421,12 +481,9 @@ def _repeats(results: RunResults) -> str:
 
 
 def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+    from simcore import version
 
-    try:
-        return version("carlos")
-    except PackageNotFoundError:
-        return "unknown"
+    return version()
 
 
 def _header(results: RunResults, relative: bool) -> str:

@@ -12,6 +12,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from simcore.report.trajectories import Recording, RoadOutline
+from simcore.units import UNITS as UNITS  # the report reads plots.UNITS
+from simcore.units import unit
 
 PASSED_COLOUR = "#2e7d32"
 FAILED_COLOUR = "#c62828"
@@ -204,28 +206,10 @@ def _frame(x: float, y: float, w: float, h: float) -> str:
     return f'<path d="M{x:.2f} {y:.2f}h{w:.2f}v{h:.2f}h{-w:.2f}z" fill="none" stroke="#212121" stroke-width="0.8"/>'
 
 
-#: units of the built-in metrics (simcore.evaluation.metrics.METRICS); a metric not here is shown without
-UNITS: dict[str, str] = {
-    "collision": "0/1",
-    "collisionTime": "s",
-    "minDistance": "m",
-    "minTimeHeadway": "s",
-    "minTimeToCollision": "s",
-    "minLateralDistance": "m",
-    "maxDeceleration": "m/s²",
-    "maxAcceleration": "m/s²",
-    "maxSpeed": "m/s",
-    "meanSpeed": "m/s",
-    "egoDistance": "m",
-    "simSeconds": "s",
-    "stopTriggered": "0/1",
-}
-
-
 def axis_label(metric: str) -> str:
     """`minDistance (m)`: the metric with its unit when known (pure)."""
-    unit = UNITS.get(metric)
-    return f"{metric} ({unit})" if unit else metric
+    u = unit(metric)
+    return f"{metric} ({u})" if u else metric
 
 
 def distributions(values: Mapping[str, Sequence[float]], columns: int = 4) -> str:

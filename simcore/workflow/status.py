@@ -35,10 +35,15 @@ class RunState:
             if self.elapsed is None or self.finished
             else eta_seconds(self.done, self.total, self.elapsed)
         )
-        text = (
-            f"{self.name}: {self.phase} {self.done}/{self.total} · passed {self.passed} failed {self.failed} "
-            f"errors {self.errors}"
+        finished = (
+            f"{self.done} finished" if self.done >= self.total else f"{self.done} of {self.total} finished"
         )
+        counts = [f"{self.passed} passed"] + [
+            f"{n} {word}"
+            for n, word in ((self.failed, "failed"), (self.errors, "errors" if self.errors != 1 else "error"))
+            if n
+        ]
+        text = f"{self.name}: {self.phase} · {finished} · {' · '.join(counts)}"
         if self.search:
             text += f" · {self.search}"
         return text + ("" if eta is None else f" · ETA {duration(eta)}")

@@ -10,6 +10,9 @@ from simcore.evaluation.criteria import format_number
 from simcore.evaluation.report import testcase_name
 from simcore.wording import plural
 
+#: significant digits of the numbers a person reads (parameters of a search's points)
+READ_DIGITS = 4
+
 
 def failure_lines(index_summaries: Sequence[Mapping[str, Any]], limit: int = 20) -> list[str]:
     """One line per failed required criterion or error of the failed and errored indexes (optional
@@ -20,14 +23,14 @@ def failure_lines(index_summaries: Sequence[Mapping[str, Any]], limit: int = 20)
             continue
         tag = " (optional)" if s.get("optional") else ""
         if s["status"] == "error":
-            lines.append(f"error  {testcase_name(s)}{tag}: {s.get('error')}")
+            lines.append(f"error  {testcase_name(s, READ_DIGITS)}{tag}: {s.get('error')}")
             continue
         for c in s.get("criteria", []):
             if c["passed"] or (c.get("optional") and not s.get("optional")):
                 continue
             actual = "absent" if c.get("actual") is None else format_number(float(c["actual"]))
             detail = c.get("message") or f"{c['metric']} = {actual}, expected {c['expected']}"
-            lines.append(f"failed {testcase_name(s)}{tag}: {c['name']}: {detail}")
+            lines.append(f"failed {testcase_name(s, READ_DIGITS)}{tag}: {c['name']}: {detail}")
     if len(lines) > limit:
         lines = [*lines[:limit], f"… and {len(lines) - limit} more (see summary.json or report.html)"]
     return lines
