@@ -111,6 +111,8 @@ class JobWatch:
                 # the client library fails to read without deserialising (KeyError 'raw_object'): list again
                 version = None
                 failures += 1
-                log.warning("watching Jobs (%s) failed: %r; listing again", namespace or "all namespaces", exc)
+                log.warning(
+                    "watching Jobs (%s) failed: %r; listing again", namespace or "all namespaces", exc
+                )
             if failures:
                 self.stop_flag.wait(min(2.0**failures, MAX_BACKOFF_S))
