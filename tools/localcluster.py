@@ -628,6 +628,14 @@ def kubectl(layout: Layout, *args: str) -> str:
     return _run([kubectl_bin, f"--kubeconfig={layout.admin_kubeconfig}", *args]).stdout
 
 
+def _containerd_booted(layout: Layout) -> bool:
+    """containerd serves CRI: its socket exists and it logged that it booted (before, the kubelet's first CRI
+    call fails with "server is not initialized yet" and the kubelet exits)."""
+    if not layout.containerd_socket.exists():
+        return False
+    return "successfully booted" in layout.log("containerd").read_text(errors="replace")
+
+
 def _node_ready(layout: Layout) -> bool:
     try:
         out = kubectl(layout, "get", "node", NODE_NAME, "-o", "json")
@@ -785,10 +793,20 @@ def up(layout: Layout | None = None, images: bool = True) -> Path:
         _wait(layout, "kube-apiserver", lambda: _https_ok(layout, f"{api}/readyz"))
         for name in ("kube-controller-manager", "kube-scheduler", "containerd"):
             _start(layout, name, cmds[name])
-        _wait(layout, "containerd", layout.containerd_socket.exists)
+        _wait(layout, "containerd", lambda: _containerd_booted(layout))
         _start(layout, "kubelet", cmds["kubelet"])
         _start(layout, "kube-proxy", cmds["kube-proxy"])
-        _wait(layout, "kubelet", lambda: _node_ready(layout))
+        for attempt in range(5):
+            try:
+                _wait(layout, "kubelet", lambda: _node_ready(layout))
+                break
+            except ClusterError:
+                # containerd's CRI may still be initialising after its boot message: the kubelet's first CRI
+                # call then fails ("server is not initialized yet") and it exits; start it again
+                if attempt == 4 or "not initialized yet" not in _log_tail(layout, "kubelet", 5):
+                    raise
+                time.sleep(1.0)
+                _start(layout, "kubelet", cmds["kubelet"])
         ready = time.monotonic() - started
         if images:  # before `up` returns, so that no pod is created before its image is there
             _import_images(layout)
