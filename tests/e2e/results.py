@@ -61,7 +61,12 @@ def by_point(files: dict[int, dict[str, bytes]]) -> dict[str, dict[str, Any]]:
     found = {}
     for data in files.values():
         summary = json.loads(data["summary.json"])
-        key = json.dumps([summary["scenario"], sorted(summary["parameters"].items()), summary["seed"]])
+        # numbers as floats: the API server writes a YAML `15.0` back as JSON `15`
+        values = sorted(
+            (k, float(v) if isinstance(v, int | float) and not isinstance(v, bool) else v)
+            for k, v in summary["parameters"].items()
+        )
+        key = json.dumps([summary["scenario"], values, summary["seed"]])
         found[key] = {"summary": verdict(summary), "recording": data.get("recording.mcap")}
     return found
 

@@ -29,11 +29,11 @@ def test_submit_watch_results_logs_rerun(cluster: Cluster, tmp_path: Path) -> No
     assert got.returncode == 0, got.stderr
     assert "automated-testing-failing" in got.stdout
 
-    download = tmp_path / "download"
     results = cluster.carlos(
-        "results", "automated-testing-failing", "-n", RUNS_NS, "--download", str(download)
+        "results", "automated-testing-failing", "-n", RUNS_NS, "--download", str(tmp_path)
     )
     assert results.returncode == 0, results.stderr
+    download = tmp_path / "automated-testing-failing"  # DIR/<run>/
     summary = json.loads((download / "summary.json").read_text())
     assert summary["exitCode"] == 1 and summary["counts"]["total"] == 4
     assert (download / "junit.xml").exists() and (download / "0" / "recording.mcap").exists()

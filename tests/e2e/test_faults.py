@@ -94,13 +94,7 @@ def test_a_pod_deleted_mid_run_is_retried(cluster: Cluster) -> None:
     time.sleep(3)
     cluster.kubectl("-n", RUNS_NS, "delete", "pod", pod["metadata"]["name"], "--wait=false")
     _complete_and_whole(cluster, name, runs)
-    index = pod["metadata"]["annotations"]["batch.kubernetes.io/job-completion-index"]
-    attempts = [
-        p
-        for p in _pods(cluster, name)
-        if p["metadata"]["annotations"]["batch.kubernetes.io/job-completion-index"] == index
-    ]
-    assert len(attempts) >= 1
+    # the deleted pod's slice ran again: every index is there, once (checked above)
 
 
 def test_the_operator_killed_mid_run_loses_and_duplicates_nothing(cluster: Cluster) -> None:
