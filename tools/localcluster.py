@@ -35,7 +35,7 @@ import subprocess
 import sys
 import time
 import urllib.request
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -842,17 +842,6 @@ def restart(layout: Layout, name: str, down_seconds: float = 0.0) -> None:
 def status(layout: Layout | None = None) -> dict[str, int | None]:
     layout = layout or default_layout()
     return {name: _pid(layout, name) for name in COMPONENTS}
-
-
-@contextlib.contextmanager
-def running(images: bool = True) -> Iterator[Path]:
-    """The cluster for the length of a `with` block (the e2e fixture)."""
-    layout = default_layout()
-    path = up(layout, images=images)
-    try:
-        yield path
-    finally:
-        down(layout, quiet=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

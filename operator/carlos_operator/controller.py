@@ -282,26 +282,14 @@ class Controller:
                 self.enqueue(key)
 
     def _next(self) -> Key | None:
-        """The next key to reconcile: a run that has no Job yet first (a burst of new runs is not queued
-        behind the resyncs and Job events of the runs already going), else the oldest in the queue."""
         with self._wake:
             while not self._stop.is_set():
-                chosen = None
                 for position, key in enumerate(self._queue):
-                    if key in self._busy:
-                        continue
-                    if chosen is None:
-                        chosen = position
-                    state = self.runs.get(key)  # read without self._lock (taken before _wake elsewhere)
-                    if state is not None and not state.ensured:
-                        chosen = position
-                        break
-                if chosen is not None:
-                    key = self._queue[chosen]
-                    del self._queue[chosen]
-                    self._queued.discard(key)
-                    self._busy.add(key)
-                    return key
+                    if key not in self._busy:
+                        del self._queue[position]
+                        self._queued.discard(key)
+                        self._busy.add(key)
+                        return key
                 self._wake.wait(1.0)
         return None
 

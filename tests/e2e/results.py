@@ -35,10 +35,6 @@ def digest(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()[:16]
 
 
-def summaries(files: dict[int, dict[str, bytes]]) -> dict[int, dict[str, Any]]:
-    return {i: verdict(json.loads(f["summary.json"])) for i, f in files.items() if "summary.json" in f}
-
-
 def messages(recording: bytes) -> list[tuple[str, int, str]]:
     """Every message of a recording as (topic, log time, digest of its bytes), in a canonical order: the pod
     path carries topics over DDS, which delivers messages of the same instant on different topics in no

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.e2e.conftest import IMAGE_PREFIX, ROOT, RUNS_NS, Cluster
+from tests.e2e.conftest import CARLOS, IMAGE_PREFIX, ROOT, RUNS_NS, Cluster
 from tests.e2e.results import by_point, index_files, junit_cases, messages
 
 pytestmark = [pytest.mark.e2e, pytest.mark.timeout(1500)]
@@ -51,7 +51,7 @@ def _local(tmp: Path, example: str) -> tuple[int, Path]:
     out = tmp / "local"
     proc = subprocess.run(
         [
-            str(Path(__import__("sys").executable).with_name("carlos")),
+            CARLOS,
             "run",
             f"examples/runs/{example}.yaml",
             "--output",

@@ -4,7 +4,10 @@ chart adds SimulationRuns to `edit` and `view`), acting through impersonation.""
 
 from __future__ import annotations
 
+import time
+
 import pytest
+import yaml
 
 from tests.e2e.conftest import RUNS_NS, SECRET, Cluster
 
@@ -67,7 +70,6 @@ def test_tenant_cannot_read_another_namespace(cluster: Cluster, tenant: str, arg
 def test_tenant_runs_may_not_name_secrets(cluster: Cluster, tenant: str) -> None:
     """Runs of a namespace outside secretReferences.namespaces that name a Secret are refused by the
     operator (Accepted=False): the operator would otherwise read that namespace's Secret for them."""
-    import yaml
 
     body = {
         "apiVersion": "carlos.dev/v1alpha1",
@@ -84,7 +86,6 @@ def test_tenant_runs_may_not_name_secrets(cluster: Cluster, tenant: str) -> None
         "-n", TENANT_NS, "apply", "-f", "-", stdin=yaml.safe_dump(body), as_user=tenant, check=False
     )
     assert created.returncode == 0, created.stderr
-    import time
 
     deadline = time.monotonic() + 60
     accepted: dict[str, str] = {}
