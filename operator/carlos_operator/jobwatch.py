@@ -3,7 +3,8 @@
 kopf filters a watch's labels on the client, so every Job of the cluster would be streamed to the operator;
 this watch sends the label selector with the list and the watch, as `kubectl get jobs -l` does. One thread
 per watched namespace (or one for every namespace): list (every Job → ADDED), then watch from the list's
-resourceVersion; a 410 Gone (the version expired) lists again; other errors list again after a backoff.
+resourceVersion; a 410 Gone (the version expired, also as the client's KeyError after an API server
+restart) lists again; other errors retry with backoff.
 """
 
 from __future__ import annotations
@@ -99,14 +100,14 @@ class JobWatch:
                     self.on_event(str(event.get("type")), job)
                 failures = 0
             except ApiException as exc:
-                version = None  # list again: the version may be gone (410, an API server restarted)
                 if exc.status == 410:
+                    version = None
                     continue
                 failures += 1
                 log.warning(
                     "watching Jobs (%s) failed: %s; retrying", namespace or "all namespaces", exc.reason
                 )
-            except Exception as exc:
+            except KeyError as exc:
                 # a restarted API server answers a watch from an expired version with an ERROR event, which
                 # the client library fails to read without deserialising (KeyError 'raw_object'): list again
                 version = None
@@ -114,5 +115,8 @@ class JobWatch:
                 log.warning(
                     "watching Jobs (%s) failed: %r; listing again", namespace or "all namespaces", exc
                 )
+            except Exception as exc:
+                failures += 1
+                log.warning("watching Jobs (%s) failed: %s; retrying", namespace or "all namespaces", exc)
             if failures:
                 self.stop_flag.wait(min(2.0**failures, MAX_BACKOFF_S))
