@@ -135,6 +135,12 @@ def run_body(name: str, runs: int) -> dict[str, Any]:
     }
 
 
+def _run_label(obj: dict[str, Any]) -> str | None:
+    """The run an object (as JSON: the watches do not build the client's models, which would take this
+    process' CPU from the control plane it measures) belongs to."""
+    return ((obj.get("metadata") or {}).get("labels") or {}).get("carlos.dev/run")
+
+
 class Watch(threading.Thread):
     """Records when each run's Job and each pod is first seen (a watch, as the operator's own)."""
 
@@ -153,8 +159,10 @@ class Watch(threading.Thread):
         threading.Thread(target=self._pods, args=(core, watch), daemon=True).start()
         while not self.stop.is_set():
             try:
-                for event in watch.Watch().stream(batch.list_namespaced_job, NS, timeout_seconds=30):
-                    run = (event["object"].metadata.labels or {}).get("carlos.dev/run")
+                for event in watch.Watch().stream(
+                    batch.list_namespaced_job, NS, timeout_seconds=30, deserialize=False
+                ):
+                    run = _run_label(event["object"])
                     if run and run not in self.jobs:
                         self.jobs[run] = time.time()
             except Exception:  # a dropped watch (the API server closes them): watch again
@@ -163,10 +171,12 @@ class Watch(threading.Thread):
     def _pods(self, core: Any, watch: Any) -> None:
         while not self.stop.is_set():
             try:
-                for event in watch.Watch().stream(core.list_namespaced_pod, NS, timeout_seconds=30):
-                    run = (event["object"].metadata.labels or {}).get("carlos.dev/run")
+                for event in watch.Watch().stream(
+                    core.list_namespaced_pod, NS, timeout_seconds=30, deserialize=False
+                ):
+                    run = _run_label(event["object"])
                     if run:
-                        self.pods.setdefault(run, set()).add(event["object"].metadata.name)
+                        self.pods.setdefault(run, set()).add(event["object"]["metadata"]["name"])
             except Exception:  # a dropped watch: watch again
                 time.sleep(0.2)
 

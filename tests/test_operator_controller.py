@@ -12,6 +12,7 @@ from typing import Any
 from carlos_operator.builders import OperatorSettings, job_name, round_job_name
 from carlos_operator.controller import Controller, _store_for
 from carlos_operator.kube import Conflict, NotFound
+from carlos_operator.runstate import slim_job
 from carlos_operator.status import format_intervals
 
 from simcore.store import NotFoundError
@@ -106,6 +107,9 @@ class FakeKube:
     def event(self, run: dict[str, Any], kind: str, reason: str, message: str) -> None:
         self.events.append((kind, reason))
 
+    def close(self) -> None:
+        """Nothing queued: events are recorded at once."""
+
 
 def run_body(name: str, uid: str, n: int, status: dict[str, Any] | None = None) -> dict[str, Any]:
     return {
@@ -135,12 +139,23 @@ def controller(
     return Controller(kube, settings, batch=batch, store_factory=factory, **kw)  # type: ignore[arg-type]
 
 
+def watch_jobs(c: Controller) -> None:
+    """The controller's Job cache as its Job watch keeps it: the fake API's Jobs as they are now."""
+    kube = c.kube
+    assert isinstance(kube, FakeKube)
+    with c._lock:
+        c.jobs.clear()
+        for name, job in kube.jobs.items():
+            c.jobs[(job["metadata"].get("namespace") or "default", name)] = slim_job(job)
+
+
 def drain(c: Controller) -> None:
     for _ in range(100):
         if not c._queue:
             return
         key = c._queue.pop(0)
         c._queued.discard(key)
+        watch_jobs(c)
         c.reconcile(key)
     raise AssertionError("the queue does not drain")
 
@@ -251,7 +266,7 @@ def test_run_deleted_and_created_again_while_its_old_objects_exist_starts() -> N
     c.observe_run("DELETED", run_body("r", "uid-1", 3))
     c.observe_run("ADDED", run_body("r", "uid-2", 3))
     drain(c)
-    assert ("ConfigMap", job_name("r"), "old-object") in kube.deleted
+    assert ("Job", job_name("r"), "old-object") in kube.deleted  # known from the Job watch: deleted first
     waiting = kube.status_patches[-1]
     assert waiting["phase"] == "Pending"
     assert {"type": "Prerequisites", "status": "False", "reason": "PreviousRunCleanup"}.items() <= {
@@ -260,6 +275,7 @@ def test_run_deleted_and_created_again_while_its_old_objects_exist_starts() -> N
     for _ in range(3):  # the backoff timer re-queues it; the old Job is deleted next, then the new one made
         c.enqueue(("default", "r"))
         drain(c)
+    assert ("ConfigMap", job_name("r"), "old-object") in kube.deleted  # its create met it (409): deleted
     owners = kube.jobs[job_name("r")]["metadata"]["ownerReferences"]
     assert [o["uid"] for o in owners] == ["uid-2"]
     assert not any(p["conditions"][0].get("reason") == "NameConflict" for p in kube.status_patches)

@@ -176,8 +176,8 @@ def test_api_server_errors_before_any_call_are_retried_to_the_same_end(at: int, 
 
 
 def test_a_lost_create_response_is_read_and_the_job_is_adopted() -> None:
-    """The Job was created but the answer never came (connection reset): the retry reads it and adopts it
-    (a 409 on a create is adopted too: test_operator_desired's race test)."""
+    """The Job was created but the answer never came (connection reset): the retry's create is answered 409,
+    the Job is read and adopted (as in test_operator_desired's race test)."""
     kube, store = _prepared()
     created = kube.create_job
 
@@ -189,4 +189,5 @@ def test_a_lost_create_response_is_read_and_the_job_is_adopted() -> None:
     kube.create_job = create_then_lose_the_answer  # type: ignore[method-assign]
     _drive(kube, store, None)
     assert _outcome(kube, store) == UNDISTURBED
-    assert kube.job_creates == 1  # the retry found the Job before creating one, and nothing else was made
+    assert kube.job_creates == 2  # the retry's create met the Job (409): adopted, nothing else was made
+    assert len(kube.jobs) == 1

@@ -408,10 +408,20 @@ def pod_manifest(run: SimulationRun) -> SimulationRun:
 
 
 def build_configmap(
-    run: SimulationRun, body: dict[str, Any], settings: OperatorSettings, distribution: str | None = None
+    run: SimulationRun,
+    body: dict[str, Any],
+    settings: OperatorSettings,
+    distribution: str | None = None,
+    *,
+    spec_yaml: str | None = None,
 ) -> dict[str, Any]:
-    """The Job's ConfigMap: the spec as the pods read it, and the distribution file the operator read."""
-    data = {SPEC_FILE: manifest_yaml(pod_manifest(run) if distribution is not None else run)}
+    """The Job's ConfigMap: the spec as the pods read it, and the distribution file the operator read.
+    `spec_yaml`: `manifest_yaml(run)` when the caller has it already (used when there is no distribution)."""
+    if distribution is not None:
+        spec_text = manifest_yaml(pod_manifest(run))
+    else:
+        spec_text = spec_yaml if spec_yaml is not None else manifest_yaml(run)
+    data = {SPEC_FILE: spec_text}
     if distribution is not None:
         data[DISTRIBUTION_FILE] = distribution
     return {

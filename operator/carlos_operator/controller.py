@@ -226,12 +226,18 @@ class Controller:
                 self.searches.forget(key)
                 return
             state = self.runs.get(key)
+            generation = meta.get("generation")
+            known = int(generation) if generation is not None else None
             if state is None or state.uid != meta.get("uid"):
                 state = self.runs[key] = RunState(body=body, uid=str(meta.get("uid")))
+            elif event_type == "MODIFIED" and known is not None and state.generation == known:
+                # the spec is as seen: a change of the status (the operator's own patches) or of metadata,
+                # nothing to reconcile (every status patch would cost a pass otherwise)
+                state.body = body
+                return
             else:
                 state.body = body
-            generation = meta.get("generation")
-            state.generation = int(generation) if generation is not None else None
+            state.generation = known
         self.enqueue(key)
 
     def observe_job(self, event_type: str, body: dict[str, Any]) -> None:
@@ -271,6 +277,7 @@ class Controller:
         for thread in self._threads:
             thread.join(timeout=10)
         self._fetch.shutdown(wait=False, cancel_futures=True)
+        self.kube.close()
         self.scratch.close()
         self.searches.close()
 

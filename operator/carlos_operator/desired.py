@@ -90,8 +90,8 @@ class RunInputs:
     store: Any = None  # the opened object store (a handle for apply; `decide` never calls it)
     results_url: str | None = None  # where the run's results go
     stored_spec: bytes | None = None  # `<run>/run.yaml` already in the store (None: absent)
-    configmap: Mapping[str, Any] | None = None  # the existing ConfigMap of the run's name
-    job: Mapping[str, Any] | None = None  # the existing Job of the run's name
+    configmap: Mapping[str, Any] | None = None  # the existing ConfigMap of the run's name, when known
+    job: Mapping[str, Any] | None = None  # the existing Job of the run's name, when known (the Job watch's)
 
 
 @dataclass(frozen=True)
@@ -418,7 +418,7 @@ def _decide(
         if reads_distribution(submitted) and inputs.distribution is not None
         else None
     )
-    configmap = build_configmap(submitted, dict(body), settings, distribution)
+    configmap = build_configmap(submitted, dict(body), settings, distribution, spec_yaml=spec.decode())
     job = build_job(run, dict(body), settings, output)
     uid = str(body["metadata"].get("uid"))
     objects: list[Wanted] = []

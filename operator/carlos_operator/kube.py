@@ -10,9 +10,11 @@ import base64
 import contextlib
 import datetime as dt
 import json
+import logging
 import os
 import threading
 import uuid
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from kubernetes import client, config
@@ -21,6 +23,7 @@ from kubernetes.client.rest import ApiException
 from simcore.spec import API_GROUP, API_VERSION, KIND
 
 PLURAL = "simulationruns"
+log = logging.getLogger("carlos.operator")
 
 
 class Conflict(Exception):
@@ -69,6 +72,15 @@ class Kube:
         self.batch = client.BatchV1Api(api_client)
         self.custom = client.CustomObjectsApi(api_client)
         self._lock = threading.Lock()
+        # events are best effort: posted in order by one thread, off the reconcile workers' path
+        self._events = ThreadPoolExecutor(max_workers=1, thread_name_prefix="carlos-events")
+
+    def close(self, timeout: float = 10.0) -> None:
+        """Post the events still queued (at most `timeout` seconds), then stop the events thread."""
+        done = self._events.submit(lambda: None)
+        with contextlib.suppress(Exception):
+            done.result(timeout=timeout)
+        self._events.shutdown(wait=False, cancel_futures=True)
 
     # ConfigMaps and Jobs
     def create_configmap(self, namespace: str, body: dict[str, Any]) -> dict[str, Any]:
@@ -185,5 +197,11 @@ class Kube:
             "lastTimestamp": stamp,
             "count": 1,
         }
-        with contextlib.suppress(ApiException):  # events are best effort
-            self.core.create_namespaced_event(meta.get("namespace"), _any(body), _preload_content=False)
+        with contextlib.suppress(RuntimeError):  # closed: the operator stops
+            self._events.submit(self._post_event, meta.get("namespace"), body)
+
+    def _post_event(self, namespace: str, body: dict[str, Any]) -> None:
+        try:
+            self.core.create_namespaced_event(namespace, _any(body), _preload_content=False)
+        except Exception as exc:  # events are best effort
+            log.debug("posting event %s failed: %s", body["metadata"]["name"], exc)

@@ -4,7 +4,9 @@
 missing or unusable (what comes after it would not be looked at): the run's distribution file (its
 ConfigMap, then the file; its local copy is written here), the ConfigMaps its scenarios name, its object
 store (opening it reads the Secret the run names, where its namespace may name Secrets), a search's scenario,
-then, for a run whose Job is still to be made, the stored `run.yaml` and the ConfigMap and Job of its name.
+then, for a run whose Job is still to be made, the stored `run.yaml` and the Job of its name as the operator's
+Job watch holds it (no request: a Job or ConfigMap of the run's name that is not known there is met by the
+create's 409, which apply.create_owned settles by the same rule, desired.claim).
 The cluster's policy (desired.refusal) is asked before anything is read: a run it refuses gets no distribution,
 Secret or store read for it, so the operator's credentials never reach a store the run chose. Nothing is read
 for a run whose status is final or whose spec is invalid, and no store opened for one that cannot run on a
@@ -93,9 +95,8 @@ def read_inputs(c: Host, state: RunState, *, prepare_search: PrepareSearch) -> R
     if store.exists(run_yaml):
         found["stored_spec"] = bytes(store.get_bytes(run_yaml))
     if run.spec.search is None:  # a search's ConfigMaps and Jobs are its rounds' (searching.py)
-        name = job_name(run.name)
-        found["configmap"] = _get(c.kube.read_configmap, namespace, name)
-        found["job"] = _get(c.kube.read_job, namespace, name)
+        with c._lock:
+            found["job"] = c.jobs.get((namespace, job_name(run.name)))
     return RunInputs(**found)
 
 

@@ -58,6 +58,7 @@ def slim_job(job: dict[str, Any]) -> dict[str, Any]:
         "metadata": {
             "name": meta.get("name"),
             "namespace": meta.get("namespace"),
+            "uid": meta.get("uid"),
             "annotations": {
                 k: v
                 for k, v in (meta.get("annotations") or {}).items()
