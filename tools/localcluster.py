@@ -330,6 +330,10 @@ rules:
   - level: Metadata
     userGroups: ["system:serviceaccounts"]
     verbs: ["create", "update", "patch", "delete", "deletecollection"]
+  # SimulationRuns created (by anyone): bench/kube.py's apply → Job latency, on the API server's clock
+  - level: Metadata
+    resources: [{group: carlos.dev, resources: [simulationruns]}]
+    verbs: ["create"]
   - level: None
 """
 

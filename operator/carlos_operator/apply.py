@@ -54,7 +54,7 @@ def apply(c: Host, key: Key, state: RunState, inputs: RunInputs, decision: Decis
         _announce(c, state, decision)
         return False
     assert state.run is not None and decision.total is not None
-    if decision.spec is not None:
+    if decision.spec is not None and not decision.objects:
         state.store.put_bytes(f"{state.run.name}/run.yaml", decision.spec)
     if not decision.objects:  # its Job started before (adopted by the status pass), or a search's rounds
         state.ensured = True
@@ -83,6 +83,8 @@ def apply(c: Host, key: Key, state: RunState, inputs: RunInputs, decision: Decis
     assert job is not None
     with c._lock:
         c.jobs.setdefault((key[0], job["metadata"]["name"]), slim_job(job))
+    if decision.spec is not None:  # after the Job, off its path: a pass that stops before stores it next time
+        state.store.put_bytes(f"{state.run.name}/run.yaml", decision.spec)
     state.ensured = True
     state.job_seen = True
     if created:

@@ -335,8 +335,14 @@ class Controller:
             # finished: the verdict and the run-level summary are recorded; nothing is read again
             self._observe_generation(state)
             return
-        if not state.ensured and not self.ensure(key, state):
-            return  # rejected, waiting for a prerequisite, or held
+        if not state.ensured:
+            if not self.ensure(key, state):
+                return  # rejected, waiting for a prerequisite, or held
+            if state.search is None:
+                # its Job is made: the status pass waits its turn in the queue, so that the runs queued
+                # behind this one get their Jobs first (a burst of new runs is not slowed by status writes)
+                self.enqueue(key)
+                return
         if state.search is not None:
             now = now_rfc3339()
             try:

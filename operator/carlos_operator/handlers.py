@@ -64,7 +64,9 @@ def startup(
         Kube(),
         OperatorSettings.from_env(),
         resync=_float_env("CARLOS_RESYNC_SECONDS", 10.0),
-        workers=int(_float_env("CARLOS_RECONCILE_WORKERS", 4)),
+        # the workers mostly wait for the API server: a burst of new runs gets its Jobs as fast as the API
+        # server takes them (a new run's status pass queues behind the Jobs still to make: controller.py)
+        workers=int(_float_env("CARLOS_RECONCILE_WORKERS", 16)),
     )
     _controller.start()
     _jobs = JobWatch(_controller.kube, WATCH_NAMESPACES, _controller.observe_job)

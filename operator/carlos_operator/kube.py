@@ -43,8 +43,16 @@ def _raise(exc: ApiException) -> None:
 
 
 def _json(response: Any) -> dict[str, Any]:
-    data = response.data
+    data = response.data  # read to the end: the connection goes back to the pool
     return json.loads(data) if data else {}
+
+
+def _done(response: Any) -> None:
+    """A response whose body is not needed, read to the end so that its connection goes back to the pool:
+    left unread (`_preload_content=False`), each one would hold a connection until collected and the next
+    request would open a new one (a TLS handshake on both ends)."""
+    response.read()
+    response.release_conn()
 
 
 def _any(body: dict[str, Any]) -> Any:
@@ -126,7 +134,7 @@ class Kube:
         body = {"preconditions": {"uid": uid}, "propagationPolicy": "Background"}
         call = self.batch.delete_namespaced_job if kind == "Job" else self.core.delete_namespaced_config_map
         try:
-            call(name, namespace, body=_any(body), _preload_content=False)
+            _done(call(name, namespace, body=_any(body), _preload_content=False))
         except ApiException as exc:
             if exc.status == 404:
                 return
@@ -165,8 +173,10 @@ class Kube:
     # SimulationRun status and events
     def patch_run_status(self, namespace: str, name: str, status: dict[str, Any]) -> None:
         try:
-            self.custom.patch_namespaced_custom_object_status(
-                API_GROUP, API_VERSION, namespace, PLURAL, name, {"status": status}, _preload_content=False
+            _done(
+                self.custom.patch_namespaced_custom_object_status(
+                    API_GROUP, API_VERSION, namespace, PLURAL, name, {"status": status}, _preload_content=False
+                )
             )
         except ApiException as exc:
             _raise(exc)
@@ -202,6 +212,6 @@ class Kube:
 
     def _post_event(self, namespace: str, body: dict[str, Any]) -> None:
         try:
-            self.core.create_namespaced_event(namespace, _any(body), _preload_content=False)
+            _done(self.core.create_namespaced_event(namespace, _any(body), _preload_content=False))
         except Exception as exc:  # events are best effort
             log.debug("posting event %s failed: %s", body["metadata"]["name"], exc)
