@@ -57,6 +57,7 @@ class FakeKube:
         self.deleted: list[tuple[str, str, str]] = []
         self.pods: list[dict[str, Any]] = []
         self.pod_lists: list[tuple[str, int]] = []
+        self.configmap_reads: list[str] = []
 
     def read_secret_data(self, namespace: str, name: str) -> dict[str, str]:
         self.secret_reads += 1
@@ -81,6 +82,7 @@ class FakeKube:
         return body
 
     def read_configmap(self, namespace: str, name: str) -> dict[str, Any]:
+        self.configmap_reads.append(name)
         if name not in self.configmaps:
             raise NotFound(name)
         return self.configmaps[name]
@@ -812,9 +814,11 @@ def test_a_distribution_from_a_configmap_is_waited_for_expanded_and_handed_to_th
     )
     kube.configmaps["d-inputs"]["data"]["speeds.xosc"] = DISTRIBUTION.decode()
     kube.status_patches.clear()
+    kube.configmap_reads.clear()
     c = controller(kube, store)
     c.observe_run("ADDED", body)
     drain(c)
+    assert kube.configmap_reads == ["d-inputs"]  # read once: checked and used from the same answer
     job = kube.jobs[job_name("d")]
     assert job["spec"]["completions"] == 6  # 3 speeds x 2 repetitions
     data = kube.configmaps[job_name("d")]["data"]

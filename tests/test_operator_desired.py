@@ -134,6 +134,18 @@ def test_a_missing_configmap_is_waited_for_naming_its_field() -> None:
     assert "spec.sweep.distributionConfigMapRef" in d.message
 
 
+def test_a_missing_configmap_names_the_position_of_its_scenario_among_all_scenarios() -> None:
+    body = run_body("r", "uid-1", 1)
+    body["spec"]["scenarios"] = [
+        {"name": "a", "openscenario": "s3://bucket/a.xosc"},
+        {"name": "b", "configMapRef": {"name": "present", "key": "b.xosc"}},
+        {"name": "c", "configMapRef": {"name": "absent", "key": "c.xosc"}},
+    ]
+    d = decision(body, absent_configmaps=("absent",))
+    assert (d.action, d.reason) == ("wait", "ConfigMapNotFound")
+    assert "spec.scenarios[2].configMapRef" in d.message and "'absent'" in d.message
+
+
 def test_objects_of_this_run_are_adopted() -> None:
     name = job_name("r")
     d = decision(run_body("r", "uid-1", 3), configmap=owned(name, "uid-1"), job=owned(name, "uid-1"))

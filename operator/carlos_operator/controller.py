@@ -311,7 +311,9 @@ class Controller:
             except Exception as exc:
                 metrics.ERRORS.labels(kind=type(exc).__name__).inc()
                 log.exception("reconciling %s/%s failed; retrying", *key)
-                threading.Timer(5.0, self.enqueue, args=(key,)).start()
+                retry = threading.Timer(5.0, self.enqueue, args=(key,))
+                retry.daemon = True  # never keeps a stopping operator alive
+                retry.start()
             finally:
                 metrics.RECONCILE_SECONDS.observe(time.perf_counter() - started)
                 with self._wake:

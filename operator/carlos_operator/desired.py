@@ -377,8 +377,13 @@ def _decide(
     if refused is not None:
         raise refused
     total = run.spec.search.budget if run.spec.search is not None else len(Plan(run.spec))
-    for position, name in enumerate(scenario_configmaps(run)):
+    for name in scenario_configmaps(run):
         if name in inputs.absent_configmaps:
+            position = next(
+                i
+                for i, scenario in enumerate(run.spec.scenarios)
+                if scenario.config_map_ref is not None and scenario.config_map_ref.name == name
+            )
             raise Waiting(
                 "ConfigMapNotFound",
                 f"spec.scenarios[{position}].configMapRef: ConfigMap {name!r} not found in namespace "

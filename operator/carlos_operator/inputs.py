@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from carlos_operator.builders import Output
 from carlos_operator.kube import NotFound
@@ -29,15 +30,18 @@ def read_input(
     field: str,
     ref_field: str,
     why: str,
+    configmap: Mapping[str, Any] | None = None,
 ) -> tuple[str, bytes]:
-    """(file name, bytes) of an input given as a ConfigMap key (`ref`, the field `ref_field`) or a URL or
-    path (`source`, the field `field`); BadInput naming the field when it cannot be read (`why`: what the
-    operator reads it for)."""
+    """(file name, bytes) of an input given as a ConfigMap key (`ref`, the field `ref_field`; `configmap`: that
+    ConfigMap when the caller has read it already) or a URL or path (`source`, the field `field`); BadInput
+    naming the field when it cannot be read (`why`: what the operator reads it for)."""
     if ref is not None:
-        try:
-            data = c.kube.read_configmap(namespace, ref.name).get("data") or {}
-        except NotFound:
-            data = {}
+        if configmap is None:
+            try:
+                configmap = c.kube.read_configmap(namespace, ref.name)
+            except NotFound:
+                configmap = {}
+        data = configmap.get("data") or {}
         if ref.key not in data:
             raise BadInput(f"ConfigMap {ref.name!r} has no key {ref.key!r}", field=f"{ref_field}.key")
         return ref.key, str(data[ref.key]).encode()

@@ -112,8 +112,11 @@ def _distribution(c: Host, run: SimulationRun, namespace: str, output: Output) -
     local copy (`distribution`, `distribution_copy`), or why it cannot be had (no `distribution` then)."""
     sweep = run.spec.sweep
     ref = sweep.distribution_config_map_ref
-    if ref is not None and _get(c.kube.read_configmap, namespace, ref.name) is None:
-        return {"absent_configmaps": (ref.name,)}
+    configmap = None
+    if ref is not None:
+        configmap = _get(c.kube.read_configmap, namespace, ref.name)
+        if configmap is None:
+            return {"absent_configmaps": (ref.name,)}
     try:
         _, data = read_input(
             c,
@@ -124,6 +127,7 @@ def _distribution(c: Host, run: SimulationRun, namespace: str, output: Output) -
             field="spec.sweep.distribution",
             ref_field="spec.sweep.distributionConfigMapRef",
             why="to expand the sweep",
+            configmap=configmap,
         )
         data.decode("utf-8")
     except UnicodeDecodeError:
