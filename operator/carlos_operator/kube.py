@@ -175,7 +175,13 @@ class Kube:
         try:
             _done(
                 self.custom.patch_namespaced_custom_object_status(
-                    API_GROUP, API_VERSION, namespace, PLURAL, name, {"status": status}, _preload_content=False
+                    API_GROUP,
+                    API_VERSION,
+                    namespace,
+                    PLURAL,
+                    name,
+                    {"status": status},
+                    _preload_content=False,
                 )
             )
         except ApiException as exc:
