@@ -781,3 +781,84 @@ def test_accumulator_agrees_with_corner_geometry(
             assert "minTimeToCollision" not in m
     else:
         assert "minTimeHeadway" not in m and "minTimeToCollision" not in m
+
+
+JUNIT_STREAM = [
+    {
+        "index": 3,
+        "scenario": "b",
+        "status": "passed",
+        "parameters": {"v": 2.5},
+        "seed": 3,
+        "wallSeconds": 0.25,
+    },
+    {
+        "index": 0,
+        "scenario": "a & <a>",
+        "status": "error",
+        "error": "boom <x>",
+        "seed": 0,
+        "attempts": 2,
+        "wallSeconds": 1.0,
+    },
+    {
+        "index": 2,
+        "scenario": "b",
+        "status": "failed",
+        "optional": True,
+        "criteria": [],
+        "seed": 2,
+        "wallSeconds": 0.5,
+    },
+    {"index": 1, "scenario": "b", "status": "passed", "seed": 1, "flaky": True, "wallSeconds": 0.125},
+]
+JUNIT_EXPECTED = """<?xml version="1.0" encoding="UTF-8"?>
+<testsuites name="r" tests="4" failures="0" errors="1" skipped="1" time="1.875">
+  <testsuite name="b" tests="3" failures="0" errors="0" skipped="1" time="0.875">
+    <testcase name="b[1]" classname="carlos.r.b" time="0.125">
+      <properties>
+        <property name="seed" value="1" />
+        <property name="flaky" value="true" />
+      </properties>
+    </testcase>
+    <testcase name="b[2]" classname="carlos.r.b" time="0.500">
+      <properties>
+        <property name="seed" value="2" />
+      </properties>
+      <skipped message="optional: failed">failed without a failed required criterion</skipped>
+    </testcase>
+    <testcase name="b[3] v=2.5" classname="carlos.r.b" time="0.250">
+      <properties>
+        <property name="param.v" value="2.5" />
+        <property name="seed" value="3" />
+      </properties>
+    </testcase>
+  </testsuite>
+  <testsuite name="a &amp; &lt;a&gt;" tests="1" failures="0" errors="1" skipped="0" time="1.000">
+    <testcase name="a &amp; &lt;a&gt;[0]" classname="carlos.r.a &amp; &lt;a&gt;" time="1.000">
+      <properties>
+        <property name="seed" value="0" />
+        <property name="attempts" value="2" />
+      </properties>
+      <error message="boom &lt;x&gt;" type="SimulationError">boom &lt;x&gt;</error>
+    </testcase>
+  </testsuite>
+</testsuites>
+"""
+
+
+def test_junit_is_written_from_a_stream_in_suite_and_index_order_with_the_document_layout() -> None:
+    """Summaries arrive one at a time in any order (a generator: never a list); the document is the same
+    bytes as a whole tree indented would be: suites by first appearance, cases by index, counts and times."""
+    import io
+
+    from simcore.evaluation.report import write_junit_xml
+
+    out = io.BytesIO()
+    write_junit_xml("r", (dict(s) for s in JUNIT_STREAM), out)
+    assert out.getvalue().decode() == JUNIT_EXPECTED
+    assert junit_xml("r", iter(JUNIT_STREAM)) == JUNIT_EXPECTED
+    empty = junit_xml("r", iter(()))
+    assert empty.endswith(
+        '<testsuites name="r" tests="0" failures="0" errors="0" skipped="0" time="0.000" />\n'
+    )

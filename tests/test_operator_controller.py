@@ -36,6 +36,9 @@ class FakeStore:
     def put_bytes(self, key: str, data: bytes) -> None:
         self.objects[key] = data
 
+    def put_file(self, key: str, path: Path) -> None:
+        self.put_bytes(key, Path(path).read_bytes())
+
     def url_for(self, key: str) -> str:
         return f"s3://bucket/out/{key}"
 

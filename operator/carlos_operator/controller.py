@@ -70,7 +70,7 @@ from carlos_operator.status import (
 )
 from simcore.errors import BadInput, CarlosError
 from simcore.evaluation.flaky import RepeatTally, flag_flaky, flag_repeats, recording_digests
-from simcore.evaluation.report import junit_xml, run_summary
+from simcore.evaluation.report import run_summary, write_junit_xml
 from simcore.plan import Plan
 from simcore.spec import SimulationRun
 
@@ -589,7 +589,15 @@ class Controller:
         if repeats is not None:
             summary["repeats"] = repeats.report()
             junit_summaries = flag_flaky(junit_summaries, summary["repeats"])
-        state.store.put_bytes(f"{run.name}/junit.xml", junit_xml(run.name, junit_summaries).encode())
+        # spooled to a file in the run's scratch folder and uploaded from there: 50,000 test cases never
+        # held in memory at once
+        spool = self.scratch.folder(*_key_of(state)) / "junit.xml"
+        try:
+            with spool.open("wb") as out:
+                write_junit_xml(run.name, junit_summaries, out)
+            state.store.put_file(f"{run.name}/junit.xml", spool)
+        finally:
+            spool.unlink(missing_ok=True)
         state.store.put_bytes(
             f"{run.name}/summary.json", (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
         )
@@ -654,6 +662,11 @@ def _missing_summary(run: SimulationRun, index: int, reason: str) -> dict[str, A
     from simcore.runner import error_outcome
 
     return error_outcome(run, index, 1, reason).summary
+
+
+def _key_of(state: RunState) -> Key:
+    meta = state.body["metadata"]
+    return (str(meta.get("namespace") or "default"), str(meta["name"]))
 
 
 def slim_run(body: dict[str, Any]) -> dict[str, Any]:

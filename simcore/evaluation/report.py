@@ -17,12 +17,16 @@ retry cannot fix that either), else 3 when a required index errored or an index 
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 import re
+import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Collection, Iterable, Mapping, Sequence
-from typing import Any, Literal
+from dataclasses import dataclass, field
+from typing import IO, Any, Literal
 
 from simcore.evaluation.criteria import CriterionResult, format_measured, verdict
 
@@ -297,69 +301,117 @@ def junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]]) -> st
     `endReason` and `flaky` (`true` on the runs of a point whose verdict changed between its repeats). A
     failed index gets `<failure>` listing its failed required criteria with expected and actual values, an
     errored one `<error>`; in an optional scenario either is `<skipped message="optional: …">` instead."""
-    by_scenario: dict[str, list[Mapping[str, Any]]] = {}
-    for summary in index_summaries:
-        by_scenario.setdefault(summary["scenario"], []).append(summary)
+    out = io.BytesIO()
+    write_junit_xml(run_name, index_summaries, out)
+    return out.getvalue().decode()
 
-    root = ET.Element("testsuites", name=_xml_text(run_name))
-    totals = {"tests": 0, "failures": 0, "errors": 0, "skipped": 0}
-    total_time = 0.0
-    for scenario, summaries in by_scenario.items():
-        suite = ET.SubElement(root, "testsuite", name=_xml_text(scenario))
-        counts = {"tests": 0, "failures": 0, "errors": 0, "skipped": 0}
-        suite_time = 0.0
-        for summary in sorted(summaries, key=lambda s: s["index"]):
-            wall = float(summary.get("wallSeconds") or 0.0)
-            suite_time += wall
-            case = ET.SubElement(
-                suite,
-                "testcase",
-                name=_xml_text(testcase_name(summary)),
-                classname=_xml_text(f"carlos.{run_name}.{scenario}"),
-                time=f"{wall:.3f}",
-            )
-            properties = ET.SubElement(case, "properties")
-            for key, value in (summary.get("parameters") or {}).items():
-                ET.SubElement(
-                    properties,
-                    "property",
-                    name=_xml_text(f"param.{key}"),
-                    value=_xml_text(_format_value(value)),
-                )
-            for key in ("seed", "attempts", "endReason", "flaky"):
-                if summary.get(key) is not None:
-                    value = _format_value(summary[key])  # `flaky`: true
-                    ET.SubElement(properties, "property", name=key, value=_xml_text(value))
-            counts["tests"] += 1
-            status = summary["status"]
-            if status == "passed":
-                continue
-            if status == "failed":
-                message, text = _failure_message(summary)
-                kind = "failure"
-            else:
-                message = str(summary.get("error") or "error")
-                text = message
-                kind = "error"
-            if summary.get("optional", False):
-                skipped = ET.SubElement(case, "skipped", message=_xml_text(f"optional: {message}"))
-                skipped.text = _xml_text(text)
-                counts["skipped"] += 1
-            elif kind == "failure":
-                element = ET.SubElement(case, "failure", message=_xml_text(message), type="CriterionFailed")
-                element.text = _xml_text(text)
-                counts["failures"] += 1
-            else:
-                element = ET.SubElement(case, "error", message=_xml_text(message), type="SimulationError")
-                element.text = _xml_text(text)
-                counts["errors"] += 1
-        for key, value in counts.items():
-            suite.set(key, str(value))
-            totals[key] += value
-        suite.set("time", f"{suite_time:.3f}")
-        total_time += suite_time
-    for key, value in totals.items():
-        root.set(key, str(value))
-    root.set("time", f"{total_time:.3f}")
-    ET.indent(root)
-    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+@dataclass
+class _Suite:
+    """One scenario's test cases while they stream in: their XML spooled to a file, what orders them."""
+
+    spool: IO[bytes]
+    cases: list[tuple[int, int, int, float]] = field(default_factory=list)  # index, offset, length, wall
+    counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(_JUNIT_COUNTS, 0))
+
+
+_JUNIT_COUNTS = ("tests", "failures", "errors", "skipped")
+
+
+def write_junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]], out: IO[bytes]) -> None:
+    """`junit_xml`, written to `out` (UTF-8) from a stream of summaries held one at a time: each test case's
+    XML is spooled to a temporary file per scenario, so that a run of 50,000 indexes never holds their
+    summaries or a document tree in memory."""
+    with contextlib.ExitStack() as stack:
+        suites: dict[str, _Suite] = {}
+        for summary in index_summaries:
+            scenario = summary["scenario"]
+            suite = suites.get(scenario)
+            if suite is None:
+                suite = suites[scenario] = _Suite(stack.enter_context(tempfile.TemporaryFile()))
+            case, kind = _testcase(run_name, scenario, summary)
+            ET.indent(case, level=2)
+            data = ET.tostring(case, encoding="unicode").encode()
+            suite.cases.append((int(summary["index"]), suite.spool.tell(), len(data), _wall(summary)))
+            suite.spool.write(data)
+            suite.counts["tests"] += 1
+            if kind:
+                suite.counts[kind] += 1
+        root = ET.Element("testsuites", name=_xml_text(run_name))
+        totals = dict.fromkeys(_JUNIT_COUNTS, 0)
+        total_time = 0.0
+        for number, (scenario, suite) in enumerate(suites.items()):
+            element = ET.SubElement(root, "testsuite", name=_xml_text(scenario))
+            ET.SubElement(element, f"carlos-cases-{number}")  # where the spooled cases go
+            suite.cases.sort(key=lambda case: case[0])
+            suite_time = 0.0
+            for case in suite.cases:
+                suite_time += case[3]
+            for key, value in suite.counts.items():
+                element.set(key, str(value))
+                totals[key] += value
+            element.set("time", f"{suite_time:.3f}")
+            total_time += suite_time
+        for key, value in totals.items():
+            root.set(key, str(value))
+        root.set("time", f"{total_time:.3f}")
+        ET.indent(root)
+        skeleton = (
+            '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+        ).encode()
+        for number, suite in enumerate(suites.values()):
+            before, _, skeleton = skeleton.partition(f"<carlos-cases-{number} />".encode())
+            out.write(before)
+            for position, (_, offset, length, _) in enumerate(suite.cases):
+                if position:
+                    out.write(b"\n    ")
+                suite.spool.seek(offset)
+                out.write(suite.spool.read(length))
+        out.write(skeleton)
+
+
+def _wall(summary: Mapping[str, Any]) -> float:
+    return float(summary.get("wallSeconds") or 0.0)
+
+
+def _testcase(run_name: str, scenario: str, summary: Mapping[str, Any]) -> tuple[ET.Element, str | None]:
+    """One index's `<testcase>` and what it counts as beyond a test (failures, errors, skipped; None)."""
+    case = ET.Element(
+        "testcase",
+        name=_xml_text(testcase_name(summary)),
+        classname=_xml_text(f"carlos.{run_name}.{scenario}"),
+        time=f"{_wall(summary):.3f}",
+    )
+    properties = ET.SubElement(case, "properties")
+    for key, value in (summary.get("parameters") or {}).items():
+        ET.SubElement(
+            properties,
+            "property",
+            name=_xml_text(f"param.{key}"),
+            value=_xml_text(_format_value(value)),
+        )
+    for key in ("seed", "attempts", "endReason", "flaky"):
+        if summary.get(key) is not None:
+            value = _format_value(summary[key])  # `flaky`: true
+            ET.SubElement(properties, "property", name=key, value=_xml_text(value))
+    status = summary["status"]
+    if status == "passed":
+        return case, None
+    if status == "failed":
+        message, text = _failure_message(summary)
+        kind = "failure"
+    else:
+        message = str(summary.get("error") or "error")
+        text = message
+        kind = "error"
+    if summary.get("optional", False):
+        skipped = ET.SubElement(case, "skipped", message=_xml_text(f"optional: {message}"))
+        skipped.text = _xml_text(text)
+        return case, "skipped"
+    if kind == "failure":
+        element = ET.SubElement(case, "failure", message=_xml_text(message), type="CriterionFailed")
+        element.text = _xml_text(text)
+        return case, "failures"
+    element = ET.SubElement(case, "error", message=_xml_text(message), type="SimulationError")
+    element.text = _xml_text(text)
+    return case, "errors"
