@@ -306,6 +306,9 @@ def junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]]) -> st
     return out.getvalue().decode()
 
 
+_JUNIT_COUNTS = ("tests", "failures", "errors", "skipped")
+
+
 @dataclass
 class _Suite:
     """One scenario's test cases while they stream in: their XML spooled to a file, what orders them."""
@@ -313,9 +316,6 @@ class _Suite:
     spool: IO[bytes]
     cases: list[tuple[int, int, int, float]] = field(default_factory=list)  # index, offset, length, wall
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(_JUNIT_COUNTS, 0))
-
-
-_JUNIT_COUNTS = ("tests", "failures", "errors", "skipped")
 
 
 def write_junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]], out: IO[bytes]) -> None:
@@ -343,10 +343,10 @@ def write_junit_xml(run_name: str, index_summaries: Iterable[Mapping[str, Any]],
         for number, (scenario, suite) in enumerate(suites.items()):
             element = ET.SubElement(root, "testsuite", name=_xml_text(scenario))
             ET.SubElement(element, f"carlos-cases-{number}")  # where the spooled cases go
-            suite.cases.sort(key=lambda case: case[0])
+            suite.cases.sort(key=lambda spooled: spooled[0])
             suite_time = 0.0
-            for case in suite.cases:
-                suite_time += case[3]
+            for _, _, _, wall in suite.cases:  # summed in index order, as the cases are written
+                suite_time += wall
             for key, value in suite.counts.items():
                 element.set(key, str(value))
                 totals[key] += value
