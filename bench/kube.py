@@ -272,12 +272,9 @@ def main() -> None:
         ).stdout
         kubectl(admin, "apply", "-f", "-", stdin=crd)
         for _ in range(120):  # the CRD is served once Established
-            crd_status = json.loads(kubectl(admin, "get", f"crd/{PLURAL}.{GROUP}", "-o", "json")).get(
-                "status", {}
-            )
-            if any(
-                c["type"] == "Established" and c["status"] == "True" for c in crd_status.get("conditions", [])
-            ):
+            crd = json.loads(kubectl(admin, "get", f"crd/{PLURAL}.{GROUP}", "-o", "json"))
+            conditions = (crd.get("status") or {}).get("conditions") or []  # null until the first update
+            if any(c["type"] == "Established" and c["status"] == "True" for c in conditions):
                 break
             time.sleep(0.5)
         kubectl(admin, "create", "namespace", NS)
