@@ -78,6 +78,11 @@ class Body:
     direction: int = 1  # +1 travels toward increasing s
     heading_offset: float = 0.0  # heading relative to the lane's travel direction, kept along the lane
     posed: tuple[Any, ...] | None = None  # the road state the pose was last computed from
+    # the reference line's curvature at the s of the pose, on that road (`update_pose_from_road`): where the
+    # next step's move along the lane starts
+    kappa_road: Any = None
+    kappa_s: float = math.nan
+    kappa: float = 0.0
     odometer: float = 0.0
     standstill_since: float | None = 0.0
     end_of_road_since: float | None = None
@@ -171,7 +176,10 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
         length = r.length
         # a curve parallel to the reference line at distance t has length (1 - κ t) per unit of s
         on = 0.0 if s < 0.0 else s  # min(max(s, 0.0), length), without the calls
-        scale = abs(1.0 - r.curvature(length if length < on else on) * t)
+        on = length if length < on else on
+        # the curvature there: known from the pose when the body is still where it was posed
+        kappa = body.kappa if on == body.kappa_s and r is body.kappa_road else r.curvature(on)
+        scale = abs(1.0 - kappa * t)
         ds = remaining / (1e-6 if scale < 1e-6 else scale)  # max(scale, 1e-6)
         target = s + body.direction * ds
         # reaching a road's end exactly counts as reaching it (the end-of-road timer starts on this step,
@@ -348,7 +356,8 @@ def update_pose_from_road(road: OpenDrive, body: Body) -> None:
     if r is not None and 0.0 <= s <= r.length:  # road.road_xyzh's road and s: ask the road itself
         centre = r.centre_t(body.lane_id, s)  # road.lane_center_t where the table has it
         t = (road.lane_center_t(road_id, body.lane_id, s) if centre is None else centre) + body.offset
-        body.x, body.y, body.z, heading = r.world_xyz(s, t)
+        body.x, body.y, body.z, heading, body.kappa = r.world_xyzk(s, t)
+        body.kappa_road, body.kappa_s = r, s
     else:
         t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
         body.x, body.y, body.z, heading = road.road_xyzh(road_id, s, t)
@@ -359,7 +368,16 @@ def update_pose_from_road(road: OpenDrive, body: Body) -> None:
         lateral = body.lateral_velocity * body.direction  # + is to the left of the travel direction
         drift = math.atan2(lateral, abs(speed))
     body.heading = (road_heading + drift + body.heading_offset + math.pi) % _TWO_PI - math.pi  # wrap_angle
-    body.posed = _road_state(body)
+    body.posed = (  # _road_state(body)
+        road_id,
+        body.lane_id,
+        s,
+        body.offset,
+        body.direction,
+        body.heading_offset,
+        body.lateral_velocity,
+        speed,
+    )
 
 
 def _road_state(body: Body) -> tuple[Any, ...]:

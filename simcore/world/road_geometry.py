@@ -406,34 +406,34 @@ class ParamPoly3(Geometry):
             out.append(total)
         return out
 
-    def _p_of(self, ds: float) -> float:
-        ss, ps = self._ss, self._ps
-        i = bisect.bisect_right(ss, ds) - 1
-        i = min(max(i, 0), len(ss) - 2)
-        s0, s1 = ss[i], ss[i + 1]
-        f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
-        return ps[i] + f * (ps[i + 1] - ps[i])
-
     def _uv_at(self, ds: float) -> tuple[float, float, float, float, float, float]:
-        """`_uv` at the parameter of ``ds``; the last one kept (a projection asks for the point and then the
-        curvature at the same ``ds``): one ``(ds, uv)`` tuple, replaced whole."""
+        """``(u, v, u', v', u'', v'')`` at the parameter ``p`` of ``ds`` (interpolated in the arc length
+        table); the last one kept (a projection asks for the point and then the curvature at the same
+        ``ds``): one ``(ds, uv)`` tuple, replaced whole. One function: it runs for every entity on such a road
+        at every step."""
         last = self._last
         if last[0] == ds:
             return last[1]
-        uv = self._uv(self._p_of(ds))
-        self._last = (ds, uv)
-        return uv
-
-    def _uv(self, p: float) -> tuple[float, float, float, float, float, float]:
+        ss, ps = self._ss, self._ps
+        i = bisect.bisect_right(ss, ds) - 1
+        top = len(ss) - 2
+        i = 0 if i < 0 else top if i > top else i  # min(max(i, 0), top), top >= 0
+        s0, s1 = ss[i], ss[i + 1]
+        f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
+        p0 = ps[i]
+        p = p0 + f * (ps[i + 1] - p0)
         au, bu, cu, du = self.u
         av, bv, cv, dv = self.v
-        u = au + p * (bu + p * (cu + p * du))
-        v = av + p * (bv + p * (cv + p * dv))
-        up = bu + p * (2 * cu + 3 * du * p)
-        vp = bv + p * (2 * cv + 3 * dv * p)
-        upp = 2 * cu + 6 * du * p
-        vpp = 2 * cv + 6 * dv * p
-        return u, v, up, vp, upp, vpp
+        uv = (
+            au + p * (bu + p * (cu + p * du)),
+            av + p * (bv + p * (cv + p * dv)),
+            bu + p * (2 * cu + 3 * du * p),
+            bv + p * (2 * cv + 3 * dv * p),
+            2 * cu + 6 * du * p,
+            2 * cv + 6 * dv * p,
+        )
+        self._last = (ds, uv)
+        return uv
 
     def local(self, ds: float) -> tuple[float, float, float]:
         u, v, up, vp, _, _ = self._uv_at(ds)
@@ -442,6 +442,12 @@ class ParamPoly3(Geometry):
             self.y + u * self._sin + v * self._cos,
             self.hdg + math.atan2(vp, up),
         )
+
+    def frame(self, ds: float) -> tuple[float, float, float, float, float]:
+        u, v, up, vp, _, _ = self._uv_at(ds)  # as local, then the heading's cosine and sine
+        c, s = self._cos, self._sin
+        h = self.hdg + math.atan2(vp, up)
+        return self.x + u * c - v * s, self.y + u * s + v * c, h, math.cos(h), math.sin(h)
 
     def curvature(self, ds: float) -> float:
         _, _, up, vp, upp, vpp = self._uv_at(ds)

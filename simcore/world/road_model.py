@@ -346,6 +346,27 @@ class Road:
             th = t
         return x - th * sin_h, y + th * cos_h, z, h
 
+    def world_xyzk(self, s: float, t: float) -> tuple[float, float, float, float, float]:
+        """`world_xyz` and the reference line's `curvature` at ``s``, from one look-up of the planView record
+        (an entity posed at ``s`` moves on from there at the next step, scaled by that curvature)."""
+        i = bisect.bisect_right(self._gstarts, s) - 1
+        g = self.geometries[i if i > 0 else 0]
+        ds = s - g.s
+        if ds < 0.0:
+            ds = 0.0
+        x, y, h, cos_h, sin_h = g.frame(ds)
+        k = g.curvature(ds)  # a paramPoly3 reuses the parameter of its frame (its last ``ds``)
+        z = self._z_fixed
+        if z is None:
+            z = self.elevation(s)
+        if self.superelevations:
+            r = self.roll(s)
+            th = t * math.cos(r)
+            z += t * math.sin(r)
+        else:
+            th = t
+        return x - th * sin_h, y + th * cos_h, z, h, k
+
     def world_points(self, s: float, ts: Sequence[float]) -> list[tuple[float, float, float]]:
         """World ``(x, y, z)`` of ``(s, t)`` for every ``t`` in ``ts``: :meth:`world_xyz` with the reference
         frame at ``s`` computed once (sampling every lane border at one ``s``)."""
