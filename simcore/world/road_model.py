@@ -357,8 +357,11 @@ class Road:
         x, y, h, cos_h, sin_h = g.frame(ds)
         k = g.curvature(ds)  # a paramPoly3 reuses the parameter of its frame (its last ``ds``)
         z = self._z_fixed
-        if z is None:
-            z = self.elevation(s)
+        if z is None:  # self.elevation(s): records there are (else 0.0 were fixed), the one at s
+            i = bisect.bisect_right(self._estarts, s + 1e-12) - 1  # as _poly_at
+            p = self.elevations[i if i > 0 else 0]
+            e = s - p.s0  # as Poly3.value
+            z = p.a + e * (p.b + e * (p.c + e * p.d))
         if self.superelevations:
             r = self.roll(s)
             th = t * math.cos(r)
