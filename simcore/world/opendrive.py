@@ -512,12 +512,21 @@ class OpenDrive:
         near = [(d, ci) for ci in cand if (d := math.hypot(tree.xs[ci] - x, tree.ys[ci] - y)) <= reach[ci]]
         near.sort()  # by distance, ties by index
         seeds: dict[int, list[float]] = {}
+        rix, sample_s, spacing = idx["rix"], idx["s"], idx["spacing"]
         for _, ci in near:
-            ri = idx["rix"][ci]
-            s0 = idx["s"][ci]
-            lst = seeds.setdefault(ri, [])
-            if len(lst) < 3 and all(abs(s0 - o) > 3.0 * idx["spacing"][ri] for o in lst):
-                lst.append(s0)
+            ri = rix[ci]
+            lst = seeds.get(ri)
+            if lst is None:
+                lst = seeds[ri] = []
+            if len(lst) < 3:
+                # up to 3 seeds per road, each more than 3 samples from the ones before
+                s0 = sample_s[ci]
+                gap = 3.0 * spacing[ri]
+                for o in lst:
+                    if not abs(s0 - o) > gap:
+                        break
+                else:
+                    lst.append(s0)
         best: tuple[tuple[float, ...], RoadCoordinates] | None = None
         for ri, starts in seeds.items():
             road: Road = idx["roads"][ri]

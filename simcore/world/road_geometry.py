@@ -104,6 +104,14 @@ class Arc(Geometry):
             h,
         )
 
+    def frame(self, ds: float) -> tuple[float, float, float, float, float]:
+        k = self.k  # as local, whose sine and cosine of the heading are the frame's
+        h = self.hdg + k * ds
+        c, s = math.cos(h), math.sin(h)
+        if abs(k) < 1e-12:
+            return self.x + ds * self._cos, self.y + ds * self._sin, h, c, s
+        return self.x + (s - self._sin) / k, self.y - (c - self._cos) / k, h, c, s
+
     def curvature(self, ds: float) -> float:
         return self.k
 
