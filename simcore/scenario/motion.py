@@ -12,6 +12,7 @@ from simcore.scenario import model as m
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
+    from simcore.world.road_model import Road
 
 
 def shape_value(shape: str, p: float) -> float:
@@ -78,11 +79,12 @@ class Body:
     direction: int = 1  # +1 travels toward increasing s
     heading_offset: float = 0.0  # heading relative to the lane's travel direction, kept along the lane
     posed: tuple[Any, ...] | None = None  # the road state the pose was last computed from
-    # the reference line's curvature at the s of the pose, on that road (`update_pose_from_road`): where the
-    # next step's move along the lane starts
-    kappa_road: Any = None
-    kappa_s: float = math.nan
-    kappa: float = 0.0
+    # the reference line at the s of the pose on its road (`update_pose_from_road`): its curvature, where the
+    # next step's move along the lane starts, and its heading, which conditions measure in (`reference_heading`)
+    ref_road: Any = None
+    ref_s: float = math.nan
+    ref_kappa: float = 0.0
+    ref_heading: float = 0.0
     odometer: float = 0.0
     standstill_since: float | None = 0.0
     end_of_road_since: float | None = None
@@ -178,7 +180,7 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
         on = 0.0 if s < 0.0 else s  # min(max(s, 0.0), length), without the calls
         on = length if length < on else on
         # the curvature there: known from the pose when the body is still where it was posed
-        kappa = body.kappa if on == body.kappa_s and r is body.kappa_road else r.curvature(on)
+        kappa = body.ref_kappa if on == body.ref_s and r is body.ref_road else r.curvature(on)
         scale = abs(1.0 - kappa * t)
         ds = remaining / (1e-6 if scale < 1e-6 else scale)  # max(scale, 1e-6)
         target = s + body.direction * ds
@@ -356,8 +358,8 @@ def update_pose_from_road(road: OpenDrive, body: Body) -> None:
     if r is not None and 0.0 <= s <= r.length:  # road.road_xyzh's road and s: ask the road itself
         centre = r.centre_t(body.lane_id, s)  # road.lane_center_t where the table has it
         t = (road.lane_center_t(road_id, body.lane_id, s) if centre is None else centre) + body.offset
-        body.x, body.y, body.z, heading, body.kappa = r.world_xyzk(s, t)
-        body.kappa_road, body.kappa_s = r, s
+        body.x, body.y, body.z, heading, body.ref_kappa = r.world_xyzk(s, t)
+        body.ref_road, body.ref_s, body.ref_heading = r, s, heading
     else:
         t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
         body.x, body.y, body.z, heading = road.road_xyzh(road_id, s, t)
@@ -378,6 +380,14 @@ def update_pose_from_road(road: OpenDrive, body: Body) -> None:
         body.lateral_velocity,
         speed,
     )
+
+
+def reference_heading(r: Road, body: Body, s: float) -> float:
+    """The heading of road `r`'s reference line at `s` (``r.reference_xyh(s)[2]``): kept from the body's pose
+    when it is posed there."""
+    if s == body.ref_s and r is body.ref_road:
+        return body.ref_heading
+    return r.reference_xyh(s)[2]
 
 
 def _road_state(body: Body) -> tuple[Any, ...]:

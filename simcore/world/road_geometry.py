@@ -61,6 +61,11 @@ class Geometry:
         """Signed curvature (1/m, positive turns left) at ``ds``."""
         raise NotImplementedError
 
+    def frame_k(self, ds: float) -> tuple[float, float, float, float, float, float]:
+        """`frame` and `curvature` at ``ds``: ``(x, y, heading, cos, sin, curvature)``."""
+        x, y, h, c, s = self.frame(ds)
+        return x, y, h, c, s, self.curvature(ds)
+
 
 class Line(Geometry):
     """A straight line."""
@@ -81,6 +86,10 @@ class Line(Geometry):
 
     def curvature(self, ds: float) -> float:
         return 0.0
+
+    def frame_k(self, ds: float) -> tuple[float, float, float, float, float, float]:
+        c, s = self._cos, self._sin
+        return self.x + ds * c, self.y + ds * s, self.hdg, c, s, 0.0
 
 
 class Arc(Geometry):
@@ -350,6 +359,7 @@ class ParamPoly3(Geometry):
     """
 
     kind = "paramPoly3"
+    _i = 0  # the arc length table's interval of the last look-up (`_uv_at`)
 
     def __init__(
         self,
@@ -423,9 +433,16 @@ class ParamPoly3(Geometry):
         if last[0] == ds:
             return last[1]
         ss, ps = self._ss, self._ps
-        i = bisect.bisect_right(ss, ds) - 1
-        top = len(ss) - 2
-        i = 0 if i < 0 else top if i > top else i  # min(max(i, 0), top), top >= 0
+        # the interval of ds, bisect_right(ss, ds) - 1 within [0, top]: the last look-up's or the next one
+        # when ds is in it (an entity moving along), else bisected
+        i = self._i
+        if not ss[i] <= ds < ss[i + 1]:
+            i += 1
+            top = len(ss) - 2
+            if not (i <= top and ss[i] <= ds < ss[i + 1]):
+                i = bisect.bisect_right(ss, ds) - 1
+                i = 0 if i < 0 else top if i > top else i  # min(max(i, 0), top), top >= 0
+            self._i = i
         s0, s1 = ss[i], ss[i + 1]
         f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
         p0 = ps[i]
@@ -461,3 +478,11 @@ class ParamPoly3(Geometry):
         _, _, up, vp, upp, vpp = self._uv_at(ds)
         sp = math.hypot(up, vp)
         return 0.0 if sp == 0 else (up * vpp - vp * upp) / sp**3
+
+    def frame_k(self, ds: float) -> tuple[float, float, float, float, float, float]:
+        u, v, up, vp, upp, vpp = self._uv_at(ds)  # as frame and curvature
+        c, s = self._cos, self._sin
+        h = self.hdg + math.atan2(vp, up)
+        sp = math.hypot(up, vp)
+        k = 0.0 if sp == 0 else (up * vpp - vp * upp) / sp**3
+        return self.x + u * c - v * s, self.y + u * s + v * c, h, math.cos(h), math.sin(h), k

@@ -354,8 +354,7 @@ class Road:
         ds = s - g.s
         if ds < 0.0:
             ds = 0.0
-        x, y, h, cos_h, sin_h = g.frame(ds)
-        k = g.curvature(ds)  # a paramPoly3 reuses the parameter of its frame (its last ``ds``)
+        x, y, h, cos_h, sin_h, k = g.frame_k(ds)
         z = self._z_fixed
         if z is None:  # self.elevation(s): records there are (else 0.0 were fixed), the one at s
             i = bisect.bisect_right(self._estarts, s + 1e-12) - 1  # as _poly_at
