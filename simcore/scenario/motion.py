@@ -47,6 +47,7 @@ def shape_peak_rate_factor(shape: str) -> float:
     return {"linear": 1.0, "cubic": 1.5, "sinusoidal": math.pi / 2, "step": 1.0}[shape]
 
 
+_PI = math.pi
 _TWO_PI = 2 * math.pi
 
 
@@ -352,34 +353,39 @@ def along_lane(
 
 
 def update_pose_from_road(road: OpenDrive, body: Body) -> None:
-    road_id, s = body.road_id, body.s
+    # (the body's fields read once each: this runs for every road-following entity at every step)
+    road_id, lane_id, s, offset = body.road_id, body.lane_id, body.s, body.offset
     assert road_id is not None
     r = road.roads.get(road_id)
     if r is not None and 0.0 <= s <= r.length:  # road.road_xyzh's road and s: ask the road itself
-        centre = r.centre_t(body.lane_id, s)  # road.lane_center_t where the table has it
-        t = (road.lane_center_t(road_id, body.lane_id, s) if centre is None else centre) + body.offset
+        centre = r.centre_t(lane_id, s)  # road.lane_center_t where the table has it
+        t = (road.lane_center_t(road_id, lane_id, s) if centre is None else centre) + offset
         body.x, body.y, body.z, heading, body.ref_kappa = r.world_xyzk(s, t)
         body.ref_road, body.ref_s, body.ref_heading = r, s, heading
     else:
-        t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
+        t = road.lane_center_t(road_id, lane_id, s) + offset
         body.x, body.y, body.z, heading = road.road_xyzh(road_id, s, t)
-    road_heading = heading if body.direction > 0 else heading + math.pi
+    direction = body.direction
+    road_heading = heading if direction > 0 else heading + _PI
     drift = 0.0
     speed = body.speed
-    if abs(speed) > 0.1:
-        lateral = body.lateral_velocity * body.direction  # + is to the left of the travel direction
+    lateral_velocity = body.lateral_velocity
+    if lateral_velocity != 0.0 and abs(speed) > 0.1:
+        # (without a lateral motion the drift is atan2(±0, |speed|) = ±0: adding it changes no heading)
+        lateral = lateral_velocity * direction  # + is to the left of the travel direction
         drift = math.atan2(lateral, abs(speed))
-    body.heading = (road_heading + drift + body.heading_offset + math.pi) % _TWO_PI - math.pi  # wrap_angle
-    body.posed = (  # _road_state(body)
+    heading_offset = body.heading_offset
+    body.heading = (road_heading + drift + heading_offset + _PI) % _TWO_PI - _PI  # wrap_angle
+    body.posed = (
         road_id,
-        body.lane_id,
+        lane_id,
         s,
-        body.offset,
-        body.direction,
-        body.heading_offset,
-        body.lateral_velocity,
+        offset,
+        direction,
+        heading_offset,
+        lateral_velocity,
         speed,
-    )
+    )  # _road_state
 
 
 def reference_heading(r: Road, body: Body, s: float) -> float:
