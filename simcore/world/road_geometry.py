@@ -359,7 +359,6 @@ class ParamPoly3(Geometry):
     """
 
     kind = "paramPoly3"
-    _i = 0  # the arc length table's interval of the last look-up (`_uv_at`)
 
     def __init__(
         self,
@@ -433,16 +432,9 @@ class ParamPoly3(Geometry):
         if last[0] == ds:
             return last[1]
         ss, ps = self._ss, self._ps
-        # the interval of ds, bisect_right(ss, ds) - 1 within [0, top]: the last look-up's or the next one
-        # when ds is in it (an entity moving along), else bisected
-        i = self._i
-        if not ss[i] <= ds < ss[i + 1]:
-            i += 1
-            top = len(ss) - 2
-            if not (i <= top and ss[i] <= ds < ss[i + 1]):
-                i = bisect.bisect_right(ss, ds) - 1
-                i = 0 if i < 0 else top if i > top else i  # min(max(i, 0), top), top >= 0
-            self._i = i
+        i = bisect.bisect_right(ss, ds) - 1
+        top = len(ss) - 2
+        i = 0 if i < 0 else top if i > top else i  # min(max(i, 0), top), top >= 0
         s0, s1 = ss[i], ss[i + 1]
         f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
         p0 = ps[i]
