@@ -508,11 +508,51 @@ class OpenDrive:
         if not cand:
             return None
         tree: PointGrid = idx["tree"]
+        xs, ys = tree.xs, tree.ys
         reach: list[float] = idx["reach"]
-        near = [(d, ci) for ci in cand if (d := math.hypot(tree.xs[ci] - x, tree.ys[ci] - y)) <= reach[ci]]
+        rix, sample_s, spacing = idx["rix"], idx["s"], idx["spacing"]
+        roads: list[Road] = idx["roads"]
+        best: tuple[tuple[float, ...], RoadCoordinates] | None = None
+        # the hinted road first: a point strictly inside one of its lanes (key (0, 0, 0, …)) is on it, whatever
+        # the other roads give (their keys are greater at the third place, where a NaN never is; road ids are
+        # unique). Its seeds are the ones the full search below gives it (its samples in the same order);
+        # without such a hit every road is searched in order, the hinted road's candidates kept.
+        hinted: list[tuple[tuple[float, ...], RoadCoordinates] | None] | None = None
+        hint_ri = -1
+        if road_hint is not None:
+            ri_of: dict[str, int] | None = idx.get("ri_of")
+            if ri_of is None:
+                ri_of = idx["ri_of"] = {road.id: ri for ri, road in enumerate(roads)}
+            hint_ri = ri_of.get(road_hint, -1)
+            if hint_ri >= 0:
+                mine = [
+                    (d, ci)
+                    for ci in cand
+                    if rix[ci] == hint_ri and (d := math.hypot(xs[ci] - x, ys[ci] - y)) <= reach[ci]
+                ]
+                mine.sort()
+                starts: list[float] = []
+                gap = 3.0 * spacing[hint_ri]
+                for _, ci in mine:
+                    if len(starts) == 3:
+                        break
+                    s0 = sample_s[ci]
+                    for o in starts:
+                        if not abs(s0 - o) > gap:
+                            break
+                    else:
+                        starts.append(s0)
+                road, sp = roads[hint_ri], spacing[hint_ri]
+                hinted = [self._candidate(road, x, y, z, s0, sp, road_hint) for s0 in starts]
+                for found in hinted:
+                    if found is not None and (best is None or found[0] < best[0]):
+                        best = found
+                if best is not None and best[0][0] == 0.0 and best[0][1] == 0.0:
+                    return best[1]
+                best = None
+        near = [(d, ci) for ci in cand if (d := math.hypot(xs[ci] - x, ys[ci] - y)) <= reach[ci]]
         near.sort()  # by distance, ties by index
         seeds: dict[int, list[float]] = {}
-        rix, sample_s, spacing = idx["rix"], idx["s"], idx["spacing"]
         for _, ci in near:
             ri = rix[ci]
             lst = seeds.get(ri)
@@ -527,27 +567,6 @@ class OpenDrive:
                         break
                 else:
                     lst.append(s0)
-        roads: list[Road] = idx["roads"]
-        best: tuple[tuple[float, ...], RoadCoordinates] | None = None
-        # the hinted road first: a point strictly inside one of its lanes (key (0, 0, 0, …)) is on it, whatever
-        # the other roads give (their keys are greater at the third place, where a NaN never is); else every
-        # road in order, as if the hinted road had not been looked at first (its candidates are kept)
-        hinted: list[tuple[tuple[float, ...], RoadCoordinates] | None] | None = None
-        hint_ri = -1
-        if road_hint is not None:
-            for ri in seeds:
-                if roads[ri].id == road_hint:
-                    hint_ri = ri
-                    hinted = [
-                        self._candidate(roads[ri], x, y, z, s0, spacing[ri], road_hint) for s0 in seeds[ri]
-                    ]
-                    for found in hinted:
-                        if found is not None and (best is None or found[0] < best[0]):
-                            best = found
-                    if best is not None and best[0][0] == 0.0 and best[0][1] == 0.0:
-                        return best[1]
-                    best = None
-                    break
         for ri, starts in seeds.items():
             if ri == hint_ri and hinted is not None:
                 candidates: list[tuple[tuple[float, ...], RoadCoordinates] | None] = hinted
