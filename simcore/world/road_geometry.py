@@ -359,6 +359,9 @@ class ParamPoly3(Geometry):
     """
 
     kind = "paramPoly3"
+    _coef: tuple[float, ...] | None = (
+        None  # (u, v coefficients, 2·cu, 3·du, 6·du, 2·cv, 3·dv, 6·dv): `_uv_at`
+    )
 
     def __init__(
         self,
@@ -439,15 +442,34 @@ class ParamPoly3(Geometry):
         f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
         p0 = ps[i]
         p = p0 + f * (ps[i + 1] - p0)
-        au, bu, cu, du = self.u
-        av, bv, cv, dv = self.v
+        coef = self._coef
+        if coef is None:  # the coefficients and their multiples, once (2·c, 3·d, 6·d are the same floats)
+            au, bu, cu, du = self.u
+            av, bv, cv, dv = self.v
+            coef = self._coef = (
+                au,
+                bu,
+                cu,
+                du,
+                av,
+                bv,
+                cv,
+                dv,
+                2 * cu,
+                3 * du,
+                6 * du,
+                2 * cv,
+                3 * dv,
+                6 * dv,
+            )
+        au, bu, cu, du, av, bv, cv, dv, cu2, du3, du6, cv2, dv3, dv6 = coef
         uv = (
             au + p * (bu + p * (cu + p * du)),
             av + p * (bv + p * (cv + p * dv)),
-            bu + p * (2 * cu + 3 * du * p),
-            bv + p * (2 * cv + 3 * dv * p),
-            2 * cu + 6 * du * p,
-            2 * cv + 6 * dv * p,
+            bu + p * (cu2 + du3 * p),  # bu + p * (2 * cu + 3 * du * p)
+            bv + p * (cv2 + dv3 * p),
+            cu2 + du6 * p,  # 2 * cu + 6 * du * p
+            cv2 + dv6 * p,
         )
         self._last = (ds, uv)
         return uv
