@@ -84,6 +84,18 @@ def _for_entities(cond: m.Condition, world: ScenarioWorld, evaluate: EntityTest)
     if len(names) == 1:
         # one entity: "any" and "all" alike hold when it is in the world and fulfils the condition
         name = names[0]
+        if name != "$owner":  # (the actor of the action running now, else looked up once: raises as then)
+            entity = world.body(name)
+
+            def one_named(triggering: list[str] | None) -> bool:
+                if entity.gone:
+                    return False
+                result = evaluate(entity)
+                if result and triggering is not None:
+                    triggering.append(name)
+                return result
+
+            return one_named
 
         def one(triggering: list[str] | None) -> bool:
             body = world.body(name)

@@ -31,11 +31,20 @@ class SpeedRuntime(Runtime):
         self.elapsed = 0.0
         self.duration = 0.0
         self.rate = 0.0  # the rate of a rate-dimension transition, within the vehicle's performance
+        # what the (immutable) action says, read at every step: a fixed target speed, a target that is
+        # followed continuously, followed at once (step shape), and a rate to a moving target
+        target = action.target
+        self._fixed = target.value if isinstance(target, m.AbsoluteTargetSpeed) else None
+        self._follows = isinstance(target, m.RelativeTargetSpeed) and target.continuous
+        self._follows_at_once = action.dynamics.shape == "step" and self._follows
+        self._moving_rate = action.dynamics.dimension == "rate" and isinstance(target, m.RelativeTargetSpeed)
 
     def target(self) -> float:
+        fixed = self._fixed
+        if fixed is not None:
+            return fixed
         target = self.action.target
-        if isinstance(target, m.AbsoluteTargetSpeed):
-            return target.value
+        assert isinstance(target, m.RelativeTargetSpeed)
         reference = self.world.body(target.entity).speed
         return reference + target.value if target.value_type == "delta" else reference * target.value
 
@@ -69,15 +78,11 @@ class SpeedRuntime(Runtime):
         if self.actor.entity.driver == "sumo":
             # the SUMO driver reaches the desired speed with its own dynamics
             self.world.sumo_set_speed(self.actor, self.target())
-            self.done = not self._continuous
+            self.done = not self._follows
             return
         if dyn.shape == "step" or self.duration <= 0:
             self._set(self.target())
-            self.done = not self._continuous
-
-    @property
-    def _continuous(self) -> bool:
-        return isinstance(self.action.target, m.RelativeTargetSpeed) and self.action.target.continuous
+            self.done = not self._follows
 
     def _set(self, speed: float, dt: float | None = None) -> None:
         if dt:
@@ -91,18 +96,14 @@ class SpeedRuntime(Runtime):
         if self.actor.entity.driver == "sumo":
             self.world.sumo_set_speed(self.actor, self.target())
             return
-        if self.done or (self.action.dynamics.shape == "step" and self._continuous):
+        if self.done or self._follows_at_once:
             # following a moving target: within the vehicle's performance (as esmini does)
             self._set(self.target(), dt)
             return
         self.elapsed += dt
         dyn = self.action.dynamics
         target = self.target()
-        if (
-            dyn.dimension == "rate"
-            and self.rate > 0
-            and isinstance(self.action.target, m.RelativeTargetSpeed)
-        ):
+        if self._moving_rate and self.rate > 0:
             # a moving target changes how long the transition at this rate lasts, not the rate (as esmini)
             self.duration = abs(target - self.v0) / self.rate * shape_peak_rate_factor(dyn.shape)
         progress = self.elapsed / max(self.duration, 1e-9)
@@ -110,7 +111,7 @@ class SpeedRuntime(Runtime):
         if progress >= 1.0 - 1e-9:
             self._set(target, dt)
             # bounded by the vehicle's performance, the target may be reached later than the shape says
-            self.done = not self._continuous and abs(self.actor.speed - target) < 1e-9
+            self.done = not self._follows and abs(self.actor.speed - target) < 1e-9
 
     def start_in_init(self) -> bool:
         """In Init, a step (or zero-time) change to a fixed target is the initial speed: reached at once; with a

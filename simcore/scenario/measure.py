@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from simcore.evaluation.metrics import Box, box_distance, boxes_overlap, footprint
 from simcore.scenario import paths
+from simcore.scenario.motion import reference_heading
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
@@ -85,7 +86,7 @@ class Measure:
         road = self.world.road
         if road is not None and body.road_id is not None and body.road_id in road.roads:
             r = road.road(body.road_id)
-            _, _, h_road = r.reference_xyh(min(max(body.s, 0.0), r.length))
+            h_road = reference_heading(r, body, min(max(body.s, 0.0), r.length))
             heading = h_road if math.cos(body.heading - h_road) >= 0 else h_road + math.pi
         self._frame[body.name] = heading
         return heading

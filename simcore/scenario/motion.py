@@ -12,6 +12,7 @@ from simcore.scenario import model as m
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
+    from simcore.world.road_model import Road
 
 
 def shape_value(shape: str, p: float) -> float:
@@ -46,6 +47,7 @@ def shape_peak_rate_factor(shape: str) -> float:
     return {"linear": 1.0, "cubic": 1.5, "sinusoidal": math.pi / 2, "step": 1.0}[shape]
 
 
+_PI = math.pi
 _TWO_PI = 2 * math.pi
 
 
@@ -78,6 +80,12 @@ class Body:
     direction: int = 1  # +1 travels toward increasing s
     heading_offset: float = 0.0  # heading relative to the lane's travel direction, kept along the lane
     posed: tuple[Any, ...] | None = None  # the road state the pose was last computed from
+    # the reference line at the s of the pose on its road (`update_pose_from_road`): its curvature, where the
+    # next step's move along the lane starts, and its heading, which conditions measure in (`reference_heading`)
+    ref_road: Any = None
+    ref_s: float = math.nan
+    ref_kappa: float = 0.0
+    ref_heading: float = 0.0
     odometer: float = 0.0
     standstill_since: float | None = 0.0
     end_of_road_since: float | None = None
@@ -171,7 +179,10 @@ def advance_on_road(road: OpenDrive, body: Body, distance: float, now: float) ->
         length = r.length
         # a curve parallel to the reference line at distance t has length (1 - κ t) per unit of s
         on = 0.0 if s < 0.0 else s  # min(max(s, 0.0), length), without the calls
-        scale = abs(1.0 - r.curvature(length if length < on else on) * t)
+        on = length if length < on else on
+        # the curvature there: known from the pose when the body is still where it was posed
+        kappa = body.ref_kappa if on == body.ref_s and r is body.ref_road else r.curvature(on)
+        scale = abs(1.0 - kappa * t)
         ds = remaining / (1e-6 if scale < 1e-6 else scale)  # max(scale, 1e-6)
         target = s + body.direction * ds
         # reaching a road's end exactly counts as reaching it (the end-of-road timer starts on this step,
@@ -342,24 +353,47 @@ def along_lane(
 
 
 def update_pose_from_road(road: OpenDrive, body: Body) -> None:
-    road_id, s = body.road_id, body.s
+    # (the body's fields read once each: this runs for every road-following entity at every step)
+    road_id, lane_id, s, offset = body.road_id, body.lane_id, body.s, body.offset
     assert road_id is not None
     r = road.roads.get(road_id)
     if r is not None and 0.0 <= s <= r.length:  # road.road_xyzh's road and s: ask the road itself
-        centre = r.centre_t(body.lane_id, s)  # road.lane_center_t where the table has it
-        t = (road.lane_center_t(road_id, body.lane_id, s) if centre is None else centre) + body.offset
-        body.x, body.y, body.z, heading = r.world_xyz(s, t)
+        centre = r.centre_t(lane_id, s)  # road.lane_center_t where the table has it
+        t = (road.lane_center_t(road_id, lane_id, s) if centre is None else centre) + offset
+        body.x, body.y, body.z, heading, body.ref_kappa = r.world_xyzk(s, t)
+        body.ref_road, body.ref_s, body.ref_heading = r, s, heading
     else:
-        t = road.lane_center_t(road_id, body.lane_id, s) + body.offset
+        t = road.lane_center_t(road_id, lane_id, s) + offset
         body.x, body.y, body.z, heading = road.road_xyzh(road_id, s, t)
-    road_heading = heading if body.direction > 0 else heading + math.pi
+    direction = body.direction
+    road_heading = heading if direction > 0 else heading + _PI
     drift = 0.0
     speed = body.speed
-    if abs(speed) > 0.1:
-        lateral = body.lateral_velocity * body.direction  # + is to the left of the travel direction
+    lateral_velocity = body.lateral_velocity
+    if lateral_velocity != 0.0 and abs(speed) > 0.1:
+        # (without a lateral motion the drift is atan2(±0, |speed|) = ±0: adding it changes no heading)
+        lateral = lateral_velocity * direction  # + is to the left of the travel direction
         drift = math.atan2(lateral, abs(speed))
-    body.heading = (road_heading + drift + body.heading_offset + math.pi) % _TWO_PI - math.pi  # wrap_angle
-    body.posed = _road_state(body)
+    heading_offset = body.heading_offset
+    body.heading = (road_heading + drift + heading_offset + _PI) % _TWO_PI - _PI  # wrap_angle
+    body.posed = (
+        road_id,
+        lane_id,
+        s,
+        offset,
+        direction,
+        heading_offset,
+        lateral_velocity,
+        speed,
+    )  # _road_state
+
+
+def reference_heading(r: Road, body: Body, s: float) -> float:
+    """The heading of road `r`'s reference line at `s` (``r.reference_xyh(s)[2]``): kept from the body's pose
+    when it is posed there."""
+    if s == body.ref_s and r is body.ref_road:
+        return body.ref_heading
+    return r.reference_xyh(s)[2]
 
 
 def _road_state(body: Body) -> tuple[Any, ...]:

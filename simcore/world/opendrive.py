@@ -508,57 +508,114 @@ class OpenDrive:
         if not cand:
             return None
         tree: PointGrid = idx["tree"]
+        xs, ys = tree.xs, tree.ys
         reach: list[float] = idx["reach"]
-        near = [(d, ci) for ci in cand if (d := math.hypot(tree.xs[ci] - x, tree.ys[ci] - y)) <= reach[ci]]
+        rix, sample_s, spacing = idx["rix"], idx["s"], idx["spacing"]
+        roads: list[Road] = idx["roads"]
+        best: tuple[tuple[float, ...], RoadCoordinates] | None = None
+        # the hinted road first: a point strictly inside one of its lanes (key (0, 0, 0, …)) is on it, whatever
+        # the other roads give (their keys are greater at the third place, where a NaN never is; road ids are
+        # unique). Its seeds are the ones the full search below gives it (its samples in the same order);
+        # without such a hit every road is searched in order, the hinted road's candidates kept.
+        hinted: list[tuple[tuple[float, ...], RoadCoordinates] | None] | None = None
+        hint_ri = -1
+        if road_hint is not None:
+            ri_of: dict[str, int] | None = idx.get("ri_of")
+            if ri_of is None:
+                ri_of = idx["ri_of"] = {road.id: ri for ri, road in enumerate(roads)}
+            hint_ri = ri_of.get(road_hint, -1)
+            if hint_ri >= 0:
+                mine = [
+                    (d, ci)
+                    for ci in cand
+                    if rix[ci] == hint_ri and (d := math.hypot(xs[ci] - x, ys[ci] - y)) <= reach[ci]
+                ]
+                mine.sort()
+                starts: list[float] = []
+                gap = 3.0 * spacing[hint_ri]
+                for _, ci in mine:
+                    if len(starts) == 3:
+                        break
+                    s0 = sample_s[ci]
+                    for o in starts:
+                        if not abs(s0 - o) > gap:
+                            break
+                    else:
+                        starts.append(s0)
+                road, sp = roads[hint_ri], spacing[hint_ri]
+                hinted = [self._candidate(road, x, y, z, s0, sp, road_hint) for s0 in starts]
+                for found in hinted:
+                    if found is not None and (best is None or found[0] < best[0]):
+                        best = found
+                if best is not None and best[0][0] == 0.0 and best[0][1] == 0.0:
+                    return best[1]
+                best = None
+        near = [(d, ci) for ci in cand if (d := math.hypot(xs[ci] - x, ys[ci] - y)) <= reach[ci]]
         near.sort()  # by distance, ties by index
         seeds: dict[int, list[float]] = {}
         for _, ci in near:
-            ri = idx["rix"][ci]
-            s0 = idx["s"][ci]
-            lst = seeds.setdefault(ri, [])
-            if len(lst) < 3 and all(abs(s0 - o) > 3.0 * idx["spacing"][ri] for o in lst):
-                lst.append(s0)
-        best: tuple[tuple[float, ...], RoadCoordinates] | None = None
+            ri = rix[ci]
+            lst = seeds.get(ri)
+            if lst is None:
+                lst = seeds[ri] = []
+            if len(lst) < 3:
+                # up to 3 seeds per road, each more than 3 samples from the ones before
+                s0 = sample_s[ci]
+                gap = 3.0 * spacing[ri]
+                for o in lst:
+                    if not abs(s0 - o) > gap:
+                        break
+                else:
+                    lst.append(s0)
         for ri, starts in seeds.items():
-            road: Road = idx["roads"][ri]
-            sp = idx["spacing"][ri]
-            for s0 in starts:
-                s, t, along, h = self._project(road, x, y, s0, sp)
-                if road.superelevations:
-                    t /= max(math.cos(road.roll(s)), 1e-6)
-                if abs(along) > 0.05:  # beyond the road's ends (or not converged)
-                    continue
-                borders = [b for b in road.all_borders(s) if abs(b[2] - b[1]) > 1e-9]
-                if not borders:
-                    continue
-                lane_hit: tuple[Lane, float, float] | None = None
-                outside = math.inf
-                for b in borders:
-                    lo, hi = min(b[1], b[2]), max(b[1], b[2])
-                    dist = 0.0 if lo <= t <= hi else min(abs(t - lo), abs(t - hi))
-                    if dist < outside or (
-                        dist == outside and lane_hit is not None and abs(b[0].id) < abs(lane_hit[0].id)
-                    ):
-                        outside, lane_hit = dist, b
-                assert lane_hit is not None
-                lane, inner, outer = lane_hit
-                width = abs(outer - inner)
-                if outside > 0.5 * width:
-                    continue
-                offset = t - 0.5 * (inner + outer)
-                dz = abs(z - road.world_xyz(s, t)[2]) if z is not None else 0.0
-                key = (
-                    0.0 if outside == 0.0 and abs(along) < 1e-6 else 1.0,
-                    0.0 if dz < 2.0 else 1.0,
-                    0.0 if road.id == road_hint else 1.0,
-                    dz,
-                    outside + abs(along),
-                    abs(offset) / max(width, 1e-6),
-                )
-                rc = _road_coordinates(road.id, lane.id, s, t, offset, h)
-                if best is None or key < best[0]:
-                    best = (key, rc)
+            if ri == hint_ri and hinted is not None:
+                candidates: list[tuple[tuple[float, ...], RoadCoordinates] | None] = hinted
+            else:
+                road, sp = roads[ri], spacing[ri]
+                candidates = [self._candidate(road, x, y, z, s0, sp, road_hint) for s0 in starts]
+            for found in candidates:
+                if found is not None and (best is None or found[0] < best[0]):
+                    best = found
         return None if best is None else best[1]
+
+    def _candidate(
+        self, road: Road, x: float, y: float, z: float | None, s0: float, sp: float, road_hint: str | None
+    ) -> tuple[tuple[float, ...], RoadCoordinates] | None:
+        """`world_to_road`'s candidate from the seed `s0` on `road`: (its sort key, its road coordinates), or
+        None when the point is beyond the road's ends or more than half the outermost lane's width outside."""
+        s, t, along, h = self._project(road, x, y, s0, sp)
+        if road.superelevations:
+            t /= max(math.cos(road.roll(s)), 1e-6)
+        if abs(along) > 0.05:  # beyond the road's ends (or not converged)
+            return None
+        borders = [b for b in road.all_borders(s) if abs(b[2] - b[1]) > 1e-9]
+        if not borders:
+            return None
+        lane_hit: tuple[Lane, float, float] | None = None
+        outside = math.inf
+        for b in borders:
+            lo, hi = min(b[1], b[2]), max(b[1], b[2])
+            dist = 0.0 if lo <= t <= hi else min(abs(t - lo), abs(t - hi))
+            if dist < outside or (
+                dist == outside and lane_hit is not None and abs(b[0].id) < abs(lane_hit[0].id)
+            ):
+                outside, lane_hit = dist, b
+        assert lane_hit is not None
+        lane, inner, outer = lane_hit
+        width = abs(outer - inner)
+        if outside > 0.5 * width:
+            return None
+        offset = t - 0.5 * (inner + outer)
+        dz = abs(z - road.world_xyz(s, t)[2]) if z is not None else 0.0
+        key = (
+            0.0 if outside == 0.0 and abs(along) < 1e-6 else 1.0,
+            0.0 if dz < 2.0 else 1.0,
+            0.0 if road.id == road_hint else 1.0,
+            dz,
+            outside + abs(along),
+            abs(offset) / max(width, 1e-6),
+        )
+        return key, _road_coordinates(road.id, lane.id, s, t, offset, h)
 
     def world_to_road_near(
         self, x: float, y: float, road_id: str, s_previous: float

@@ -61,6 +61,11 @@ class Geometry:
         """Signed curvature (1/m, positive turns left) at ``ds``."""
         raise NotImplementedError
 
+    def frame_k(self, ds: float) -> tuple[float, float, float, float, float, float]:
+        """`frame` and `curvature` at ``ds``: ``(x, y, heading, cos, sin, curvature)``."""
+        x, y, h, c, s = self.frame(ds)
+        return x, y, h, c, s, self.curvature(ds)
+
 
 class Line(Geometry):
     """A straight line."""
@@ -81,6 +86,10 @@ class Line(Geometry):
 
     def curvature(self, ds: float) -> float:
         return 0.0
+
+    def frame_k(self, ds: float) -> tuple[float, float, float, float, float, float]:
+        c, s = self._cos, self._sin
+        return self.x + ds * c, self.y + ds * s, self.hdg, c, s, 0.0
 
 
 class Arc(Geometry):
@@ -103,6 +112,14 @@ class Arc(Geometry):
             self.y - (math.cos(h) - self._cos) / k,
             h,
         )
+
+    def frame(self, ds: float) -> tuple[float, float, float, float, float]:
+        k = self.k  # as local, whose sine and cosine of the heading are the frame's
+        h = self.hdg + k * ds
+        c, s = math.cos(h), math.sin(h)
+        if abs(k) < 1e-12:
+            return self.x + ds * self._cos, self.y + ds * self._sin, h, c, s
+        return self.x + (s - self._sin) / k, self.y - (c - self._cos) / k, h, c, s
 
     def curvature(self, ds: float) -> float:
         return self.k
@@ -342,6 +359,9 @@ class ParamPoly3(Geometry):
     """
 
     kind = "paramPoly3"
+    _coef: tuple[float, ...] | None = (
+        None  # (u, v coefficients, 2·cu, 3·du, 6·du, 2·cv, 3·dv, 6·dv): `_uv_at`
+    )
 
     def __init__(
         self,
@@ -406,34 +426,53 @@ class ParamPoly3(Geometry):
             out.append(total)
         return out
 
-    def _p_of(self, ds: float) -> float:
-        ss, ps = self._ss, self._ps
-        i = bisect.bisect_right(ss, ds) - 1
-        i = min(max(i, 0), len(ss) - 2)
-        s0, s1 = ss[i], ss[i + 1]
-        f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
-        return ps[i] + f * (ps[i + 1] - ps[i])
-
     def _uv_at(self, ds: float) -> tuple[float, float, float, float, float, float]:
-        """`_uv` at the parameter of ``ds``; the last one kept (a projection asks for the point and then the
-        curvature at the same ``ds``): one ``(ds, uv)`` tuple, replaced whole."""
+        """``(u, v, u', v', u'', v'')`` at the parameter ``p`` of ``ds`` (interpolated in the arc length
+        table); the last one kept (a projection asks for the point and then the curvature at the same
+        ``ds``): one ``(ds, uv)`` tuple, replaced whole. One function: it runs for every entity on such a road
+        at every step."""
         last = self._last
         if last[0] == ds:
             return last[1]
-        uv = self._uv(self._p_of(ds))
+        ss, ps = self._ss, self._ps
+        i = bisect.bisect_right(ss, ds) - 1
+        top = len(ss) - 2
+        i = 0 if i < 0 else top if i > top else i  # min(max(i, 0), top), top >= 0
+        s0, s1 = ss[i], ss[i + 1]
+        f = (ds - s0) / (s1 - s0) if s1 > s0 else 0.0
+        p0 = ps[i]
+        p = p0 + f * (ps[i + 1] - p0)
+        coef = self._coef
+        if coef is None:  # the coefficients and their multiples, once (2·c, 3·d, 6·d are the same floats)
+            au, bu, cu, du = self.u
+            av, bv, cv, dv = self.v
+            coef = self._coef = (
+                au,
+                bu,
+                cu,
+                du,
+                av,
+                bv,
+                cv,
+                dv,
+                2 * cu,
+                3 * du,
+                6 * du,
+                2 * cv,
+                3 * dv,
+                6 * dv,
+            )
+        au, bu, cu, du, av, bv, cv, dv, cu2, du3, du6, cv2, dv3, dv6 = coef
+        uv = (
+            au + p * (bu + p * (cu + p * du)),
+            av + p * (bv + p * (cv + p * dv)),
+            bu + p * (cu2 + du3 * p),  # bu + p * (2 * cu + 3 * du * p)
+            bv + p * (cv2 + dv3 * p),
+            cu2 + du6 * p,  # 2 * cu + 6 * du * p
+            cv2 + dv6 * p,
+        )
         self._last = (ds, uv)
         return uv
-
-    def _uv(self, p: float) -> tuple[float, float, float, float, float, float]:
-        au, bu, cu, du = self.u
-        av, bv, cv, dv = self.v
-        u = au + p * (bu + p * (cu + p * du))
-        v = av + p * (bv + p * (cv + p * dv))
-        up = bu + p * (2 * cu + 3 * du * p)
-        vp = bv + p * (2 * cv + 3 * dv * p)
-        upp = 2 * cu + 6 * du * p
-        vpp = 2 * cv + 6 * dv * p
-        return u, v, up, vp, upp, vpp
 
     def local(self, ds: float) -> tuple[float, float, float]:
         u, v, up, vp, _, _ = self._uv_at(ds)
@@ -443,7 +482,21 @@ class ParamPoly3(Geometry):
             self.hdg + math.atan2(vp, up),
         )
 
+    def frame(self, ds: float) -> tuple[float, float, float, float, float]:
+        u, v, up, vp, _, _ = self._uv_at(ds)  # as local, then the heading's cosine and sine
+        c, s = self._cos, self._sin
+        h = self.hdg + math.atan2(vp, up)
+        return self.x + u * c - v * s, self.y + u * s + v * c, h, math.cos(h), math.sin(h)
+
     def curvature(self, ds: float) -> float:
         _, _, up, vp, upp, vpp = self._uv_at(ds)
         sp = math.hypot(up, vp)
         return 0.0 if sp == 0 else (up * vpp - vp * upp) / sp**3
+
+    def frame_k(self, ds: float) -> tuple[float, float, float, float, float, float]:
+        u, v, up, vp, upp, vpp = self._uv_at(ds)  # as frame and curvature
+        c, s = self._cos, self._sin
+        h = self.hdg + math.atan2(vp, up)
+        sp = math.hypot(up, vp)
+        k = 0.0 if sp == 0 else (up * vpp - vp * upp) / sp**3
+        return self.x + u * c - v * s, self.y + u * s + v * c, h, math.cos(h), math.sin(h), k

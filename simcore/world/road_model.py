@@ -346,6 +346,29 @@ class Road:
             th = t
         return x - th * sin_h, y + th * cos_h, z, h
 
+    def world_xyzk(self, s: float, t: float) -> tuple[float, float, float, float, float]:
+        """`world_xyz` and the reference line's `curvature` at ``s``, from one look-up of the planView record
+        (an entity posed at ``s`` moves on from there at the next step, scaled by that curvature)."""
+        i = bisect.bisect_right(self._gstarts, s) - 1
+        g = self.geometries[i if i > 0 else 0]
+        ds = s - g.s
+        if ds < 0.0:
+            ds = 0.0
+        x, y, h, cos_h, sin_h, k = g.frame_k(ds)
+        z = self._z_fixed
+        if z is None:  # self.elevation(s): records there are (else 0.0 were fixed), the one at s
+            i = bisect.bisect_right(self._estarts, s + 1e-12) - 1  # as _poly_at
+            p = self.elevations[i if i > 0 else 0]
+            e = s - p.s0  # as Poly3.value
+            z = p.a + e * (p.b + e * (p.c + e * p.d))
+        if self.superelevations:
+            r = self.roll(s)
+            th = t * math.cos(r)
+            z += t * math.sin(r)
+        else:
+            th = t
+        return x - th * sin_h, y + th * cos_h, z, h, k
+
     def world_points(self, s: float, ts: Sequence[float]) -> list[tuple[float, float, float]]:
         """World ``(x, y, z)`` of ``(s, t)`` for every ``t`` in ``ts``: :meth:`world_xyz` with the reference
         frame at ``s`` computed once (sampling every lane border at one ``s``)."""

@@ -9,7 +9,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from simcore.scenario.motion import lane_point, wrap_angle
+from simcore.scenario.motion import lane_point, reference_heading, wrap_angle
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
@@ -48,7 +48,7 @@ def road_pose(world: ScenarioWorld, body: Body) -> RoadPose | None:
     r = road.road(body.road_id)
     s = min(max(body.s, 0.0), r.length)
     t, lane, offset = lane_point(road, body.road_id, body.lane_id, s, body.offset)
-    h_road = r.reference_xyh(s)[2]
+    h_road = reference_heading(r, body, s)
     c, sn = math.cos(h_road), math.sin(h_road)
     vx, vy = body.vx, body.vy  # over the last step (0 before the first, as esmini's)
     # along s: the change of the velocity over the last step (from displacements, as esmini's)
