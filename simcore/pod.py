@@ -647,23 +647,19 @@ def run_recorder(env: PodEnv) -> int:
 
 
 def _open_recording(env: PodEnv, run: Any, plan: Any, index: int, attempt: str) -> _Recording:
+    from simcore.pipeline import manifest_yaml, versions
     from simcore.recorder import McapRecorder
-    from simcore.runner import versions
 
     spec = run.spec
     point = plan[index - env.offset]
     workdir = Path(tempfile.mkdtemp(prefix=f"recorder-{index}-", dir=env.scratch))
     recorder = None
     if spec.recording.enabled:
-        import yaml
-
         recorder = McapRecorder.for_recording(
             workdir / "recording.mcap",
             spec.recording,
             metadata={
-                "carlos.spec": {
-                    "manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))
-                },
+                "carlos.spec": {"manifest": manifest_yaml(run)},
                 "carlos.versions": versions(),
             },
         )
