@@ -61,6 +61,7 @@ from pathlib import Path
 from typing import Any
 
 from simcore.errors import BadInput, CarlosError, ExitCode
+from simcore.startup import settle_worker
 from simcore.transport.bus import Callback, Message, Publisher
 
 log = logging.getLogger("carlos.pod")
@@ -385,6 +386,7 @@ def run_simcore(env: PodEnv) -> int:
                 code = _run_one(
                     env, run, plan[position], index, earlier + attempt, final, bus, status, reports
                 )
+                settle_worker()  # a warm worker, as `carlos run`'s (simcore.executor)
                 if code != ExitCode.INFRASTRUCTURE:
                     break
             earlier = 0
