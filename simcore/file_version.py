@@ -10,30 +10,15 @@ microseconds; parsing it costs milliseconds. Every cache is bounded (`BoundedCac
 from __future__ import annotations
 
 import hashlib
-import stat
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Generic, TypeVar
 
-#: a file's absolute path, size, modification and status-change times (ns) and inode: an edit or an atomic
-#: replace changes it (what a file's version looks like; caches key by `content_key`)
-FileVersion = tuple[str, int, int, int, int]
 #: a file's absolute path and the SHA-256 digest of its bytes
 ContentKey = tuple[str, bytes]
 
 K = TypeVar("K")
 V = TypeVar("V")
-
-
-def file_version(path: Path) -> FileVersion | None:
-    """The version of the regular file at `path`; None when there is none (missing, a directory, ...)."""
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    if not stat.S_ISREG(st.st_mode):
-        return None
-    return (str(path.absolute()), st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino)
 
 
 def content_key(path: Path, data: bytes) -> ContentKey:

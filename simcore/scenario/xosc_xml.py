@@ -28,7 +28,7 @@ MAX_XML_ATTRIBUTES = 256  # on one element
 MAX_XML_ELEMENTS = 1_000_000
 #: files parsed once per process (`parsed_xml`): at most this many, each at most this large
 PARSED_FILES_MAX = 32
-PARSED_FILE_MAX_BYTES = 4 * 1024 * 1024
+PARSED_FILE_MAX_BYTES = 1024 * 1024  # a parsed tree takes some 10× its file in memory: at most ~0.3 GB in all
 
 
 class XmlLimitExceeded(Exception):
