@@ -30,6 +30,7 @@ from simcore.lifetime import die_with_parent, make_scratch_root
 from simcore.plan import Plan
 from simcore.runner import RunOutcome, error_outcome, run_index, summary_bytes
 from simcore.spec import ScenarioRef, SimulationRun
+from simcore.startup import settle_worker
 from simcore.store import Store, StoreError, open_store
 from simcore.transport.bus import Bus
 
@@ -67,7 +68,10 @@ def _init_worker(progress: Any, parent_pid: int, settings: Settings) -> None:
 
 def _work_in_pool(index: int, attempt: int, final_attempt: bool) -> RunOutcome:
     assert _worker_settings is not None, "a pool worker starts with _init_worker"
-    return _work(_worker_settings, index, attempt, final_attempt)
+    try:
+        return _work(_worker_settings, index, attempt, final_attempt)
+    finally:
+        settle_worker()
 
 
 def _report(index: int, sim_time: float) -> None:

@@ -12,6 +12,7 @@ sensors or the closed loop read it; ROS messages per topic only when someone con
 
 from __future__ import annotations
 
+import functools
 import json
 import platform
 import time
@@ -23,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from simcore import DISTRIBUTION
 from simcore.errors import BadInput, SimulationError
+from simcore.file_version import BoundedCache
 from simcore.plan import RunPoint
 from simcore.spec import SimulationRun, SimulationRunSpec
 from simcore.transport.bus import Bus, InProcessBus, Message
@@ -153,24 +155,43 @@ def start_sumo(scenario: Scenario, step_seconds: float, seed: int) -> SumoWorld 
 
 
 def versions() -> dict[str, str]:
+    """The versions of Python and of the packages a recording names (`carlos.versions`)."""
+    return dict(_versions())
+
+
+@functools.cache  # installed packages do not change under a running process (a worker asks once per run)
+def _versions() -> tuple[tuple[str, str], ...]:
     out = {"python": platform.python_version()}
     for package in ("carlos", "eclipse-sumo", "libsumo", "mcap", "rosbags"):
         try:
             out[package] = version(DISTRIBUTION if package == "carlos" else package)
         except Exception:  # a package missing from the environment is reported, not fatal
             out[package] = "unknown"
-    return out
+    return tuple(out.items())
+
+
+#: the manifest YAML of a recording's `carlos.spec` metadata, by the run's JSON (a worker's runs share it)
+_MANIFEST_YAML: BoundedCache[str, str] = BoundedCache(8)
+
+
+def manifest_yaml(run: SimulationRun) -> str:
+    """The run's manifest as YAML (`carlos.spec` / `manifest` of every recording), dumped once per content."""
+    key = run.model_dump_json(by_alias=True, exclude_none=True)
+    text = _MANIFEST_YAML.get(key)
+    if text is None:
+        import yaml
+
+        text = _MANIFEST_YAML.put(
+            key, yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))
+        )
+    return text
 
 
 def _metadata(
     run: SimulationRun, point: RunPoint, scenario: Scenario, scenario_file: Path, offset: float = 0.0
 ) -> dict[str, Any]:
-    import yaml
-
     return {
-        "carlos.spec": {
-            "manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))
-        },
+        "carlos.spec": {"manifest": manifest_yaml(run)},
         "carlos.run": {
             "run": run.name,
             "index": str(point.index),

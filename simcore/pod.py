@@ -61,6 +61,7 @@ from pathlib import Path
 from typing import Any
 
 from simcore.errors import BadInput, CarlosError, ExitCode
+from simcore.startup import settle_worker
 from simcore.transport.bus import Callback, Message, Publisher
 
 log = logging.getLogger("carlos.pod")
@@ -385,6 +386,7 @@ def run_simcore(env: PodEnv) -> int:
                 code = _run_one(
                     env, run, plan[position], index, earlier + attempt, final, bus, status, reports
                 )
+                settle_worker()  # a warm worker, as `carlos run`'s (simcore.executor)
                 if code != ExitCode.INFRASTRUCTURE:
                     break
             earlier = 0
@@ -647,23 +649,19 @@ def run_recorder(env: PodEnv) -> int:
 
 
 def _open_recording(env: PodEnv, run: Any, plan: Any, index: int, attempt: str) -> _Recording:
+    from simcore.pipeline import manifest_yaml, versions
     from simcore.recorder import McapRecorder
-    from simcore.runner import versions
 
     spec = run.spec
     point = plan[index - env.offset]
     workdir = Path(tempfile.mkdtemp(prefix=f"recorder-{index}-", dir=env.scratch))
     recorder = None
     if spec.recording.enabled:
-        import yaml
-
         recorder = McapRecorder.for_recording(
             workdir / "recording.mcap",
             spec.recording,
             metadata={
-                "carlos.spec": {
-                    "manifest": yaml.safe_dump(run.model_dump(mode="json", by_alias=True, exclude_none=True))
-                },
+                "carlos.spec": {"manifest": manifest_yaml(run)},
                 "carlos.versions": versions(),
             },
         )

@@ -348,10 +348,42 @@ def test_warning_in_a_catalog_entry_names_the_catalog_file_and_line(tmp_path: Pa
         ),
     )
     path = write_scenario(tmp_path, text)
-    warnings = load_scenario(path).warnings
-    assert any(
-        w.startswith(f"{tmp_path / 'man' / 'Lights.xosc'}:5: ") and "LightStateAction" in w for w in warnings
-    ), warnings
+    for _ in range(2):  # the second load uses the catalog parsed by the first: the same file and line
+        warnings = load_scenario(path).warnings
+        assert any(
+            w.startswith(f"{tmp_path / 'man' / 'Lights.xosc'}:5: ") and "LightStateAction" in w
+            for w in warnings
+        ), warnings
+
+
+def test_a_catalog_edited_between_loads_is_read_again(tmp_path: Path) -> None:
+    """Catalogs are parsed once per content: an edit keeping the file's size and modification time is read
+    at the next load all the same."""
+    import os
+
+    catalog = tmp_path / "cat" / "Cars.xosc"
+    catalog.parent.mkdir()
+
+    def write(length: str) -> None:
+        car = CAR.replace('length="4.5"', f'length="{length}"')
+        catalog.write_text(
+            f'<?xml version="1.0"?><OpenSCENARIO>{file_header()}<Catalog name="Cars">{car}</Catalog></OpenSCENARIO>'
+        )
+
+    write("4.5")
+    text = openscenario(
+        catalogs='<CatalogLocations><VehicleCatalog><Directory path="cat"/></VehicleCatalog></CatalogLocations>',
+        road=road_network(HIGHWAY),
+        entities=scenario_object("Ego", '<CatalogReference catalogName="Cars" entryName="car"/>'),
+    )
+    path = write_scenario(tmp_path, text)
+    assert load_scenario(path).entities[0].box.length == 4.5
+    assert load_scenario(path).entities[0].box.length == 4.5
+    before = catalog.stat()
+    write("5.5")
+    os.utime(catalog, ns=(before.st_atime_ns, before.st_mtime_ns))
+    assert catalog.stat().st_size == before.st_size
+    assert load_scenario(path).entities[0].box.length == 5.5
 
 
 # --- positions and trajectories seen by conditions --------------------------------------------------------

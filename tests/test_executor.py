@@ -61,3 +61,20 @@ def test_a_killed_worker_is_retried_and_the_sweep_completes(tmp_path: Path) -> N
     assert max(s["attempts"] for s in summaries) >= 2  # at least one run was retried after the crash
     run_summary = json.loads((out / "crash" / "summary.json").read_text())
     assert run_summary["counts"]["total"] == 4 and run_summary["status"] == "passed"
+
+
+def test_a_warm_worker_freezes_what_its_first_run_left_alive_once() -> None:
+    """After a worker's first run its long-lived objects are frozen (never scanned by later collections);
+    later runs do not freeze again. In a process of its own: freezing is for the life of the process."""
+    code = """
+import gc
+from simcore.startup import settle_worker
+kept = [[i] for i in range(1000)]
+settle_worker()
+first = gc.get_freeze_count()
+more = [[i] for i in range(1000)]
+settle_worker()
+print(first >= 1000, gc.get_freeze_count() == first)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split() == ["True", "True"]

@@ -213,14 +213,14 @@ def test_collision_with_any_entity_is_collision_with_one_of_them() -> None:
         assert not bind_collision(m.CollisionCondition("Far"), world)(ego)
 
 
-def test_a_scenario_file_is_parsed_once_per_version_and_loaded_with_each_load_s_values(
+def test_a_scenario_file_is_parsed_once_per_content_and_loaded_with_each_load_s_values(
     tmp_path: Path,
 ) -> None:
     """Loads of one file share its parsed XML (a sweep's points), each with its own parameter values; an
     edit of the file, even one keeping its size, is read at the next load."""
     import os
 
-    from simcore.scenario import xosc
+    from simcore.scenario import xosc, xosc_xml
     from tests.xosc_fixtures import openscenario, place, scenario_object, write_scenario
 
     def text(default: str) -> str:
@@ -236,8 +236,24 @@ def test_a_scenario_file_is_parsed_once_per_version_and_loaded_with_each_load_s_
     assert first.parameters["S"] == 30.0 and second.parameters["S"] == 10.0
     assert first.init[0].action.position.s == 30.0  # type: ignore[union-attr]
     assert second.init[0].action.position.s == 10.0  # type: ignore[union-attr]
-    assert sum(1 for key in xosc._PARSED if key[0] == str(path.absolute())) == 1
+    assert sum(1 for key in xosc_xml._PARSED if key[0] == str(path.absolute())) == 1
     stat = path.stat()
     path.write_text(text("20.0"))  # the same size, and the same modification time
     os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns))
     assert xosc.load_scenario(path).parameters["S"] == 20.0
+
+
+def test_the_parsed_files_a_worker_keeps_are_bounded(tmp_path: Path) -> None:
+    """A worker loading many scenario files (a sweep over many scenarios) keeps at most PARSED_FILES_MAX
+    parsed files; one dropped is parsed again when loaded again, with the same result."""
+    from simcore.scenario import xosc, xosc_xml
+    from tests.xosc_fixtures import openscenario, place, scenario_object
+
+    paths = []
+    for i in range(xosc_xml.PARSED_FILES_MAX + 5):
+        path = tmp_path / f"s{i}.xosc"
+        path.write_text(openscenario(entities=scenario_object("Ego"), init=place("Ego", 10.0 + i)))
+        paths.append(path)
+        assert xosc.load_scenario(path).init[0].action.position.s == 10.0 + i  # type: ignore[union-attr]
+        assert len(xosc_xml._PARSED) <= xosc_xml.PARSED_FILES_MAX
+    assert xosc.load_scenario(paths[0]).init[0].action.position.s == 10.0  # type: ignore[union-attr]

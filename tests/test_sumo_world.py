@@ -76,54 +76,56 @@ def test_runs_with_the_xml_parser_kept_initialised_are_the_runs_without(tmp_path
     assert held == [plain, plain]
 
 
-def test_a_road_file_is_hashed_or_checked_once_per_version(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """A warm worker hashes its OpenDRIVE file (and checks a `.net.xml`) once; a changed file is hashed (and
-    checked) again, and gets the network the uncached hash names."""
+def _rewrite_keeping_size_and_times(path: Path, data: bytes) -> None:
+    """`data` written over `path` (as long as its content), its modification time kept."""
+    import os
+
+    before = path.stat()
+    assert len(data) == before.st_size
+    path.write_bytes(data)
+    os.utime(path, ns=(before.st_atime_ns, before.st_mtime_ns))
+
+
+def test_a_road_file_is_known_by_its_content(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A warm worker checks a `.net.xml` once per content; a changed file, even one of the same size and
+    modification time, is checked again, and a changed OpenDRIVE file gets the network its content names."""
     from simcore.errors import BadInput
     from simcore.world import sumo
 
-    calls = {"hash": 0, "check": 0}
-    plain_name, plain_check = sumo._network_name, sumo.check_network_xml
-
-    def counted_name(path: Path) -> str:
-        calls["hash"] += 1
-        return plain_name(path)
+    calls = {"check": 0}
+    plain_check = sumo.check_network_xml
 
     def counted_check(path: Path) -> None:
         calls["check"] += 1
         plain_check(path)
 
-    monkeypatch.setattr(sumo, "_network_name", counted_name)
     monkeypatch.setattr(sumo, "check_network_xml", counted_check)
     cache = tmp_path / "cache"
     cache.mkdir()
     road = tmp_path / "road.xodr"
-    road.write_bytes((ROOT / "examples" / "maps" / "highway.xodr").read_bytes())
-    (cache / plain_name(road)).write_text("<net/>")  # already converted: no netconvert here
+    text = (ROOT / "examples" / "maps" / "highway.xodr").read_bytes()
+    road.write_bytes(text)
+    (cache / sumo._network_name(road, text)).write_text("<net/>")  # already converted: no netconvert here
     first = sumo.prepare_network(road, cache)
-    assert sumo.prepare_network(road, cache) == first == cache / plain_name(road)
-    assert calls["hash"] == 1
-    road.write_bytes(road.read_bytes() + b"\n")  # another version
-    (cache / plain_name(road)).write_text("<net/>")
-    second = sumo.prepare_network(road, cache)
-    assert second == cache / plain_name(road) != first
-    assert calls["hash"] == 2
+    assert sumo.prepare_network(road, cache) == first == cache / sumo._network_name(road, text)
+    changed = text.replace(b"<header", b"<HEADER", 1)
+    _rewrite_keeping_size_and_times(road, changed)
+    (cache / sumo._network_name(road, changed)).write_text("<net/>")
+    assert sumo.prepare_network(road, cache) == cache / sumo._network_name(road, changed) != first
 
     net = tmp_path / "road.net.xml"
     net.write_text("<net/>")
     assert sumo.prepare_network(net) == sumo.prepare_network(net) == net
     assert calls["check"] == 1
-    net.write_text("<network/>")  # another version, and no network
+    _rewrite_keeping_size_and_times(net, b"<nat/>")  # another content, and no network
     with pytest.raises(BadInput, match="expected <net>"):
         sumo.prepare_network(net)
     assert calls["check"] == 2
 
 
 def test_runs_on_one_network_file_share_its_lanes_and_only_its_lanes(tmp_path: Path) -> None:
-    """A run looks up the lanes of an edge once for every later run on the same network file; a network file
-    rewritten in between (another version) starts from nothing."""
+    """A run looks up the lanes of an edge once for every later run on the same network file content; a
+    network file changed in between starts from nothing."""
     pytest.importorskip("libsumo")
     from simcore.world.sumo import SumoWorld, netconvert_available, prepare_network
     from simcore.world.sumo_lanes import edge_lanes
@@ -146,6 +148,9 @@ def test_runs_on_one_network_file_share_its_lanes_and_only_its_lanes(tmp_path: P
                 (lid, world._sumo.lane.getShape(lid), world._sumo.lane.getLength(lid)) for lid in edge.by_id
             )
             assert edge_lanes(raw) is edge  # and it is what this run's SUMO gives
-    network.write_bytes(network.read_bytes())
+    network.write_bytes(network.read_bytes())  # rewritten as it was: the same content
+    with SumoWorld(network, 0.05, seed=1) as world:
+        assert world._edge_of_lane and all(world._edge_of_lane[lane] is edge for lane, edge in first.items())
+    network.write_bytes(network.read_bytes() + b"\n")  # another content
     with SumoWorld(network, 0.05, seed=1) as world:
         assert world._edge_of_lane == {}

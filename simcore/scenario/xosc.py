@@ -19,7 +19,6 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from simcore.errors import BadInput
-from simcore.file_version import FileVersion, file_version
 from simcore.scenario import model as m
 from simcore.scenario.parameters import Declaration, ParameterError, ParamValue, convert
 from simcore.scenario.xosc_catalogs import _catalog_dirs
@@ -27,43 +26,21 @@ from simcore.scenario.xosc_conditions import _trigger
 from simcore.scenario.xosc_entities import _entities
 from simcore.scenario.xosc_reader import _Reader
 from simcore.scenario.xosc_storyboard import _init, _story
-from simcore.scenario.xosc_xml import read_xml
+from simcore.scenario.xosc_xml import parsed_xml, read_xml
 
 __all__ = ["declared_parameters", "load_scenario", "parameter_declarations", "read_xml"]
-
-
-#: parsed scenario files (the XML tree and its element lines, which no parameter changes) by path and file
-#: identity (size, mtime, ctime, inode): a sweep's points load the same file with other parameter values
-_PARSED: dict[FileVersion, tuple[ET.Element, dict[int, int]]] = {}
-_PARSED_MAX = 8
-
-
-def _parsed_scenario(path: Path) -> tuple[ET.Element, dict[int, int]]:
-    """The XML tree of a scenario file and the source line of each element, parsed once per file version.
-    The tree is shared between loads and only read (`_Reader` never changes it); an entry is replaced when
-    the file's size, modification or status-change time or inode changes (an edit, an atomic replace)."""
-    lines: dict[int, int] = {}
-    key = file_version(path)
-    if key is None:  # read_xml says what is wrong
-        return read_xml(path, what="OpenSCENARIO file", lines=lines), lines
-    hit = _PARSED.get(key)
-    if hit is None:
-        hit = (read_xml(path, what="OpenSCENARIO file", lines=lines), lines)
-        if len(_PARSED) >= _PARSED_MAX:
-            _PARSED.pop(next(iter(_PARSED)))
-        _PARSED[key] = hit
-    return hit
 
 
 def load_scenario(path: str | Path, overrides: Mapping[str, ParamValue] | None = None) -> m.Scenario:
     """Parse an OpenSCENARIO file. `overrides` replace declared parameter defaults; a name the file does not
     declare is bad input (a typo in a sweep must not silently do nothing)."""
     path = Path(path)
-    root, lines = _parsed_scenario(path)
+    parsed = parsed_xml(path, what="OpenSCENARIO file")
+    root = parsed.root
     if root.tag != "OpenSCENARIO":
         raise BadInput(f"root element is <{root.tag}>, expected <OpenSCENARIO>", file=str(path))
     reader = _Reader(path, overrides or {})
-    reader.lines = dict(lines)  # catalogs read while loading add their elements' lines
+    reader.lines = dict(parsed.lines)  # catalogs read while loading add their elements' lines
     header = root.find("FileHeader")
     version = "1.0"
     description = ""
@@ -152,7 +129,7 @@ def _signal_controllers(reader: _Reader, signals: ET.Element) -> tuple[m.SignalC
 
 def declared_parameters(path: str | Path) -> dict[str, str]:
     """The scenario's top-level parameter names and their declared default values (as written)."""
-    root = read_xml(Path(path), what="OpenSCENARIO file")
+    root = parsed_xml(Path(path), what="OpenSCENARIO file").root
     block = root.find("ParameterDeclarations")
     if block is None:
         return {}
@@ -161,7 +138,7 @@ def declared_parameters(path: str | Path) -> dict[str, str]:
 
 def parameter_declarations(path: str | Path) -> dict[str, Declaration]:
     """The scenario's top-level parameter declarations by name (type and default as written)."""
-    root = read_xml(Path(path), what="OpenSCENARIO file")
+    root = parsed_xml(Path(path), what="OpenSCENARIO file").root
     block = root.find("ParameterDeclarations")
     if block is None:
         return {}

@@ -1,6 +1,6 @@
 """Catalogs for the OpenSCENARIO parser: the directories of CatalogLocations and the entry a CatalogReference
-names, with its parameter assignments (each catalog file read once per load, its elements' file and lines
-kept for messages).
+names, with its parameter assignments (each catalog file read once per load, parsed once per process for its
+content; its elements' file and lines kept for messages).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 
 from simcore.scenario.parameters import ParamValue
 from simcore.scenario.xosc_reader import _Reader
-from simcore.scenario.xosc_xml import read_xml
+from simcore.scenario.xosc_xml import parsed_xml
 
 
 def _catalog_dirs(reader: _Reader, root: ET.Element) -> dict[str, Path]:
@@ -60,11 +60,11 @@ def _catalog_entry(
             files = [directory]
         for file in files:
             if file not in reader._catalog_files:
-                root = read_xml(file, what="catalog", lines=reader.lines)
-                reader._catalog_files[file] = root.find("Catalog")
-                reader._catalog_roots.append(root)  # alive while loading: element ids stay unique
-                for element in root.iter():
-                    reader.files[id(element)] = file
+                parsed = parsed_xml(file, what="catalog")
+                reader.lines.update(parsed.lines)
+                reader._catalog_files[file] = parsed.root.find("Catalog")
+                reader._catalog_roots.append(parsed.root)  # alive while loading: element ids stay unique
+                reader.files.update(dict.fromkeys(parsed.ids, file))
             catalog = reader._catalog_files[file]
             # by the catalog's name, or by its file name (esmini accepts both)
             if catalog is None or catalog_name not in (catalog.get("name"), file.stem):

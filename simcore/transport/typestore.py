@@ -75,6 +75,18 @@ class _OnDemand(dict[str, Any]):
         return dict.items(self)
 
 
+class _Msgdefs(dict[str, Msgdef[object]]):
+    """The store's Msgdefs by type name, each made on its first lookup."""
+
+    def __init__(self, store: LazyTypestore) -> None:
+        super().__init__()
+        self._store = store
+
+    def __missing__(self, typename: str) -> Msgdef[object]:
+        msgdef = self[typename] = self._store._new_msgdef(typename)
+        return msgdef
+
+
 def _nested(desc: Any) -> Iterator[str]:
     """The type names a field description refers to (NAME, or the element of an ARRAY/SEQUENCE)."""
     kind, payload = desc
@@ -136,6 +148,8 @@ class LazyTypestore(Typestore):
         self._complete = False
         self.types = _OnDemand(self)
         self.fielddefs = _OnDemand(self)
+        self.cache: dict[str, Msgdef[object]] = _Msgdefs(self)
+        object.__setattr__(self, "get_msgdef", self.cache.__getitem__)  # see get_msgdef
 
     def _load(self, typename: str) -> bool:
         """Generate `typename` and the known types it nests that are not generated yet; False if unknown."""
@@ -182,21 +196,24 @@ class LazyTypestore(Typestore):
             dict.__setitem__(self.types, typename, getattr(module, typename.replace("/", "__")))
 
     def get_msgdef(self, typename: str) -> Msgdef[object]:
-        """As `Typestore.get_msgdef`, with each (de)serialiser generated when first used."""
-        msgdef = self.cache.get(typename)
-        if msgdef is None:
-            from rosbags.serde.cdr import generate_getsize_cdr
-            from rosbags.typesys.base import normalize_fieldname
+        """As `Typestore.get_msgdef`, with each (de)serialiser generated when first used. (An instance's
+        `get_msgdef` is its cache's `__getitem__`: rosbags' generated serialisers look up the Msgdef of every
+        nested type, a dozen lookups per message, so a lookup is a dict's, without a Python call.)"""
+        return self.cache[typename]
 
-            entries = [(normalize_fieldname(name), desc) for name, desc in self.fielddefs[typename][1]]
-            msgdef = object.__new__(_LazyMsgdef)
-            for field, value in (("name", typename), ("fields", entries), ("cls", self.types[typename])):
-                object.__setattr__(msgdef, field, value)
-            object.__setattr__(msgdef, "_store", self)
-            getsize, size = generate_getsize_cdr(entries, self)
-            object.__setattr__(msgdef, "getsize_cdr", getsize)
-            object.__setattr__(msgdef, "size_cdr", size)
-            self.cache[typename] = msgdef
+    def _new_msgdef(self, typename: str) -> Msgdef[object]:
+        """The Msgdef of `typename` (KeyError for an unknown type), its (de)serialisers generated lazily."""
+        from rosbags.serde.cdr import generate_getsize_cdr
+        from rosbags.typesys.base import normalize_fieldname
+
+        entries = [(normalize_fieldname(name), desc) for name, desc in self.fielddefs[typename][1]]
+        msgdef = object.__new__(_LazyMsgdef)
+        for field, value in (("name", typename), ("fields", entries), ("cls", self.types[typename])):
+            object.__setattr__(msgdef, field, value)
+        object.__setattr__(msgdef, "_store", self)
+        getsize, size = generate_getsize_cdr(entries, self)
+        object.__setattr__(msgdef, "getsize_cdr", getsize)
+        object.__setattr__(msgdef, "size_cdr", size)
         return msgdef
 
     def register(self, typs: Typesdict) -> None:

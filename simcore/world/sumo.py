@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from simcore.errors import BadInput, SimulationError
-from simcore.file_version import FileVersion, file_version
+from simcore.file_version import BoundedCache, ContentKey, content_key
 from simcore.world.sumo_lanes import EdgeLanes, edge_lanes, nearest_lane
 
 NETCONVERT_OPTIONS = (
@@ -98,44 +98,49 @@ def check_network_xml(path: Path) -> None:
         raise BadInput(f"root element is <{root_tag}>, expected <net> (a SUMO network)", file=str(path))
 
 
-#: what a warm worker (one road file, run after run) knows of its road files: the network name of each
-#: OpenDRIVE file version (its content hashed once) and the `.net.xml` versions check_network_xml passed
-_NETWORK_NAMES: dict[FileVersion, str] = {}
-_CHECKED_NETWORKS: set[FileVersion] = set()
+#: the `.net.xml` files check_network_xml passed, by content (a warm worker runs one network run after run)
+_CHECKED_NETWORKS: BoundedCache[ContentKey, bool] = BoundedCache(64)
 MAX_CACHED_FILES = 64
 
 
-def _network_name(road_file: Path) -> str:
-    """The SUMO network's file name for an OpenDRIVE file: its content, netconvert's options and SUMO's
-    version hashed."""
+def _network_name(road_file: Path, data: bytes) -> str:
+    """The SUMO network's file name for an OpenDRIVE file: its content (`data`), netconvert's options and
+    SUMO's version hashed."""
     digest = hashlib.sha256()
-    digest.update(road_file.read_bytes())
+    digest.update(data)
     digest.update(" ".join(NETCONVERT_OPTIONS).encode())
     digest.update(sumo_version().encode())
     return f"{road_file.stem}-{digest.hexdigest()[:16]}.net.xml"
 
 
+def _read_road(road_file: Path) -> bytes:
+    """The bytes of a road file (a SUMO network no larger than MAX_NETWORK_BYTES)."""
+    try:
+        if road_file.name.endswith(".net.xml"):
+            size = road_file.stat().st_size
+            if size > MAX_NETWORK_BYTES:
+                raise BadInput(
+                    f"SUMO network is {size} bytes; at most {MAX_NETWORK_BYTES} are allowed",
+                    file=str(road_file),
+                )
+        return road_file.read_bytes()
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+        raise BadInput("road network file not found", file=str(road_file)) from None
+
+
 def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
     """The SUMO network for an OpenDRIVE file (converted once, cached by content hash) or a `.net.xml`
-    (checked once per file version)."""
-    version = file_version(road_file)
-    if version is None:
-        raise BadInput("road network file not found", file=str(road_file))
+    (checked once per content)."""
+    data = _read_road(road_file)
     if road_file.name.endswith(".net.xml"):
-        if version not in _CHECKED_NETWORKS:
+        key = content_key(road_file, data)
+        if key not in _CHECKED_NETWORKS:
             check_network_xml(road_file)
-            if len(_CHECKED_NETWORKS) >= MAX_CACHED_FILES:
-                _CHECKED_NETWORKS.clear()
-            _CHECKED_NETWORKS.add(version)
+            _CHECKED_NETWORKS.put(key, True)
         return road_file
     if road_file.suffix != ".xodr":
         raise BadInput("road network must be OpenDRIVE (.xodr) or SUMO (.net.xml)", file=str(road_file))
-    name = _NETWORK_NAMES.get(version)
-    if name is None:
-        name = _network_name(road_file)
-        if len(_NETWORK_NAMES) >= MAX_CACHED_FILES:
-            _NETWORK_NAMES.clear()
-        _NETWORK_NAMES[version] = name
+    name = _network_name(road_file, data)
     cache_dir = cache_dir or default_cache_dir()
     target = cache_dir / name
     if target.is_file():
@@ -213,22 +218,24 @@ def _heading(angle: float) -> float:
     return math.radians(90.0 - angle)
 
 
-#: per network file version, each lane looked up so far → the lanes of its edge (None: a junction's lane): a
+#: per network file content, each lane looked up so far → the lanes of its edge (None: a junction's lane): a
 #: loaded network never changes, so a warm worker's runs on one network share them
-_EDGES_OF_LANES: dict[FileVersion, dict[str, EdgeLanes | None]] = {}
+_EDGES_OF_LANES: BoundedCache[ContentKey, dict[str, EdgeLanes | None]] = BoundedCache(MAX_CACHED_FILES)
 
 
-def _edges_of_lanes(version: FileVersion | None, loaded: FileVersion | None) -> dict[str, EdgeLanes | None]:
-    """The lanes known for a network whose file had `version` before SUMO loaded it and `loaded` after (the
-    same: SUMO loaded that version); a map of this run's own otherwise."""
-    if version is None or version != loaded:
+def _network_key(network: Path) -> ContentKey | None:
+    try:
+        return content_key(network, network.read_bytes())
+    except OSError:
+        return None
+
+
+def _edges_of_lanes(before: ContentKey | None, after: ContentKey | None) -> dict[str, EdgeLanes | None]:
+    """The lanes known for a network whose file had the content `before` before SUMO loaded it and `after`
+    after (the same: SUMO loaded that content); a map of this run's own otherwise."""
+    if before is None or before != after:
         return {}
-    known = _EDGES_OF_LANES.get(version)
-    if known is None:
-        if len(_EDGES_OF_LANES) >= MAX_CACHED_FILES:
-            _EDGES_OF_LANES.clear()
-        known = _EDGES_OF_LANES[version] = {}
-    return known
+    return _EDGES_OF_LANES.get_or_make(before, dict)
 
 
 class SumoWorld:
@@ -282,12 +289,12 @@ class SumoWorld:
             repr(step_seconds),
         ]
         keep_xml_parser_initialized(_libsumo.__file__)
-        version = file_version(network)
+        before = _network_key(network)
         try:
             self._sumo.start(args)
         except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError
             raise SimulationError(f"SUMO did not start: {exc}") from exc
-        self._edge_of_lane = _edges_of_lanes(version, file_version(network))
+        self._edge_of_lane = _edges_of_lanes(before, _network_key(network))
 
     def close(self) -> None:
         with contextlib.suppress(Exception):  # already closed or never started: nothing to release
