@@ -21,15 +21,15 @@ in the messages that name entities (ground truth ids, metadata).
 
 from __future__ import annotations
 
-import math
-import re
 from collections.abc import Callable, Mapping
 from functools import cache, partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from simcore.transport.conversions import quaternion_xyzw, stamp_parts
 from simcore.transport.msgdefs import FIELDDEFS
+from simcore.transport.ros_names import MAP_FRAME, base_link, odometry_topic, ros_name
 from simcore.transport.typestore import MSG_DIR, LazyTypestore
 from simcore.world.state import EntityState, WorldFrame
 
@@ -55,7 +55,6 @@ __all__ = [
     "tf",
 ]
 
-MAP_FRAME = "map"
 CLOCK_TOPIC = "/clock"
 TF_TOPIC = "/tf"
 OBJECTS_TOPIC = "/carlos/objects"
@@ -112,34 +111,6 @@ else:
 
 # --- names and small conversions ------------------------------------------------------------------------
 
-_INVALID = re.compile(r"[^A-Za-z0-9_]+")
-_UNDERSCORES = re.compile(r"_{2,}")
-
-
-@cache
-def ros_name(name: str) -> str:
-    """`name` as a valid ROS 2 name token (letters, digits, single `_`, not starting with a digit), one token
-    per name: a name that needed changing carries a hash of itself (`car 2` → `car_2_4f1c2a`)."""
-    token = _UNDERSCORES.sub("_", _INVALID.sub("_", name)).strip("_")
-    if not token:
-        token = "entity"
-    if token[0].isdigit():
-        token = "e" + token
-    if token == name:
-        return token
-    import hashlib
-
-    return f"{token}_{hashlib.sha256(name.encode()).hexdigest()[:6]}"
-
-
-def base_link(entity: str) -> str:
-    """The entity's body frame (REP-105): `<entity>/base_link`."""
-    return f"{ros_name(entity)}/base_link"
-
-
-def odometry_topic(entity: str) -> str:
-    return f"/carlos/{ros_name(entity)}/odometry"
-
 
 def _check_unique(frame: WorldFrame) -> None:
     seen: dict[str, str] = {}
@@ -155,23 +126,14 @@ def _check_unique(frame: WorldFrame) -> None:
 
 def stamp(time_s: float) -> Time:
     """Simulated time in seconds as builtin_interfaces/Time (rounded to the nanosecond)."""
-    ns = round(time_s * 1e9)
-    if ns < 0:
-        raise ValueError(f"negative simulation time {time_s}")
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = stamp_parts(time_s)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def quaternion(yaw: float, pitch: float = 0.0, roll: float = 0.0) -> Quaternion:
     """Quaternion of the intrinsic z-y'-x'' rotation (yaw, pitch, roll), as tf2's `setRPY(roll, pitch, yaw)`."""
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    return Quaternion(
-        x=sr * cp * cy - cr * sp * sy,
-        y=cr * sp * cy + sr * cp * sy,
-        z=cr * cp * sy - sr * sp * cy,
-        w=cr * cp * cy + sr * sp * sy,
-    )
+    x, y, z, w = quaternion_xyzw(yaw, pitch, roll)
+    return Quaternion(x=x, y=y, z=z, w=w)
 
 
 def _header(frame: WorldFrame, frame_id: str = MAP_FRAME) -> Header:
