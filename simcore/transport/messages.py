@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from simcore.transport import world_cdr
 from simcore.transport.conversions import quaternion_xyzw, stamp_parts
 from simcore.transport.msgdefs import FIELDDEFS
 from simcore.transport.ros_names import MAP_FRAME, base_link, odometry_topic, ros_name
@@ -253,26 +254,43 @@ def status(frame: WorldFrame, state: str, detail: Mapping[str, str] | None = Non
     )
 
 
-def frame_builders(frame: WorldFrame) -> list[tuple[str, str, Callable[[], Any]]]:
-    """(topic, typename, build) for one step: `/clock`, `/tf`, `/carlos/<entity>/odometry` for every
-    entity and FollowGhost ghost, `/carlos/objects` (entities only); `build()` makes the message (called only
-    for topics someone consumes)."""
+#: (topic, typename, build, encode): `build()` makes the message object, `encode()` its CDR bytes (those of
+#: `serialize(build())`, written straight from the frame by `simcore.transport.world_cdr`).
+FrameTopic = tuple[str, str, Callable[[], Any], Callable[[], bytes]]
+
+
+def frame_builders(frame: WorldFrame) -> list[FrameTopic]:
+    """(topic, typename, build, encode) for one step: `/clock`, `/tf`, `/carlos/<entity>/odometry` for every
+    entity and FollowGhost ghost, `/carlos/objects` (entities only); `build()` makes the message and
+    `encode()` its CDR (each called only for topics someone consumes, as they consume it)."""
     _check_unique(frame)
-    out: list[tuple[str, str, Callable[[], Any]]] = [
-        (CLOCK_TOPIC, Clock.__msgtype__, lambda: clock(frame)),
-        (TF_TOPIC, TFMessage.__msgtype__, lambda: tf(frame)),
+    out: list[FrameTopic] = [
+        (CLOCK_TOPIC, Clock.__msgtype__, partial(clock, frame), partial(world_cdr.clock, frame)),
+        (TF_TOPIC, TFMessage.__msgtype__, partial(tf, frame), partial(world_cdr.tf, frame)),
     ]
     out.extend(
-        (odometry_topic(entity.name), Odometry.__msgtype__, partial(odometry, frame, entity))
+        (
+            odometry_topic(entity.name),
+            Odometry.__msgtype__,
+            partial(odometry, frame, entity),
+            partial(world_cdr.odometry, frame, entity),
+        )
         for entity in (*frame.entities, *frame.ghosts)
     )
-    out.append((OBJECTS_TOPIC, "vision_msgs/msg/Detection3DArray", lambda: objects(frame)))
+    out.append(
+        (
+            OBJECTS_TOPIC,
+            "vision_msgs/msg/Detection3DArray",
+            partial(objects, frame),
+            partial(world_cdr.objects, frame),
+        )
+    )
     return out
 
 
 def frame_messages(frame: WorldFrame) -> list[tuple[str, str, Any]]:
     """(topic, typename, message) for one step: every topic of `frame_builders`, built."""
-    return [(topic, typename, build()) for topic, typename, build in frame_builders(frame)]
+    return [(topic, typename, build()) for topic, typename, build, _ in frame_builders(frame)]
 
 
 # --- serialisation -------------------------------------------------------------------------------------

@@ -44,7 +44,7 @@ class WorldPublisher:
         from simcore.transport import messages
 
         wants = self.wants
-        for topic, typename, build in messages.frame_builders(frame):
+        for topic, typename, build, _ in messages.frame_builders(frame):
             if wants(topic):
                 self._publisher(topic, typename).publish(build(), frame.time)
 
