@@ -13,6 +13,8 @@ import pytest
 
 from simcore.recorder import McapRecorder
 from simcore.transport import messages, world_cdr
+from simcore.transport.bus import InProcessBus, Message
+from simcore.transport.world import WorldPublisher
 from simcore.world.state import BoundingBox, EntityState, WorldFrame
 
 #: floats that must keep their exact bits
@@ -162,6 +164,21 @@ def test_direct_cdr_edge_cases() -> None:
             encode()
 
 
+def test_bus_messages_carry_the_direct_cdr_and_build_objects_on_demand() -> None:
+    frame = _frame(random.Random(7))
+    bus = InProcessBus()
+    got: list[Message] = []
+    bus.subscribe("*", got.append)
+    WorldPublisher(bus).publish(frame)
+    assert len(got) == len(messages.frame_builders(frame))
+    for message in got:
+        assert message.msg is None and message.data is None  # nothing made before a consumer asks
+        data = message.cdr()
+        assert message.msg is None  # the bytes came without the object
+        assert data == messages.serialize(message.obj())
+        assert message.obj().__msgtype__ == message.typename
+
+
 def _record(path: Path, frames: list[WorldFrame], write: Any) -> bytes:
     with McapRecorder(path, topics=["*"], compression="zstd") as recorder:
         for frame in frames:
@@ -186,5 +203,11 @@ def test_recordings_are_the_same_bytes_as_from_rosbags_objects(tmp_path: Path) -
     def direct(recorder: McapRecorder, frame: WorldFrame) -> None:
         recorder.write_frame(frame)
 
+    def bus(recorder: McapRecorder, frame: WorldFrame) -> None:
+        in_process = InProcessBus()
+        in_process.subscribe("*", recorder.write_message, wants=recorder.wants)
+        WorldPublisher(in_process).publish(frame)
+
     expected = _record(tmp_path / "objects.mcap", frames, objects)
     assert _record(tmp_path / "direct.mcap", frames, direct) == expected
+    assert _record(tmp_path / "bus.mcap", frames, bus) == expected
