@@ -53,7 +53,7 @@ import numpy as np
 from simcore.spec import Recording
 from simcore.store import fsync_dir
 from simcore.transport.bus import Message
-from simcore.transport.messages import frame_messages, msgdef, serialize
+from simcore.transport.messages import frame_builders, msgdef, serialize
 from simcore.world.state import WorldFrame
 
 __all__ = ["DEFAULT_QOS", "ZSTD_LEVEL", "Compression", "McapRecorder", "RecorderError"]
@@ -600,11 +600,12 @@ class McapRecorder:
         self.write(message.topic, message.typename, payload, message.time_s)
 
     def write_frame(self, frame: WorldFrame) -> int:
-        """Record one step's messages (`frame_messages`); returns how many were recorded."""
+        """Record one step's messages (the topics of `frame_builders`, their CDR written straight from the
+        frame); returns how many were recorded."""
         self._check_open()
         written = 0
-        for topic, typename, msg in frame_messages(frame):
-            if self.write(topic, typename, msg, frame.time):
+        for topic, typename, _, encode in frame_builders(frame):
+            if self.wants(topic) and self.write(topic, typename, encode(), frame.time):
                 written += 1
         return written
 

@@ -19,27 +19,37 @@ from typing import Any, Protocol
 
 @dataclass(slots=True)
 class Message:
-    """One message on the bus. `msg` (the object) or `data` (CDR bytes) is set; `cdr()`/`obj()` convert."""
+    """One message on the bus. `msg` (the object) or `data` (CDR bytes) is set, or `build` (makes the object)
+    with `encode` (makes its CDR bytes, the same as serialising the object, without it); `cdr()`/`obj()`
+    give either, made or converted on first use."""
 
     topic: str
     typename: str
     time_s: float
     msg: Any = None
     data: bytes | None = None
+    build: Callable[[], Any] | None = None
+    encode: Callable[[], bytes] | None = None
 
     def cdr(self) -> bytes:
         if self.data is None:
-            from simcore.transport.messages import serialize
+            if self.encode is not None:
+                self.data = self.encode()
+            else:
+                from simcore.transport.messages import serialize
 
-            self.data = serialize(self.msg)
+                self.data = serialize(self.obj())
         return self.data
 
     def obj(self) -> Any:
         if self.msg is None:
-            from simcore.transport.messages import deserialize
+            if self.build is not None:
+                self.msg = self.build()
+            else:
+                from simcore.transport.messages import deserialize
 
-            assert self.data is not None
-            self.msg = deserialize(self.data, self.typename)
+                assert self.data is not None
+                self.msg = deserialize(self.data, self.typename)
         return self.msg
 
 
@@ -51,6 +61,13 @@ class Publisher(Protocol):
     typename: str
 
     def publish(self, msg: Any, time_s: float) -> None: ...
+
+    def publish_lazily(
+        self, build: Callable[[], Any], encode: Callable[[], bytes] | None, time_s: float
+    ) -> None:
+        """Publish the message `build()` makes, made only if a consumer wants the object; `encode()` (when
+        given) makes its CDR bytes directly, for consumers that want only those (a recorder, a transport)."""
+        ...
 
 
 class Bus(Protocol):
@@ -71,6 +88,11 @@ class _InProcessPublisher:
 
     def publish(self, msg: Any, time_s: float) -> None:
         self.bus.dispatch(Message(self.topic, self.typename, time_s, msg=msg))
+
+    def publish_lazily(
+        self, build: Callable[[], Any], encode: Callable[[], bytes] | None, time_s: float
+    ) -> None:
+        self.bus.dispatch(Message(self.topic, self.typename, time_s, build=build, encode=encode))
 
 
 @dataclass

@@ -76,6 +76,7 @@ import struct
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -221,6 +222,11 @@ class _DdsPublisher:
 
     def publish(self, msg: Any, time_s: float) -> None:
         self.bus.publish_message(Message(self.topic, self.typename, time_s, msg=msg))
+
+    def publish_lazily(
+        self, build: Callable[[], Any], encode: Callable[[], bytes] | None, time_s: float
+    ) -> None:
+        self.bus.publish_message(Message(self.topic, self.typename, time_s, build=build, encode=encode))
 
 
 @dataclass

@@ -256,6 +256,11 @@ class _LoopbackPublisher:
     def publish(self, msg: Any, time_s: float) -> None:
         self.bus.publish_message(Message(self.topic, self.typename, time_s, msg=msg))
 
+    def publish_lazily(
+        self, build: Callable[[], Any], encode: Callable[[], bytes] | None, time_s: float
+    ) -> None:
+        self.bus.publish_message(Message(self.topic, self.typename, time_s, build=build, encode=encode))
+
 
 class LoopbackBus:
     """A `Bus` client of a `LoopbackHub`. Callbacks of remote messages run on the bus' reader thread."""

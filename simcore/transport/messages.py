@@ -21,15 +21,16 @@ in the messages that name entities (ground truth ids, metadata).
 
 from __future__ import annotations
 
-import math
-import re
 from collections.abc import Callable, Mapping
 from functools import cache, partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from simcore.transport import world_cdr
+from simcore.transport.conversions import quaternion_xyzw, stamp_parts
 from simcore.transport.msgdefs import FIELDDEFS
+from simcore.transport.ros_names import MAP_FRAME, base_link, odometry_topic, ros_name
 from simcore.transport.typestore import MSG_DIR, LazyTypestore
 from simcore.world.state import EntityState, WorldFrame
 
@@ -55,7 +56,6 @@ __all__ = [
     "tf",
 ]
 
-MAP_FRAME = "map"
 CLOCK_TOPIC = "/clock"
 TF_TOPIC = "/tf"
 OBJECTS_TOPIC = "/carlos/objects"
@@ -112,34 +112,6 @@ else:
 
 # --- names and small conversions ------------------------------------------------------------------------
 
-_INVALID = re.compile(r"[^A-Za-z0-9_]+")
-_UNDERSCORES = re.compile(r"_{2,}")
-
-
-@cache
-def ros_name(name: str) -> str:
-    """`name` as a valid ROS 2 name token (letters, digits, single `_`, not starting with a digit), one token
-    per name: a name that needed changing carries a hash of itself (`car 2` → `car_2_4f1c2a`)."""
-    token = _UNDERSCORES.sub("_", _INVALID.sub("_", name)).strip("_")
-    if not token:
-        token = "entity"
-    if token[0].isdigit():
-        token = "e" + token
-    if token == name:
-        return token
-    import hashlib
-
-    return f"{token}_{hashlib.sha256(name.encode()).hexdigest()[:6]}"
-
-
-def base_link(entity: str) -> str:
-    """The entity's body frame (REP-105): `<entity>/base_link`."""
-    return f"{ros_name(entity)}/base_link"
-
-
-def odometry_topic(entity: str) -> str:
-    return f"/carlos/{ros_name(entity)}/odometry"
-
 
 def _check_unique(frame: WorldFrame) -> None:
     seen: dict[str, str] = {}
@@ -155,23 +127,14 @@ def _check_unique(frame: WorldFrame) -> None:
 
 def stamp(time_s: float) -> Time:
     """Simulated time in seconds as builtin_interfaces/Time (rounded to the nanosecond)."""
-    ns = round(time_s * 1e9)
-    if ns < 0:
-        raise ValueError(f"negative simulation time {time_s}")
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = stamp_parts(time_s)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def quaternion(yaw: float, pitch: float = 0.0, roll: float = 0.0) -> Quaternion:
     """Quaternion of the intrinsic z-y'-x'' rotation (yaw, pitch, roll), as tf2's `setRPY(roll, pitch, yaw)`."""
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    return Quaternion(
-        x=sr * cp * cy - cr * sp * sy,
-        y=cr * sp * cy + sr * cp * sy,
-        z=cr * cp * sy - sr * sp * cy,
-        w=cr * cp * cy + sr * sp * sy,
-    )
+    x, y, z, w = quaternion_xyzw(yaw, pitch, roll)
+    return Quaternion(x=x, y=y, z=z, w=w)
 
 
 def _header(frame: WorldFrame, frame_id: str = MAP_FRAME) -> Header:
@@ -291,26 +254,43 @@ def status(frame: WorldFrame, state: str, detail: Mapping[str, str] | None = Non
     )
 
 
-def frame_builders(frame: WorldFrame) -> list[tuple[str, str, Callable[[], Any]]]:
-    """(topic, typename, build) for one step: `/clock`, `/tf`, `/carlos/<entity>/odometry` for every
-    entity and FollowGhost ghost, `/carlos/objects` (entities only); `build()` makes the message (called only
-    for topics someone consumes)."""
+#: (topic, typename, build, encode): `build()` makes the message object, `encode()` its CDR bytes (those of
+#: `serialize(build())`, written straight from the frame by `simcore.transport.world_cdr`).
+FrameTopic = tuple[str, str, Callable[[], Any], Callable[[], bytes]]
+
+
+def frame_builders(frame: WorldFrame) -> list[FrameTopic]:
+    """(topic, typename, build, encode) for one step: `/clock`, `/tf`, `/carlos/<entity>/odometry` for every
+    entity and FollowGhost ghost, `/carlos/objects` (entities only); `build()` makes the message and
+    `encode()` its CDR (each called only for topics someone consumes, as they consume it)."""
     _check_unique(frame)
-    out: list[tuple[str, str, Callable[[], Any]]] = [
-        (CLOCK_TOPIC, Clock.__msgtype__, lambda: clock(frame)),
-        (TF_TOPIC, TFMessage.__msgtype__, lambda: tf(frame)),
+    out: list[FrameTopic] = [
+        (CLOCK_TOPIC, Clock.__msgtype__, partial(clock, frame), partial(world_cdr.clock, frame)),
+        (TF_TOPIC, TFMessage.__msgtype__, partial(tf, frame), partial(world_cdr.tf, frame)),
     ]
     out.extend(
-        (odometry_topic(entity.name), Odometry.__msgtype__, partial(odometry, frame, entity))
+        (
+            odometry_topic(entity.name),
+            Odometry.__msgtype__,
+            partial(odometry, frame, entity),
+            partial(world_cdr.odometry, frame, entity),
+        )
         for entity in (*frame.entities, *frame.ghosts)
     )
-    out.append((OBJECTS_TOPIC, "vision_msgs/msg/Detection3DArray", lambda: objects(frame)))
+    out.append(
+        (
+            OBJECTS_TOPIC,
+            "vision_msgs/msg/Detection3DArray",
+            partial(objects, frame),
+            partial(world_cdr.objects, frame),
+        )
+    )
     return out
 
 
 def frame_messages(frame: WorldFrame) -> list[tuple[str, str, Any]]:
     """(topic, typename, message) for one step: every topic of `frame_builders`, built."""
-    return [(topic, typename, build()) for topic, typename, build in frame_builders(frame)]
+    return [(topic, typename, build()) for topic, typename, build, _ in frame_builders(frame)]
 
 
 # --- serialisation -------------------------------------------------------------------------------------

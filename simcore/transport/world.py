@@ -44,9 +44,9 @@ class WorldPublisher:
         from simcore.transport import messages
 
         wants = self.wants
-        for topic, typename, build in messages.frame_builders(frame):
+        for topic, typename, build, encode in messages.frame_builders(frame):
             if wants(topic):
-                self._publisher(topic, typename).publish(build(), frame.time)
+                self._publisher(topic, typename).publish_lazily(build, encode, frame.time)
 
     def publish_status(self, frame: WorldFrame, state: str) -> None:
         if self.wants(STATUS_TOPIC):
