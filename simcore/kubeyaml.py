@@ -32,6 +32,19 @@ def _str(dumper: yaml.SafeDumper, value: str) -> yaml.ScalarNode:
 _Dumper.add_representer(str, _str)
 
 
+class _FastDumper(getattr(yaml, "CSafeDumper", yaml.SafeDumper)):  # type: ignore[misc]
+    pass
+
+
+_FastDumper.add_representer(str, _str)
+
+
+def dump_fast(data: Any, **kwargs: Any) -> str:
+    """`dump` written by libyaml's emitter (about five times faster) where PyYAML has it: the same data, but
+    long strings may wrap at other places than `dump` wraps them, so never compare its bytes with `dump`'s."""
+    return str(yaml.dump(data, Dumper=_FastDumper, **kwargs))
+
+
 def dump(data: Any, **kwargs: Any) -> str:
     """`yaml.safe_dump` whose output Go's YAML parser reads back as the same data."""
     return str(yaml.dump(data, Dumper=_Dumper, **kwargs))

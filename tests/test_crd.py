@@ -235,3 +235,8 @@ def test_crd_yaml_reads_the_same_with_yaml_1_1_booleans() -> None:
         list("yYnNoO"),
     )
     assert yaml.load(crd_yaml(), Loader=Yaml11) == crd()
+    # the operator's ConfigMaps and run.yaml (libyaml's emitter) keep the quotes too
+    from simcore import kubeyaml
+
+    data = {"y": ["n", "on", "Off", "yes", "x"], "matrix": {"y": [1.5, 2.0]}, "long": "word " * 40}
+    assert yaml.load(kubeyaml.dump_fast(data, sort_keys=False), Loader=Yaml11) == data

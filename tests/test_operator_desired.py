@@ -227,6 +227,16 @@ def test_results_of_another_spec_under_the_name_are_not_overwritten() -> None:
     same = decision(run_body("r", "uid-1", 3)).spec
     d = decision(run_body("r", "uid-1", 3), stored_spec=same)
     assert d.action == "create" and d.spec is None  # stored already: not written again
+    # the same spec in another YAML layout (another version's writer): the same spec
+    assert same is not None
+    import yaml
+
+    relaid = yaml.safe_dump(yaml.safe_load(same), width=20, default_flow_style=True).encode()
+    assert relaid != same
+    d = decision(run_body("r", "uid-1", 3), stored_spec=relaid)
+    assert d.action == "create" and d.spec is None
+    d = decision(run_body("r", "uid-1", 3), stored_spec=b"{unclosed: [")
+    assert (d.action, d.reason) == ("reject", "ResultsExist")
 
 
 def test_a_search_gets_its_spec_stored_and_no_configmap_or_job() -> None:

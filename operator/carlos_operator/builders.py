@@ -373,14 +373,15 @@ def check_cluster_spec(run: SimulationRun) -> None:
 
 
 def manifest_yaml(run: SimulationRun) -> str:
-    """The spec as applied (apiVersion, kind, name, spec): what every pod reads. Never the permutations."""
+    """The spec as applied (apiVersion, kind, name, spec): what every pod reads. Never the permutations.
+    Compared with a stored `run.yaml` by its data, not its bytes (desired.same_spec)."""
     document = {
         "apiVersion": f"{API_GROUP}/{API_VERSION}",
         "kind": KIND,
         "metadata": {"name": run.name},
         "spec": run.spec.model_dump(mode="json", by_alias=True, exclude_none=True),
     }
-    return kubeyaml.dump(document, sort_keys=False)
+    return kubeyaml.dump_fast(document, sort_keys=False)
 
 
 def _labels(run: SimulationRun, settings: OperatorSettings) -> dict[str, str]:

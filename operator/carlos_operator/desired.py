@@ -323,6 +323,20 @@ def _holding(previous: Mapping[str, Any], run: SimulationRun, total: int, now: s
 # --- the decision ------------------------------------------------------------------------------------------
 
 
+def same_spec(stored: bytes, spec: bytes) -> bool:
+    """Whether a stored `run.yaml` holds the spec `spec` (YAML): the same bytes, or the same data written
+    otherwise (another version's YAML layout); unreadable is another spec."""
+    if stored == spec:
+        return True
+    import yaml
+
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+    try:
+        return bool(yaml.load(stored, Loader=loader) == yaml.load(spec, Loader=loader))
+    except yaml.YAMLError:
+        return False
+
+
 def decide(
     run: Mapping[str, Any],
     inputs: RunInputs,
@@ -409,7 +423,7 @@ def _decide(
         )
         return Decision("hold", status=_holding(status, run, total, now), events=events, **accepted)
     spec = manifest_yaml(submitted).encode()
-    if inputs.stored_spec is not None and inputs.stored_spec != spec:
+    if inputs.stored_spec is not None and not same_spec(inputs.stored_spec, spec):
         raise Rejected(
             "ResultsExist",
             f"results for run {run.name!r} already exist at {inputs.results_url} with a different spec: "
