@@ -932,3 +932,29 @@ def test_repeats_flag_flaky_points_and_check_determinism_as_carlos_run() -> None
     ordered = [json.loads(store.objects[f"r/{i}/summary.json"]) for i in range(4)]
     list(flag_repeats(ordered, lambda i: i // 2, local, recording_digests(store, "r")))  # type: ignore[arg-type]
     assert local.report() == repeats
+
+
+def test_the_default_outputs_client_is_made_at_start_and_used_by_the_first_run(monkeypatch: Any) -> None:
+    """The operator makes the default output's object-store client at start (handlers.startup), so a burst of
+    new runs does not wait for boto3 all at once; a run of the default output gets that very client, and a
+    default output that needs a Secret is not opened ahead (the Secret is the run's namespace's)."""
+    from carlos_operator import controller as module
+    from carlos_operator.builders import resolve_output
+    from carlos_operator.desired import parse
+
+    monkeypatch.setattr(module, "_clients", {})
+    monkeypatch.setenv("AWS_ACCESS_KEY_ID", "warm-key")
+    monkeypatch.setenv("AWS_SECRET_ACCESS_KEY", "warm-secret")
+    env = {"CARLOS_DEFAULT_OUTPUT_URL": "s3://bucket/out", "CARLOS_DEFAULT_S3_ENDPOINT": "http://127.0.0.1:9"}
+    kube = FakeKube()
+    module.warm_up(kube, OperatorSettings.from_env({**env, "CARLOS_DEFAULT_S3_SECRET": "s3"}))
+    assert module._clients == {} and kube.secret_reads == 0
+    settings = OperatorSettings.from_env(env)
+    module.warm_up(kube, settings)
+    assert len(module._clients) == 1
+    (warm,) = module._clients.values()
+    body = run_body("r", "uid-1", 1)
+    del body["spec"]["output"]
+    run, _ = parse(body, settings)
+    store = _store_for(kube, "default", resolve_output(run, settings, namespace="default"))
+    assert store._client is warm and store.prefix == "out/default"

@@ -127,6 +127,21 @@ def _store_for(kube: Kube, namespace: str, output: Output) -> Any:
     return _s3_store(bucket, prefix, endpoint, region, creds)
 
 
+def warm_up(kube: Kube, settings: OperatorSettings) -> None:
+    """Make at start what the first passes of a burst of new runs would otherwise all wait for at once: the
+    object-store client of the default output (boto3's import, its service model) when it needs no Secret.
+    Best effort: a run opens its store as always."""
+    if not (settings.default_output_url or "").startswith("s3://") or settings.default_s3_secret:
+        return
+    output = Output(
+        url=str(settings.default_output_url), endpoint=settings.default_s3_endpoint, region=None, secret=None
+    )
+    try:
+        _store_for(kube, "", output)
+    except Exception as exc:  # the first run opens it again and says what is wrong
+        log.debug("warming the default object store's client failed: %s", exc)
+
+
 _clients: dict[tuple[str | None, ...], Any] = {}
 _clients_lock = threading.Lock()
 

@@ -15,13 +15,14 @@ import dataclasses
 import json
 import logging
 import os
+import threading
 from typing import Any
 
 import kopf
 
 from carlos_operator import metrics
 from carlos_operator.builders import OperatorSettings
-from carlos_operator.controller import Controller
+from carlos_operator.controller import Controller, warm_up
 from carlos_operator.jobwatch import JobWatch
 from carlos_operator.kube import Kube
 from simcore.spec import API_GROUP, API_VERSION
@@ -69,6 +70,9 @@ def startup(
         workers=int(_float_env("CARLOS_RECONCILE_WORKERS", 16)),
     )
     _controller.start()
+    threading.Thread(
+        target=warm_up, args=(_controller.kube, _controller.settings), name="carlos-warm-up", daemon=True
+    ).start()
     _jobs = JobWatch(_controller.kube, WATCH_NAMESPACES, _controller.observe_job)
     _jobs.start()
     logger.info("carlos operator started")
