@@ -90,12 +90,29 @@ class Kube:
             done.result(timeout=timeout)
         self._events.shutdown(wait=False, cancel_futures=True)
 
+    def _post(self, path: str, namespace: str, body: dict[str, Any]) -> Any:
+        """POST `body` (a plain dict) to `path` (with `{namespace}`) as the client's generated `create_*`
+        methods do (its authentication, headers, connection pool), but without their typed model: those
+        validate the dict into a model and serialise it back, ~15 ms of CPU for a Job. The raw response;
+        ApiException when it is not a success."""
+        request = self.api_client.param_serialize(
+            method="POST",
+            resource_path=path,
+            path_params={"namespace": namespace},
+            header_params={"Accept": "application/json", "Content-Type": "application/json"},
+            body=body,
+            auth_settings=["BearerToken"],
+        )
+        response = self.api_client.call_api(*request)
+        if not 200 <= response.status <= 299:
+            response.read()
+            raise ApiException.from_response(http_resp=response, body=None, data=None)
+        return response.response
+
     # ConfigMaps and Jobs
     def create_configmap(self, namespace: str, body: dict[str, Any]) -> dict[str, Any]:
         try:
-            return _json(
-                self.core.create_namespaced_config_map(namespace, _any(body), _preload_content=False)
-            )
+            return _json(self._post("/api/v1/namespaces/{namespace}/configmaps", namespace, body))
         except ApiException as exc:
             _raise(exc)
             raise
@@ -109,7 +126,7 @@ class Kube:
 
     def create_job(self, namespace: str, body: dict[str, Any]) -> dict[str, Any]:
         try:
-            return _json(self.batch.create_namespaced_job(namespace, _any(body), _preload_content=False))
+            return _json(self._post("/apis/batch/v1/namespaces/{namespace}/jobs", namespace, body))
         except ApiException as exc:
             _raise(exc)
             raise
@@ -218,6 +235,6 @@ class Kube:
 
     def _post_event(self, namespace: str, body: dict[str, Any]) -> None:
         try:
-            _done(self.core.create_namespaced_event(namespace, _any(body), _preload_content=False))
+            _done(self._post("/api/v1/namespaces/{namespace}/events", namespace, body))
         except Exception as exc:  # events are best effort
             log.debug("posting event %s failed: %s", body["metadata"]["name"], exc)
