@@ -61,13 +61,14 @@ def startup(
     settings.scanning.disabled = True
     settings.posting.level = logging.WARNING
     settings.execution.max_workers = 8
+    # the workers mostly wait for the API server: a burst of new runs gets its Jobs as fast as the API
+    # server takes them (a new run's status pass queues behind the Jobs still to make: controller.py)
+    workers = max(1, int(_float_env("CARLOS_RECONCILE_WORKERS", 16)))
     _controller = Controller(
-        Kube(),
+        Kube(connections=workers + 4),  # and the events thread, the Job watch, the pod checks
         OperatorSettings.from_env(),
         resync=_float_env("CARLOS_RESYNC_SECONDS", 10.0),
-        # the workers mostly wait for the API server: a burst of new runs gets its Jobs as fast as the API
-        # server takes them (a new run's status pass queues behind the Jobs still to make: controller.py)
-        workers=int(_float_env("CARLOS_RECONCILE_WORKERS", 16)),
+        workers=workers,
     )
     _controller.start()
     threading.Thread(

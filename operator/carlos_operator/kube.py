@@ -67,14 +67,19 @@ def now_rfc3339() -> str:
 class Kube:
     """Thread-safe thin wrapper (the underlying ApiClient pools its connections)."""
 
-    def __init__(self, api_client: client.ApiClient | None = None) -> None:
+    def __init__(self, api_client: client.ApiClient | None = None, *, connections: int = 32) -> None:
+        """`connections`: kept open to the API server, at least one per thread that calls it at once (the
+        reconcile workers, the events thread, the Job watch): a request beyond the pool opens a connection of
+        its own, a TLS handshake on both ends, and closes it after."""
         if api_client is None:
             try:
                 config.load_incluster_config()
             except config.ConfigException:
                 # KUBECONFIG at call time (the client reads it once, at import)
                 config.load_kube_config(config_file=os.environ.get("KUBECONFIG") or None)
-            api_client = client.ApiClient()
+            configuration = client.Configuration.get_default_copy()
+            configuration.connection_pool_maxsize = connections
+            api_client = client.ApiClient(configuration)
         self.api_client = api_client
         self.core = client.CoreV1Api(api_client)
         self.batch = client.BatchV1Api(api_client)
