@@ -63,7 +63,7 @@ def startup(
     settings.execution.max_workers = 8
     # the workers mostly wait for the API server: a burst of new runs gets its Jobs as fast as the API
     # server takes them (a new run's status pass queues behind the Jobs still to make: controller.py)
-    workers = max(1, int(_float_env("CARLOS_RECONCILE_WORKERS", 16)))
+    workers = max(1, int(_float_env("CARLOS_RECONCILE_WORKERS", 32)))
     _controller = Controller(
         Kube(connections=workers + 4),  # and the events thread, the Job watch, the pod checks
         OperatorSettings.from_env(),
