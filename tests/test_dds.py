@@ -801,7 +801,9 @@ def test_a_ros2_nodes_reader_counts_as_a_subscriber_and_gets_the_first_sample(do
     writer_node = DomainParticipant(domain)  # the process' domain is configured (loopback) by the buses
     try:
         recorder.subscribe("*", lambda message: None)
-        assert sim.wait_for_subscribers("/carlos/Ego/odometry", 1, timeout=20)
+        # unicast discovery on loopback may wait one SPDP interval (cyclonedds: 30 s) when a first announcement
+        # is lost under load (seen once in the parallel suite at 20 s)
+        assert sim.wait_for_subscribers("/carlos/Ego/odometry", 1, timeout=45)
         assert sim.subscriber_count("/carlos/Ego/odometry") == 0  # a glob is no node of that topic
         deadline = time.monotonic() + 30
         while sim.subscriber_count("/carlos/Ego/odometry") < 1:
