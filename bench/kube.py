@@ -260,8 +260,8 @@ def main() -> None:
         ).stdout
         kubectl(admin, "apply", "-f", "-", stdin=crd)
         for _ in range(120):  # the CRD is served once Established
-            crd = json.loads(kubectl(admin, "get", f"crd/{PLURAL}.{GROUP}", "-o", "json"))
-            conditions = (crd.get("status") or {}).get("conditions") or []  # null until the first update
+            served = json.loads(kubectl(admin, "get", f"crd/{PLURAL}.{GROUP}", "-o", "json"))
+            conditions = (served.get("status") or {}).get("conditions") or []  # null until the first update
             if any(c["type"] == "Established" and c["status"] == "True" for c in conditions):
                 break
             time.sleep(0.5)

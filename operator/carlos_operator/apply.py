@@ -54,9 +54,9 @@ def apply(c: Host, key: Key, state: RunState, inputs: RunInputs, decision: Decis
         _announce(c, state, decision)
         return False
     assert state.run is not None and decision.total is not None
-    if decision.spec is not None and not decision.objects:
-        state.store.put_bytes(f"{state.run.name}/run.yaml", decision.spec)
     if not decision.objects:  # its Job started before (adopted by the status pass), or a search's rounds
+        if decision.spec is not None:
+            state.store.put_bytes(f"{state.run.name}/run.yaml", decision.spec)
         state.ensured = True
         state.job_seen = state.job_seen or action == "adopt"
         return True

@@ -53,6 +53,7 @@ from carlos_operator.desired import (
     Waiting,
     condition_status,
     decide,
+    namespace_of,
     rejection,
     waiting,
 )
@@ -606,7 +607,7 @@ class Controller:
             junit_summaries = flag_flaky(junit_summaries, summary["repeats"])
         # spooled to a file in the run's scratch folder and uploaded from there: 50,000 test cases never
         # held in memory at once
-        spool = self.scratch.folder(*_key_of(state)) / "junit.xml"
+        spool = self.scratch.folder(namespace_of(state.body), run.name) / "junit.xml"
         try:
             with spool.open("wb") as out:
                 write_junit_xml(run.name, junit_summaries, out)
@@ -677,11 +678,6 @@ def _missing_summary(run: SimulationRun, index: int, reason: str) -> dict[str, A
     from simcore.runner import error_outcome
 
     return error_outcome(run, index, 1, reason).summary
-
-
-def _key_of(state: RunState) -> Key:
-    meta = state.body["metadata"]
-    return (str(meta.get("namespace") or "default"), str(meta["name"]))
 
 
 def slim_run(body: dict[str, Any]) -> dict[str, Any]:

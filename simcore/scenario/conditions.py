@@ -84,21 +84,12 @@ def _for_entities(cond: m.Condition, world: ScenarioWorld, evaluate: EntityTest)
     if len(names) == 1:
         # one entity: "any" and "all" alike hold when it is in the world and fulfils the condition
         name = names[0]
-        if name != "$owner":  # (the actor of the action running now, else looked up once: raises as then)
-            entity = world.body(name)
-
-            def one_named(triggering: list[str] | None) -> bool:
-                if entity.gone:
-                    return False
-                result = evaluate(entity)
-                if result and triggering is not None:
-                    triggering.append(name)
-                return result
-
-            return one_named
+        # a named entity is looked up once (raising as then); $owner, the actor of the action running now, at
+        # every evaluation
+        fixed = world.body(name) if name != "$owner" else None
 
         def one(triggering: list[str] | None) -> bool:
-            body = world.body(name)
+            body = fixed if fixed is not None else world.body(name)
             if body.gone:
                 return False
             result = evaluate(body)
