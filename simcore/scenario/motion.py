@@ -256,9 +256,7 @@ def _plain_side(r: Any, side: int) -> bool:
     """Is one lane section all of this side of the road, with no lane narrowing to nothing in it? A body in
     a lane there keeps its lane id along the road (`_follow_lane_links` and `_leave_vanished_lane` change
     nothing). Found once per road and side, kept on the road (its lanes never change after parsing)."""
-    plain: dict[int, bool] | None = r.__dict__.get("_plain_sides")
-    if plain is None:
-        plain = r.__dict__["_plain_sides"] = {}
+    plain = r.plain_sides
     found = plain.get(side)
     if found is None:
         sections = r.side_sections(side)
@@ -271,12 +269,12 @@ def _plain_side(r: Any, side: int) -> bool:
 
 def _may_vanish(lane: Any, section: Any) -> bool:
     """Does the lane's width reach zero somewhere in its section (found once per lane, kept on the lane)?"""
-    found = getattr(lane, "_may_vanish", None)
+    found = lane.may_vanish
     if found is None:
         ends = [p.s0 for p in lane.widths] + [max(section.end - section.s, 0.0)]
         probes = [x for a, b in itertools.pairwise(ends) for x in (a, (a + b) / 2, b)]
         found = bool(lane.widths) and any(lane.width_at(x) <= 1e-6 for x in probes)
-        setattr(lane, "_may_vanish", found)  # noqa: B010 (a cache on a parsed road object)
+        lane.may_vanish = found
     return bool(found)
 
 

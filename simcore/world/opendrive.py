@@ -218,9 +218,7 @@ class OpenDrive:
             return centre
         if lane_id == 0:
             return road.lane_offset(s)
-        centers: dict[tuple[float, int], float] | None = road.__dict__.get("_centers")
-        if centers is None:
-            centers = road.__dict__["_centers"] = {}
+        centers = road.centre_memo
         hit = centers.get((s, lane_id))
         if hit is not None:
             return hit

@@ -144,6 +144,8 @@ class Lane:
         self.borders.sort(key=lambda p: p.s0)
         self._wstarts = [p.s0 for p in self.widths]
         self._bstarts = [p.s0 for p in self.borders]
+        #: whether the width reaches zero somewhere in the lane's section (simcore/scenario/motion.py)
+        self.may_vanish: bool | None = None
 
     def width_at(self, ds: float) -> float:
         """The width at ``ds`` from the section start (0 for the centre lane and lanes without widths)."""
@@ -288,6 +290,15 @@ class Road:
         self._cross_starts = sorted(set(self._side_starts[1]) | set(self._side_starts[-1]))
         self._crosses: list[LaneCross | None] | None = None
         self._uniform: LaneCross | None = None  # the cross of every s, where there is one
+        # memos of look-ups asked for several times per step (bounded: cleared past 256 entries), declared
+        # here rather than added on first use: a fixed set of attributes, as a compiler such as mypyc needs
+        self._borders: dict[tuple[float, int], list[tuple[Lane, float, float]]] = {}
+        self._fixed: dict[tuple[int, int], list[tuple[Lane, float, float]] | None] = {}
+        self._all_borders: dict[float, list[tuple[Lane, float, float]]] = {}
+        #: `OpenDrive.lane_center_t` where `centre_t` has no table (simcore/world/opendrive.py)
+        self.centre_memo: dict[tuple[float, int], float] = {}
+        #: per side, whether its lanes keep their ids along the road (simcore/scenario/motion.py)
+        self.plain_sides: dict[int, bool] = {}
 
     # -- reference line
     def geometry_at(self, s: float) -> Geometry:
@@ -407,9 +418,7 @@ class Road:
     def side_borders(self, s: float, side: int) -> list[tuple[Lane, float, float]]:
         """``(lane, t_inner, t_outer)`` for the lanes of ``side`` at ``s``, innermost first (memoised: the
         same road position is asked for several times per simulation step; callers must not mutate)."""
-        cache: dict[tuple[float, int], list[tuple[Lane, float, float]]] | None = self.__dict__.get("_borders")
-        if cache is None:
-            cache = self.__dict__["_borders"] = {}
+        cache = self._borders
         hit = cache.get((s, side))
         if hit is not None:
             return hit
@@ -429,11 +438,7 @@ class Road:
     def _fixed_borders(self, sec: LaneSection, side: int) -> list[tuple[Lane, float, float]] | None:
         """The borders of a section's side where they are the same at every ``s`` of it (constant widths,
         constant or no laneOffset: the sums below give the same numbers at every ``s``), else None."""
-        fixed: dict[tuple[int, int], list[tuple[Lane, float, float]] | None] | None = self.__dict__.get(
-            "_fixed"
-        )
-        if fixed is None:
-            fixed = self.__dict__["_fixed"] = {}
+        fixed = self._fixed
         key = (id(sec), side)
         if key in fixed:
             return fixed[key]
@@ -521,9 +526,7 @@ class Road:
         cross = self.cross_at(s)
         if cross is not None:
             return cross.borders
-        cache: dict[float, list[tuple[Lane, float, float]]] | None = self.__dict__.get("_all_borders")
-        if cache is None:
-            cache = self.__dict__["_all_borders"] = {}
+        cache = self._all_borders
         hit = cache.get(s)
         if hit is not None:
             return hit
