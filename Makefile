@@ -85,7 +85,8 @@ reference: install
 msgdefs: install
 	$(PY) -m simcore.transport.typestore > simcore/transport/msgdefs.py
 
-# the wheel (dist/carlos_sim-VERSION-py3-none-any.whl), built from the files git tracks
+# the wheel (dist/carlos_sim-VERSION-cp3XX-…whl with the step loop compiled where a C compiler is found, else
+# …-py3-none-any.whl: setup.py), built from the files git tracks
 wheel:
 	PYTHON=$(PYTHON) tools/build-wheel dist
 

@@ -8,13 +8,16 @@
     time, each on a copy of the file with that run's parameter values (esmini drives Ego by its script where
     CARLOS hands it to SUMO, as the file asks). Each of BENCH_SWEEP_ROUNDS rounds (default 1) runs carlos,
     esmini, esmini, carlos, so that a drift of the host's speed weighs on both sides alike; means are shown.
-(c) simulated seconds per wall second per core, warm, in this process: the run pipeline
+(c) simulated seconds per wall second per core, warm, in one process: the run pipeline
     (`simcore.pipeline.simulate`, what `carlos run` workers and the simcore pod call) vs the bare engine
     (`ScenarioEngine.advance` in a loop) on the corpus cut-in.
 
-Wall seconds and CPU seconds (user + system of the processes started) are both reported: on a shared
-machine the CPU seconds are the steadier figure. `carlos run` runs this checkout's code (PYTHONPATH is set
-to it). BENCH_BEFORE=DIR (a checkout of an earlier revision, e.g. `git worktree add /tmp/before REV`)
+What runs is what a user installs: this checkout's wheel, built by tools/build-wheel (the step loop's modules
+compiled by mypyc where a C compiler is found, as `pip install` builds it; CARLOS_COMPILE=0 for the
+pure-Python build) and installed into a scratch folder that comes first on PYTHONPATH, for the `carlos`
+processes and for the child process of (c). The table names the build. Wall seconds and CPU seconds (user +
+system of the processes started) are both reported: on a shared machine the CPU seconds are the steadier
+figure. BENCH_BEFORE=DIR (a checkout of an earlier revision, e.g. `git worktree add /tmp/before REV`)
 measures (a) and (b) for that code too, interleaved with this checkout's, as the "before" figures.
 Python's bytecode cache should be writable (PYTHONDONTWRITEBYTECODE unset), as in an installed package;
 one untimed run per checkout warms it.
@@ -109,11 +112,37 @@ def measured(job: Callable[[], object]) -> tuple[float, float]:
     return time.perf_counter() - started, _children_cpu() - cpu
 
 
-def tree_env(tree: Path) -> dict[str, str]:
-    """The environment that makes `carlos` run the code of the checkout `tree`."""
-    env = {**os.environ, "PYTHONPATH": f"{tree}{os.pathsep}{tree / 'operator'}"}
+def installed(tree: Path, work: Path, label: str) -> Path:
+    """The wheel of the checkout `tree` (tools/build-wheel: compiled where it can be, as a user's `pip install`
+    builds it) installed without its dependencies into a folder of its own; returns the folder."""
+    dist, site = work / f"dist-{label}", work / f"site-{label}"
+    wheel = subprocess.run(
+        [str(tree / "tools" / "build-wheel"), str(dist)],
+        env={**os.environ, "PYTHON": sys.executable},
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()[-1]
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(site), wheel],
+        capture_output=True,
+        check=True,
+    )
+    return site
+
+
+def site_env(site: Path) -> dict[str, str]:
+    """The environment that makes `carlos` (and this script's child) run the installation in `site`: first on
+    the path, ahead of this virtualenv's editable install of the checkout."""
+    env = {**os.environ, "PYTHONPATH": str(site)}
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     return env
+
+
+def build_of(env: dict[str, str]) -> str:
+    """`carlos --version`'s build: compiled or pure Python."""
+    done = subprocess.run([str(CARLOS), "--version"], env=env, capture_output=True, text=True, check=True)
+    return done.stdout.strip().rsplit(", ", 1)[-1].rstrip(")")
 
 
 def esmini_command(binary: Path, scenario: Path) -> list[str]:
@@ -204,7 +233,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="carlos-bench-") as name:
         work = Path(name)
         single = manifest(work, "single", cut_in, recording=True)  # the defaults: recording and report on
-        envs = {label: tree_env(tree) for label, tree in trees.items()}
+        envs = {label: site_env(installed(tree, work, label)) for label, tree in trees.items()}
+        for label, env in envs.items():
+            figures[f"build_{label}"] = build_of(env)
         for env in envs.values():  # warm-up: bytecode cache, road network cache
             timed([str(CARLOS), "run", str(single), "--fresh"], work, env)
             for made in ("results/single/report.html", "results/single/0/recording.mcap"):
@@ -265,7 +296,14 @@ def main() -> None:
                 figures[f"sweep_esmini_next_to_{label}_s"] = round(e_wall, 2)
                 figures[f"sweep_esmini_next_to_{label}_cpu_s"] = round(e_cpu, 2)
                 figures[f"sweep_{label}_throughput_over_esmini"] = round(e_wall / wall, 2)
-        sim, pipeline_rate, engine_rate, engine_road_once_rate = pipeline_vs_engine(cut_in, work)
+        child = subprocess.run(
+            [sys.executable, __file__, "--pipeline-vs-engine", str(cut_in), str(work)],
+            env=envs["after"],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        sim, pipeline_rate, engine_rate, engine_road_once_rate = json.loads(child.stdout.splitlines()[-1])
         figures["pipeline_sim_s_per_wall_s"] = round(pipeline_rate, 1)
         figures["engine_sim_s_per_wall_s"] = round(engine_rate, 1)
         figures["engine_road_once_sim_s_per_wall_s"] = round(engine_road_once_rate, 1)
@@ -284,6 +322,7 @@ def main() -> None:
     row(
         "measure", *[f"carlos {label}" for label in labels], "esmini", *[f"ratio {label}" for label in labels]
     )
+    row("installed build (carlos --version)", *[figures[f"build_{label}"] for label in labels])
     row(
         "single run, fresh process (s)",
         *[pair(f"single_{label}") for label in labels],
@@ -314,4 +353,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:2] == ["--pipeline-vs-engine"]:  # (c), in a child running the installed build
+        sys.path.remove(str(ROOT))
+        print(json.dumps(pipeline_vs_engine(Path(sys.argv[2]), Path(sys.argv[3]))))
+    else:
+        main()

@@ -14,3 +14,13 @@ def version() -> str:
         return installed(DISTRIBUTION)
     except PackageNotFoundError:
         return "unknown"
+
+
+def compiled() -> bool:
+    """Whether the step loop's modules run as machine code (a wheel built with mypyc: setup.py's COMPILED)
+    rather than as Python source (an editable install, a pure-Python wheel)."""
+    from importlib.machinery import EXTENSION_SUFFIXES
+    from importlib.util import find_spec
+
+    spec = find_spec("simcore.scenario.engine")
+    return spec is not None and (spec.origin or "").endswith(tuple(EXTENSION_SUFFIXES))

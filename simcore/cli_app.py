@@ -89,9 +89,10 @@ out = Console(emoji=False)
 
 def _print_version(value: bool) -> None:
     if value:
-        from simcore import DISTRIBUTION, version
+        from simcore import DISTRIBUTION, compiled, version
 
-        out.print(Text(f"carlos {version()} ({DISTRIBUTION})"), highlight=False)
+        build = "compiled" if compiled() else "pure Python"
+        out.print(Text(f"carlos {version()} ({DISTRIBUTION}, {build})"), highlight=False)
         raise typer.Exit(0)
 
 

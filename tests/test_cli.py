@@ -328,7 +328,7 @@ def test_help_is_whole_in_80_columns_and_the_version_is_printed() -> None:
     commands = top[top.index("Commands:") :]
     assert "..." not in commands and "…" not in commands  # every command's first sentence whole
     version = carlos("--version")
-    assert version.returncode == 0 and version.stdout.strip() == "carlos 0.1.0 (carlos-sim)"
+    assert version.returncode == 0 and version.stdout.strip() == "carlos 0.1.0 (carlos-sim, pure Python)"
 
 
 def test_plan_of_a_search_says_its_points_are_chosen_as_it_runs() -> None:

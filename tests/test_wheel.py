@@ -25,12 +25,14 @@ DIST_INFO = "carlos_sim-0.1.0.dist-info/"
 
 
 def build_wheel(out: Path) -> Path:
+    """A pure-Python wheel (CARLOS_COMPILE=0: what it holds besides the compiled modules is the same, and
+    compiling them takes minutes; tools/wheel-check builds, checks and runs the compiled wheel)."""
     result = subprocess.run(
         [str(ROOT / "tools" / "build-wheel"), str(out)],
         capture_output=True,
         text=True,
         timeout=600,
-        env={**os.environ, "PYTHON": sys.executable},
+        env={**os.environ, "PYTHON": sys.executable, "CARLOS_COMPILE": "0"},
     )
     assert result.returncode == 0, result.stderr[-3000:]
     return Path(result.stdout.strip().splitlines()[-1])
@@ -81,11 +83,13 @@ def test_wheel_holds_every_module_and_data_file(wheel: Path) -> None:
 
 
 def _install(wheel: Path, target: Path) -> None:
+    """Installs a wheel or a source folder (built pure Python: CARLOS_COMPILE=0, as in `build_wheel`)."""
     subprocess.run(
         [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(target), str(wheel)],
         check=True,
         capture_output=True,
         timeout=300,
+        env={**os.environ, "CARLOS_COMPILE": "0"},
     )
 
 
@@ -188,7 +192,7 @@ def test_pip_install_of_the_source_folder_carries_the_examples(tmp_path: Path) -
         return subprocess.run(command, cwd=work, env=env, capture_output=True, text=True, timeout=600)
 
     version = carlos("--version")
-    assert version.stdout.strip() == "carlos 0.1.0 (carlos-sim)", version.stdout + version.stderr
+    assert version.stdout.strip() == "carlos 0.1.0 (carlos-sim, pure Python)", version.stdout + version.stderr
     written = carlos("examples", ".")
     assert written.returncode == 0, written.stderr
     assert (work / "examples" / "runs" / "prototyping.yaml").read_bytes() == (

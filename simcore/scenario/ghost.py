@@ -39,19 +39,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 from simcore.scenario import model as m
 from simcore.scenario.drivers import Vehicle, put
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
-
     from simcore.scenario.motion import Body
-    from simcore.scenario.world import ScenarioWorld
-
-    class GhostWorld(ScenarioWorld, Protocol):
-        def run_alone(self, body: Body, dt: float, steps: int, sample: Callable[[int], None]) -> None: ...
+    from simcore.scenario.world import GhostWorld
 
 
 FOLLOW_GHOST = "FollowGhostController"

@@ -10,6 +10,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from simcore.scenario import model as m
     from simcore.scenario.measure import Measure
     from simcore.scenario.motion import Body
@@ -76,3 +78,10 @@ class ScenarioWorld(Protocol):
     def sumo_set_speed(self, body: Body, speed: float) -> None: ...
 
     def sumo_change_lane(self, body: Body, lane_id: int, duration: float) -> None: ...
+
+
+class GhostWorld(ScenarioWorld, Protocol):
+    """The world a FollowGhostController runs in (simcore/scenario/ghost.py): it can also run the ghost ahead
+    alone, sampling its trail."""
+
+    def run_alone(self, body: Body, dt: float, steps: int, sample: Callable[[int], None]) -> None: ...

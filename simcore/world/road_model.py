@@ -14,12 +14,9 @@ import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Any
 
 from simcore.world.road_geometry import Geometry
-
-if TYPE_CHECKING:  # numpy is imported only where arrays are built (sample_lane_boundaries)
-    import numpy as np
 
 __all__ = [
     "DRIVING_LANE_TYPES",
@@ -570,6 +567,8 @@ class LaneBoundary:
     section_index: int
     lane_id: int
     lane_type: str
-    s: np.ndarray
-    inner: np.ndarray
-    outer: np.ndarray
+    # numpy arrays (typed Any: numpy is imported only where they are built, and a compiled module needs the
+    # names of its dataclasses' field types when it loads)
+    s: Any
+    inner: Any
+    outer: Any
