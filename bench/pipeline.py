@@ -354,7 +354,8 @@ def main() -> None:
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["--pipeline-vs-engine"]:  # (c), in a child running the installed build
-        sys.path.remove(str(ROOT))
+        # the installed build only: not this checkout, nor this folder (its simcore.py is another bench)
+        sys.path[:] = [p for p in sys.path if p and Path(p).resolve() not in (ROOT, ROOT / "bench")]
         print(json.dumps(pipeline_vs_engine(Path(sys.argv[2]), Path(sys.argv[3]))))
     else:
         main()
