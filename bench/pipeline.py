@@ -18,7 +18,8 @@ pure-Python build) and installed into a scratch folder that comes first on PYTHO
 processes and for the child process of (c). The table names the build. Wall seconds and CPU seconds (user +
 system of the processes started) are both reported: on a shared machine the CPU seconds are the steadier
 figure. BENCH_BEFORE=DIR (a checkout of an earlier revision, e.g. `git worktree add /tmp/before REV`)
-measures (a) and (b) for that code too, interleaved with this checkout's, as the "before" figures.
+measures (a) and (b) for that code too, interleaved with this checkout's, as the "before" figures;
+BENCH_PURE=1 likewise measures this checkout's pure-Python wheel (CARLOS_COMPILE=0) as "pure".
 Python's bytecode cache should be writable (PYTHONDONTWRITEBYTECODE unset), as in an installed package;
 one untimed run per checkout warms it.
 
@@ -53,6 +54,7 @@ SWEEP = int(os.environ.get("BENCH_SWEEP", "200"))
 PASSES = int(os.environ.get("BENCH_PASSES", "10"))
 SWEEP_ROUNDS = int(os.environ.get("BENCH_SWEEP_ROUNDS", "1"))
 BEFORE = Path(os.environ["BENCH_BEFORE"]).resolve() if os.environ.get("BENCH_BEFORE") else None
+PURE = os.environ.get("BENCH_PURE") == "1"
 CORPUS = Path(os.environ.get("CARLOS_ESMINI_CORPUS", ""))
 CARLOS = Path(sys.executable).parent / "carlos"
 EXAMPLE = ROOT / "examples" / "scenarios" / "cut-in.xosc"
@@ -112,13 +114,14 @@ def measured(job: Callable[[], object]) -> tuple[float, float]:
     return time.perf_counter() - started, _children_cpu() - cpu
 
 
-def installed(tree: Path, work: Path, label: str) -> Path:
+def installed(tree: Path, work: Path, label: str, *, pure: bool = False) -> Path:
     """The wheel of the checkout `tree` (tools/build-wheel: compiled where it can be, as a user's `pip install`
-    builds it) installed without its dependencies into a folder of its own; returns the folder."""
+    builds it; `pure`: CARLOS_COMPILE=0) installed without its dependencies into a folder of its own; returns
+    the folder."""
     dist, site = work / f"dist-{label}", work / f"site-{label}"
     wheel = subprocess.run(
         [str(tree / "tools" / "build-wheel"), str(dist)],
-        env={**os.environ, "PYTHON": sys.executable},
+        env={**os.environ, "PYTHON": sys.executable, **({"CARLOS_COMPILE": "0"} if pure else {})},
         capture_output=True,
         text=True,
         check=True,
@@ -228,12 +231,19 @@ def main() -> None:
     cut_in = CORPUS / "resources" / "xosc" / "cut-in.xosc"
     if not cut_in.is_file():
         raise SystemExit(f"corpus cut-in not found at {cut_in} (set CARLOS_ESMINI_CORPUS)")
-    trees = {"after": ROOT, **({"before": BEFORE} if BEFORE is not None else {})}
+    trees = {
+        "after": ROOT,
+        **({"before": BEFORE} if BEFORE is not None else {}),
+        **({"pure": ROOT} if PURE else {}),
+    }
     figures: dict[str, float | int | None] = {"sweep_runs": SWEEP}
     with tempfile.TemporaryDirectory(prefix="carlos-bench-") as name:
         work = Path(name)
         single = manifest(work, "single", cut_in, recording=True)  # the defaults: recording and report on
-        envs = {label: site_env(installed(tree, work, label)) for label, tree in trees.items()}
+        envs = {
+            label: site_env(installed(tree, work, label, pure=label == "pure"))
+            for label, tree in trees.items()
+        }
         for label, env in envs.items():
             figures[f"build_{label}"] = build_of(env)
         for env in envs.values():  # warm-up: bytecode cache, road network cache
