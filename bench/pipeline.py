@@ -236,7 +236,7 @@ def main() -> None:
         **({"before": BEFORE} if BEFORE is not None else {}),
         **({"pure": ROOT} if PURE else {}),
     }
-    figures: dict[str, float | int | None] = {"sweep_runs": SWEEP}
+    figures: dict[str, float | int | str | list[float] | None] = {"sweep_runs": SWEEP}
     with tempfile.TemporaryDirectory(prefix="carlos-bench-") as name:
         work = Path(name)
         single = manifest(work, "single", cut_in, recording=True)  # the defaults: recording and report on
@@ -297,6 +297,7 @@ def main() -> None:
                         sides[side].append(measured(lambda env=env: carlos_sweep(env)))
                     else:
                         sides[side].append(measured(esmini_sweep))
+            figures[f"sweep_{label}_each_s"] = [round(w, 2) for w, _ in sides["carlos"]]
             wall, cpu = (statistics.fmean(v) for v in zip(*sides["carlos"], strict=True))
             figures[f"sweep_{label}_s"] = round(wall, 2)
             figures[f"sweep_{label}_cpu_s"] = round(cpu, 2)
