@@ -112,9 +112,17 @@ def _extensions() -> list:  # type: ignore[type-arg]
     if reason is not None:
         if mode == "1":
             raise SystemExit(f"CARLOS_COMPILE=1 but {reason}")
-        _say(f"{reason}: the wheel is pure Python, sweeps run slower (CARLOS_COMPILE=0 says so on purpose)")
+        _say(
+            f"{reason}: the wheel is pure Python, sweeps run slower (CARLOS_COMPILE=0: pure Python on purpose)"
+        )
         return []
-    from mypyc.build import mypycify
+    try:
+        from mypyc.build import mypycify
+    except ImportError:  # a build without its isolated environment (--no-build-isolation) and no mypy
+        if mode == "1":
+            raise
+        _say("no mypyc (pip install mypy): the wheel is pure Python, sweeps run slower")
+        return []
 
     # mypy's own settings, not pyproject's [tool.mypy] (its pydantic plugin is not in the build environment);
     # debug level 0: no build folder names in the binaries
