@@ -18,8 +18,11 @@ import sys
 import sysconfig
 from pathlib import Path
 
-from setuptools import find_namespace_packages, setup
+from setuptools import Extension, find_namespace_packages, setup
 from setuptools.command.build_ext import build_ext
+
+#: CARLOS_COMPILE: "0" pure Python, "1" compiled or fail, unset: compiled when possible (see COMPILED)
+MODE = os.environ.get("CARLOS_COMPILE", "")
 
 #: The modules of a run's step loop (the scenario engine, its actions, conditions and controllers, the road
 #: network, the SUMO bridge, the metrics), compiled to C extensions by mypyc when a wheel is built (`pip
@@ -96,21 +99,20 @@ def _cannot_compile() -> str | None:
     return None
 
 
-def _extensions() -> list:  # type: ignore[type-arg]
-    mode = os.environ.get("CARLOS_COMPILE", "")
-    if mode not in ("0", "1", ""):
+def _extensions() -> list[Extension]:
+    if MODE not in ("0", "1", ""):
         raise SystemExit(
-            f"CARLOS_COMPILE={mode!r}: 0 (pure Python), 1 (compiled) or unset (compiled when possible)"
+            f"CARLOS_COMPILE={MODE!r}: 0 (pure Python), 1 (compiled) or unset (compiled when possible)"
         )
     # a build compiles (mypyc type-checks the sources first: not for pip's metadata steps); an editable install
     # never does
     building = any(command in sys.argv for command in ("bdist_wheel", "build", "build_ext", "install"))
     editable = any(command in sys.argv for command in ("editable_wheel", "develop"))
-    if mode == "0" or not building or editable:
+    if MODE == "0" or not building or editable:
         return []
     reason = _cannot_compile()
     if reason is not None:
-        if mode == "1":
+        if MODE == "1":
             raise SystemExit(f"CARLOS_COMPILE=1 but {reason}")
         _say(
             f"{reason}: the wheel is pure Python, sweeps run slower (CARLOS_COMPILE=0: pure Python on purpose)"
@@ -119,7 +121,7 @@ def _extensions() -> list:  # type: ignore[type-arg]
     try:
         from mypyc.build import mypycify
     except ImportError:  # a build without its isolated environment (--no-build-isolation) and no mypy
-        if mode == "1":
+        if MODE == "1":
             raise
         _say("no mypyc (pip install mypy): the wheel is pure Python, sweeps run slower")
         return []
@@ -138,7 +140,7 @@ class OptionalBuildExt(build_ext):
         try:
             super().run()
         except Exception as exc:
-            if os.environ.get("CARLOS_COMPILE") == "1":
+            if MODE == "1":
                 raise
             for extension in self.extensions:  # nothing half built: a module's shim without its library
                 Path(self.get_ext_fullpath(extension.name)).unlink(missing_ok=True)
