@@ -154,3 +154,140 @@ def test_runs_on_one_network_file_share_its_lanes_and_only_its_lanes(tmp_path: P
     network.write_bytes(network.read_bytes() + b"\n")  # another content
     with SumoWorld(network, 0.05, seed=1) as world:
         assert world._edge_of_lane == {}
+
+
+#: one process: runs of a SUMO-driven car behind a scripted one that changes lanes, each printed as the SUMO-driven
+#: car's speed factor and trajectory; `plan` lists each run's (seed, reuse, fail: raise half-way), and libsumo's starts are counted
+_PARKED_RUNS = """
+import json, sys
+from pathlib import Path
+import libsumo
+import simcore.world.sumo as sumo
+from simcore.world.opendrive import OpenDrive
+
+network, road_file, plan = Path(sys.argv[1]), Path(sys.argv[2]), json.loads(sys.argv[3])
+road = OpenDrive.from_file(road_file)
+starts = []
+plain_start = libsumo.start
+libsumo.start = lambda args, **kw: starts.append(1) or plain_start(args, **kw)
+
+def run(seed, reuse, fail):
+    trajectory = []
+    try:
+        with sumo.SumoWorld(network, 0.05, seed=seed, reuse=reuse) as world:
+            start = road.road_to_world("1", 100.0, road.lane_center_t("1", -1, 100.0))
+            cut = road.road_to_world("1", 130.0, road.lane_center_t("1", -2, 130.0))
+            box = {"length": 4.5, "width": 1.8, "height": 1.5, "front_offset": 3.65, "max_speed": 50.0,
+                   "max_accel": 4.0, "max_decel": 9.0}
+            world.add_vehicle("ego", **box, x=start.x, y=start.y, heading=start.heading, speed=20.0,
+                              scripted=False)
+            # SUMO's random draw at the insertion (the road's speed limit is above what the car wants here)
+            trajectory.append(world._sumo.vehicle.getSpeedFactor("ego"))
+            world.add_vehicle("cut", **box, x=cut.x, y=cut.y, heading=cut.heading, speed=15.0, scripted=True)
+            s = 130.0
+            for step in range(200):
+                if fail and step == 100:
+                    raise RuntimeError("half-way")
+                s += 15.0 * 0.05
+                share = min(max((step - 40) / 60, 0.0), 1.0)
+                t = (1 - share) * road.lane_center_t("1", -2, s) + share * road.lane_center_t("1", -1, s)
+                pose = road.road_to_world("1", s, t)
+                world.place("cut", pose.x, pose.y, pose.heading, 15.0)
+                world.step()
+                trajectory.append(tuple(world.read("ego") or ()))
+    except RuntimeError:
+        pass
+    return trajectory
+
+runs = [run(*entry) for entry in plan]
+print(json.dumps({"runs": runs, "starts": len(starts)}))
+"""
+
+
+def test_a_parked_simulation_runs_as_a_fresh_start(tmp_path: Path) -> None:
+    """A warm worker's runs on one network, step and seed share one libsumo simulation, parked between them
+    (simcore/world/sumo_warm.py): each run's trajectory is the fresh start's, bit for bit, also after a run that
+    failed half-way and after a run with another seed; another seed starts SUMO anew."""
+    pytest.importorskip("libsumo")
+    from simcore.world.sumo import netconvert_available, prepare_network
+
+    if not netconvert_available():
+        pytest.skip("netconvert is not installed")
+    road_file = ROOT / "examples" / "maps" / "highway.xodr"
+    network = prepare_network(road_file, cache_dir=tmp_path)
+    plan = [
+        (3, False, False),  # fresh, closed
+        (3, True, False),  # fresh, parked
+        (3, True, False),  # parked
+        (3, True, True),  # parked, fails half-way
+        (3, True, False),  # parked
+        (4, True, False),  # another seed: fresh, parked
+        (3, True, False),  # fresh again
+        (3, True, False),  # parked
+    ]
+    out = subprocess.run(
+        [sys.executable, "-c", _PARKED_RUNS, str(network), str(road_file), json.dumps(plan)],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
+    result = json.loads(out.stdout.splitlines()[-1])
+    fresh, *later = result["runs"]
+    assert len(fresh) == 201 and all(fresh)
+    assert fresh[-1] != fresh[1]  # it drove
+    assert later[:2] == [fresh, fresh]
+    assert later[2] == fresh[:101]
+    assert later[3] == fresh
+    assert later[4][0] != fresh[0] and len(later[4]) == 201  # another seed: another speed factor
+    assert later[5:] == [fresh, fresh]
+    assert result["starts"] == 4  # the unparked run, the first parked one, seed 4, seed 3 again
+
+
+def test_the_generator_state_written_for_sumo_is_a_seeded_mt19937() -> None:
+    """The state written for SUMO's default generator is `std::mt19937`'s after seeding: continued by Python's
+    Mersenne Twister (the same generator), its 10,000th number from the default seed 5489 is the one the C++
+    standard requires ([rand.predef]); a saved state's count-only generator is replaced by it, a full one kept."""
+    import random
+
+    from simcore.world.sumo_warm import FULL_STATE_COUNT, mt19937_seeded, with_default_generator_seeded
+
+    *words, position = (int(word) for word in mt19937_seeded(5489).split())
+    assert len(words) == 624 and position == 624
+    generator = random.Random()
+    generator.setstate((3, (*words, position), None))
+    numbers = [generator.getrandbits(32) for _ in range(10_000)]
+    assert numbers[-1] == 4123659995
+    assert mt19937_seeded(-1) == mt19937_seeded(2**32 - 1)  # an int seed as the unsigned 32 bits it is
+
+    saved = '<snapshot><rngState default="16" routeHandler="0">\n<rngLane index="0" state="3"/></rngState>'
+    written = with_default_generator_seeded(saved, 7)
+    assert written == saved.replace('default="16"', f'default="{FULL_STATE_COUNT + 16} {mt19937_seeded(7)}"')
+    assert with_default_generator_seeded(written, 8) == written  # already in full: SUMO's own
+    assert with_default_generator_seeded("<snapshot/>", 7) is None
+
+
+def test_a_state_failing_its_check_is_never_parked(tmp_path: Path) -> None:
+    """When the state written for SUMO does not give the speed factors of a fresh start (here: the generator
+    seeded with another seed), nothing is parked: every run starts SUMO afresh, and drives as a fresh start."""
+    pytest.importorskip("libsumo")
+    from simcore.world.sumo import netconvert_available, prepare_network
+
+    if not netconvert_available():
+        pytest.skip("netconvert is not installed")
+    road_file = ROOT / "examples" / "maps" / "highway.xodr"
+    network = prepare_network(road_file, cache_dir=tmp_path)
+    wrong_seed = "import simcore.world.sumo_warm as warm\nseeded = warm.mt19937_seeded\n"
+    wrong_seed += "warm.mt19937_seeded = lambda seed: seeded(seed + 1)\n"
+    plan = [(3, False, False), (3, True, False), (3, True, False), (3, True, False)]
+    out = subprocess.run(
+        [sys.executable, "-c", wrong_seed + _PARKED_RUNS, str(network), str(road_file), json.dumps(plan)],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
+    result = json.loads(out.stdout.splitlines()[-1])
+    fresh, *later = result["runs"]
+    assert later == [fresh, fresh, fresh]
+    assert result["starts"] == 5  # the first keyed run starts twice (after its failed check), the rest once

@@ -10,7 +10,6 @@ happens only here, when a run starts, never at operator import time.
 
 from __future__ import annotations
 
-import contextlib
 import ctypes
 import functools
 import hashlib
@@ -25,6 +24,7 @@ from typing import Any, NamedTuple
 
 from simcore.errors import BadInput, SimulationError
 from simcore.file_version import BoundedCache, ContentKey, content_key
+from simcore.world import sumo_warm
 from simcore.world.sumo_lanes import EdgeLanes, edge_lanes, nearest_lane
 
 NETCONVERT_OPTIONS = (
@@ -241,7 +241,9 @@ def _edges_of_lanes(before: ContentKey | None, after: ContentKey | None) -> dict
 class SumoWorld:
     """One libsumo simulation. Time advances only through `step()`."""
 
-    def __init__(self, network: Path, step_seconds: float, seed: int) -> None:
+    def __init__(self, network: Path, step_seconds: float, seed: int, *, reuse: bool = True) -> None:
+        """SUMO on `network` at time 0. `reuse`: the process's parked simulation when it was started the same
+        way (simcore/world/sumo_warm.py), and parked again by `close()`; else started and closed."""
         import libsumo  # heavy import: only where a run really starts
         from libsumo import _libsumo
 
@@ -290,15 +292,22 @@ class SumoWorld:
         ]
         keep_xml_parser_initialized(_libsumo.__file__)
         before = _network_key(network)
+        # a parked simulation is reused for the same arguments on the same network content
+        self._key: tuple[tuple[str, ...], ContentKey] | None = (
+            (tuple(args), before) if reuse and before is not None else None
+        )
+        self._closed = False
         try:
-            self._sumo.start(args)
+            reused = sumo_warm.start(self._sumo, args, seed, self._key)
         except Exception as exc:  # libsumo raises its own TraCIException / FatalTraCIError
             raise SimulationError(f"SUMO did not start: {exc}") from exc
-        self._edge_of_lane = _edges_of_lanes(before, _network_key(network))
+        self._edge_of_lane = _edges_of_lanes(before, before if reused else _network_key(network))
 
     def close(self) -> None:
-        with contextlib.suppress(Exception):  # already closed or never started: nothing to release
-            self._sumo.close()
+        """The end of the run: SUMO parked for the next run when it may be reused, else closed. Once."""
+        if not self._closed:
+            self._closed = True
+            sumo_warm.close(self._sumo, self._front, self._key)
 
     def __enter__(self) -> SumoWorld:
         return self
