@@ -247,10 +247,16 @@ def test_a_parked_simulation_runs_as_a_fresh_start(tmp_path: Path) -> None:
 def test_the_generator_state_written_for_sumo_is_a_seeded_mt19937() -> None:
     """The state written for SUMO's default generator is `std::mt19937`'s after seeding: continued by Python's
     Mersenne Twister (the same generator), its 10,000th number from the default seed 5489 is the one the C++
-    standard requires ([rand.predef]); a saved state's count-only generator is replaced by it, a full one kept."""
+    standard requires ([rand.predef]); a saved state's count-only generator is replaced by it, a full one kept;
+    what loading a state does nothing with is left out."""
     import random
 
-    from simcore.world.sumo_warm import FULL_STATE_COUNT, mt19937_seeded, with_default_generator_seeded
+    from simcore.world.sumo_warm import (
+        FULL_STATE_COUNT,
+        mt19937_seeded,
+        with_default_generator_seeded,
+        without_inert_parts,
+    )
 
     *words, position = (int(word) for word in mt19937_seeded(5489).split())
     assert len(words) == 624 and position == 624
@@ -265,6 +271,14 @@ def test_the_generator_state_written_for_sumo_is_a_seeded_mt19937() -> None:
     assert written == saved.replace('default="16"', f'default="{FULL_STATE_COUNT + 16} {mt19937_seeded(7)}"')
     assert with_default_generator_seeded(written, 8) == written  # already in full: SUMO's own
     assert with_default_generator_seeded("<snapshot/>", 7) is None
+    saved = '<?xml version="1.0"?>\n<!-- options\n  <seed value="7"/>\n-->\n<snapshot>\n  <rngState default="1">\n'
+    saved += (
+        '    <rngLane index="0" state="0"/>\n    <rngLane index="1" state="5"/>\n  </rngState>\n</snapshot>'
+    )
+    assert without_inert_parts(saved) == (
+        '<?xml version="1.0"?>\n<snapshot>\n  <rngState default="1">\n    <rngLane index="1" state="5"/>\n'
+        "  </rngState>\n</snapshot>"
+    )
 
 
 def test_a_state_failing_its_check_is_never_parked(tmp_path: Path) -> None:
