@@ -4,7 +4,10 @@
 when its parent dies (Linux prctl PR_SET_PDEATHSIG through ctypes; elsewhere a thread watching the parent's
 pid), and once the workers are gone multiprocessing's resource tracker sees its pipe close and exits too.
 Workers write their scratch folders under one folder per `carlos run` process (`carlos-run-<pid>-…` in the
-temporary directory): the run removes it when it ends, and the next run removes those of dead processes.
+temporary directory): the run removes it when it ends, and the next run removes those of dead processes. A
+process keeping SUMO between runs saves SUMO's start state in a folder named the same way with its own pid
+(`carlos-run-<pid>-sumo-…`, simcore/world/sumo_warm.py), removed at its exit or, after a kill, by the next
+run or the next such process.
 """
 
 from __future__ import annotations
@@ -46,13 +49,19 @@ def _watch_parent(parent_pid: int) -> None:
 
 
 def _alive(pid: int) -> bool:
+    """Whether process `pid` still runs: a zombie (ended, not yet reaped: a killed run's orphaned workers can
+    stay so for a while when nothing reaps orphans, as in some containers) has ended."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:  # ended meanwhile; or no /proc (not Linux): the signal's answer stands
+        return not Path("/proc").is_dir()
+    return "\nState:\tZ" not in status
 
 
 def remove_stale_scratch(temp_dir: Path | None = None) -> list[Path]:

@@ -35,6 +35,8 @@ from collections.abc import Hashable, Iterable
 from pathlib import Path
 from typing import Any
 
+from simcore.lifetime import SCRATCH_PREFIX, remove_stale_scratch
+
 #: the libsumo option that makes a saved state hold the random generators' states
 SAVE_RNG = ("--save-state.rng", "true")
 #: SUMO's SAVE_ONLY_COUNT: a generator's saved count this large is followed by its full state, which loading
@@ -62,7 +64,10 @@ class _Parked:
 
     def snapshot(self, sumo: Any) -> Path:
         if self.folder is None or self.pid != os.getpid():
-            self.folder = Path(tempfile.mkdtemp(prefix="carlos-sumo-"))
+            # named as a `carlos run` scratch folder of this process: when a kill leaves it behind (no atexit),
+            # the next process to make one, or the next `carlos run`, removes it (simcore/lifetime.py)
+            remove_stale_scratch()
+            self.folder = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-sumo-"))
             self.pid = os.getpid()
             self.refused = set()
             atexit.register(_at_exit, sumo, self.folder, self.pid)
