@@ -347,7 +347,9 @@ class SumoWorld:
         # the driver brakes comfortably (at most 4.5 m/s²) and uses the vehicle's full braking only in an emergency
         sumo.vehicletype.setDecel(vtype, max(min(COMFORT_DECELERATION, max_decel), 0.1))
         sumo.vehicletype.setEmergencyDecel(vtype, max(max_decel, 0.1))
-        sumo.vehicletype.setImperfection(vtype, 0.0)  # deterministic driver; noise comes from the scenario
+        # deterministic driver; noise comes from the scenario. Also what lets a kept simulation leave its per-lane
+        # random generators as they stand (simcore/world/sumo_warm.py): dawdling draws from them, times zero
+        sumo.vehicletype.setImperfection(vtype, 0.0)
         sumo.vehicletype.setMinGap(vtype, 2.0)
         self._front[name] = front_offset
         fx, fy = x + front_offset * math.cos(heading), y + front_offset * math.sin(heading)

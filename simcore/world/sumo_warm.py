@@ -14,9 +14,9 @@ The random generators. SUMO saves a generator as the count of numbers drawn sinc
 draws that many more from wherever the generator stands: a count does not rewind it. So the saved state's
 `default` generator is written out in full instead (`std::mt19937` seeded with the run's seed, as the start
 leaves it), and checked once per start: three vehicles' speed factors drawn after loading it must be those drawn
-right after the start, or the simulation is never parked. The per-lane generators are left as they stand: what
-CARLOS's vehicles draw from them (dawdling, impatience, lateral noise) is multiplied by zero
-(simcore/world/sumo.py `add_vehicle`: imperfection 0, lane changes only when asked), so it changes nothing.
+right after the start, or the simulation is never parked. The per-lane generators are left as they stand: SUMO
+draws from them for every vehicle's dawdling every step, which CARLOS's vehicles do with imperfection 0
+(simcore/world/sumo.py `add_vehicle`): the draws are multiplied by zero and change nothing.
 
 The next run started with the same key gets the simulation as a fresh start would have made it (the same
 trajectories and speed factors to the last bit: tests/test_sumo_world.py); any other key, or any error, closes
@@ -42,7 +42,7 @@ SAVE_RNG = ("--save-state.rng", "true")
 #: SUMO's SAVE_ONLY_COUNT: a generator's saved count this large is followed by its full state, which loading
 #: then takes as it is
 FULL_STATE_COUNT = 1_000_000
-#: vehicles drawing speed factors to check a saved state (`check`)
+#: vehicles drawing speed factors to check a saved state (`_save_and_check`)
 PROBES = tuple(f"carlos.probe.{i}" for i in range(3))
 #: what loading a saved state does nothing with: the comment naming the options it was saved with, and a lane's
 #: generator with nothing drawn (loading `state="0"` draws nothing); ~30% of a load's cost on a small network
