@@ -4,8 +4,9 @@ libsumo holds one simulation per process. Starting one costs a run ~2.5 ms of CP
 options, seeds its random generators and reads the network) and closing it ~0.4 ms, while a worker's runs of a
 sweep mostly share network, step and seed. So a run's end parks the simulation instead of closing it:
 
-1. its vehicles are removed and one empty step is made (SUMO then takes their lanes off its list of active
-   lanes: loading a state over lanes still marked active leaves every later vehicle standing still, SUMO 1.28);
+1. its vehicles are removed and one empty step is made (loading the state right after a run leaves every
+   later vehicle standing still in SUMO 1.28, presumably because their lanes are still marked active; after
+   the removal and a step they move: tests/test_sumo_world.py);
 2. the state saved right after the start is loaded again: time 0, no vehicles, no routes, only SUMO's vehicle
    types, and the random generator vehicles draw their speed factors from (`default`) as the start seeded it;
 3. the simulation must then be empty at time 0, or it is closed.
