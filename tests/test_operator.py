@@ -383,6 +383,9 @@ def test_a_killed_shard_is_retried_without_rerunning_its_finished_runs(
     )
     body = manifest("shard", s3_server.bucket, ["simSeconds <= 100"], [10.0, 12.0, 14.0, 16.0, 18.0, 20.0])
     body["spec"]["execution"]["runsPerPod"] = 3
+    # runs of 300 steps (~0.1 s): run 2 is still under way when the kill below sees run 1's summary (a warm
+    # pod's 30-step run could end within one look of it)
+    body["spec"]["simulation"]["stepSeconds"] = 0.01
     killed: list[bool] = []
 
     def mid_slice() -> bool:  # once (the undisturbed run's pod 0 is left alone)
