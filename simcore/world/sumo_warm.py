@@ -46,7 +46,7 @@ FULL_STATE_COUNT = 1_000_000
 #: vehicles drawing speed factors to check a saved state (`_save_and_check`)
 PROBES = tuple(f"carlos.probe.{i}" for i in range(3))
 #: what loading a saved state does nothing with: the comment naming the options it was saved with, and a lane's
-#: generator with nothing drawn (loading `state="0"` draws nothing); ~30% of a load's cost on a small network
+#: generator with nothing drawn (loading `state="0"` draws nothing); ~23% of a load's cost on a small network
 _INERT = re.compile(r'<!--.*?-->\s*|\s*<rngLane index="\d+" state="0"/>', re.DOTALL)
 _DEFAULT_GENERATOR = re.compile(r'<rngState\b[^>]*?\bdefault="(\d+)( [\d ]+)?"')
 
