@@ -82,7 +82,8 @@ def remove_stale_scratch(temp_dir: Path | None = None) -> list[Path]:
     return removed
 
 
-def make_scratch_root(temp_dir: Path | None = None) -> Path:
-    """A new scratch folder for this process' workers (stale ones of dead runs are removed first)."""
+def make_scratch_root(temp_dir: Path | None = None, label: str = "") -> Path:
+    """A new scratch folder of this process (`carlos-run-<pid>-<label>…`: for its workers, or, labelled, for a
+    purpose of its own); stale ones of dead processes are removed first."""
     remove_stale_scratch(temp_dir)
-    return Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-", dir=temp_dir))
+    return Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-{label}", dir=temp_dir))

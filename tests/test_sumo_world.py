@@ -11,45 +11,65 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: one process: a short run of a SUMO-driven car and a scripted one, first without the Xerces hold, then twice
-#: with it (a warm worker's runs); prints the three trajectories and whether the hold took
-_RUNS = """
+#: one process's runs of a SUMO-driven car ("ego") behind a scripted one that changes into its lane: `run(seed,
+#: reuse, fail)` gives the SUMO-driven car's speed factor (SUMO's random draw at its insertion; the road's speed
+#: limit is above what the car wants here), then its pose after each of 200 steps (`fail`: the run raises
+#: half-way); `starts` counts libsumo's starts
+_DRIVE = """
 import json, sys
 from pathlib import Path
+import libsumo
 import simcore.world.sumo as sumo
+from simcore.world.opendrive import OpenDrive
 
 network, road_file = Path(sys.argv[1]), Path(sys.argv[2])
-from simcore.world.opendrive import OpenDrive
 road = OpenDrive.from_file(road_file)
+starts = []
+plain_start = libsumo.start
+libsumo.start = lambda args, **kw: starts.append(1) or plain_start(args, **kw)
 
-def run():
+def run(seed, reuse, fail):
     trajectory = []
-    with sumo.SumoWorld(network, 0.05, seed=3) as world:
-        start = road.road_to_world("1", 100.0, road.lane_center_t("1", -1, 100.0))
-        cut = road.road_to_world("1", 130.0, road.lane_center_t("1", -2, 130.0))
-        box = {"length": 4.5, "width": 1.8, "height": 1.5, "front_offset": 3.65, "max_speed": 50.0,
-               "max_accel": 4.0, "max_decel": 9.0}
-        world.add_vehicle("ego", **box, x=start.x, y=start.y, heading=start.heading, speed=20.0, scripted=False)
-        world.add_vehicle("cut", **box, x=cut.x, y=cut.y, heading=cut.heading, speed=15.0, scripted=True)
-        s = 130.0
-        for step in range(200):
-            s += 15.0 * 0.05
-            share = min(max((step - 40) / 60, 0.0), 1.0)
-            t = (1 - share) * road.lane_center_t("1", -2, s) + share * road.lane_center_t("1", -1, s)
-            pose = road.road_to_world("1", s, t)
-            world.place("cut", pose.x, pose.y, pose.heading, 15.0)
-            world.step()
-            trajectory.append(tuple(world.read("ego") or ()))
+    try:
+        with sumo.SumoWorld(network, 0.05, seed=seed, reuse=reuse) as world:
+            start = road.road_to_world("1", 100.0, road.lane_center_t("1", -1, 100.0))
+            cut = road.road_to_world("1", 130.0, road.lane_center_t("1", -2, 130.0))
+            box = {"length": 4.5, "width": 1.8, "height": 1.5, "front_offset": 3.65, "max_speed": 50.0,
+                   "max_accel": 4.0, "max_decel": 9.0}
+            world.add_vehicle("ego", **box, x=start.x, y=start.y, heading=start.heading, speed=20.0,
+                              scripted=False)
+            trajectory.append(world._sumo.vehicle.getSpeedFactor("ego"))
+            world.add_vehicle("cut", **box, x=cut.x, y=cut.y, heading=cut.heading, speed=15.0, scripted=True)
+            s = 130.0
+            for step in range(200):
+                if fail and step == 100:
+                    raise RuntimeError("half-way")
+                s += 15.0 * 0.05
+                share = min(max((step - 40) / 60, 0.0), 1.0)
+                t = (1 - share) * road.lane_center_t("1", -2, s) + share * road.lane_center_t("1", -1, s)
+                pose = road.road_to_world("1", s, t)
+                world.place("cut", pose.x, pose.y, pose.heading, 15.0)
+                world.step()
+                trajectory.append(tuple(world.read("ego") or ()))
+    except RuntimeError:
+        pass
     return trajectory
+"""
 
+#: first without the Xerces hold, then twice with it (a warm worker's runs, each starting SUMO: not kept between
+#: them); prints the three runs and whether the hold took
+_RUNS = (
+    _DRIVE
+    + """
 hold = sumo.keep_xml_parser_initialized
 sumo.keep_xml_parser_initialized = lambda library: False
-plain = run()
+plain = run(3, False, False)
 sumo.keep_xml_parser_initialized = hold
-held = [run(), run()]
+held = [run(3, False, False), run(3, False, False)]
 from libsumo import _libsumo
-print(json.dumps({"held": hold(_libsumo.__file__), "runs": [plain, *held]}))
+print(json.dumps({"held": hold(_libsumo.__file__), "runs": [plain, *held], "starts": len(starts)}))
 """
+)
 
 
 def test_runs_with_the_xml_parser_kept_initialised_are_the_runs_without(tmp_path: Path) -> None:
@@ -74,6 +94,7 @@ def test_runs_with_the_xml_parser_kept_initialised_are_the_runs_without(tmp_path
     assert result["held"] is True  # the hold was taken (this libsumo has Xerces 3.2)
     assert all(state for state in plain)
     assert held == [plain, plain]
+    assert result["starts"] == 3  # each run started SUMO (none kept): the hold is what starts and closes use
 
 
 def _rewrite_keeping_size_and_times(path: Path, data: bytes) -> None:
@@ -156,52 +177,14 @@ def test_runs_on_one_network_file_share_its_lanes_and_only_its_lanes(tmp_path: P
         assert world._edge_of_lane == {}
 
 
-#: one process: runs of a SUMO-driven car behind a scripted one that changes lanes, each printed as the SUMO-driven
-#: car's speed factor and trajectory; `plan` lists each run's (seed, reuse, fail: raise half-way), and libsumo's starts are counted
-_PARKED_RUNS = """
-import json, sys
-from pathlib import Path
-import libsumo
-import simcore.world.sumo as sumo
-from simcore.world.opendrive import OpenDrive
-
-network, road_file, plan = Path(sys.argv[1]), Path(sys.argv[2]), json.loads(sys.argv[3])
-road = OpenDrive.from_file(road_file)
-starts = []
-plain_start = libsumo.start
-libsumo.start = lambda args, **kw: starts.append(1) or plain_start(args, **kw)
-
-def run(seed, reuse, fail):
-    trajectory = []
-    try:
-        with sumo.SumoWorld(network, 0.05, seed=seed, reuse=reuse) as world:
-            start = road.road_to_world("1", 100.0, road.lane_center_t("1", -1, 100.0))
-            cut = road.road_to_world("1", 130.0, road.lane_center_t("1", -2, 130.0))
-            box = {"length": 4.5, "width": 1.8, "height": 1.5, "front_offset": 3.65, "max_speed": 50.0,
-                   "max_accel": 4.0, "max_decel": 9.0}
-            world.add_vehicle("ego", **box, x=start.x, y=start.y, heading=start.heading, speed=20.0,
-                              scripted=False)
-            # SUMO's random draw at the insertion (the road's speed limit is above what the car wants here)
-            trajectory.append(world._sumo.vehicle.getSpeedFactor("ego"))
-            world.add_vehicle("cut", **box, x=cut.x, y=cut.y, heading=cut.heading, speed=15.0, scripted=True)
-            s = 130.0
-            for step in range(200):
-                if fail and step == 100:
-                    raise RuntimeError("half-way")
-                s += 15.0 * 0.05
-                share = min(max((step - 40) / 60, 0.0), 1.0)
-                t = (1 - share) * road.lane_center_t("1", -2, s) + share * road.lane_center_t("1", -1, s)
-                pose = road.road_to_world("1", s, t)
-                world.place("cut", pose.x, pose.y, pose.heading, 15.0)
-                world.step()
-                trajectory.append(tuple(world.read("ego") or ()))
-    except RuntimeError:
-        pass
-    return trajectory
-
-runs = [run(*entry) for entry in plan]
+#: the runs `plan` lists (seed, reuse, fail) in one process; prints them and libsumo's starts
+_PARKED_RUNS = (
+    _DRIVE
+    + """
+runs = [run(*entry) for entry in json.loads(sys.argv[3])]
 print(json.dumps({"runs": runs, "starts": len(starts)}))
 """
+)
 
 
 def test_a_parked_simulation_runs_as_a_fresh_start(tmp_path: Path) -> None:

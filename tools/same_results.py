@@ -1,8 +1,8 @@
 """Two folders of run results must hold the same results: the same files, recordings byte for byte, and
 summaries, verdicts, logs and manifests the same except for what differs between any two runs (wall-clock
 times, the output folder's own name). Not `carlos compare` (simcore/compare.py): that one judges a candidate
-build against a baseline within tolerances; this one asks for the same bytes. tools/wheel-check runs two examples with the installed (compiled)
-wheel and with the checkout's source and compares them with this. `report.html` is left out: it shows wall
+build against a baseline within tolerances; this one asks for the same bytes. tools/wheel-check runs two
+examples with the installed (compiled) wheel and with the checkout's source and compares them with this. `report.html` is left out: it shows wall
 times and the folder in its text.
 
 Usage: python tools/same_results.py FOLDER_A FOLDER_B   (exit 1 with the differences; 0 and a count when the same)
@@ -30,9 +30,13 @@ def _drop(value: Any) -> Any:
     return value
 
 
+def files(root: Path) -> set[Path]:
+    """The files compared under `root`, relative to it."""
+    return {p.relative_to(root) for p in root.rglob("*") if p.is_file() and p.name != "report.html"}
+
+
 def differences(a: Path, b: Path) -> list[str]:
-    files_a = {p.relative_to(a) for p in a.rglob("*") if p.is_file() and p.name != "report.html"}
-    files_b = {p.relative_to(b) for p in b.rglob("*") if p.is_file() and p.name != "report.html"}
+    files_a, files_b = files(a), files(b)
     out = [f"only in {a}: {p}" for p in sorted(files_a - files_b)]
     out += [f"only in {b}: {p}" for p in sorted(files_b - files_a)]
     for rel in sorted(files_a & files_b):
@@ -60,7 +64,7 @@ def main(argv: list[str]) -> int:
     if found:
         print("\n".join(found[:50]), file=sys.stderr)
         return 1
-    count = sum(1 for p in a.rglob("*") if p.is_file() and p.name != "report.html")
+    count = len(files(a))
     if count == 0:
         print(f"no results in {a}", file=sys.stderr)
         return 1

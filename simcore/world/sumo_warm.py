@@ -31,12 +31,11 @@ import contextlib
 import os
 import re
 import shutil
-import tempfile
 from collections.abc import Hashable, Iterable
 from pathlib import Path
 from typing import Any
 
-from simcore.lifetime import SCRATCH_PREFIX, remove_stale_scratch
+from simcore.lifetime import make_scratch_root
 
 #: the libsumo option that makes a saved state hold the random generators' states
 SAVE_RNG = ("--save-state.rng", "true")
@@ -65,10 +64,9 @@ class _Parked:
 
     def snapshot(self, sumo: Any) -> Path:
         if self.folder is None or self.pid != os.getpid():
-            # named as a `carlos run` scratch folder of this process: when a kill leaves it behind (no atexit),
-            # the next process to make one, or the next `carlos run`, removes it (simcore/lifetime.py)
-            remove_stale_scratch()
-            self.folder = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-sumo-"))
+            # a scratch folder of this process: when a kill leaves it behind (no atexit), the next process to make
+            # one, or the next `carlos run`, removes it (simcore/lifetime.py)
+            self.folder = make_scratch_root(label="sumo-")
             self.pid = os.getpid()
             self.refused = set()
             atexit.register(_at_exit, sumo, self.folder, self.pid)
