@@ -52,9 +52,18 @@ def _domain_in_use(domain: int) -> bool:
     return False
 
 
+def worker_share(candidates: range) -> list[int]:
+    """This pytest-xdist worker's share of `candidates` (every n-th, n the number of workers): two workers
+    that both find a domain unused before either has joined it never pick the same one."""
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    index = int(worker[2:]) if worker[2:].isdigit() else 0
+    return [c for c in candidates if c % count == index % count]
+
+
 def free_domain() -> int:
-    """A DDS domain in 1..99 that no participant on this host uses (tests/test_dds.py takes 100..199)."""
-    candidates = list(range(1, 100))
+    """A DDS domain in 1..99 that no participant on this host uses (tests/test_dds.py takes 100..229)."""
+    candidates = worker_share(range(1, 100))
     random.shuffle(candidates)
     for domain in candidates:
         if not _domain_in_use(domain):

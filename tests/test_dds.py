@@ -36,6 +36,7 @@ from simcore.transport.bus import Message
 from simcore.transport.dds import DdsBus, decode, loopback_config, ros_topic
 from simcore.transport.dds_types import dds_typename, idl_type, ros_typename
 from simcore.transport.messages import TYPESTORE, serialize
+from tests.kubelet import worker_share
 
 ROOT = Path(__file__).resolve().parent.parent
 CARLOS = str(Path(sys.executable).with_name("carlos"))
@@ -70,7 +71,7 @@ _USED_DOMAINS: set[int] = set()
 def domain() -> int:
     rng = random.Random(f"{os.getpid()}-{time.time_ns()}-{os.environ.get('PYTEST_XDIST_WORKER', '')}")
     for _ in range(5):
-        candidate = rng.choice(sorted(set(range(100, 230)) - _USED_DOMAINS))
+        candidate = rng.choice(sorted(set(worker_share(range(100, 230))) - _USED_DOMAINS))
         if _domain_is_empty(candidate):
             _USED_DOMAINS.add(candidate)
             return candidate
@@ -951,3 +952,40 @@ def test_a_reader_matching_during_the_match_query_is_asked_again() -> None:
 
     assert DdsBus._matched_participants(Racing()) == set()  # type: ignore[arg-type]
     assert Racing.calls == 1
+
+
+_EXIT_PROBE = """
+import atexit, os, sys
+
+def dds_threads_left():
+    names = {open(f"/proc/self/task/{t}/comm").read().strip() for t in os.listdir("/proc/self/task")}
+    print("left:", " ".join(sorted(names & {"gc", "tev", "recv", "dq.builtins", "dq.user"})), flush=True)
+
+atexit.register(dds_threads_left)  # registered first: runs last, after every other exit handler
+
+from simcore.transport.dds import DdsBus
+
+bus = DdsBus(int(sys.argv[1]), config=sys.argv[2])
+bus.advertise("/carlos/status", "diagnostic_msgs/msg/DiagnosticStatus")
+bus.subscribe("/carlos/recorder/status", lambda message: None, typename="diagnostic_msgs/msg/DiagnosticStatus")
+if sys.argv[3] == "close":
+    bus.close()
+print("done", flush=True)
+"""
+
+
+@pytest.mark.parametrize("ending", ["close", "open"])
+def test_a_process_leaves_its_dds_domain_before_the_interpreter_finalizes(domain: int, ending: str) -> None:
+    """The domain (and its threads) is gone once the exit handlers ran, whether the bus was closed or left
+    open: deleted later, while Python finalizes, cyclonedds' garbage-collector thread is ended as it takes
+    the GIL to free a type, and the deletion waits for it forever (a pod that never exits)."""
+    out = subprocess.run(
+        [sys.executable, "-c", _EXIT_PROBE, str(domain), CONFIG, ending],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
+        env=_env(domain),
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.splitlines() == ["done", "left: "], out.stdout + out.stderr

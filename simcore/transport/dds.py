@@ -68,6 +68,7 @@ Heavy import: cyclonedds is imported by this module only.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import fnmatch
 import functools
@@ -76,6 +77,7 @@ import struct
 import threading
 import time
 import uuid
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -117,6 +119,22 @@ class DdsError(ConnectionError):
 
 _domains: dict[int, tuple[str, Domain]] = {}
 _domains_lock = threading.Lock()
+_open_buses: weakref.WeakSet[DdsBus] = weakref.WeakSet()
+
+
+@atexit.register
+def _leave_dds() -> None:
+    """Close the buses left open and delete the domains this process configured, while Python still runs.
+    cyclonedds' own threads take the GIL to free a domain's types; a thread that does so while the
+    interpreter finalizes is ended, and a domain deleted then (its last Python reference collected) waits
+    for that thread forever: the process never exits."""
+    for bus in list(_open_buses):
+        bus.close()
+    with _domains_lock:
+        domains = [domain for _, domain in _domains.values()]
+        _domains.clear()
+    for domain in domains:
+        domain.__del__()
 
 
 def _configure(domain_id: int, config: str) -> None:
@@ -317,6 +335,7 @@ class DdsBus:
             self._waitset.attach(ReadCondition(builtin, _ANY))
         self._thread = threading.Thread(target=self._run, name=f"dds-{self.domain_id}", daemon=True)
         self._thread.start()
+        _open_buses.add(self)
 
     # --- Bus protocol -----------------------------------------------------------------------------------
 
@@ -387,6 +406,7 @@ class DdsBus:
             self._topics.clear()
             self._announcers.clear()
         self.participant.__del__()  # deletes the participant and everything in it
+        _open_buses.discard(self)
 
     # --- extras ----------------------------------------------------------------------------------------
 
