@@ -7,7 +7,9 @@ import asyncio
 import base64
 import contextlib
 import json
+import os
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -86,7 +88,8 @@ def load_page(path: Path | str, probe: str, *, width: int = 1200, height: int = 
 
     binary = find_chromium()
     assert binary is not None
-    with tempfile.TemporaryDirectory(prefix="carlos-chromium-") as profile:
+    profile = tempfile.mkdtemp(prefix="carlos-chromium-")
+    try:
         proc = subprocess.Popen(
             [
                 binary,
@@ -101,6 +104,7 @@ def load_page(path: Path | str, probe: str, *, width: int = 1200, height: int = 
             ],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
+            start_new_session=True,  # its helper processes too are ended below, before the profile goes
         )
         try:
             port_file = Path(profile) / "DevToolsActivePort"
@@ -126,3 +130,17 @@ def load_page(path: Path | str, probe: str, *, width: int = 1200, height: int = 
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
+            # Chromium's renderer and utility processes outlive it for a moment, writing into the profile
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+    finally:
+        for attempt in range(20):  # a helper killed just now may still finish a write
+            try:
+                shutil.rmtree(profile)
+                break
+            except FileNotFoundError:
+                break
+            except OSError:
+                if attempt == 19:
+                    raise
+                time.sleep(0.1)
