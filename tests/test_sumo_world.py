@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -188,9 +189,9 @@ print(json.dumps({"runs": runs, "starts": len(starts)}))
 
 
 def test_a_parked_simulation_runs_as_a_fresh_start(tmp_path: Path) -> None:
-    """A warm worker's runs on one network, step and seed share one libsumo simulation, parked between them
-    (simcore/world/sumo_warm.py): each run's trajectory is the fresh start's, bit for bit, also after a run that
-    failed half-way and after a run with another seed; another seed starts SUMO anew."""
+    """A warm worker's runs on one network and step share one libsumo simulation, parked between them
+    (simcore/world/sumo_warm.py), whatever their seeds: each run's trajectory is a fresh start's with its seed,
+    bit for bit, also after a run that failed half-way."""
     pytest.importorskip("libsumo")
     from simcore.world.sumo import netconvert_available, prepare_network
 
@@ -199,14 +200,16 @@ def test_a_parked_simulation_runs_as_a_fresh_start(tmp_path: Path) -> None:
     road_file = ROOT / "examples" / "maps" / "highway.xodr"
     network = prepare_network(road_file, cache_dir=tmp_path)
     plan = [
-        (3, False, False),  # fresh, closed
+        (3, False, False),  # fresh, closed: each seed's reference
+        (4, False, False),
+        (5, False, False),
         (3, True, False),  # fresh, parked
         (3, True, False),  # parked
-        (3, True, True),  # parked, fails half-way
+        (4, True, False),  # parked, another seed
+        (4, True, True),  # parked, fails half-way
+        (5, True, False),  # parked
         (3, True, False),  # parked
-        (4, True, False),  # another seed: fresh, parked
-        (3, True, False),  # fresh again
-        (3, True, False),  # parked
+        (4, True, False),  # parked
     ]
     out = subprocess.run(
         [sys.executable, "-c", _PARKED_RUNS, str(network), str(road_file), json.dumps(plan)],
@@ -216,28 +219,79 @@ def test_a_parked_simulation_runs_as_a_fresh_start(tmp_path: Path) -> None:
         cwd=ROOT,
     )
     result = json.loads(out.stdout.splitlines()[-1])
-    fresh, *later = result["runs"]
-    assert len(fresh) == 201 and all(fresh)
-    assert fresh[-1] != fresh[1]  # it drove
-    assert later[:2] == [fresh, fresh]
-    assert later[2] == fresh[:101]
-    assert later[3] == fresh
-    assert later[4][0] != fresh[0] and len(later[4]) == 201  # another seed: another speed factor
-    assert later[5:] == [fresh, fresh]
-    assert result["starts"] == 4  # the unparked run, the first parked one, seed 4, seed 3 again
+    three, four, five, *later = result["runs"]
+    assert all(len(fresh) == 201 and all(fresh) for fresh in (three, four, five))
+    assert three[-1] != three[1]  # it drove
+    assert len({three[0], four[0], five[0]}) == 3  # each seed its own speed factor
+    assert later == [three, three, four, four[:101], five, three, four]
+    assert result["starts"] == 4  # the three unparked runs and the first parked one
+
+
+#: after a state was loaded, SUMO writes its generators in full; then started afresh with a seed, it saves them
+_SUMO_WRITES_SEEDED = """
+import json, sys, libsumo
+network, folder = sys.argv[1], sys.argv[2]
+base = ["sumo", "-n", network, "--no-step-log", "true", "--save-state.rng", "true"]
+libsumo.start([*base, "--seed", "1"])
+libsumo.simulation.saveState(folder + "/first.xml")
+import simcore.world.sumo_warm as warm
+state = warm.for_seed(warm.start_template(open(folder + "/first.xml").read(), 1), 1)
+open(folder + "/full.xml", "w").write(state)
+libsumo.simulation.loadState(folder + "/full.xml")
+libsumo.close()
+libsumo.start([*base, "--seed", "8"])
+libsumo.simulation.saveState(folder + "/second.xml")
+libsumo.close()
+print(json.dumps(open(folder + "/second.xml").read()))
+"""
+
+
+def test_sumo_seeds_every_named_generator_with_the_seed(tmp_path: Path) -> None:
+    """What writing every named generator as `std::mt19937` seeded with the run's seed rests on: SUMO's start
+    seeds each of them with `--seed`. A process that loaded a state has SUMO write the generators that outlive a
+    simulation in full, so its next start's saved state shows them: each one is `mt19937_seeded(seed)`, and the
+    template of that state is accepted for parking."""
+    pytest.importorskip("libsumo")
+    from simcore.world.sumo import netconvert_available, prepare_network
+    from simcore.world.sumo_warm import FULL_STATE_COUNT, mt19937_seeded, start_template
+
+    if not netconvert_available():
+        pytest.skip("netconvert is not installed")
+    network = prepare_network(ROOT / "examples" / "maps" / "highway.xodr", cache_dir=tmp_path)
+    out = subprocess.run(
+        [sys.executable, "-c", _SUMO_WRITES_SEEDED, str(network), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
+    state = json.loads(out.stdout.splitlines()[-1])
+    generators = re.search(r"<rngState\b([^>]*)>", state)
+    assert generators is not None
+    named = dict(re.findall(r'([\w.]+)="([^"]*)"', generators.group(1)))
+    in_full = {name: value.partition(" ") for name, value in named.items() if " " in value}
+    # the generators that live as long as the process (insertionControl's is made anew with each simulation)
+    assert {"default", "routeHandler", "device", "driverState"} <= set(in_full)
+    for name, (count, _, words) in in_full.items():
+        assert int(count) >= FULL_STATE_COUNT, name
+        assert words == mt19937_seeded(8), name
+    assert start_template(state, 8) is not None
+    assert start_template(state, 9) is None  # in full, but not as seeding with 9 leaves it
 
 
 def test_the_generator_state_written_for_sumo_is_a_seeded_mt19937() -> None:
     """The state written for SUMO's default generator is `std::mt19937`'s after seeding: continued by Python's
     Mersenne Twister (the same generator), its 10,000th number from the default seed 5489 is the one the C++
-    standard requires ([rand.predef]); a saved state's count-only generator is replaced by it, a full one kept;
+    standard requires ([rand.predef]); every named generator of a state saved at the start is written so for
+    any seed (their counts kept), and a state with a generator in full other than as seeding left it is refused;
     what loading a state does nothing with is left out."""
     import random
 
     from simcore.world.sumo_warm import (
         FULL_STATE_COUNT,
+        for_seed,
         mt19937_seeded,
-        with_default_generator_seeded,
+        start_template,
         without_inert_parts,
     )
 
@@ -249,11 +303,19 @@ def test_the_generator_state_written_for_sumo_is_a_seeded_mt19937() -> None:
     assert numbers[-1] == 4123659995
     assert mt19937_seeded(-1) == mt19937_seeded(2**32 - 1)  # an int seed as the unsigned 32 bits it is
 
-    saved = '<snapshot><rngState default="16" routeHandler="0">\n<rngLane index="0" state="3"/></rngState>'
-    written = with_default_generator_seeded(saved, 7)
-    assert written == saved.replace('default="16"', f'default="{FULL_STATE_COUNT + 16} {mt19937_seeded(7)}"')
-    assert with_default_generator_seeded(written, 8) == written  # already in full: SUMO's own
-    assert with_default_generator_seeded("<snapshot/>", 7) is None
+    full = f"{FULL_STATE_COUNT} {mt19937_seeded(7)}"
+    saved = '<snapshot><rngState default="0" routeHandler="0">\n<rngLane index="0" state="3"/></rngState>'
+    template = start_template(saved, 7)
+    assert template == saved
+    assert for_seed(template, 7) == saved.replace('"0" routeHandler="0"', f'"{full}" routeHandler="{full}"')
+    assert start_template(for_seed(template, 7), 7) == for_seed(template, 7)  # in full as SUMO writes it
+    assert start_template(for_seed(template, 7), 8) is None  # in full, another seed's
+    counted = start_template(saved.replace('default="0"', 'default="16"'), 7)  # counts on from earlier runs
+    assert counted is not None and f'default="{FULL_STATE_COUNT + 16} {mt19937_seeded(7)}"' in for_seed(
+        counted, 7
+    )
+    assert start_template(saved.replace('default="0"', f'default="{FULL_STATE_COUNT}"'), 7) is None
+    assert start_template("<snapshot/>", 7) is None
     saved = '<?xml version="1.0"?>\n<!-- options\n  <seed value="7"/>\n-->\n<snapshot>\n  <rngState default="1">\n'
     saved += (
         '    <rngLane index="0" state="0"/>\n    <rngLane index="1" state="5"/>\n  </rngState>\n</snapshot>'

@@ -275,8 +275,6 @@ class SumoWorld:
             str(network),
             "--step-length",
             repr(step_seconds),
-            "--seed",
-            str(seed),
             "--begin",
             "0",
             "--no-step-log",
@@ -292,7 +290,8 @@ class SumoWorld:
         ]
         keep_xml_parser_initialized(_libsumo.__file__)
         before = _network_key(network)
-        # a parked simulation is reused for the same arguments on the same network content
+        # a parked simulation is reused for the same arguments on the same network content, whatever the seed
+        # (`--seed` is added by sumo_warm.start)
         self._key: tuple[tuple[str, ...], ContentKey] | None = (
             (tuple(args), before) if reuse and before is not None else None
         )

@@ -1,27 +1,33 @@
-"""The process's libsumo simulation, kept warm between runs on the same network, step and seed.
+"""The process's libsumo simulation, kept warm between runs on the same network and step, whatever their seeds.
 
 libsumo holds one simulation per process. Starting one costs a run ~2.5 ms of CPU (libsumo registers its ~1,000
 options, seeds its random generators and reads the network) and closing it ~0.4 ms, while a worker's runs of a
-sweep mostly share network, step and seed. So a run's end parks the simulation instead of closing it:
+sweep share network and step. So a run's end parks the simulation instead of closing it, and the next run's
+start resets it:
 
-1. its vehicles are removed and one empty step is made (loading the state right after a run leaves every
-   later vehicle standing still in SUMO 1.28, presumably because their lanes are still marked active; after
-   the removal and a step they move: tests/test_sumo_world.py);
-2. the state saved right after the start is loaded again: time 0, no vehicles, no routes, only SUMO's vehicle
-   types, and the random generator vehicles draw their speed factors from (`default`) as the start seeded it;
-3. the simulation must then be empty at time 0, or it is closed.
+1. at the end: its vehicles are removed and one empty step is made (loading the state right after a run leaves
+   every later vehicle standing still in SUMO 1.28, presumably because their lanes are still marked active;
+   after the removal and a step they move: tests/test_sumo_world.py);
+2. at the next start: the state saved right after the first start is loaded, its random generators written as
+   seeding them with the new run's seed leaves them: time 0, no vehicles, no routes, only SUMO's vehicle types;
+3. the simulation must then be empty at time 0, or it is closed and SUMO started afresh.
 
-The random generators. SUMO saves a generator as the count of numbers drawn since it was seeded and, loading,
-draws that many more from wherever the generator stands: a count does not rewind it. So the saved state's
-`default` generator is written out in full instead (`std::mt19937` seeded with the run's seed, as the start
-leaves it), and checked once per start: three vehicles' speed factors drawn after loading it must be those drawn
-right after the start, or the simulation is never parked. The per-lane generators are left as they stand: SUMO
-draws from them for every vehicle's dawdling every step, which CARLOS's vehicles do with imperfection 0
-(simcore/world/sumo.py `add_vehicle`): the draws are multiplied by zero and change nothing.
+The random generators. A start seeds each of SUMO's named generators (`default`, the one vehicles draw their
+speed factors from, `routeHandler`, `insertionControl`, `device`, ...) with `--seed`; nothing is drawn before
+the state is saved, and nothing else at the start depends on the seed. SUMO saves a generator as the count of
+numbers drawn since it was seeded and, loading, draws that many more from wherever the generator stands: a
+count does not rewind it. So every named generator is written out in full instead (`std::mt19937` seeded with
+the run's seed), for whichever seed the run has. A generator SUMO itself writes in full (it does once a state
+was loaded in the process) must be exactly that, or the simulation is never parked; and the first start checks
+the loaded state: three vehicles' speed factors drawn after loading it must be those drawn right after the
+start, or the simulation is never parked. The per-lane generators are left as they stand: SUMO draws from them
+for every vehicle's dawdling every step, which CARLOS's vehicles do with imperfection 0 (simcore/world/sumo.py
+`add_vehicle`): the draws are multiplied by zero and change nothing.
 
-The next run started with the same key gets the simulation as a fresh start would have made it (the same
-trajectories and speed factors to the last bit: tests/test_sumo_world.py); any other key, or any error, closes
-it and starts afresh. What a run changes in SUMO is only vehicles, their types and routes (simcore/world/sumo.py).
+A run started with the key of the parked simulation (its arguments other than the seed, and the network
+file's content) gets it as a fresh start with its seed would have made it (the same trajectories and speed
+factors to the last bit: tests/test_sumo_world.py); any other key, or any error, closes it and starts afresh.
+What a run changes in SUMO is only vehicles, their types and routes (simcore/world/sumo.py).
 """
 
 from __future__ import annotations
@@ -47,18 +53,25 @@ PROBES = tuple(f"carlos.probe.{i}" for i in range(3))
 #: what loading a saved state does nothing with: the comment naming the options it was saved with, and a lane's
 #: generator with nothing drawn (loading `state="0"` draws nothing); ~23% of a load's cost on a small network
 _INERT = re.compile(r'<!--.*?-->\s*|\s*<rngLane index="\d+" state="0"/>', re.DOTALL)
-_DEFAULT_GENERATOR = re.compile(r'<rngState\b[^>]*?\bdefault="(\d+)( [\d ]+)?"')
+#: the named generators of a saved state: `<rngState name="count" ...>` (a count, or a count of at least
+#: FULL_STATE_COUNT followed by the generator's full state)
+_RNG_STATE = re.compile(r"<rngState\b([^>]*?)(/?>)")
+_GENERATOR = re.compile(r'(\s)([\w.]+)="([^"]*)"')
 
 
 class _Parked:
     """The simulation waiting for the next run: its key (None: nothing parked), the process that started it (a
-    forked child never uses its parent's), its state at time 0, and the keys whose state failed its check."""
+    forked child never uses its parent's), its saved state at time 0, and the keys whose state failed its
+    check."""
 
     def __init__(self) -> None:
         self.key: Hashable | None = None
         self.pid = 0
         self.folder: Path | None = None
-        self.saved = False  # the state at time 0 of this process's simulation is saved and checked
+        #: the state at time 0 of this process's simulation, saved and checked (its generators to be written
+        #: for a run's seed); None: nothing saved
+        self.template: str | None = None
+        self.written_seed: int | None = None  # the seed whose state the snapshot file holds
         self.types = 0  # the vehicle types right after the start (SUMO's defaults)
         self.refused: set[Hashable] = set()
 
@@ -94,17 +107,39 @@ def mt19937_seeded(seed: int) -> str:
     return " ".join(map(str, words)) + " 624"
 
 
-def with_default_generator_seeded(state: str, seed: int) -> str | None:
-    """A saved SUMO state whose `default` generator is written in full: as SUMO wrote it when it did (its count
-    reached FULL_STATE_COUNT: the generator lives as long as the process, and a state loaded before set its
-    count), else as freshly seeded with `seed` (the count plus FULL_STATE_COUNT). None without that generator."""
-    match = _DEFAULT_GENERATOR.search(state)
+def start_template(state: str, seed: int) -> str | None:
+    """A state SUMO saved right after a start with `seed`, as the template for any seed (`for_seed`): without
+    the parts loading does nothing with. None when a named generator is written in full with another state
+    than `std::mt19937` seeded with `seed`. (A count-only generator is as the start seeded it: nothing is drawn
+    before the state is saved. Its count need not be 0: seeding does not reset it, and a process counts on
+    from its earlier simulations.)"""
+    match = _RNG_STATE.search(state)
     if match is None:
         return None
-    if match.group(2) is not None:
-        return state
-    count = FULL_STATE_COUNT + int(match.group(1))
-    return f"{state[: match.start(1)]}{count} {mt19937_seeded(seed)}{state[match.end(1) :]}"
+    fresh = mt19937_seeded(seed)
+    for _, _, value in _GENERATOR.findall(match.group(1)):
+        count, _, words = value.partition(" ")
+        if not count.isdigit() or (int(count) >= FULL_STATE_COUNT) != bool(words):
+            return None
+        if words and words != fresh:
+            return None
+    return without_inert_parts(state)
+
+
+def for_seed(template: str, seed: int) -> str:
+    """The state `template` (`start_template`) with every named generator written in full as seeded with `seed`
+    (its count kept, counted from FULL_STATE_COUNT)."""
+    seeded = mt19937_seeded(seed)
+    match = _RNG_STATE.search(template)
+    assert match is not None  # start_template made sure
+
+    def written(generator: re.Match[str]) -> str:
+        count = int(generator.group(3).partition(" ")[0])
+        count += FULL_STATE_COUNT if count < FULL_STATE_COUNT else 0
+        return f'{generator.group(1)}{generator.group(2)}="{count} {seeded}"'
+
+    attributes = _GENERATOR.sub(written, match.group(1))
+    return f"{template[: match.start(1)]}{attributes}{template[match.end(1) :]}"
 
 
 def without_inert_parts(state: str) -> str:
@@ -113,47 +148,49 @@ def without_inert_parts(state: str) -> str:
 
 
 def start(sumo: Any, args: list[str], seed: int, key: Hashable | None) -> bool:
-    """A simulation as `sumo.start(args)` (with `--seed seed`) makes it. With a `key` (what identifies the
-    arguments and the files they name): the parked one when it was started with an equal key (True), else a
-    fresh start, prepared for parking when its saved state passes its check (False). Without: a fresh start,
-    closed by `close`. A parked simulation not reused is closed first. Errors are libsumo's."""
+    """A simulation as `sumo.start(args)` with `--seed seed` makes it. With a `key` (what identifies the
+    arguments and the files they name, the seed aside): the parked one, reset for `seed`, when it was parked
+    with an equal key (True), else a fresh start, prepared for parking when its saved state passes its check
+    (False). Without: a fresh start, closed by `close`. A parked simulation not reused is closed first. Errors
+    are libsumo's."""
     parked, _PARKED.key = _PARKED.key, None
-    if key is not None and parked == key and _PARKED.pid == os.getpid():
+    if key is not None and parked == key and _load(sumo, seed):
         return True
     if parked is not None:
         with contextlib.suppress(Exception):
             sumo.close()
-    _PARKED.saved = False
-    sumo.start([*args, *SAVE_RNG])
+    _PARKED.template = None
+    command = [*args, "--seed", str(seed), *SAVE_RNG]
+    sumo.start(command)
     if key is not None and key not in _PARKED.refused:
         try:
-            _PARKED.saved = _save_and_check(sumo, seed)
+            saved = _save_and_check(sumo, seed)
         except Exception:  # any failure only means: not parked
-            _PARKED.saved = False
-        if not _PARKED.saved:  # the check drew random numbers: this run gets a fresh start of its own
+            saved = False
+        if not saved:  # the check drew random numbers: this run gets a fresh start of its own
+            _PARKED.template = None
             _PARKED.refused.add(key)
             with contextlib.suppress(Exception):
                 sumo.close()
-            sumo.start([*args, *SAVE_RNG])
+            sumo.start(command)
     return False
 
 
 def _save_and_check(sumo: Any, seed: int) -> bool:
-    """The fresh simulation's state saved (its default generator in full) and loaded again; True when vehicles
-    then draw the speed factors they draw right after the start."""
+    """The fresh simulation's state saved as the template for every seed, and loaded again for `seed`; True
+    when vehicles then draw the speed factors they draw right after the start."""
     path = _PARKED.snapshot(sumo)
     sumo.simulation.saveState(str(path))
-    state = with_default_generator_seeded(path.read_text(encoding="utf-8"), seed)
-    if state is None:
+    template = start_template(path.read_text(encoding="utf-8"), seed)
+    if template is None:
         return False
-    path.write_text(without_inert_parts(state), encoding="utf-8")
+    _PARKED.template, _PARKED.written_seed = template, None
     _PARKED.types = sumo.vehicletype.getIDCount()
     edge = next(edge for edge in sumo.edge.getIDList() if not edge.startswith(":"))
     fresh = _speed_factors(sumo, edge)
-    _PARKED.saved = True
-    if not _reset(sumo, PROBES) or _speed_factors(sumo, edge) != fresh:
+    if not (_clear(sumo, PROBES) and _load(sumo, seed)) or _speed_factors(sumo, edge) != fresh:
         return False
-    return _reset(sumo, PROBES)
+    return _clear(sumo, PROBES) and _load(sumo, seed)
 
 
 def _speed_factors(sumo: Any, edge: str) -> tuple[float, ...]:
@@ -166,24 +203,41 @@ def _speed_factors(sumo: Any, edge: str) -> tuple[float, ...]:
 
 def close(sumo: Any, vehicles: Iterable[str], key: Hashable | None) -> None:
     """End a run whose vehicles were `vehicles`: with its start's `key`, park the simulation for the next run
-    (see the module's doc); else, or when it cannot be reset, close it."""
-    if key is not None and _reset(sumo, vehicles):
+    (see the module's doc); else, or when its vehicles cannot be removed, close it."""
+    if key is not None and _clear(sumo, vehicles):
         _PARKED.key = key
         return
     with contextlib.suppress(Exception):  # already closed or never started: nothing to release
         sumo.close()
 
 
-def _reset(sumo: Any, vehicles: Iterable[str]) -> bool:
-    """The simulation back at its saved start, empty; False when that cannot be made sure."""
-    if not _PARKED.saved or _PARKED.pid != os.getpid():
+def _clear(sumo: Any, vehicles: Iterable[str]) -> bool:
+    """A run's vehicles (and any other) removed and one empty step made; False when that cannot be made sure,
+    or nothing is saved to load afterwards."""
+    if _PARKED.template is None or _PARKED.pid != os.getpid():
         return False
     try:
         for name in dict.fromkeys((*vehicles, *sumo.vehicle.getIDList())):
             with contextlib.suppress(sumo.TraCIException):  # already left the network
                 sumo.vehicle.remove(name)
         sumo.simulationStep()
-        sumo.simulation.loadState(str(_PARKED.snapshot(sumo)))
+        return True
+    except Exception:  # any failure only means: not parked
+        return False
+
+
+def _load(sumo: Any, seed: int) -> bool:
+    """The simulation back at its saved start, its generators seeded with `seed`, empty; False when that cannot
+    be made sure."""
+    if _PARKED.template is None or _PARKED.pid != os.getpid():
+        return False
+    try:
+        path = _PARKED.snapshot(sumo)
+        if _PARKED.written_seed != seed:
+            _PARKED.written_seed = None
+            path.write_text(for_seed(_PARKED.template, seed), encoding="utf-8")
+            _PARKED.written_seed = seed
+        sumo.simulation.loadState(str(path))
         return (
             sumo.simulation.getTime() == 0.0
             and sumo.vehicle.getIDCount() == 0
