@@ -51,7 +51,9 @@ def domain_id_from_env(env: Mapping[str, str] | None = None) -> int:
 def loopback_config(max_participants: int = 32) -> str:
     """cyclonedds configuration (XML, for `config=` or CYCLONEDDS_URI) for 127.0.0.1 only: the loopback
     interface has no multicast, so discovery is unicast to the participant ports of 127.0.0.1 (up to
-    `max_participants` per domain on this host). Large fragments: loopback's MTU is 64 KiB."""
+    `max_participants` per domain on this host). Large fragments: loopback's MTU is 64 KiB. Heartbeats every
+    10 ms while a reliable writer has data not yet acknowledged (cyclonedds' default 100 ms): waiting for the
+    acknowledgements (the simcore pod before each verdict, `DdsBus.flush`) takes ~0.02 s instead of ~0.15 s."""
     return (
         '<CycloneDDS><Domain Id="any"><General>'
         '<Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
@@ -60,7 +62,8 @@ def loopback_config(max_participants: int = 32) -> str:
         "</General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
         f"<MaxAutoParticipantIndex>{max_participants - 1}</MaxAutoParticipantIndex>"
         '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
-        '<Internal><SocketReceiveBufferSize min="default" max="4MB"/></Internal>'
+        '<Internal><SocketReceiveBufferSize min="default" max="4MB"/>'
+        "<HeartbeatInterval>10ms</HeartbeatInterval></Internal>"
         "</Domain></CycloneDDS>"
     )
 
