@@ -26,7 +26,7 @@ import yaml
 
 from simcore.errors import BadInput, ExitCode
 from simcore.evaluation.report import in_manifest_order, junit_xml, run_summary
-from simcore.lifetime import die_with_parent, make_scratch_root
+from simcore.lifetime import die_with_parent, make_scratch_root, remove_stale_scratch
 from simcore.plan import Plan
 from simcore.runner import RunOutcome, error_outcome, run_index, summary_bytes
 from simcore.spec import ScenarioRef, SimulationRun
@@ -251,6 +251,9 @@ def execute(
     max_attempts = spec.execution.retries + 1
     pending = list(todo)
     sweep = _Sweep(settings, store, pending, attempts, max_attempts, outcomes, events)
+    # the scratch of killed runs goes now, also when nothing is left to run (a run killed after its last index)
+    # or the one left runs here
+    remove_stale_scratch()
     if bus is not None or len(pending) == 1:
         # a live view's bus, or a single run: here, without paying for a worker process and its imports
         _in_process(sweep, bus)

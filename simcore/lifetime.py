@@ -4,7 +4,8 @@
 when its parent dies (Linux prctl PR_SET_PDEATHSIG through ctypes; elsewhere a thread watching the parent's
 pid), and once the workers are gone multiprocessing's resource tracker sees its pipe close and exits too.
 Workers write their scratch folders under one folder per `carlos run` process (`carlos-run-<pid>-…` in the
-temporary directory): the run removes it when it ends, and the next run removes those of dead processes. A
+temporary directory): the run removes it when it ends, and the next run (whatever it has left to do) removes
+those of dead processes. A
 process keeping SUMO between runs saves SUMO's start state in a folder named the same way with its own pid
 (`carlos-run-<pid>-sumo-…`, simcore/world/sumo_warm.py), removed at its exit or, after a kill, by the next
 run or the next such process.

@@ -44,3 +44,35 @@ def test_the_scratch_of_an_ended_process_goes_even_before_it_is_reaped(tmp_path:
         running.kill()
         running.wait()
         zombie.wait()
+
+
+def test_a_run_with_nothing_left_to_do_removes_the_scratch_of_killed_runs(tmp_path: Path) -> None:
+    """`carlos run` removes what killed runs left in the temporary directory also when it has no index left
+    to run (a run killed after its last index, then resumed) and when it runs its one index in-process."""
+    scenario = Path(__file__).resolve().parents[1] / "examples" / "scenarios" / "curve-following.xosc"
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: once}\n"
+        f"spec:\n  scenarios: [{{name: c, openscenario: {scenario}}}]\n  simulation: {{maxSeconds: 1}}\n"
+    )
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    ended = subprocess.Popen([sys.executable, "-c", "pass"])
+    ended.wait()
+    env = {**os.environ, "TMPDIR": str(temp)}
+    command = [
+        sys.executable,
+        "-m",
+        "simcore.cli",
+        "run",
+        str(manifest),
+        "-o",
+        f"file://{tmp_path / 'out'}",
+        "-q",
+    ]
+    for attempt in ("runs its index here", "has nothing left to run"):
+        left = temp / f"{SCRATCH_PREFIX}{ended.pid}-x"
+        left.mkdir()
+        result = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300)
+        assert result.returncode == 0, result.stderr
+        assert list(temp.iterdir()) == [], attempt
