@@ -279,6 +279,54 @@ def test_sumo_seeds_every_named_generator_with_the_seed(tmp_path: Path) -> None:
     assert start_template(state, 9) is None  # in full, but not as seeding with 9 leaves it
 
 
+#: one run (fresh, not kept) with SUMO's state saved right after its start and right before its end; prints the
+#: named generators' counts of both
+_COUNTED = (
+    _DRIVE
+    + """
+import re
+folder = sys.argv[3]
+plain_init, plain_close = sumo.SumoWorld.__init__, sumo.SumoWorld.close
+def init(self, *args, **kwargs):
+    plain_init(self, *args, **kwargs)
+    self._sumo.simulation.saveState(folder + "/start.xml")
+def close(self):
+    self._sumo.simulation.saveState(folder + "/end.xml")
+    plain_close(self)
+sumo.SumoWorld.__init__, sumo.SumoWorld.close = init, close
+run(3, False, False)
+def counts(name):
+    generators = re.search(r"<rngState\\b([^>]*)>", open(folder + name).read()).group(1)
+    return dict(re.findall(r'([\\w.]+)="(\\d+)', generators))
+print(json.dumps([counts("/start.xml"), counts("/end.xml")]))
+"""
+)
+
+
+def test_a_run_draws_from_no_named_generator_but_the_default_one(tmp_path: Path) -> None:
+    """What loading only `default` for a kept simulation's next run of the same seed rests on: a run (SUMO
+    driving one car, CARLOS placing another) draws from SUMO's `default` generator (speed factors) and from no
+    other named one (route files, flows, devices: CARLOS uses none of them)."""
+    pytest.importorskip("libsumo")
+    from simcore.world.sumo import netconvert_available, prepare_network
+
+    if not netconvert_available():
+        pytest.skip("netconvert is not installed")
+    road_file = ROOT / "examples" / "maps" / "highway.xodr"
+    network = prepare_network(road_file, cache_dir=tmp_path)
+    out = subprocess.run(
+        [sys.executable, "-c", _COUNTED, str(network), str(road_file), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
+    start, end = json.loads(out.stdout.splitlines()[-1])
+    assert set(start) == set(end) and {"default", "routeHandler", "device"} <= set(start)
+    assert int(end.pop("default")) > int(start.pop("default"))
+    assert end == start
+
+
 def test_the_generator_state_written_for_sumo_is_a_seeded_mt19937() -> None:
     """The state written for SUMO's default generator is `std::mt19937`'s after seeding: continued by Python's
     Mersenne Twister (the same generator), its 10,000th number from the default seed 5489 is the one the C++
@@ -309,6 +357,7 @@ def test_the_generator_state_written_for_sumo_is_a_seeded_mt19937() -> None:
     assert template == saved
     assert for_seed(template, 7) == saved.replace('"0" routeHandler="0"', f'"{full}" routeHandler="{full}"')
     assert start_template(for_seed(template, 7), 7) == for_seed(template, 7)  # in full as SUMO writes it
+    assert for_seed(template, 7, ("default",)) == saved.replace('"0" routeHandler="0"', f'"{full}"')
     assert start_template(for_seed(template, 7), 8) is None  # in full, another seed's
     counted = start_template(saved.replace('default="0"', 'default="16"'), 7)  # counts on from earlier runs
     assert counted is not None and f'default="{FULL_STATE_COUNT + 16} {mt19937_seeded(7)}"' in for_seed(
