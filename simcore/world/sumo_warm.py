@@ -75,7 +75,7 @@ class _Parked:
         self.written: tuple[int, bool] | None = (
             None  # the snapshot file's seed, and whether it holds every generator
         )
-        self.loaded_seed: int | None = None  # the seed of the last state loaded with every generator
+        self.loaded_seed: int | None = None  # the seed every generator was last loaded for
         self.types = 0  # the vehicle types right after the start (SUMO's defaults)
         self.refused: set[Hashable] = set()
 
@@ -250,10 +250,9 @@ def _load(sumo: Any, seed: int) -> bool:
             state = for_seed(_PARKED.template, seed, None if every else ("default",))
             path.write_text(state, encoding="utf-8")
             _PARKED.written = (seed, every)
-        _PARKED.loaded_seed = None
+        _PARKED.loaded_seed = None  # until the load is through: after a failed one, every generator again
         sumo.simulation.loadState(str(path))
-        if every:
-            _PARKED.loaded_seed = seed
+        _PARKED.loaded_seed = seed
         return (
             sumo.simulation.getTime() == 0.0
             and sumo.vehicle.getIDCount() == 0
