@@ -7,6 +7,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -57,6 +58,27 @@ def run(seed, reuse, fail):
     return trajectory
 """
 
+
+def _highway(tmp_path: Path) -> tuple[Path, Path]:
+    """(the SUMO network of examples/maps/highway.xodr converted into `tmp_path`, the road file); the test is
+    skipped without libsumo or netconvert."""
+    pytest.importorskip("libsumo")
+    from simcore.world.sumo import netconvert_available, prepare_network
+
+    if not netconvert_available():
+        pytest.skip("netconvert is not installed")
+    road_file = ROOT / "examples" / "maps" / "highway.xodr"
+    return prepare_network(road_file, cache_dir=tmp_path), road_file
+
+
+def _printed(script: str, *args: object) -> Any:
+    """What `script`, run in a fresh process with `args`, printed as JSON on its last line."""
+    out = subprocess.run(
+        [sys.executable, "-c", script, *map(str, args)], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    return json.loads(out.stdout.splitlines()[-1])
+
+
 #: first without the Xerces hold, then twice with it (a warm worker's runs, each starting SUMO: not kept between
 #: them); prints the three runs and whether the hold took
 _RUNS = (
@@ -76,21 +98,8 @@ print(json.dumps({"held": hold(_libsumo.__file__), "runs": [plain, *held], "star
 def test_runs_with_the_xml_parser_kept_initialised_are_the_runs_without(tmp_path: Path) -> None:
     """libsumo starts and closes Xerces at every run unless CARLOS holds it initialised for the process: the
     SUMO-driven car's trajectory is the same, bit for bit, without the hold and in two runs with it."""
-    pytest.importorskip("libsumo")
-    from simcore.world.sumo import netconvert_available, prepare_network
-
-    if not netconvert_available():
-        pytest.skip("netconvert is not installed")
-    road_file = ROOT / "examples" / "maps" / "highway.xodr"
-    network = prepare_network(road_file, cache_dir=tmp_path)
-    out = subprocess.run(
-        [sys.executable, "-c", _RUNS, str(network), str(road_file)],
-        capture_output=True,
-        text=True,
-        check=True,
-        cwd=ROOT,
-    )
-    result = json.loads(out.stdout.splitlines()[-1])
+    network, road_file = _highway(tmp_path)
+    result = _printed(_RUNS, network, road_file)
     plain, *held = result["runs"]
     assert result["held"] is True  # the hold was taken (this libsumo has Xerces 3.2)
     assert all(state for state in plain)
@@ -192,13 +201,7 @@ def test_a_parked_simulation_runs_as_a_fresh_start(tmp_path: Path) -> None:
     """A warm worker's runs on one network and step share one libsumo simulation, parked between them
     (simcore/world/sumo_warm.py), whatever their seeds: each run's trajectory is a fresh start's with its seed,
     bit for bit, also after a run that failed half-way."""
-    pytest.importorskip("libsumo")
-    from simcore.world.sumo import netconvert_available, prepare_network
-
-    if not netconvert_available():
-        pytest.skip("netconvert is not installed")
-    road_file = ROOT / "examples" / "maps" / "highway.xodr"
-    network = prepare_network(road_file, cache_dir=tmp_path)
+    network, road_file = _highway(tmp_path)
     plan = [
         (3, False, False),  # fresh, closed: each seed's reference
         (4, False, False),
@@ -211,14 +214,7 @@ def test_a_parked_simulation_runs_as_a_fresh_start(tmp_path: Path) -> None:
         (3, True, False),  # parked
         (4, True, False),  # parked
     ]
-    out = subprocess.run(
-        [sys.executable, "-c", _PARKED_RUNS, str(network), str(road_file), json.dumps(plan)],
-        capture_output=True,
-        text=True,
-        check=True,
-        cwd=ROOT,
-    )
-    result = json.loads(out.stdout.splitlines()[-1])
+    result = _printed(_PARKED_RUNS, network, road_file, json.dumps(plan))
     three, four, five, *later = result["runs"]
     assert all(len(fresh) == 201 and all(fresh) for fresh in (three, four, five))
     assert three[-1] != three[1]  # it drove
@@ -251,21 +247,10 @@ def test_sumo_seeds_every_named_generator_with_the_seed(tmp_path: Path) -> None:
     seeds each of them with `--seed`. A process that loaded a state has SUMO write the generators that outlive a
     simulation in full, so its next start's saved state shows them: each one is `mt19937_seeded(seed)`, and the
     template of that state is accepted for parking."""
-    pytest.importorskip("libsumo")
-    from simcore.world.sumo import netconvert_available, prepare_network
     from simcore.world.sumo_warm import FULL_STATE_COUNT, mt19937_seeded, start_template
 
-    if not netconvert_available():
-        pytest.skip("netconvert is not installed")
-    network = prepare_network(ROOT / "examples" / "maps" / "highway.xodr", cache_dir=tmp_path)
-    out = subprocess.run(
-        [sys.executable, "-c", _SUMO_WRITES_SEEDED, str(network), str(tmp_path)],
-        capture_output=True,
-        text=True,
-        check=True,
-        cwd=ROOT,
-    )
-    state = json.loads(out.stdout.splitlines()[-1])
+    network, _ = _highway(tmp_path)
+    state = _printed(_SUMO_WRITES_SEEDED, network, tmp_path)
     generators = re.search(r"<rngState\b([^>]*)>", state)
     assert generators is not None
     named = dict(re.findall(r'([\w.]+)="([^"]*)"', generators.group(1)))
@@ -307,21 +292,8 @@ def test_a_run_draws_from_no_named_generator_but_the_default_one(tmp_path: Path)
     """What loading only `default` for a kept simulation's next run of the same seed rests on: a run (SUMO
     driving one car, CARLOS placing another) draws from SUMO's `default` generator (speed factors) and from no
     other named one (route files, flows, devices: CARLOS uses none of them)."""
-    pytest.importorskip("libsumo")
-    from simcore.world.sumo import netconvert_available, prepare_network
-
-    if not netconvert_available():
-        pytest.skip("netconvert is not installed")
-    road_file = ROOT / "examples" / "maps" / "highway.xodr"
-    network = prepare_network(road_file, cache_dir=tmp_path)
-    out = subprocess.run(
-        [sys.executable, "-c", _COUNTED, str(network), str(road_file), str(tmp_path)],
-        capture_output=True,
-        text=True,
-        check=True,
-        cwd=ROOT,
-    )
-    start, end = json.loads(out.stdout.splitlines()[-1])
+    network, road_file = _highway(tmp_path)
+    start, end = _printed(_COUNTED, network, road_file, tmp_path)
     assert set(start) == set(end) and {"default", "routeHandler", "device"} <= set(start)
     assert int(end.pop("default")) > int(start.pop("default"))
     assert end == start
@@ -378,24 +350,11 @@ def test_the_generator_state_written_for_sumo_is_a_seeded_mt19937() -> None:
 def test_a_state_failing_its_check_is_never_parked(tmp_path: Path) -> None:
     """When the state written for SUMO does not give the speed factors of a fresh start (here: the generator
     seeded with another seed), nothing is parked: every run starts SUMO afresh, and drives as a fresh start."""
-    pytest.importorskip("libsumo")
-    from simcore.world.sumo import netconvert_available, prepare_network
-
-    if not netconvert_available():
-        pytest.skip("netconvert is not installed")
-    road_file = ROOT / "examples" / "maps" / "highway.xodr"
-    network = prepare_network(road_file, cache_dir=tmp_path)
+    network, road_file = _highway(tmp_path)
     wrong_seed = "import simcore.world.sumo_warm as warm\nseeded = warm.mt19937_seeded\n"
     wrong_seed += "warm.mt19937_seeded = lambda seed: seeded(seed + 1)\n"
     plan = [(3, False, False), (3, True, False), (3, True, False), (3, True, False)]
-    out = subprocess.run(
-        [sys.executable, "-c", wrong_seed + _PARKED_RUNS, str(network), str(road_file), json.dumps(plan)],
-        capture_output=True,
-        text=True,
-        check=True,
-        cwd=ROOT,
-    )
-    result = json.loads(out.stdout.splitlines()[-1])
+    result = _printed(wrong_seed + _PARKED_RUNS, network, road_file, json.dumps(plan))
     fresh, *later = result["runs"]
     assert later == [fresh, fresh, fresh]
     assert result["starts"] == 5  # the first keyed run starts twice (after its failed check), the rest once
