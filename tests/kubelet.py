@@ -24,6 +24,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -61,14 +62,39 @@ def worker_share(candidates: range) -> list[int]:
     return [c for c in candidates if c % count == index % count]
 
 
-def free_domain() -> int:
-    """A DDS domain in 1..99 that no participant on this host uses (tests/test_dds.py takes 100..229)."""
-    candidates = worker_share(range(1, 100))
+#: domains handed to pods of this process that have not ended: two pods that start at once (a Job's
+#: parallelism) both find a domain unused before either has joined it, so the check alone is not enough
+_reserved: set[int] = set()
+_reserved_lock = threading.Lock()
+
+
+def _pick_domain() -> int:
+    candidates = [d for d in worker_share(range(1, 100)) if d not in _reserved]
     random.shuffle(candidates)
     for domain in candidates:
         if not _domain_in_use(domain):
             return domain
     raise RuntimeError("no free DDS domain in 1..99")
+
+
+def free_domain() -> int:
+    """A DDS domain in 1..99 that no participant on this host uses (tests/test_dds.py takes 100..229), nor a
+    pod of this process that has not ended."""
+    with _reserved_lock:
+        return _pick_domain()
+
+
+def reserve_domain() -> int:
+    """`free_domain`, held for one pod until `release_domain`."""
+    with _reserved_lock:
+        domain = _pick_domain()
+        _reserved.add(domain)
+        return domain
+
+
+def release_domain(domain: int) -> None:
+    with _reserved_lock:
+        _reserved.discard(domain)
 
 
 def _wait_port(port: int, timeout: float, proc: subprocess.Popen[bytes]) -> None:
@@ -165,7 +191,7 @@ class Kubelet:
             if "startupProbe" in c
         }
         ports = {port: free_port() for port in probe_ports}
-        domain = free_domain()
+        domain = reserve_domain()  # released when the pod has ended
         procs: list[tuple[str, subprocess.Popen[bytes], Path]] = []
 
         def start(container: Mapping[str, Any]) -> subprocess.Popen[bytes]:
@@ -216,5 +242,6 @@ class Kubelet:
                 if proc.poll() is None:
                     proc.kill()
                     proc.wait()
+            release_domain(domain)
         logs = {name: path.read_text(errors="replace") for name, _, path in procs}
         return PodResult(exit_codes=exit_codes, logs=logs)

@@ -200,7 +200,7 @@ def test_operator_restart_adopts_the_job(
         st = wait_for(lambda: terminal(kube, "e2e-restart"), 180, "a terminal phase")
     finally:
         jobs.stop()
-    assert st["phase"] == "Succeeded" and st["passed"] == 2
+    assert st["phase"] == "Succeeded" and st["passed"] == 2, st
     assert len(c.objects("jobs")) == 1
     assert len(c.objects("configmaps")) == 1
 

@@ -279,6 +279,38 @@ def test_a_shard_pod_runs_its_slice_and_skips_finished_indexes_when_retried(
         assert store.get_bytes(f"{name}/{key}") == data
 
 
+def test_the_test_kubelet_gives_pods_that_run_at_once_their_own_dds_domain(tmp_path: Path) -> None:
+    """Pods of a real cluster each have their own loopback; here they share the host's, so two pods in one
+    DDS domain would hear each other (a run's verdict then comes out wrong). 30 pods started at once, each
+    printing its domain while the others still run: all different (the domains were drawn at random and
+    checked only for a joined participant: 30 pods that had not joined yet shared one almost surely)."""
+    import sys
+
+    code = "import os, time; print(os.environ['ROS_DOMAIN_ID'], flush=True); time.sleep(1.5)"
+    pod = {
+        "containers": [
+            {
+                "name": "simcore",
+                "command": [sys.executable, "-c", code],
+                "env": [{"name": "ROS_DOMAIN_ID", "value": "0"}],
+            }
+        ]
+    }
+    kubelet = Kubelet(configmaps={}, secrets={}, workdir=tmp_path)
+    results: list[Any] = [None] * 30
+    threads = [
+        threading.Thread(target=lambda i=i: results.__setitem__(i, kubelet.run_pod(pod, index=i)))
+        for i in range(30)
+    ]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(60)
+    domains = [r.logs["simcore"].strip() for r in results]
+    assert all(d.isdigit() and d != "0" for d in domains), domains
+    assert len(set(domains)) == 30, sorted(domains)
+
+
 def test_pod_env_names_the_slice_of_its_completion_index() -> None:
     from simcore.errors import BadInput
     from simcore.pod import PodEnv
