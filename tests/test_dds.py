@@ -33,7 +33,15 @@ import yaml
 pytest.importorskip("cyclonedds")
 
 from simcore.transport.bus import Message
-from simcore.transport.dds import DdsBus, decode, loopback_config, ros_topic
+from simcore.transport.dds import (
+    DdsBus,
+    decode,
+    loopback_config,
+    own_payload,
+    padded,
+    ros_topic,
+    unpadded,
+)
 from simcore.transport.dds_types import dds_typename, idl_type, ros_typename
 from simcore.transport.messages import TYPESTORE, serialize
 from tests.kubelet import worker_share
@@ -234,10 +242,13 @@ def test_rosbags_cdr_is_byte_identical_to_cyclonedds_xcdr1_of_the_generated_type
 
 
 def _unpadded(hexdata: str, length: int) -> bytes:
-    """A payload as received, checked to be padded to a multiple of 4, without its padding."""
+    """A payload of `length` bytes from a CARLOS writer as a cyclonedds reader gets it: its encapsulation
+    options' low bits say the padding to a multiple of 4, and the padding is there or was taken off by them
+    (cyclonedds does either, by the reader's type). The payload without padding, with options 0."""
     data = bytes.fromhex(hexdata)
-    assert len(data) == length + (-length % 4)
-    return data[:length]
+    pad = -length % 4
+    assert data[2:4] == bytes((0, pad)) and len(data) in (length, length + pad)
+    return data[:3] + b"\x00" + data[4:length]
 
 
 def test_decode_strips_transport_padding_and_refuses_what_is_not_the_type() -> None:
@@ -252,6 +263,14 @@ def test_decode_strips_transport_padding_and_refuses_what_is_not_the_type() -> N
         decode(data, "nav_msgs/msg/Odometry")
     with pytest.raises(ValueError, match="CDR"):
         decode(b"\x01\x00\x00\x00", "std_msgs/msg/String")
+    # a writer that says its padding in the options (DDS-XTypes; as a CARLOS writer does): the same bytes
+    assert padded(data) == b"\x00\x01\x00\x02" + data[4:]
+    assert decode(padded(data) + b"\x00\x07", "std_msgs/msg/String")[1] == data
+    assert unpadded(padded(data) + b"\x00\x07", 2) == data
+    assert own_payload(padded(data)) == data  # as a cyclonedds reader hands it over: padding taken off
+    assert own_payload(padded(data) + b"\x00\x07") == data  # or not
+    four = serialize(TYPESTORE.types["std_msgs/msg/String"](data="abcdefg"))  # 16 bytes: nothing to pad
+    assert padded(four) is four and unpadded(four, 0) is four and own_payload(four) is four
 
 
 # --- wire-level interop with a plain cyclonedds process (what rmw_cyclonedds_cpp sees) ---------------------
@@ -479,8 +498,9 @@ def test_a_plain_cyclonedds_node_sees_ros2_topics_types_qos_and_values(domain: i
     assert {row[5] for row in got["odometry"]} == {0.25}
     assert [row[6] for row in got["odometry"]] == [0.0, 2.0, 4.0, 6.0, 8.0]
     assert [row[7] for row in got["odometry"]] == [round(0.1 * i * 1e9) for i in range(5)]  # source stamp
-    # on the wire: rosbags' bytes, encapsulation options 0, padded to 4 bytes (by cyclonedds, as for
-    # rmw_cyclonedds_cpp's samples; the pad bytes' values are undefined); decode() takes the padding off
+    # on the wire: rosbags' bytes, the encapsulation options saying how many bytes pad them to 4
+    # (rmw_cyclonedds_cpp writes 0 there and readers get the padding; ROS 2 ignores the options); a
+    # cyclonedds reader takes the padding off by them; decode() gives the bytes without it either way
     assert [
         _unpadded(h, len(serialize(msg))) for h, msg in zip(got["odometry_cdr"], odometries, strict=True)
     ] == [serialize(msg) for msg in odometries]
@@ -674,7 +694,10 @@ def test_own_publications_arrive_once_synchronously_and_other_buses_get_them_onc
         other: list[tuple[str, float, str]] = []
         done = threading.Event()
 
+        raw: list[tuple[bool, bytes]] = []
+
         def on_other(message: Message) -> None:
+            raw.append((message.msg is None, message.cdr()))  # before obj() makes the message
             other.append((message.topic, message.time_s, message.obj().data))
             if len(other) == 20:
                 done.set()
@@ -689,6 +712,11 @@ def test_own_publications_arrive_once_synchronously_and_other_buses_get_them_onc
         assert b.drain()
         assert own == [i * 0.5 for i in range(20)]
         assert other == [("/chatter", i * 0.5, f"m{i}") for i in range(20)]
+        # a CARLOS writer's samples: the exact bytes (10 of the 20 are padded on the wire), and no message
+        # made unless a subscriber asks for it (the options say the padding: no deserialising to find it)
+        sent = [serialize(t["std_msgs/msg/String"](data=f"m{i}")) for i in range(20)]
+        assert {len(b) % 4 for b in sent} == {0, 3}
+        assert raw == [(True, b) for b in sent]
         assert b.discovered == {"/chatter": "std_msgs/msg/String"}
         assert a.flush(10)
         with pytest.raises(ValueError, match="advertised as"):

@@ -161,14 +161,19 @@ def ros_topic(name: str) -> str | None:
     return "/" + name[len(prefix) :] if name.startswith(prefix) and len(name) > len(prefix) else None
 
 
+#: the encapsulation options' bits that give the number of padding bytes at the end of a payload
+_PADDING_BITS = 0x03
+
+
 def decode(data: bytes, typename: str) -> tuple[Any, bytes]:
     """A received CDR payload → (message, the payload without transport padding).
 
     DDS carries payloads in multiples of 4 bytes: a sample of 11 bytes arrives with one byte appended, of
-    any value (rmw_cyclonedds_cpp writes encapsulation options 0 and lets cyclonedds pad, as CARLOS does;
-    ROS 2's deserialisers ignore what follows the message, as rosbags' does up to 3 bytes). The exact
-    length is where the deserialiser stops, so what a subscriber gets (and the recorder stores) is byte for
-    byte what the publisher serialised. Raises ValueError for a payload that is not a `typename`."""
+    any value (rmw_cyclonedds_cpp writes encapsulation options 0 and lets cyclonedds pad; ROS 2's
+    deserialisers ignore what follows the message, as rosbags' does up to 3 bytes). The exact length is
+    where the deserialiser stops, so what a subscriber gets (and the recorder stores) is byte for byte what
+    the publisher serialised. (A CARLOS writer says its padding in the options instead: `padded`.) Raises
+    ValueError for a payload that is not a `typename`."""
     from rosbags.serde import SerdeError
 
     from simcore.transport.messages import TYPESTORE
@@ -183,7 +188,33 @@ def decode(data: bytes, typename: str) -> tuple[Any, bytes]:
     end = 4 + pos
     if end > len(data) or end + 3 < len(data):
         raise ValueError(f"not a {typename}: {len(data) - end} bytes left over")
-    return msg, data if end == len(data) else data[:end]
+    return msg, unpadded(data, len(data) - end)
+
+
+def unpadded(data: bytes, pad: int) -> bytes:
+    """A received CDR payload without its last `pad` bytes of transport padding, the padding bits of its
+    encapsulation options cleared: the bytes the publisher serialised."""
+    if not pad and not data[3] & _PADDING_BITS:
+        return data
+    return b"%c%c%c%c" % (data[0], data[1], data[2], data[3] & ~_PADDING_BITS) + data[4 : len(data) - pad]
+
+
+def padded(data: bytes) -> bytes:
+    """A CDR payload as CARLOS writes it to DDS: the number of bytes the transport pads it with (to a multiple
+    of 4) in the two low bits of its encapsulation options (DDS-XTypes 1.3, 7.6.3.1.2). A cyclonedds reader
+    then hands over the payload without the padding, so a CARLOS reader has the exact bytes without
+    deserialising the message (`own_payload`). ROS 2's deserialisers ignore the options."""
+    pad = -len(data) % 4
+    if not pad or len(data) < 4:
+        return data
+    return b"%c%c%c%c" % (data[0], data[1], data[2], (data[3] & ~_PADDING_BITS) | pad) + data[4:]
+
+
+def own_payload(data: bytes) -> bytes:
+    """A CARLOS writer's payload (`padded`) as received → the bytes it serialised: its padding bits cleared,
+    and its padding taken off where the reader left it on (a length that is a multiple of 4)."""
+    pad = data[3] & _PADDING_BITS
+    return unpadded(data, pad if len(data) % 4 == 0 else 0)
 
 
 @functools.cache
@@ -386,7 +417,7 @@ class DdsBus:
         if message.topic == "/clock":
             self._last_clock = message.time_s  # the time of the commands of ROS 2 nodes that answer it
         stamp = max(0, round(message.time_s * 1e9))
-        ret = ddspy_write_ts(writer.writer._ref, data, stamp)
+        ret = ddspy_write_ts(writer.writer._ref, padded(data), stamp)
         if ret < 0:
             raise DdsError(f"DDS write on {message.topic} failed ({DDSException(ret, '')!s})")
         self._dispatch(message)
@@ -630,7 +661,8 @@ class DdsBus:
             if not info.valid_data:
                 continue
             count += 1
-            if self._simtime(reader, info.publication_handle):
+            own = self._simtime(reader, info.publication_handle)
+            if own:
                 time_s = info.source_timestamp / 1e9
                 if reader.topic == "/clock":
                     self._last_clock = time_s
@@ -638,14 +670,20 @@ class DdsBus:
                 time_s = self._last_clock
             else:
                 time_s = info.source_timestamp / 1e9
-            try:
-                msg, exact = decode(data, reader.typename)
-            except ValueError as exc:
-                if reader.topic not in self._bad_topics:
-                    self._bad_topics.add(reader.topic)
-                    log.warning("dds: dropping undecodable samples on %s: %s", reader.topic, exc)
-                continue
-            self._dispatch(Message(reader.topic, reader.typename, time_s, msg=msg, data=exact))
+            if own and len(data) >= 4 and data[:2] == b"\x00\x01":
+                # a CARLOS writer's payload says its padding (`padded`): the message is made only for a
+                # subscriber that wants the object (a recorder wants the bytes only)
+                message = Message(reader.topic, reader.typename, time_s, data=own_payload(data))
+            else:  # any other writer's: the exact length is where the deserialiser stops
+                try:
+                    msg, exact = decode(data, reader.typename)
+                except ValueError as exc:
+                    if reader.topic not in self._bad_topics:
+                        self._bad_topics.add(reader.topic)
+                        log.warning("dds: dropping undecodable samples on %s: %s", reader.topic, exc)
+                    continue
+                message = Message(reader.topic, reader.typename, time_s, msg=msg, data=exact)
+            self._dispatch(message)
         self.received += count
         return count
 
