@@ -6,6 +6,7 @@ This module stays small: the worker processes `carlos run` spawns start by impor
 imports (typer, rich: some 50 ms before its first run).
 """
 
+import os
 import sys
 from typing import Any
 
@@ -15,7 +16,15 @@ from simcore.startup import pause_gc, resume_gc
 __all__ = ["main", "pause_gc", "resume_gc"]
 
 
+#: one BLAS thread per process unless the environment says otherwise: CARLOS runs in parallel as processes
+#: (`--parallel` workers, pods), each busy on its own core, so OpenBLAS's pool of threads (numpy's) would only
+#: compete with the other processes for the cores (its threads spin when they start and after each product)
+SINGLE_THREADED_BLAS = {"OPENBLAS_NUM_THREADS": "1"}
+
+
 def main() -> None:
+    for name, value in SINGLE_THREADED_BLAS.items():  # before anything imports numpy; workers inherit it
+        os.environ.setdefault(name, value)
     pause_gc()
     from simcore.cli_app import _line, app, console
 

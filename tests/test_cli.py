@@ -338,3 +338,38 @@ def test_plan_of_a_search_says_its_points_are_chosen_as_it_runs() -> None:
         done.stdout.split()
     )
     assert "(defaults)" not in done.stdout
+
+
+def test_carlos_keeps_numpy_to_one_blas_thread_unless_the_environment_says_otherwise() -> None:
+    """`carlos` runs in parallel as processes: numpy's OpenBLAS starts no pool of threads of its own in them
+    (they would compete with the other workers for the cores), unless OPENBLAS_NUM_THREADS is set."""
+    script = (
+        "import os, sys\n"
+        "if sys.argv[1] == 'carlos':\n"
+        "    from simcore import cli\n"
+        "    sys.argv = ['carlos', '--version']\n"
+        "    try:\n"
+        "        cli.main()\n"
+        "    except SystemExit:\n"
+        "        pass\n"
+        "import numpy\n"
+        "print(len(os.listdir('/proc/self/task')))\n"
+    )
+    blas = ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS")  # what OpenBLAS reads
+    env = {k: v for k, v in os.environ.items() if k not in blas}
+
+    def threads(how: str, **extra: str) -> int:
+        out = subprocess.run(
+            [sys.executable, "-c", script, how],
+            env={**env, **extra},
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        return int(out.stdout.strip().splitlines()[-1])
+
+    if (os.cpu_count() or 1) > 1:
+        assert threads("plain") > 1  # what numpy does by itself on this machine: a pool
+    assert threads("carlos") == 1
+    if (os.cpu_count() or 1) > 1:
+        assert threads("carlos", OPENBLAS_NUM_THREADS="2") == 2  # the user's setting stands
