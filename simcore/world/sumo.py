@@ -264,6 +264,9 @@ class SumoWorld:
         self.step_seconds = step_seconds
         self._front: dict[str, float] = {}  # reference point → front bumper distance
         self._scripted: set[str] = set()
+        # the speed last set for each scripted vehicle: SUMO keeps a set speed until it is set again (its speed
+        # time line runs to the end of time), so the same speed is not set again
+        self._speeds: dict[str, float] = {}
         # scripted vehicles: the place each is to have at the end of the next step (front x, y, heading,
         # speed), the lane it is on after the last step, and per lane the polyline segment it was on
         self._targets: dict[str, tuple[float, float, float, float]] = {}
@@ -403,7 +406,14 @@ class SumoWorld:
         try:
             if name in self._scripted:
                 speed = 0.0 if speed < 0.0 else speed  # max(speed, 0.0), without the builtin's call cost
-                self._set_speed(name, speed)
+                last = self._speeds.get(name)
+                if (
+                    last is None
+                    or last != speed
+                    or (speed == 0.0 and math.copysign(1.0, last) != math.copysign(1.0, speed))
+                ):
+                    self._set_speed(name, speed)
+                    self._speeds[name] = speed
                 self._targets[name] = (fx, fy, heading, speed)  # SUMO's angle only if SUMO searches
             else:
                 self._move_xy(name, fx, fy, _sumo_angle(heading))
