@@ -39,6 +39,11 @@ if TYPE_CHECKING:
 
 #: wall seconds between two looks at the workers' progress queue
 DRAIN_INTERVAL_S = 0.2
+#: quick indexes go to a worker in batches (one message each way, not one per index): a batch holds about
+#: BATCH_TARGET_S of runs (by the mean wall time of the indexes done so far), at most BATCH_MAX indexes, and at
+#: most a share of what is left so that the workers end together; one index until the first is done
+BATCH_TARGET_S = 0.1
+BATCH_MAX = 16
 _progress_queue: Any = None
 _worker_settings: Any = None  # Settings of this pool worker (_init_worker)
 
@@ -72,6 +77,18 @@ def _work_in_pool(index: int, attempt: int, final_attempt: bool) -> RunOutcome:
         return _work(_worker_settings, index, attempt, final_attempt)
     finally:
         settle_worker()
+
+
+def _work_batch(batch: list[tuple[int, int, bool]]) -> tuple[list[RunOutcome], StoreError | None]:
+    """(index, attempt, final attempt) one after another in this worker: their outcomes, and the StoreError
+    that stopped the batch (the indexes after it are not run)."""
+    outcomes = []
+    for index, attempt, final_attempt in batch:
+        try:
+            outcomes.append(_work_in_pool(index, attempt, final_attempt))
+        except StoreError as exc:
+            return outcomes, exc
+    return outcomes, None
 
 
 def _report(index: int, sim_time: float) -> None:
@@ -139,6 +156,14 @@ class _Sweep:
     max_attempts: int
     outcomes: dict[int, dict[str, Any]]  # final summaries by index
     events: Events
+    run_seconds: float = 0.0  # the wall seconds of the runs done here so far, and how many (batch sizes)
+    runs_done: int = 0
+
+    def batch_size(self, workers: int) -> int:
+        if not self.runs_done:
+            return 1
+        by_time = int(BATCH_TARGET_S * self.runs_done / max(self.run_seconds, 1e-9))
+        return max(1, min(BATCH_MAX, by_time, len(self.pending) // (2 * workers)))
 
 
 def kept_on_resume(summary: dict[str, Any]) -> bool:
@@ -319,9 +344,9 @@ def _in_pool(sweep: _Sweep, workers: int) -> None:
             initializer=_init_worker,
             initargs=(progress, os.getpid(), sweep.settings),
         ) as pool:
-            in_flight: dict[Future[RunOutcome], int] = {}
+            in_flight: dict[Future[tuple[list[RunOutcome], StoreError | None]], list[int]] = {}
             broken = False
-            _submit(pool, sweep, in_flight, workers * 2)
+            _submit(pool, sweep, in_flight, workers)
             next_drain = 0.0
             while in_flight:
                 done, _ = wait(list(in_flight), timeout=DRAIN_INTERVAL_S, return_when=FIRST_COMPLETED)
@@ -331,32 +356,24 @@ def _in_pool(sweep: _Sweep, workers: int) -> None:
                     _drain(progress, sweep.events)
                     next_drain = time.monotonic() + DRAIN_INTERVAL_S
                 for future in done:
-                    index = in_flight.pop(future)
+                    batch = in_flight.pop(future)
                     try:
-                        outcome = future.result()
-                    except StoreError as exc:
-                        outage = outage or exc
-                        sweep.pending.clear()
-                        continue
+                        outcomes, error = future.result()
                     except BrokenProcessPool:
                         broken = True
-                        _crashed(sweep, index)
+                        _crashed_batch(sweep, batch)
                         continue
-                    if (
-                        outcome.exit_code == ExitCode.INFRASTRUCTURE
-                        and sweep.attempts[index] < sweep.max_attempts
-                    ):
-                        sweep.events.on_retry(index, sweep.attempts[index], str(outcome.summary.get("error")))
-                        sweep.pending.append(index)
-                        continue
-                    sweep.outcomes[index] = outcome.summary
-                    sweep.events.on_done(outcome)
+                    for outcome in outcomes:
+                        _finished(sweep, outcome)
+                    if error is not None:
+                        outage = outage or error
+                        sweep.pending.clear()
                 if broken:
-                    for future, index in list(in_flight.items()):
+                    for future, batch in list(in_flight.items()):
                         in_flight.pop(future)
-                        _crashed(sweep, index)
+                        _crashed_batch(sweep, batch)
                     break
-                _submit(pool, sweep, in_flight, workers * 2)
+                _submit(pool, sweep, in_flight, workers)
     _drain(progress, sweep.events)
     if outage is not None:
         raise outage
@@ -403,15 +420,34 @@ def _in_process(sweep: _Sweep, bus: Bus | None) -> None:
         sweep.events.on_done(outcome)
 
 
+def _finished(sweep: _Sweep, outcome: RunOutcome) -> None:
+    """An index a worker ran: retried after an infrastructure error while it has attempts left, else done."""
+    index = outcome.index
+    sweep.run_seconds += float(outcome.summary.get("wallSeconds") or 0.0)
+    sweep.runs_done += 1
+    if outcome.exit_code == ExitCode.INFRASTRUCTURE and sweep.attempts[index] < sweep.max_attempts:
+        sweep.events.on_retry(index, sweep.attempts[index], str(outcome.summary.get("error")))
+        sweep.pending.append(index)
+        return
+    sweep.outcomes[index] = outcome.summary
+    sweep.events.on_done(outcome)
+
+
 def _submit(
-    pool: ProcessPoolExecutor, sweep: _Sweep, in_flight: dict[Future[RunOutcome], int], limit: int
+    pool: ProcessPoolExecutor,
+    sweep: _Sweep,
+    in_flight: dict[Future[tuple[list[RunOutcome], StoreError | None]], list[int]],
+    workers: int,
 ) -> None:
-    """Keep up to `limit` indexes queued in the pool (a small queue keeps retries and progress prompt)."""
-    while sweep.pending and len(in_flight) < limit:
-        index = sweep.pending.pop(0)
-        sweep.attempts[index] += 1
-        final = sweep.attempts[index] >= sweep.max_attempts
-        in_flight[pool.submit(_work_in_pool, index, sweep.attempts[index], final)] = index
+    """Keep two batches per worker queued in the pool (a small queue keeps retries and progress prompt)."""
+    while sweep.pending and len(in_flight) < 2 * workers:
+        batch = sweep.pending[: sweep.batch_size(workers)]
+        del sweep.pending[: len(batch)]
+        work = []
+        for index in batch:
+            sweep.attempts[index] += 1
+            work.append((index, sweep.attempts[index], sweep.attempts[index] >= sweep.max_attempts))
+        in_flight[pool.submit(_work_batch, work)] = batch
 
 
 def _drain(progress: Any, events: Events) -> None:
@@ -425,22 +461,37 @@ def _drain(progress: Any, events: Events) -> None:
         events.on_progress(index, sim_time)
 
 
-def _crashed(sweep: _Sweep, index: int) -> None:
-    """An index whose worker process died: retry it, or record it as an error when out of attempts."""
+def _crashed_batch(sweep: _Sweep, batch: list[int]) -> None:
+    """A batch whose worker process died (or was ended with the pool): its indexes run in order, so those
+    with this attempt's summary written were done (`_crashed` keeps them), the first without one was
+    running or waiting, and the ones after it never started: they get their attempt back and run again."""
+    for position, index in enumerate(batch):
+        if not _crashed(sweep, index):
+            later = batch[position + 1 :]
+            for unstarted in later:
+                sweep.attempts[unstarted] -= 1
+            sweep.pending[:0] = later
+            return
+
+
+def _crashed(sweep: _Sweep, index: int) -> bool:
+    """An index whose worker process died: retry it, or record it as an error when out of attempts. True when
+    the worker had finished it (its summary kept)."""
     written = _written_summary(sweep.store, f"{sweep.settings.run.name}/{index}/summary.json")
     if written is not None and kept_on_resume(written) and written.get("attempts") == sweep.attempts[index]:
         # the worker finished this attempt (its summary is written last) and died before reporting it
         written = in_manifest_order(written, list(Plan(sweep.settings.run.spec)[index].parameters))
         sweep.outcomes[index] = written
         sweep.events.on_done(RunOutcome(index=index, summary=written, exit_code=_exit_code_of(written)))
-        return
+        return True
     reason = "the worker process died (crash in the simulator)"
     if sweep.attempts[index] < sweep.max_attempts:
         sweep.events.on_retry(index, sweep.attempts[index], reason)
         sweep.pending.append(index)
-        return
+        return False
     outcome = error_outcome(sweep.settings.run, index, sweep.attempts[index], reason)
     summary = outcome.summary
     sweep.store.put_bytes(f"{sweep.settings.run.name}/{index}/summary.json", summary_bytes(summary))
     sweep.outcomes[index] = summary
     sweep.events.on_done(outcome)
+    return False

@@ -78,3 +78,51 @@ print(first >= 1000, gc.get_freeze_count() == first)
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.split() == ["True", "True"]
+
+
+def test_a_worker_killed_mid_batch_costs_only_the_runs_it_had_started(tmp_path: Path) -> None:
+    """Quick runs go to a worker in batches. A worker killed mid-batch (no retries) leaves the runs it finished
+    as they are, ends the run it was running in an error, and gives the runs of its batches that had not
+    started their attempt back: they run afterwards and pass. So at most one error per batch in flight (two
+    per worker), however large the batches."""
+    scenario = ROOT / "examples" / "scenarios" / "cut-in.xosc"
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(
+        "apiVersion: carlos.dev/v1alpha1\nkind: SimulationRun\nmetadata: {name: batches}\n"
+        f"spec:\n  scenarios: [{{name: c, openscenario: {scenario}}}]\n"
+        "  sweep: {repetitions: 120}\n"
+        "  simulation: {stepSeconds: 0.1, maxSeconds: 0.5}\n"
+        "  recording: {enabled: false}\n"
+        "  execution: {retries: 0}\n"
+    )
+    out = tmp_path / "out"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "simcore.cli", "run", str(manifest), "-o", f"file://{out}", "-j", "2"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        victim = None
+        while time.monotonic() < deadline and victim is None:
+            workers = [
+                p for p in _children(process.pid) if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()
+            ]
+            if workers and len(list(out.glob("batches/*/summary.json"))) >= 20:
+                victim = workers[0]
+            time.sleep(0.005)
+        assert victim is not None, "no worker process appeared"
+        os.kill(victim, signal.SIGKILL)
+        _, stderr = process.communicate(timeout=300)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    statuses = [
+        json.loads((out / "batches" / str(i) / "summary.json").read_text())["status"] for i in range(120)
+    ]
+    errors = statuses.count("error")
+    assert process.returncode == (3 if errors else 0), stderr
+    assert errors <= 4, (errors, stderr)
+    assert statuses.count("passed") == 120 - errors
