@@ -6,9 +6,11 @@ that cannot start, Kueue holds, observedGeneration."""
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import pytest
 from carlos_operator.builders import OperatorSettings, job_name, round_job_name
 from carlos_operator.controller import Controller, _store_for
 from carlos_operator.kube import Conflict, NotFound
@@ -131,6 +133,20 @@ def run_body(name: str, uid: str, n: int, status: dict[str, Any] | None = None) 
     }
 
 
+#: the controllers a test made: their scratch folders (a run's inputs, a search's files) are removed after it,
+#: as the operator removes them when it stops
+_made: list[Controller] = []
+
+
+@pytest.fixture(autouse=True)
+def _scratch_removed() -> Iterator[None]:
+    yield
+    while _made:
+        made = _made.pop()
+        made.scratch.close()
+        made.searches.close()
+
+
 def controller(
     kube: FakeKube, store: FakeStore, batch: int = 500, secrets: str = "default", **kw: Any
 ) -> Controller:
@@ -141,7 +157,9 @@ def controller(
         store.opened += 1
         return store
 
-    return Controller(kube, settings, batch=batch, store_factory=factory, **kw)  # type: ignore[arg-type]
+    made = Controller(kube, settings, batch=batch, store_factory=factory, **kw)  # type: ignore[arg-type]
+    _made.append(made)
+    return made
 
 
 def watch_jobs(c: Controller) -> None:
