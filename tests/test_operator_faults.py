@@ -15,7 +15,14 @@ from carlos_operator.builders import job_name
 from carlos_operator.kube import Conflict
 from kubernetes.client.rest import ApiException
 
-from tests.test_operator_controller import FakeKube, FakeStore, controller, run_body, summary
+from tests.test_operator_controller import (  # _scratch_removed: its controllers' scratch folders go too
+    FakeKube,
+    FakeStore,
+    _scratch_removed,  # noqa: F401
+    controller,
+    run_body,
+    summary,
+)
 
 N = 5
 FAILED_INDEX = 3
