@@ -423,8 +423,10 @@ def _in_process(sweep: _Sweep, bus: Bus | None) -> None:
 def _finished(sweep: _Sweep, outcome: RunOutcome) -> None:
     """An index a worker ran: retried after an infrastructure error while it has attempts left, else done."""
     index = outcome.index
-    sweep.run_seconds += float(outcome.summary.get("wallSeconds") or 0.0)
-    sweep.runs_done += 1
+    wall = float(outcome.summary.get("wallSeconds") or 0.0)
+    if wall > 0.0:  # an index that ended before it ran (an error) says nothing of how long runs take
+        sweep.run_seconds += wall
+        sweep.runs_done += 1
     if outcome.exit_code == ExitCode.INFRASTRUCTURE and sweep.attempts[index] < sweep.max_attempts:
         sweep.events.on_retry(index, sweep.attempts[index], str(outcome.summary.get("error")))
         sweep.pending.append(index)
