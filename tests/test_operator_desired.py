@@ -22,7 +22,15 @@ from carlos_operator.desired import (
     decide,
 )
 
-from tests.test_operator_controller import FakeKube, FakeStore, controller, drain, run_body, search_body
+from tests.test_operator_controller import (  # _scratch_removed: its controllers' scratch folders go too
+    FakeKube,
+    FakeStore,
+    _scratch_removed,  # noqa: F401
+    controller,
+    drain,
+    run_body,
+    search_body,
+)
 
 NOW = "2026-11-29T00:00:00Z"
 SETTINGS = OperatorSettings.from_env({"CARLOS_SECRET_NAMESPACES": "default"})
