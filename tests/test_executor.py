@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -17,6 +18,38 @@ ROOT = Path(__file__).resolve().parents[1]
 def _children(pid: int) -> list[int]:
     out = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True, check=False).stdout
     return [int(p) for p in out.split()]
+
+
+def _run_killing_a_worker(
+    manifest: Path, out: Path, ready: Callable[[], bool], *, settle: float, poll: float, within: float
+) -> tuple[int, str, str]:
+    """`carlos run` of `manifest` into `out` with 2 workers; one worker is killed with SIGKILL once `ready()`
+    holds (and `settle` seconds more). (exit code, stdout, stderr)."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "simcore.cli", "run", str(manifest), "-o", f"file://{out}", "-j", "2"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + within
+        victim = None
+        while time.monotonic() < deadline and victim is None:
+            workers = [
+                p for p in _children(process.pid) if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()
+            ]
+            if workers and ready():
+                time.sleep(settle)
+                victim = workers[0]
+            time.sleep(poll)
+        assert victim is not None, "no worker process appeared"
+        os.kill(victim, signal.SIGKILL)
+        stdout, stderr = process.communicate(timeout=300)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    return process.returncode, stdout, stderr
 
 
 def test_a_killed_worker_is_retried_and_the_sweep_completes(tmp_path: Path) -> None:
@@ -29,32 +62,11 @@ def test_a_killed_worker_is_retried_and_the_sweep_completes(tmp_path: Path) -> N
         "  execution: {retries: 2}\n"
     )
     out = tmp_path / "out"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "simcore.cli", "run", str(manifest), "-o", f"file://{out}", "-j", "2"],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    # once a worker is simulating (the run's spec is stored, then 0.3 s), it is killed the hard way
+    returncode, stdout, stderr = _run_killing_a_worker(
+        manifest, out, (out / "crash" / "run.yaml").exists, settle=0.3, poll=0.05, within=60
     )
-    try:
-        # wait until a worker is simulating (its run's scratch exists), then kill it the hard way
-        deadline = time.monotonic() + 60
-        victim = None
-        while time.monotonic() < deadline and victim is None:
-            workers = [
-                p for p in _children(process.pid) if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()
-            ]
-            if workers and (out / "crash" / "run.yaml").exists():
-                time.sleep(0.3)
-                victim = workers[0]
-            time.sleep(0.05)
-        assert victim is not None, "no worker process appeared"
-        os.kill(victim, signal.SIGKILL)
-        stdout, stderr = process.communicate(timeout=300)
-    finally:
-        if process.poll() is None:
-            process.kill()
-    assert process.returncode == 0, stderr
+    assert returncode == 0, stderr
     assert "retrying" in stderr + stdout or "worker process died" in stderr + stdout
     summaries = [json.loads((out / "crash" / str(i) / "summary.json").read_text()) for i in range(4)]
     assert [s["status"] for s in summaries] == ["passed"] * 4
@@ -96,33 +108,18 @@ def test_a_worker_killed_mid_batch_costs_only_the_runs_it_had_started(tmp_path: 
         "  execution: {retries: 0}\n"
     )
     out = tmp_path / "out"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "simcore.cli", "run", str(manifest), "-o", f"file://{out}", "-j", "2"],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    returncode, _, stderr = _run_killing_a_worker(
+        manifest,
+        out,
+        lambda: len(list(out.glob("batches/*/summary.json"))) >= 20,
+        settle=0.0,
+        poll=0.005,
+        within=120,
     )
-    try:
-        deadline = time.monotonic() + 120
-        victim = None
-        while time.monotonic() < deadline and victim is None:
-            workers = [
-                p for p in _children(process.pid) if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()
-            ]
-            if workers and len(list(out.glob("batches/*/summary.json"))) >= 20:
-                victim = workers[0]
-            time.sleep(0.005)
-        assert victim is not None, "no worker process appeared"
-        os.kill(victim, signal.SIGKILL)
-        _, stderr = process.communicate(timeout=300)
-    finally:
-        if process.poll() is None:
-            process.kill()
     statuses = [
         json.loads((out / "batches" / str(i) / "summary.json").read_text())["status"] for i in range(120)
     ]
     errors = statuses.count("error")
-    assert process.returncode == (3 if errors else 0), stderr
+    assert returncode == (3 if errors else 0), stderr
     assert errors <= 4, (errors, stderr)
     assert statuses.count("passed") == 120 - errors

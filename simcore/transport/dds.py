@@ -191,12 +191,17 @@ def decode(data: bytes, typename: str) -> tuple[Any, bytes]:
     return msg, unpadded(data, len(data) - end)
 
 
+def _with_padding_bits(data: bytes, pad: int, end: int) -> bytes:
+    """`data[:end]` with `pad` in the padding bits of its encapsulation options (the header's last byte)."""
+    return b"%c%c%c%c" % (data[0], data[1], data[2], (data[3] & ~_PADDING_BITS) | pad) + data[4:end]
+
+
 def unpadded(data: bytes, pad: int) -> bytes:
     """A received CDR payload without its last `pad` bytes of transport padding, the padding bits of its
     encapsulation options cleared: the bytes the publisher serialised."""
     if not pad and not data[3] & _PADDING_BITS:
         return data
-    return b"%c%c%c%c" % (data[0], data[1], data[2], data[3] & ~_PADDING_BITS) + data[4 : len(data) - pad]
+    return _with_padding_bits(data, 0, len(data) - pad)
 
 
 def padded(data: bytes) -> bytes:
@@ -207,7 +212,7 @@ def padded(data: bytes) -> bytes:
     pad = -len(data) % 4
     if not pad or len(data) < 4:
         return data
-    return b"%c%c%c%c" % (data[0], data[1], data[2], (data[3] & ~_PADDING_BITS) | pad) + data[4:]
+    return _with_padding_bits(data, pad, len(data))
 
 
 def own_payload(data: bytes) -> bytes:

@@ -18,9 +18,9 @@ the state is saved, and nothing else at the start depends on the seed. SUMO save
 numbers drawn since it was seeded and, loading, draws that many more from wherever the generator stands: a
 count does not rewind it. So every named generator is written out in full instead (`std::mt19937` seeded with
 the run's seed), for whichever seed the run has; the next run of the same seed loads only `default` in full, as
-a run draws from no other named generator (a generator missing from a state is left as it stands). A generator SUMO itself writes in full (it does once a state
-was loaded in the process) must be exactly that, or the simulation is never parked; and the first start checks
-the loaded state: three vehicles' speed factors drawn after loading it must be those drawn right after the
+a run draws from no other named generator (a generator missing from a state is left as it stands). A
+generator SUMO itself writes in full (it does once a state was loaded in the process) must be exactly that, or
+the simulation is never parked; and the first start checks the loaded state: three vehicles' speed factors drawn after loading it must be those drawn right after the
 start, or the simulation is never parked. The per-lane generators are left as they stand: SUMO draws from them
 for every vehicle's dawdling every step, which CARLOS's vehicles do with imperfection 0 (simcore/world/sumo.py
 `add_vehicle`): the draws are multiplied by zero and change nothing.
@@ -72,9 +72,8 @@ class _Parked:
         #: the state at time 0 of this process's simulation, saved and checked (its generators to be written
         #: for a run's seed); None: nothing saved
         self.template: str | None = None
-        self.written: tuple[int, bool] | None = (
-            None  # the snapshot file's seed, and whether it holds every generator
-        )
+        #: the snapshot file's seed, and whether it holds every generator
+        self.written: tuple[int, bool] | None = None
         self.loaded_seed: int | None = None  # the seed every generator was last loaded for
         self.types = 0  # the vehicle types right after the start (SUMO's defaults)
         self.refused: set[Hashable] = set()
