@@ -65,7 +65,7 @@ COMPILED = [
     ),
     *(
         f"simcore/world/{name}.py"
-        for name in ("opendrive", "road_geometry", "road_model", "sumo", "sumo_lanes")
+        for name in ("opendrive", "road_geometry", "road_model", "state", "sumo", "sumo_lanes")
     ),
 ]
 

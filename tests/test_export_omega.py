@@ -328,7 +328,6 @@ def test_without_betterosi_the_export_and_the_osi_channel_are_bad_input(
 def test_recording_and_export_paths_agree_for_any_entity_name(tmp_path: Path) -> None:
     """An entity whose name is no ROS token (`lead truck`: /tf says `lead_truck_<hash>/base_link`) is still
     exported; the export from the ROS topics and the recorded OSI channel give the same objects."""
-    import dataclasses
 
     import betterosi
 
@@ -340,8 +339,8 @@ def test_recording_and_export_paths_agree_for_any_entity_name(tmp_path: Path) ->
     frames = []
     for step in range(6):
         frame = _frame(step)
-        truck = dataclasses.replace(frame.entities[1], name="lead truck")
-        frames.append(dataclasses.replace(frame, entities=(frame.entities[0], truck)))
+        truck = frame.entities[1].replace(name="lead truck")
+        frames.append(frame.replace(entities=(frame.entities[0], truck)))
     path = tmp_path / "r.mcap"
     with McapRecorder(path) as rec:
         for frame in frames:

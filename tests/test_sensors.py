@@ -3,7 +3,6 @@ camera, ground truth, ROS 2 messages, scheduling and the spec models."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -1006,7 +1005,7 @@ def test_column_culling_is_exact_on_the_curved_highway(monkeypatch: pytest.Monke
     for s, lane, turn in ((300.0, -1, 0.0), (700.0, -2, 0.7), (1500.0, -3, -2.0), (1100.0, -4, math.pi)):
         p = road.lane_to_world("1", lane, s)
         ego = car("Ego", p.x, p.y, heading=p.heading + turn)
-        ego = dataclasses.replace(ego, z=p.z)
+        ego = ego.replace(z=p.z)
         ahead = car(
             "Ahead", p.x + 12 * math.cos(p.heading), p.y + 12 * math.sin(p.heading), heading=p.heading
         )
@@ -1093,9 +1092,7 @@ def test_column_culling_is_exact_on_corpus_roads(name: str, monkeypatch: pytest.
                 "range_max": 100.0,
                 "mount": {"x": 1.0, "z": 1.9, "yaw": float(rng.uniform(-90, 90))},
             }
-            ego = dataclasses.replace(
-                car("Ego", p[0], p[1], heading=float(rng.uniform(-3, 3))), z=float(p[2])
-            )
+            ego = car("Ego", p[0], p[1], heading=float(rng.uniform(-3, 3))).replace(z=float(p[2]))
             boxes = Boxes.of(frame(ego, car("Other", p[0] + 8, p[1] + 3)))
             culled = lidar(**config).scan(scene, boxes, ego, 0)
             with monkeypatch.context() as m:
@@ -1132,7 +1129,7 @@ def test_culling_is_exact_for_a_roadside_lidar(monkeypatch: pytest.MonkeyPatch, 
     cars = []
     for k, (lane, ds) in enumerate(((-1, -30.0), (-2, 5.0), (-3, 25.0), (-4, -10.0), (-1, 60.0))):
         p = road.lane_to_world("1", lane, 1200.0 + ds)
-        cars.append(dataclasses.replace(car(f"c{k}", p.x, p.y, heading=p.heading), z=p.z))
+        cars.append(car(f"c{k}", p.x, p.y, heading=p.heading).replace(z=p.z))
     boxes = Boxes.of(frame(*cars))
     cast_sizes = count_casts(monkeypatch)
     culled = lidar(**config).scan(scene, boxes, unit, -1)

@@ -36,14 +36,7 @@ from simcore.scenario.storyboard import State
 from simcore.scenario.sumo_bridge import SumoBridge
 from simcore.scenario.triggers import Triggers
 from simcore.scenario.world import Pose
-from simcore.world.state import (
-    BoundingBox,
-    EntityState,
-    WorldFrame,
-    entity_state,
-    lane_coordinates,
-    world_frame,
-)
+from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
 
 if TYPE_CHECKING:
     from simcore.scenario import controllers
@@ -728,8 +721,8 @@ class ScenarioEngine:
             if road is not None:
                 s = body.s
                 t, lane_id, offset = lane_point(road, road_id, body.lane_id, s, body.offset)
-                lane = lane_coordinates(road_id, lane_id, s, t, offset)
-        return entity_state(
+                lane = LaneCoordinates(road_id, lane_id, s, t, offset)
+        return EntityState(
             fixed[3],
             fixed[4],
             fixed[5],
@@ -763,13 +756,13 @@ class ScenarioEngine:
                 if state is None:
                     state = states[b.name] = state_of(b)
                 entities.append(state)
-            return world_frame(self.step_index, self.time, tuple(entities), self.ego, (), ())
+            return WorldFrame(self.step_index, self.time, tuple(entities), self.ego, (), ())
         ghost_names = self.ghosts.names
         # a ghost is no object of the world (esmini shows it as a shadow): published apart
         present = [b for b in self.bodies.values() if not b.gone or b.name == ego]
         entities = [self.state_of(b) for b in present if b.name not in ghost_names]
         ghosts = tuple([self.state_of(b) for b in present if b.name in ghost_names])
-        return world_frame(self.step_index, self.time, tuple(entities), self.ego, (), ghosts)
+        return WorldFrame(self.step_index, self.time, tuple(entities), self.ego, (), ghosts)
 
     @property
     def started(self) -> bool:

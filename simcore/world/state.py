@@ -1,11 +1,19 @@
-"""The world state every step: what every part downstream of the simulator (recorder, metrics, sensors) reads."""
+"""The world state every step: what every part downstream of the simulator (recorder, metrics, sensors) reads.
+
+The four types are immutable value classes: fields set once by the constructor (positional or by keyword),
+equality and hash over the fields in order, `Name(field=value, …)` as repr, `replace(**changes)` for a copy
+with some fields changed. They are built for every entity at every step and read by the metrics, so they are
+compiled classes in an installed wheel (setup.py `COMPILED`): a compiled module builds one at the cost of a
+C struct and reads a field without a look-up. Their attributes are `Final`, which the compiler makes
+read-only; run interpreted, `simcore.world.frozen.freeze` makes them so.
+"""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from typing import Any, Final, final
 
-from simcore.world.frozen import builder
+from simcore.world.frozen import freeze
 
 Corners = tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]]
 
@@ -29,51 +37,214 @@ def box_corners(
     )
 
 
-@dataclass(frozen=True, slots=True)
+def _repr(name: str, names: tuple[str, ...], values: tuple[Any, ...]) -> str:
+    return f"{name}({', '.join(f'{n}={v!r}' for n, v in zip(names, values, strict=True))})"
+
+
+#: the fields of `BoundingBox`, in order
+BOUNDING_BOX_FIELDS: Final = ("center_x", "center_y", "center_z", "length", "width", "height")
+
+
+@final
 class BoundingBox:
     """An entity's box in its own frame (OpenSCENARIO BoundingBox): centre relative to the entity's
     reference point (for vehicles the rear axle, on the ground), x forward, y left, z up; dimensions in m."""
 
-    center_x: float
-    center_y: float
-    center_z: float
-    length: float
-    width: float
-    height: float
+    __slots__ = BOUNDING_BOX_FIELDS
+    center_x: Final[float]
+    center_y: Final[float]
+    center_z: Final[float]
+    length: Final[float]
+    width: Final[float]
+    height: Final[float]
+
+    def __init__(
+        self, center_x: float, center_y: float, center_z: float, length: float, width: float, height: float
+    ) -> None:
+        self.center_x = center_x
+        self.center_y = center_y
+        self.center_z = center_z
+        self.length = length
+        self.width = width
+        self.height = height
+
+    def values(self) -> tuple[float, float, float, float, float, float]:
+        """The fields, in order."""
+        return (self.center_x, self.center_y, self.center_z, self.length, self.width, self.height)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, BoundingBox):
+            return NotImplemented
+        return self.values() == other.values()
+
+    def __hash__(self) -> int:
+        return hash(self.values())
+
+    def __repr__(self) -> str:
+        return _repr("BoundingBox", BOUNDING_BOX_FIELDS, self.values())
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return BoundingBox, self.values()
 
 
-@dataclass(frozen=True, slots=True)
+#: the fields of `LaneCoordinates`, in order
+LANE_COORDINATES_FIELDS: Final = ("road_id", "lane_id", "s", "t", "offset")
+
+
+@final
 class LaneCoordinates:
     """Where an entity is on the OpenDRIVE road network (`road_id`, `lane_id`, `s` along the reference
     line, `t` lateral from it, `offset` from the lane centre)."""
 
-    road_id: str
-    lane_id: int
-    s: float
-    t: float
-    offset: float
+    __slots__ = LANE_COORDINATES_FIELDS
+    road_id: Final[str]
+    lane_id: Final[int]
+    s: Final[float]
+    t: Final[float]
+    offset: Final[float]
+
+    def __init__(self, road_id: str, lane_id: int, s: float, t: float, offset: float) -> None:
+        self.road_id = road_id
+        self.lane_id = lane_id
+        self.s = s
+        self.t = t
+        self.offset = offset
+
+    def values(self) -> tuple[str, int, float, float, float]:
+        """The fields, in order."""
+        return (self.road_id, self.lane_id, self.s, self.t, self.offset)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, LaneCoordinates):
+            return NotImplemented
+        return self.values() == other.values()
+
+    def __hash__(self) -> int:
+        return hash(self.values())
+
+    def __repr__(self) -> str:
+        return _repr("LaneCoordinates", LANE_COORDINATES_FIELDS, self.values())
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return LaneCoordinates, self.values()
 
 
-@dataclass(frozen=True, slots=True)
+#: the fields of `EntityState`, in order
+ENTITY_STATE_FIELDS: Final = (
+    "name",
+    "object_type",
+    "category",
+    "x",
+    "y",
+    "z",
+    "heading",
+    "pitch",
+    "roll",
+    "speed",
+    "acceleration",
+    "yaw_rate",
+    "bbox",
+    "lane",
+    "controlled_by",
+)
+
+
+@final
 class EntityState:
     """One entity at one instant. Pose is of the entity's reference point in the `map` frame (ENU, REP-103):
-    x east, y north, z up; heading counter-clockwise from x, in rad. Speeds in m/s, accelerations in m/s²."""
+    x east, y north, z up; heading counter-clockwise from x, in rad. Speeds in m/s, accelerations in m/s².
+    `object_type` is "vehicle", "pedestrian" or "miscObject"; `category` the OpenSCENARIO category (car,
+    truck, bus, bicycle, pedestrian, obstacle, …); `speed` signed, along the heading; `acceleration`
+    longitudinal; `controlled_by` "scenario", "sumo" or "external"."""
 
-    name: str
-    object_type: str  # "vehicle" | "pedestrian" | "miscObject"
-    category: str  # OpenSCENARIO category: car, truck, bus, bicycle, pedestrian, obstacle, …
-    x: float
-    y: float
-    z: float
-    heading: float
-    pitch: float
-    roll: float
-    speed: float  # signed, along the heading
-    acceleration: float  # longitudinal
-    yaw_rate: float
-    bbox: BoundingBox
-    lane: LaneCoordinates | None = None
-    controlled_by: str = "scenario"  # "scenario" | "sumo" | "external"
+    __slots__ = ENTITY_STATE_FIELDS
+    name: Final[str]
+    object_type: Final[str]
+    category: Final[str]
+    x: Final[float]
+    y: Final[float]
+    z: Final[float]
+    heading: Final[float]
+    pitch: Final[float]
+    roll: Final[float]
+    speed: Final[float]
+    acceleration: Final[float]
+    yaw_rate: Final[float]
+    bbox: Final[BoundingBox]
+    lane: Final[LaneCoordinates | None]
+    controlled_by: Final[str]
+
+    def __init__(
+        self,
+        name: str,
+        object_type: str,
+        category: str,
+        x: float,
+        y: float,
+        z: float,
+        heading: float,
+        pitch: float,
+        roll: float,
+        speed: float,
+        acceleration: float,
+        yaw_rate: float,
+        bbox: BoundingBox,
+        lane: LaneCoordinates | None = None,
+        controlled_by: str = "scenario",
+    ) -> None:
+        self.name = name
+        self.object_type = object_type
+        self.category = category
+        self.x = x
+        self.y = y
+        self.z = z
+        self.heading = heading
+        self.pitch = pitch
+        self.roll = roll
+        self.speed = speed
+        self.acceleration = acceleration
+        self.yaw_rate = yaw_rate
+        self.bbox = bbox
+        self.lane = lane
+        self.controlled_by = controlled_by
+
+    def values(self) -> tuple[Any, ...]:
+        """The fields, in order."""
+        return (
+            self.name,
+            self.object_type,
+            self.category,
+            self.x,
+            self.y,
+            self.z,
+            self.heading,
+            self.pitch,
+            self.roll,
+            self.speed,
+            self.acceleration,
+            self.yaw_rate,
+            self.bbox,
+            self.lane,
+            self.controlled_by,
+        )
+
+    def replace(self, **changes: Any) -> EntityState:
+        """A copy with `changes` (field=value) made."""
+        return EntityState(**{**dict(zip(ENTITY_STATE_FIELDS, self.values(), strict=True)), **changes})
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, EntityState):
+            return NotImplemented
+        return self.values() == other.values()
+
+    def __hash__(self) -> int:
+        return hash(self.values())
+
+    def __repr__(self) -> str:
+        return _repr("EntityState", ENTITY_STATE_FIELDS, self.values())
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return EntityState, self.values()
 
     @property
     def velocity(self) -> tuple[float, float]:
@@ -91,18 +262,62 @@ class EntityState:
         return list(box_corners(self.x, self.y, self.heading, b.center_x, b.center_y, b.length, b.width))
 
 
-@dataclass(frozen=True, slots=True)
-class WorldFrame:
-    """Every entity at simulated time `time` (s); `step` counts from 0."""
+#: the fields of `WorldFrame`, in order
+WORLD_FRAME_FIELDS: Final = ("step", "time", "entities", "ego", "events", "ghosts")
 
-    step: int
-    time: float
-    entities: tuple[EntityState, ...]
-    ego: str | None = None
-    events: tuple[str, ...] = field(default_factory=tuple)  # storyboard transitions this step, for logs
-    # a FollowGhost controller's ghost (`<entity>_ghost`, esmini's): published (odometry, tf) but no object of
-    # the world: sensors, metrics, V2X and ground truth see only `entities`
-    ghosts: tuple[EntityState, ...] = field(default_factory=tuple)
+
+@final
+class WorldFrame:
+    """Every entity at simulated time `time` (s); `step` counts from 0. `events`: the storyboard's
+    transitions this step, for logs. `ghosts`: a FollowGhost controller's ghost (`<entity>_ghost`,
+    esmini's), published (odometry, tf) but no object of the world: sensors, metrics, V2X and ground truth
+    see only `entities`."""
+
+    __slots__ = WORLD_FRAME_FIELDS
+    step: Final[int]
+    time: Final[float]
+    entities: Final[tuple[EntityState, ...]]
+    ego: Final[str | None]
+    events: Final[tuple[str, ...]]
+    ghosts: Final[tuple[EntityState, ...]]
+
+    def __init__(
+        self,
+        step: int,
+        time: float,
+        entities: tuple[EntityState, ...],
+        ego: str | None = None,
+        events: tuple[str, ...] = (),
+        ghosts: tuple[EntityState, ...] = (),
+    ) -> None:
+        self.step = step
+        self.time = time
+        self.entities = entities
+        self.ego = ego
+        self.events = events
+        self.ghosts = ghosts
+
+    def values(self) -> tuple[Any, ...]:
+        """The fields, in order."""
+        return (self.step, self.time, self.entities, self.ego, self.events, self.ghosts)
+
+    def replace(self, **changes: Any) -> WorldFrame:
+        """A copy with `changes` (field=value) made."""
+        return WorldFrame(**{**dict(zip(WORLD_FRAME_FIELDS, self.values(), strict=True)), **changes})
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, WorldFrame):
+            return NotImplemented
+        return self.values() == other.values()
+
+    def __hash__(self) -> int:
+        return hash(self.values())
+
+    def __repr__(self) -> str:
+        return _repr("WorldFrame", WORLD_FRAME_FIELDS, self.values())
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return WorldFrame, self.values()
 
     def entity(self, name: str) -> EntityState:
         for entity in self.entities:
@@ -111,8 +326,5 @@ class WorldFrame:
         raise KeyError(name)
 
 
-#: `EntityState`, `LaneCoordinates` and `WorldFrame` from every field, positionally (the engine's per-step
-#: frames); equal to the objects their constructors give
-entity_state = builder(EntityState)
-lane_coordinates = builder(LaneCoordinates)
-world_frame = builder(WorldFrame)
+for _cls in (BoundingBox, LaneCoordinates, EntityState, WorldFrame):
+    freeze(_cls)
