@@ -33,6 +33,7 @@ MODE = os.environ.get("CARLOS_COMPILE", "")
 #: Python's headers are there and says so when it falls back to pure Python. `carlos --version` tells which.
 COMPILED = [
     "simcore/evaluation/metrics.py",
+    "simcore/stepping.py",
     *(
         f"simcore/scenario/{name}.py"
         for name in (

@@ -15,7 +15,6 @@ from __future__ import annotations
 import functools
 import json
 import platform
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib.metadata import version
@@ -23,10 +22,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from simcore import DISTRIBUTION
-from simcore.errors import BadInput, SimulationError
+from simcore.errors import BadInput
 from simcore.file_version import BoundedCache
 from simcore.plan import RunPoint
 from simcore.spec import SimulationRun, SimulationRunSpec
+from simcore.stepping import FrameReaders, step_to_end
 from simcore.transport.bus import Bus, InProcessBus, Message
 from simcore.transport.world import WorldPublisher
 
@@ -40,11 +40,9 @@ if TYPE_CHECKING:
     from simcore.sensors.loop import PerceptionLoop
     from simcore.v2x.service import V2XService
     from simcore.world.opendrive import OpenDrive
+    from simcore.world.state import WorldFrame
     from simcore.world.sumo import SumoWorld
 
-#: wall seconds between two progress reports of a run (a sweep's run of a tenth of a second reports none: its
-#: end is reported anyway; a report from a worker process costs a queue message and a wake-up of the parent)
-PROGRESS_INTERVAL_S = 0.5
 #: called with (index, simulated seconds so far) while a run progresses
 Progress = Callable[[int, float], None]
 #: called with the engine after the initial state and after every step (e.g. a conformance trace)
@@ -375,53 +373,39 @@ def drive(
         parts.metrics,
         parts.world,
     )
-    index = parts.point.index
     if closed_loop is not None:
         closed_loop.wait_for_nodes(b.name for b in engine.bodies.values() if b.external)
     osi, recorder = parts.osi, parts.recorder
-    if osi is not None:
-        from simcore.osi import GROUND_TRUTH_SCHEMA, OSI_TOPIC
     frames = parts.needs_frames
     frame = engine.frame() if frames else None
-
-    def consume() -> None:
-        assert frame is not None
+    readers = None
+    if frames:
+        ground_truth = None
         if osi is not None and recorder is not None:
-            recorder.write(OSI_TOPIC, GROUND_TRUTH_SCHEMA, osi.encode(frame), frame.time)
-        if metrics is not None:
-            metrics.update(frame)
-        if closed_loop is not None:
-            closed_loop.published(frame.time)
-        world.publish(frame)
-        if perception is not None:
-            perception.step(frame)
-        if v2x is not None:
-            v2x.step(frame)
+            from simcore.osi import GROUND_TRUTH_SCHEMA, OSI_TOPIC
 
-    if frame is not None:
-        consume()
+            def ground_truth(frame: WorldFrame) -> None:
+                recorder.write(OSI_TOPIC, GROUND_TRUTH_SCHEMA, osi.encode(frame), frame.time)
+
+        readers = FrameReaders(
+            world, metrics, ground_truth=ground_truth, closed_loop=closed_loop, perception=perception, v2x=v2x
+        )
+    if readers is not None and frame is not None:
+        readers.take(frame)
     if observe is not None:
         observe(engine)
-    max_steps = round(spec.simulation.max_seconds / spec.simulation.step_seconds)
-    next_report = time.monotonic() + PROGRESS_INTERVAL_S
-    while not engine.ended and engine.step_index < max_steps:
-        if closed_loop is not None:
-            closed_loop.wait((b.name for b in engine.bodies.values() if b.external), engine.time)
-        if frames:
-            frame = engine.step()
-            consume()
-        else:
-            engine.advance()
-        if observe is not None:
-            observe(engine)
-        if progress is not None and time.monotonic() >= next_report:
-            next_report = time.monotonic() + PROGRESS_INTERVAL_S
-            progress(index, engine.time)
-        if deadline is not None and engine.step_index % 100 == 0 and time.monotonic() > deadline:
-            raise SimulationError(
-                f"run exceeded execution.timeoutSeconds={spec.execution.timeout_seconds} "
-                f"at simulated t={engine.time:.1f} s"
-            )
+    frame = step_to_end(
+        engine,
+        readers,
+        round(spec.simulation.max_seconds / spec.simulation.step_seconds),
+        frame,
+        closed_loop=closed_loop,
+        observe=observe,
+        progress=progress,
+        index=parts.point.index,
+        deadline=deadline,
+        timeout_seconds=spec.execution.timeout_seconds,
+    )
     if perception is not None:
         perception.close()
     world.publish_status(frame if frame is not None else engine.frame(), "ended")
