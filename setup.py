@@ -25,12 +25,13 @@ from setuptools.command.build_ext import build_ext
 MODE = os.environ.get("CARLOS_COMPILE", "")
 
 #: The modules of a run's step loop (the scenario engine, its actions, conditions and controllers, the road
-#: network, the SUMO bridge, the metrics), compiled to C extensions by mypyc when a wheel is built (`pip
-#: install .`, tools/build-wheel, the images' wheel stage): the same source as machine code, about a quarter
-#: to a third less CPU per run of a sweep (docs/benchmarks.md). An editable install (`make install`) stays
-#: pure Python, so that an edited file takes effect at once. CARLOS_COMPILE=0 builds a pure-Python wheel,
-#: CARLOS_COMPILE=1 fails the build when it cannot compile; unset, the build compiles when a C compiler and
-#: Python's headers are there and says so when it falls back to pure Python. `carlos --version` tells which.
+#: network, the SUMO bridge, the world frame, the metrics, the loop itself), compiled to C extensions by
+#: mypyc when a wheel is built (`pip install .`, tools/build-wheel, the images' wheel stage): the same
+#: source as machine code, about 40% less CPU per run of a sweep (docs/benchmarks.md). An editable install
+#: (`make install`) stays pure Python, so that an edited file takes effect at once. CARLOS_COMPILE=0 builds
+#: a pure-Python wheel, CARLOS_COMPILE=1 fails the build when it cannot compile; unset, the build compiles
+#: when a C compiler and Python's headers are there and says so when it falls back to pure Python. `carlos
+#: --version` tells which.
 COMPILED = [
     "simcore/evaluation/metrics.py",
     "simcore/stepping.py",
