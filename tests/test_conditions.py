@@ -589,7 +589,7 @@ def test_collision_is_the_overlap_of_the_footprints_near_and_far() -> None:
         ego = Body(car("Ego"))
         other = Body(car("Other"), x=dx, y=dy, heading=heading)
         world = _bodies_world({"Ego": ego, "Other": other})
-        return conditions.collision(m.CollisionCondition("Other"), world, ego)  # type: ignore[arg-type]
+        return conditions.collision(m.CollisionCondition("Other"), world, ego)
 
     assert collides(4.5, 0.0)  # bumper to bumper: touching
     assert collides(4.5 + 0.5 * TOUCH_TOLERANCE, 0.0)
@@ -635,7 +635,7 @@ def test_relative_distance_decided_by_bounds_agrees_with_the_measured_distance()
                 kind,
                 rule,
                 value,
-            )  # type: ignore[arg-type]
+            )
             checked += 1
             centres = world.measure.box_distance_lower_bound(ego, other) + 0.5 * (
                 math.hypot(4.5, 1.8) + math.hypot(12.0, 1.8)

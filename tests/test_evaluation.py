@@ -19,6 +19,7 @@ from simcore.evaluation.metrics import (
     MetricsAccumulator,
     box_distance,
     boxes_overlap,
+    footprint,
     separation,
 )
 from simcore.evaluation.report import index_summary, junit_xml, run_summary
@@ -416,7 +417,7 @@ def test_box_distance_is_invariant_under_rigid_motion(
     def move(box: Box) -> Box:
         corners = tuple((c * x - s * y + tx, s * x + c * y + ty) for x, y in box.corners)
         axes = tuple((c * x - s * y, s * x + c * y) for x, y in box.axes)
-        return Box(corners, axes)  # type: ignore[arg-type]
+        return Box.of_points(corners, axes)
 
     assert box_distance(move(a), move(b)) == pytest.approx(box_distance(a, b), abs=1e-6)
 
@@ -862,3 +863,25 @@ def test_junit_is_written_from_a_stream_in_suite_and_index_order_with_the_docume
     assert empty.endswith(
         '<testsuites name="r" tests="0" failures="0" errors="0" skipped="0" time="0.000" />\n'
     )
+
+
+def test_a_footprint_is_the_state_s_corners_and_axes_as_an_immutable_value() -> None:
+    import copy
+    import pickle
+
+    from simcore.world.state import box_corners
+
+    box = footprint(3.0, -2.0, 0.4, 1.4, 0.2, 4.5, 1.8)
+    c, s = math.cos(0.4), math.sin(0.4)
+    assert box.corners == box_corners(3.0, -2.0, 0.4, 1.4, 0.2, 4.5, 1.8)
+    assert box.axes == ((c, s), (-s, c))
+    assert Box.of_points(box.corners, box.axes) == box and hash(Box.of_points(box.corners, box.axes)) == hash(
+        box
+    )
+    assert pickle.loads(pickle.dumps(box)) == box and copy.copy(box) == box
+    assert box != footprint(3.0, -2.0, 0.4, 1.4, 0.2, 4.5, 1.9)
+    assert repr(box) == f"Box(corners={box.corners!r}, axes={box.axes!r})"
+    with pytest.raises(AttributeError):
+        box.x0 = 1.0  # type: ignore[misc]
+    with pytest.raises(AttributeError):
+        del box.fy  # type: ignore[misc]

@@ -41,8 +41,10 @@ adds it (1.0/0.0) to the metrics before the criteria are evaluated.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from collections.abc import Sequence
+from typing import Any, Final, final
 
+from simcore.world.frozen import freeze
 from simcore.world.state import EntityState, WorldFrame, box_corners
 
 Point = tuple[float, float]
@@ -93,18 +95,113 @@ METRICS: dict[str, str] = {
 KNOWN_METRICS = frozenset(METRICS)
 
 
-class Box(NamedTuple):
-    """A ground-plane footprint: four corners (counter-clockwise) and the two unit axes of the box
-    (forward, left). The axes come from the heading, so they stay valid for degenerate (zero length or
-    width) boxes, and they are the separating-axis candidates of the box."""
+#: the fields of `Box`, in order
+BOX_FIELDS: Final = ("x0", "y0", "x1", "y1", "x2", "y2", "x3", "y3", "fx", "fy", "lx", "ly")
 
-    corners: tuple[Point, Point, Point, Point]
-    axes: tuple[Point, Point]
 
-    @classmethod
-    def of(cls, entity: EntityState) -> Box:
+@final
+class Box:
+    """A ground-plane footprint: four corners, counter-clockwise from front-left ((x0, y0) … (x3, y3)), and
+    the two unit axes of the box, forward (fx, fy) and left (lx, ly). The axes come from the heading, so
+    they stay valid for degenerate (zero length or width) boxes, and they are the separating-axis
+    candidates of the box. Plain float fields, so that the compiled overlap and distance tests read them
+    without unpacking; `corners` and `axes` give them as points."""
+
+    __slots__ = BOX_FIELDS
+    x0: Final[float]
+    y0: Final[float]
+    x1: Final[float]
+    y1: Final[float]
+    x2: Final[float]
+    y2: Final[float]
+    x3: Final[float]
+    y3: Final[float]
+    fx: Final[float]
+    fy: Final[float]
+    lx: Final[float]
+    ly: Final[float]
+
+    def __init__(
+        self,
+        x0: float,
+        y0: float,
+        x1: float,
+        y1: float,
+        x2: float,
+        y2: float,
+        x3: float,
+        y3: float,
+        fx: float,
+        fy: float,
+        lx: float,
+        ly: float,
+    ) -> None:
+        self.x0 = x0
+        self.y0 = y0
+        self.x1 = x1
+        self.y1 = y1
+        self.x2 = x2
+        self.y2 = y2
+        self.x3 = x3
+        self.y3 = y3
+        self.fx = fx
+        self.fy = fy
+        self.lx = lx
+        self.ly = ly
+
+    @staticmethod
+    def of_points(corners: Sequence[Point], axes: Sequence[Point]) -> Box:
+        """The box of four corners (counter-clockwise) and its (forward, left) axes."""
+        (x0, y0), (x1, y1), (x2, y2), (x3, y3) = corners
+        (fx, fy), (lx, ly) = axes
+        return Box(x0, y0, x1, y1, x2, y2, x3, y3, fx, fy, lx, ly)
+
+    @staticmethod
+    def of(entity: EntityState) -> Box:
         b = entity.bbox
         return footprint(entity.x, entity.y, entity.heading, b.center_x, b.center_y, b.length, b.width)
+
+    @property
+    def corners(self) -> tuple[Point, Point, Point, Point]:
+        return (self.x0, self.y0), (self.x1, self.y1), (self.x2, self.y2), (self.x3, self.y3)
+
+    @property
+    def axes(self) -> tuple[Point, Point]:
+        return (self.fx, self.fy), (self.lx, self.ly)
+
+    def values(self) -> tuple[float, ...]:
+        """The fields, in order."""
+        return (
+            self.x0,
+            self.y0,
+            self.x1,
+            self.y1,
+            self.x2,
+            self.y2,
+            self.x3,
+            self.y3,
+            self.fx,
+            self.fy,
+            self.lx,
+            self.ly,
+        )
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Box):
+            return NotImplemented
+        return self.values() == other.values()
+
+    def __hash__(self) -> int:
+        return hash(self.values())
+
+    def __repr__(self) -> str:
+        return f"Box(corners={self.corners!r}, axes={self.axes!r})"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return Box, self.values()
+
+
+freeze(Box)
 
 
 def footprint(
@@ -113,15 +210,16 @@ def footprint(
     """The footprint of a box centred (`center_x`, `center_y`) from a reference point (x, y) in the frame of
     `heading`: the corners `EntityState.corners()` gives, with the box's axes."""
     c, s = math.cos(heading), math.sin(heading)
-    return Box(box_corners(x, y, heading, center_x, center_y, length, width), ((c, s), (-s, c)))
+    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = box_corners(x, y, heading, center_x, center_y, length, width)
+    return Box(x0, y0, x1, y1, x2, y2, x3, y3, c, s, -s, c)
 
 
 def _axis_gap(a: Box, b: Box, ax: float, ay: float) -> float:
     """Gap between the projections of the boxes on the axis (negative when they overlap on it)."""
-    (a0x, a0y), (a1x, a1y), (a2x, a2y), (a3x, a3y) = a.corners
-    (b0x, b0y), (b1x, b1y), (b2x, b2y), (b3x, b3y) = b.corners
-    p0, p1, p2, p3 = a0x * ax + a0y * ay, a1x * ax + a1y * ay, a2x * ax + a2y * ay, a3x * ax + a3y * ay
-    q0, q1, q2, q3 = b0x * ax + b0y * ay, b1x * ax + b1y * ay, b2x * ax + b2y * ay, b3x * ax + b3y * ay
+    p0, p1 = a.x0 * ax + a.y0 * ay, a.x1 * ax + a.y1 * ay
+    p2, p3 = a.x2 * ax + a.y2 * ay, a.x3 * ax + a.y3 * ay
+    q0, q1 = b.x0 * ax + b.y0 * ay, b.x1 * ax + b.y1 * ay
+    q2, q3 = b.x2 * ax + b.y2 * ay, b.x3 * ax + b.y3 * ay
     return max(min(q0, q1, q2, q3) - max(p0, p1, p2, p3), min(p0, p1, p2, p3) - max(q0, q1, q2, q3))
 
 
@@ -130,43 +228,70 @@ def separation(a: Box, b: Box) -> float:
 
     Positive: the boxes are disjoint and at least that far apart (a lower bound of `box_distance`).
     Zero or negative: no candidate axis separates them: they touch or overlap (separating-axis theorem)."""
-    (f1, l1), (f2, l2) = a.axes, b.axes
     return max(
-        _axis_gap(a, b, f1[0], f1[1]),
-        _axis_gap(a, b, l1[0], l1[1]),
-        _axis_gap(a, b, f2[0], f2[1]),
-        _axis_gap(a, b, l2[0], l2[1]),
+        _axis_gap(a, b, a.fx, a.fy),
+        _axis_gap(a, b, a.lx, a.ly),
+        _axis_gap(a, b, b.fx, b.fy),
+        _axis_gap(a, b, b.lx, b.ly),
     )
 
 
 def boxes_overlap(a: Box, b: Box) -> bool:
     """Whether the boxes overlap or touch (within `TOUCH_TOLERANCE`): the separating-axis test.
     Equivalent to `separation(a, b) <= TOUCH_TOLERANCE`, stopping at the first separating axis."""
-    return all(_axis_gap(a, b, ax, ay) <= TOUCH_TOLERANCE for ax, ay in (*a.axes, *b.axes))
+    return (
+        _axis_gap(a, b, a.fx, a.fy) <= TOUCH_TOLERANCE
+        and _axis_gap(a, b, a.lx, a.ly) <= TOUCH_TOLERANCE
+        and _axis_gap(a, b, b.fx, b.fy) <= TOUCH_TOLERANCE
+        and _axis_gap(a, b, b.lx, b.ly) <= TOUCH_TOLERANCE
+    )
 
 
 def _disjoint_distance(a: Box, b: Box) -> float:
     """Distance between two disjoint convex polygons: the nearest pair is a vertex of one and an edge
     of the other (squared distances compared, one square root)."""
     best = math.inf
-    for p, q in ((a.corners, b.corners), (b.corners, a.corners)):
-        for i in range(4):
-            x0, y0 = q[i - 1]
-            x1, y1 = q[i]
-            dx, dy = x1 - x0, y1 - y0
-            length2 = dx * dx + dy * dy
-            for px, py in p:
-                rx, ry = px - x0, py - y0
-                if length2 > 0.0:
-                    t = (rx * dx + ry * dy) / length2
-                    if t > 1.0:
-                        rx, ry = px - x1, py - y1
-                    elif t > 0.0:
-                        rx, ry = rx - t * dx, ry - t * dy
-                d2 = rx * rx + ry * ry
-                if d2 < best:
-                    best = d2
+    for p, q in ((a, b), (b, a)):
+        best = _edge_to_corners(best, q.x3, q.y3, q.x0, q.y0, p)
+        best = _edge_to_corners(best, q.x0, q.y0, q.x1, q.y1, p)
+        best = _edge_to_corners(best, q.x1, q.y1, q.x2, q.y2, p)
+        best = _edge_to_corners(best, q.x2, q.y2, q.x3, q.y3, p)
     return math.sqrt(best)
+
+
+def _edge_to_corners(best: float, x0: float, y0: float, x1: float, y1: float, p: Box) -> float:
+    """The least of `best` and the squared distances from the corners of `p` to the edge (x0, y0)-(x1, y1)."""
+    dx, dy = x1 - x0, y1 - y0
+    length2 = dx * dx + dy * dy
+    best = _to_edge(best, p.x0, p.y0, x0, y0, x1, y1, dx, dy, length2)
+    best = _to_edge(best, p.x1, p.y1, x0, y0, x1, y1, dx, dy, length2)
+    best = _to_edge(best, p.x2, p.y2, x0, y0, x1, y1, dx, dy, length2)
+    return _to_edge(best, p.x3, p.y3, x0, y0, x1, y1, dx, dy, length2)
+
+
+def _to_edge(
+    best: float,
+    px: float,
+    py: float,
+    x0: float,
+    y0: float,
+    x1: float,
+    y1: float,
+    dx: float,
+    dy: float,
+    length2: float,
+) -> float:
+    """The lesser of `best` and the squared distance from (px, py) to the edge from (x0, y0) to (x1, y1)
+    (direction (dx, dy), squared length `length2`)."""
+    rx, ry = px - x0, py - y0
+    if length2 > 0.0:
+        t = (rx * dx + ry * dy) / length2
+        if t > 1.0:
+            rx, ry = px - x1, py - y1
+        elif t > 0.0:
+            rx, ry = rx - t * dx, ry - t * dy
+    d2 = rx * rx + ry * ry
+    return d2 if d2 < best else best
 
 
 def box_distance(a: Box, b: Box) -> float:

@@ -54,7 +54,7 @@ def _box(x: float, y: float, yaw: float, length: float, width: float) -> Box:
     corners = tuple(
         (x + c * dx - s * dy, y + s * dx + c * dy) for dx, dy in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))
     )
-    return Box(corners, ((c, s), (-s, c)))  # type: ignore[arg-type]
+    return Box.of_points(corners, ((c, s), (-s, c)))
 
 
 def _yaw(q: object) -> float:

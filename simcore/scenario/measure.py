@@ -352,16 +352,15 @@ def _extent_along(body: Body, front: bool) -> float:
 def axis_gaps(a: Box, b: Box) -> Point:
     """Gaps between the boxes' projections on a's forward and left axes: positive when b is ahead (left),
     negative behind (right), 0 where the projections overlap."""
-    (fx, fy), (lx, ly) = a.axes
-    return _projection_gap(a, b, fx, fy), _projection_gap(a, b, lx, ly)
+    return _projection_gap(a, b, a.fx, a.fy), _projection_gap(a, b, a.lx, a.ly)
 
 
 def _projection_gap(a: Box, b: Box, ax: float, ay: float) -> float:
     # (unrolled: builtin min and max of the same four values, in the same order, as of a list of them)
-    (a0x, a0y), (a1x, a1y), (a2x, a2y), (a3x, a3y) = a.corners
-    (b0x, b0y), (b1x, b1y), (b2x, b2y), (b3x, b3y) = b.corners
-    p0, p1, p2, p3 = a0x * ax + a0y * ay, a1x * ax + a1y * ay, a2x * ax + a2y * ay, a3x * ax + a3y * ay
-    q0, q1, q2, q3 = b0x * ax + b0y * ay, b1x * ax + b1y * ay, b2x * ax + b2y * ay, b3x * ax + b3y * ay
+    p0, p1 = a.x0 * ax + a.y0 * ay, a.x1 * ax + a.y1 * ay
+    p2, p3 = a.x2 * ax + a.y2 * ay, a.x3 * ax + a.y3 * ay
+    q0, q1 = b.x0 * ax + b.y0 * ay, b.x1 * ax + b.y1 * ay
+    q2, q3 = b.x2 * ax + b.y2 * ay, b.x3 * ax + b.y3 * ay
     a_min, a_max = min(p0, p1, p2, p3), max(p0, p1, p2, p3)
     b_min, b_max = min(q0, q1, q2, q3), max(q0, q1, q2, q3)
     if a_max < b_min - SMALL:
@@ -374,7 +373,7 @@ def _projection_gap(a: Box, b: Box, ax: float, ay: float) -> float:
 def _point_gaps(box: Box, heading: float, x: float, y: float) -> tuple[float, float, float]:
     """(distance, longitudinal, lateral) from a box to a point: the vector from the nearest point of the
     box to the point, in the box's frame; zeros when the point is inside."""
-    point_box = Box(((x, y),) * 4, ((1.0, 0.0), (0.0, 1.0)))
+    point_box = Box(x, y, x, y, x, y, x, y, 1.0, 0.0, 0.0, 1.0)
     if boxes_overlap(box, point_box):
         return 0.0, 0.0, 0.0
     best = (math.inf, 0.0, 0.0)
