@@ -351,8 +351,8 @@ def _in_pool(sweep: _Sweep, workers: int) -> None:
             while in_flight:
                 done, _ = wait(list(in_flight), timeout=DRAIN_INTERVAL_S, return_when=FIRST_COMPLETED)
                 if not done or time.monotonic() >= next_drain:
-                    # progress reports come at most every stepping.PROGRESS_INTERVAL_S per run: polling the queue
-                    # (a selector each time) after every finished index of a quick sweep would cost more
+                    # progress reports come at most every stepping.PROGRESS_INTERVAL_S per run: polling the
+                    # queue (a selector each time) after every finished index of a quick sweep would cost more
                     _drain(progress, sweep.events)
                     next_drain = time.monotonic() + DRAIN_INTERVAL_S
                 for future in done:

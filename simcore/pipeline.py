@@ -376,10 +376,8 @@ def drive(
     if closed_loop is not None:
         closed_loop.wait_for_nodes(b.name for b in engine.bodies.values() if b.external)
     osi, recorder = parts.osi, parts.recorder
-    frames = parts.needs_frames
-    frame = engine.frame() if frames else None
-    readers = None
-    if frames:
+    frame = readers = None
+    if parts.needs_frames:
         ground_truth = None
         if osi is not None and recorder is not None:
             from simcore.osi import GROUND_TRUTH_SCHEMA, OSI_TOPIC
@@ -390,7 +388,7 @@ def drive(
         readers = FrameReaders(
             world, metrics, ground_truth=ground_truth, closed_loop=closed_loop, perception=perception, v2x=v2x
         )
-    if readers is not None and frame is not None:
+        frame = engine.frame()
         readers.take(frame)
     if observe is not None:
         observe(engine)

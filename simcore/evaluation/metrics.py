@@ -42,10 +42,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any, Final, final
+from typing import ClassVar, Final, final
 
 from simcore.world.frozen import freeze
-from simcore.world.state import EntityState, WorldFrame, box_corners
+from simcore.world.state import EntityState, Value, WorldFrame, box_corners
 
 Point = tuple[float, float]
 
@@ -100,7 +100,7 @@ BOX_FIELDS: Final = ("x0", "y0", "x1", "y1", "x2", "y2", "x3", "y3", "fx", "fy",
 
 
 @final
-class Box:
+class Box(Value):
     """A ground-plane footprint: four corners, counter-clockwise from front-left ((x0, y0) … (x3, y3)), and
     the two unit axes of the box, forward (fx, fy) and left (lx, ly). The axes come from the heading, so
     they stay valid for degenerate (zero length or width) boxes, and they are the separating-axis
@@ -108,6 +108,7 @@ class Box:
     without unpacking; `corners` and `axes` give them as points."""
 
     __slots__ = BOX_FIELDS
+    FIELDS: ClassVar[tuple[str, ...]] = BOX_FIELDS
     x0: Final[float]
     y0: Final[float]
     x1: Final[float]
@@ -186,19 +187,8 @@ class Box:
             self.ly,
         )
 
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, Box):
-            return NotImplemented
-        return self.values() == other.values()
-
-    def __hash__(self) -> int:
-        return hash(self.values())
-
     def __repr__(self) -> str:
         return f"Box(corners={self.corners!r}, axes={self.axes!r})"
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        return Box, self.values()
 
 
 freeze(Box)

@@ -11,7 +11,7 @@ read-only; run interpreted, `simcore.world.frozen.freeze` makes them so.
 from __future__ import annotations
 
 import math
-from typing import Any, Final, final
+from typing import Any, ClassVar, Final, Self, final
 
 from simcore.world.frozen import freeze
 
@@ -37,8 +37,37 @@ def box_corners(
     )
 
 
-def _repr(name: str, names: tuple[str, ...], values: tuple[Any, ...]) -> str:
-    return f"{name}({', '.join(f'{n}={v!r}' for n, v in zip(names, values, strict=True))})"
+class Value:
+    """Base of the immutable value classes built on every step (the frame's types, the metrics' footprint):
+    equality and hash over `values()` (instances of the same class only), `Name(field=value, …)` as repr,
+    pickling, and `replace(**changes)` for a copy with some fields changed. A subclass names its fields in
+    order in `FIELDS` (its `__slots__` too), stores each in its `__init__` and gives them in `values()`."""
+
+    __slots__ = ()
+    FIELDS: ClassVar[tuple[str, ...]] = ()
+
+    def values(self) -> tuple[Any, ...]:
+        """The fields, in order."""
+        raise NotImplementedError
+
+    def replace(self, **changes: Any) -> Self:
+        """A copy with `changes` (field=value) made."""
+        return type(self)(**{**dict(zip(self.FIELDS, self.values(), strict=True)), **changes})
+
+    def __eq__(self, other: object) -> bool:
+        if other.__class__ is not self.__class__ or not isinstance(other, Value):
+            return NotImplemented
+        return self.values() == other.values()
+
+    def __hash__(self) -> int:
+        return hash(self.values())
+
+    def __repr__(self) -> str:
+        shown = ", ".join(f"{n}={v!r}" for n, v in zip(self.FIELDS, self.values(), strict=True))
+        return f"{type(self).__name__}({shown})"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return type(self), self.values()
 
 
 #: the fields of `BoundingBox`, in order
@@ -46,11 +75,12 @@ BOUNDING_BOX_FIELDS: Final = ("center_x", "center_y", "center_z", "length", "wid
 
 
 @final
-class BoundingBox:
+class BoundingBox(Value):
     """An entity's box in its own frame (OpenSCENARIO BoundingBox): centre relative to the entity's
     reference point (for vehicles the rear axle, on the ground), x forward, y left, z up; dimensions in m."""
 
     __slots__ = BOUNDING_BOX_FIELDS
+    FIELDS: ClassVar[tuple[str, ...]] = BOUNDING_BOX_FIELDS
     center_x: Final[float]
     center_y: Final[float]
     center_z: Final[float]
@@ -72,31 +102,18 @@ class BoundingBox:
         """The fields, in order."""
         return (self.center_x, self.center_y, self.center_z, self.length, self.width, self.height)
 
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, BoundingBox):
-            return NotImplemented
-        return self.values() == other.values()
-
-    def __hash__(self) -> int:
-        return hash(self.values())
-
-    def __repr__(self) -> str:
-        return _repr("BoundingBox", BOUNDING_BOX_FIELDS, self.values())
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        return BoundingBox, self.values()
-
 
 #: the fields of `LaneCoordinates`, in order
 LANE_COORDINATES_FIELDS: Final = ("road_id", "lane_id", "s", "t", "offset")
 
 
 @final
-class LaneCoordinates:
+class LaneCoordinates(Value):
     """Where an entity is on the OpenDRIVE road network (`road_id`, `lane_id`, `s` along the reference
     line, `t` lateral from it, `offset` from the lane centre)."""
 
     __slots__ = LANE_COORDINATES_FIELDS
+    FIELDS: ClassVar[tuple[str, ...]] = LANE_COORDINATES_FIELDS
     road_id: Final[str]
     lane_id: Final[int]
     s: Final[float]
@@ -113,20 +130,6 @@ class LaneCoordinates:
     def values(self) -> tuple[str, int, float, float, float]:
         """The fields, in order."""
         return (self.road_id, self.lane_id, self.s, self.t, self.offset)
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, LaneCoordinates):
-            return NotImplemented
-        return self.values() == other.values()
-
-    def __hash__(self) -> int:
-        return hash(self.values())
-
-    def __repr__(self) -> str:
-        return _repr("LaneCoordinates", LANE_COORDINATES_FIELDS, self.values())
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        return LaneCoordinates, self.values()
 
 
 #: the fields of `EntityState`, in order
@@ -150,7 +153,7 @@ ENTITY_STATE_FIELDS: Final = (
 
 
 @final
-class EntityState:
+class EntityState(Value):
     """One entity at one instant. Pose is of the entity's reference point in the `map` frame (ENU, REP-103):
     x east, y north, z up; heading counter-clockwise from x, in rad. Speeds in m/s, accelerations in m/s².
     `object_type` is "vehicle", "pedestrian" or "miscObject"; `category` the OpenSCENARIO category (car,
@@ -158,6 +161,7 @@ class EntityState:
     longitudinal; `controlled_by` "scenario", "sumo" or "external"."""
 
     __slots__ = ENTITY_STATE_FIELDS
+    FIELDS: ClassVar[tuple[str, ...]] = ENTITY_STATE_FIELDS
     name: Final[str]
     object_type: Final[str]
     category: Final[str]
@@ -228,24 +232,6 @@ class EntityState:
             self.controlled_by,
         )
 
-    def replace(self, **changes: Any) -> EntityState:
-        """A copy with `changes` (field=value) made."""
-        return EntityState(**{**dict(zip(ENTITY_STATE_FIELDS, self.values(), strict=True)), **changes})
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, EntityState):
-            return NotImplemented
-        return self.values() == other.values()
-
-    def __hash__(self) -> int:
-        return hash(self.values())
-
-    def __repr__(self) -> str:
-        return _repr("EntityState", ENTITY_STATE_FIELDS, self.values())
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        return EntityState, self.values()
-
     @property
     def velocity(self) -> tuple[float, float]:
         return self.speed * math.cos(self.heading), self.speed * math.sin(self.heading)
@@ -267,13 +253,14 @@ WORLD_FRAME_FIELDS: Final = ("step", "time", "entities", "ego", "events", "ghost
 
 
 @final
-class WorldFrame:
+class WorldFrame(Value):
     """Every entity at simulated time `time` (s); `step` counts from 0. `events`: the storyboard's
     transitions this step, for logs. `ghosts`: a FollowGhost controller's ghost (`<entity>_ghost`,
     esmini's), published (odometry, tf) but no object of the world: sensors, metrics, V2X and ground truth
     see only `entities`."""
 
     __slots__ = WORLD_FRAME_FIELDS
+    FIELDS: ClassVar[tuple[str, ...]] = WORLD_FRAME_FIELDS
     step: Final[int]
     time: Final[float]
     entities: Final[tuple[EntityState, ...]]
@@ -300,24 +287,6 @@ class WorldFrame:
     def values(self) -> tuple[Any, ...]:
         """The fields, in order."""
         return (self.step, self.time, self.entities, self.ego, self.events, self.ghosts)
-
-    def replace(self, **changes: Any) -> WorldFrame:
-        """A copy with `changes` (field=value) made."""
-        return WorldFrame(**{**dict(zip(WORLD_FRAME_FIELDS, self.values(), strict=True)), **changes})
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, WorldFrame):
-            return NotImplemented
-        return self.values() == other.values()
-
-    def __hash__(self) -> int:
-        return hash(self.values())
-
-    def __repr__(self) -> str:
-        return _repr("WorldFrame", WORLD_FRAME_FIELDS, self.values())
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        return WorldFrame, self.values()
 
     def entity(self, name: str) -> EntityState:
         for entity in self.entities:
