@@ -865,6 +865,27 @@ def test_junit_is_written_from_a_stream_in_suite_and_index_order_with_the_docume
     )
 
 
+@given(
+    coords,
+    coords,
+    st.floats(-10.0, 10.0),
+    st.floats(-3.0, 3.0),
+    st.floats(-1.0, 1.0),
+    st.floats(0.0, 20.0),
+    st.floats(0.0, 4.0),
+)
+def test_a_footprint_has_the_very_corners_of_the_state(
+    x: float, y: float, heading: float, center_x: float, center_y: float, length: float, width: float
+) -> None:
+    """The metrics' footprint repeats `box_corners`' arithmetic (without its tuples): the same floats, so
+    that the metrics, the conditions and the published states agree to the bit."""
+    from simcore.world.state import box_corners
+
+    box = footprint(x, y, heading, center_x, center_y, length, width)
+    assert box.corners == box_corners(x, y, heading, center_x, center_y, length, width)
+    assert box.axes == ((math.cos(heading), math.sin(heading)), (-math.sin(heading), math.cos(heading)))
+
+
 def test_a_footprint_is_the_state_s_corners_and_axes_as_an_immutable_value() -> None:
     import copy
     import pickle

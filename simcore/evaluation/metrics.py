@@ -45,12 +45,15 @@ from collections.abc import Sequence
 from typing import ClassVar, Final, final
 
 from simcore.world.frozen import freeze
-from simcore.world.state import EntityState, Value, WorldFrame, box_corners
+from simcore.world.state import EntityState, Value, WorldFrame
 
 Point = tuple[float, float]
 
 #: Boxes closer than this (m) count as touching, hence colliding (absorbs rounding of rotated corners).
 TOUCH_TOLERANCE = 1e-9
+#: Slack (m) on the bounding circles whose distance bounds the footprints' from below (more than any
+#: rounding of theirs): only where that bound is below the least distance so far is the exact one computed.
+BOUND_MARGIN = 1e-6
 #: Lane width (m) assumed for the "same lane" test of entities without lane coordinates.
 LANE_WIDTH = 3.5
 #: Time headway is only sampled while the ego is faster than this (m/s).
@@ -199,9 +202,27 @@ def footprint(
 ) -> Box:
     """The footprint of a box centred (`center_x`, `center_y`) from a reference point (x, y) in the frame of
     `heading`: the corners `EntityState.corners()` gives, with the box's axes."""
+    # the arithmetic of `box_corners` (the same floats: tests/test_evaluation.py), without its tuples: this
+    # runs for most steps
     c, s = math.cos(heading), math.sin(heading)
-    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = box_corners(x, y, heading, center_x, center_y, length, width)
-    return Box(x0, y0, x1, y1, x2, y2, x3, y3, c, s, -s, c)
+    cx = x + c * center_x - s * center_y
+    cy = y + s * center_x + c * center_y
+    hl, hw = length / 2, width / 2
+    lc, ls, wc, ws = hl * c, hl * s, hw * c, hw * s
+    return Box(
+        cx + lc - ws,
+        cy + ls + wc,
+        cx - lc - ws,
+        cy - ls + wc,
+        cx - lc + ws,
+        cy - ls - wc,
+        cx + lc + ws,
+        cy + ls - wc,
+        c,
+        s,
+        -s,
+        c,
+    )
 
 
 def _axis_gap(a: Box, b: Box, ax: float, ay: float) -> float:
@@ -210,7 +231,35 @@ def _axis_gap(a: Box, b: Box, ax: float, ay: float) -> float:
     p2, p3 = a.x2 * ax + a.y2 * ay, a.x3 * ax + a.y3 * ay
     q0, q1 = b.x0 * ax + b.y0 * ay, b.x1 * ax + b.y1 * ay
     q2, q3 = b.x2 * ax + b.y2 * ay, b.x3 * ax + b.y3 * ay
-    return max(min(q0, q1, q2, q3) - max(p0, p1, p2, p3), min(p0, p1, p2, p3) - max(q0, q1, q2, q3))
+    # min and max as the built-ins take them (the first of equals), unrolled: compiled, no float is boxed
+    p_lo = p_hi = p0
+    if p1 < p_lo:
+        p_lo = p1
+    if p1 > p_hi:
+        p_hi = p1
+    if p2 < p_lo:
+        p_lo = p2
+    if p2 > p_hi:
+        p_hi = p2
+    if p3 < p_lo:
+        p_lo = p3
+    if p3 > p_hi:
+        p_hi = p3
+    q_lo = q_hi = q0
+    if q1 < q_lo:
+        q_lo = q1
+    if q1 > q_hi:
+        q_hi = q1
+    if q2 < q_lo:
+        q_lo = q2
+    if q2 > q_hi:
+        q_hi = q2
+    if q3 < q_lo:
+        q_lo = q3
+    if q3 > q_hi:
+        q_hi = q3
+    gap, other = q_lo - p_hi, p_lo - q_hi
+    return other if other > gap else gap
 
 
 def separation(a: Box, b: Box) -> float:
@@ -218,12 +267,15 @@ def separation(a: Box, b: Box) -> float:
 
     Positive: the boxes are disjoint and at least that far apart (a lower bound of `box_distance`).
     Zero or negative: no candidate axis separates them: they touch or overlap (separating-axis theorem)."""
-    return max(
-        _axis_gap(a, b, a.fx, a.fy),
-        _axis_gap(a, b, a.lx, a.ly),
-        _axis_gap(a, b, b.fx, b.fy),
-        _axis_gap(a, b, b.lx, b.ly),
-    )
+    gap = _axis_gap(a, b, a.fx, a.fy)  # the max of the four, as the built-in takes it (unrolled, unboxed)
+    other = _axis_gap(a, b, a.lx, a.ly)
+    if other > gap:
+        gap = other
+    other = _axis_gap(a, b, b.fx, b.fy)
+    if other > gap:
+        gap = other
+    other = _axis_gap(a, b, b.lx, b.ly)
+    return other if other > gap else gap
 
 
 def boxes_overlap(a: Box, b: Box) -> bool:
@@ -314,7 +366,10 @@ class MetricsAccumulator:
         "_min_thw_with",
         "_min_ttc",
         "_min_ttc_with",
-        "_prev",
+        "_prev_speed",
+        "_prev_time",
+        "_prev_x",
+        "_prev_y",
         "_sim_seconds",
         "_speed_integral",
     )
@@ -326,7 +381,8 @@ class MetricsAccumulator:
         self._sim_seconds: float | None = None
         self._has_ego = False
         self._first_time = 0.0
-        self._prev: tuple[float, float, float, float] | None = None  # time, x, y, |speed| of the ego
+        # time, x, y, |speed| of the ego in the last frame (`_has_ego`: there was one)
+        self._prev_time = self._prev_x = self._prev_y = self._prev_speed = 0.0
         self._distance = 0.0
         self._speed_integral = 0.0
         self._max_speed = 0.0
@@ -366,13 +422,12 @@ class MetricsAccumulator:
 
         # Ego kinematics.
         speed = abs(ego.speed)
-        if self._prev is None:
+        if not self._has_ego:
             self._first_time = t
         else:
-            t0, x0, y0, v0 = self._prev
-            self._distance += math.hypot(ego.x - x0, ego.y - y0)
-            self._speed_integral += 0.5 * (v0 + speed) * (t - t0)
-        self._prev = (t, ego.x, ego.y, speed)
+            self._distance += math.hypot(ego.x - self._prev_x, ego.y - self._prev_y)
+            self._speed_integral += 0.5 * (self._prev_speed + speed) * (t - self._prev_time)
+        self._prev_time, self._prev_x, self._prev_y, self._prev_speed = t, ego.x, ego.y, speed
         self._has_ego = True
         if speed > self._max_speed:
             self._max_speed = speed
@@ -390,25 +445,25 @@ class MetricsAccumulator:
         bx, by = bbox.center_x, bbox.center_y
         ex, ey = ego.x + fx * bx - fy * by, ego.y + fy * bx + fx * by
         e_hl, e_hw = bbox.length / 2, bbox.width / 2
-        e_radius = math.hypot(e_hl, e_hw)
+        # the bounding circle's radius, a bit wide (`lower` below stays a lower bound whatever the rounding)
+        e_radius = math.sqrt(e_hl * e_hl + e_hw * e_hw) + BOUND_MARGIN
         e_speed = ego.speed
         e_lane = ego.lane
         half_lane = self._lane_width / 2
         ego_box: Box | None = None
-        cos, sin, hypot = math.cos, math.sin, math.hypot
 
         for other in frame.entities:
             if other is ego:
                 continue
             o_heading = other.heading
-            oc, os = cos(o_heading), sin(o_heading)
+            oc, os = math.cos(o_heading), math.sin(o_heading)
             bbox = other.bbox
             bx, by = bbox.center_x, bbox.center_y
             dx, dy = (other.x + oc * bx - os * by) - ex, (other.y + os * bx + oc * by) - ey
             o_hl, o_hw = bbox.length / 2, bbox.width / 2
 
             # Collision and distance; the bounding circles give a cheap lower bound of the distance.
-            lower = hypot(dx, dy) - e_radius - hypot(o_hl, o_hw)
+            lower = math.sqrt(dx * dx + dy * dy) - e_radius - math.sqrt(o_hl * o_hl + o_hw * o_hw)
             if lower <= TOUCH_TOLERANCE or lower < self._min_distance:
                 if ego_box is None:
                     ego_box = Box.of(ego)
@@ -433,7 +488,7 @@ class MetricsAccumulator:
             lon = dx * fx + dy * fy
             lat = dy * fx - dx * fy
             rel = o_heading - h
-            cr, sr = cos(rel), abs(sin(rel))
+            cr, sr = math.cos(rel), abs(math.sin(rel))
             acr = abs(cr)
             o_lon = o_hl * acr + o_hw * sr
             o_lat = o_hl * sr + o_hw * acr
@@ -467,7 +522,7 @@ class MetricsAccumulator:
     def result(self) -> dict[str, float]:
         """The metrics so far; a metric that was never defined is absent (see the module docstring)."""
         out: dict[str, float] = {}
-        if self._has_ego and self._prev is not None:
+        if self._has_ego:
             out["collision"] = 1.0 if self._collision else 0.0
             if self._collision_time is not None:
                 out["collisionTime"] = float(self._collision_time)
@@ -482,8 +537,8 @@ class MetricsAccumulator:
             out["maxDeceleration"] = float(self._max_dec)
             out["maxAcceleration"] = float(self._max_acc)
             out["maxSpeed"] = float(self._max_speed)
-            duration = self._prev[0] - self._first_time
-            out["meanSpeed"] = float(self._speed_integral / duration if duration > 0 else self._prev[3])
+            duration = self._prev_time - self._first_time
+            out["meanSpeed"] = float(self._speed_integral / duration if duration > 0 else self._prev_speed)
             out["egoDistance"] = float(self._distance)
         if self._sim_seconds is not None:
             out["simSeconds"] = float(self._sim_seconds)
