@@ -52,7 +52,9 @@ class FrameReaders:
             self.metrics.update(frame)
         if self.closed_loop is not None:
             self.closed_loop.published(frame.time)
-        self.world.publish(frame)
+        world = self.world
+        if world.consumers:  # (what `publish` checks first: the call is skipped too)
+            world.publish(frame)
         if self.perception is not None:
             self.perception.step(frame)
         if self.v2x is not None:

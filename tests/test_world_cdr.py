@@ -179,6 +179,33 @@ def test_bus_messages_carry_the_direct_cdr_and_build_objects_on_demand() -> None
         assert message.obj().__msgtype__ == message.typename
 
 
+def test_a_world_publisher_publishes_only_while_someone_consumes_also_one_who_came_later() -> None:
+    """`FrameReaders` reads `consumers` every step: an in-process bus's subscriptions as they grow."""
+    from simcore.stepping import FrameReaders
+
+    frame = _frame(random.Random(3))
+    bus = InProcessBus()
+    world = WorldPublisher(bus)
+    readers = FrameReaders(world)
+    assert not world.has_consumers() and not world.consumers
+    readers.take(frame)  # nobody: nothing built, nothing sent
+    got: list[Message] = []
+    bus.subscribe("/clock", got.append)
+    assert world.has_consumers()
+    readers.take(frame)
+    assert [m.topic for m in got] == ["/clock"]
+
+    class Transport:  # a bus to other processes (loopback, DDS): its consumers are elsewhere
+        def advertise(self, topic: str, typename: str) -> Any:
+            raise AssertionError("not published here")
+
+        def subscribe(self, pattern: str, callback: Any) -> None: ...
+
+        def close(self) -> None: ...
+
+    assert WorldPublisher(Transport()).has_consumers()
+
+
 def _record(path: Path, frames: list[WorldFrame], write: Any) -> bytes:
     with McapRecorder(path, topics=["*"], compression="zstd") as recorder:
         for frame in frames:

@@ -225,13 +225,13 @@ def footprint(
     )
 
 
-def _axis_gap(a: Box, b: Box, ax: float, ay: float) -> float:
-    """Gap between the projections of the boxes on the axis (negative when they overlap on it)."""
+def projections(a: Box, b: Box, ax: float, ay: float) -> tuple[float, float, float, float]:
+    """(least, greatest) projection of a's corners on the axis (ax, ay), then b's: the built-in min and max
+    of the four, as they take them (the first of equals), unrolled so that compiled, no float is boxed."""
     p0, p1 = a.x0 * ax + a.y0 * ay, a.x1 * ax + a.y1 * ay
     p2, p3 = a.x2 * ax + a.y2 * ay, a.x3 * ax + a.y3 * ay
     q0, q1 = b.x0 * ax + b.y0 * ay, b.x1 * ax + b.y1 * ay
     q2, q3 = b.x2 * ax + b.y2 * ay, b.x3 * ax + b.y3 * ay
-    # min and max as the built-ins take them (the first of equals), unrolled: compiled, no float is boxed
     p_lo = p_hi = p0
     if p1 < p_lo:
         p_lo = p1
@@ -258,8 +258,14 @@ def _axis_gap(a: Box, b: Box, ax: float, ay: float) -> float:
         q_lo = q3
     if q3 > q_hi:
         q_hi = q3
+    return p_lo, p_hi, q_lo, q_hi
+
+
+def _axis_gap(a: Box, b: Box, ax: float, ay: float) -> float:
+    """Gap between the projections of the boxes on the axis (negative when they overlap on it)."""
+    p_lo, p_hi, q_lo, q_hi = projections(a, b, ax, ay)
     gap, other = q_lo - p_hi, p_lo - q_hi
-    return other if other > gap else gap
+    return other if other > gap else gap  # max(gap, other)
 
 
 def separation(a: Box, b: Box) -> float:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Protocol
 
-from simcore.evaluation.metrics import Box, box_distance, boxes_overlap, footprint
+from simcore.evaluation.metrics import Box, box_distance, boxes_overlap, footprint, projections
 from simcore.scenario import paths
 from simcore.scenario.motion import reference_heading
 
@@ -356,13 +356,7 @@ def axis_gaps(a: Box, b: Box) -> Point:
 
 
 def _projection_gap(a: Box, b: Box, ax: float, ay: float) -> float:
-    # (unrolled: builtin min and max of the same four values, in the same order, as of a list of them)
-    p0, p1 = a.x0 * ax + a.y0 * ay, a.x1 * ax + a.y1 * ay
-    p2, p3 = a.x2 * ax + a.y2 * ay, a.x3 * ax + a.y3 * ay
-    q0, q1 = b.x0 * ax + b.y0 * ay, b.x1 * ax + b.y1 * ay
-    q2, q3 = b.x2 * ax + b.y2 * ay, b.x3 * ax + b.y3 * ay
-    a_min, a_max = min(p0, p1, p2, p3), max(p0, p1, p2, p3)
-    b_min, b_max = min(q0, q1, q2, q3), max(q0, q1, q2, q3)
+    a_min, a_max, b_min, b_max = projections(a, b, ax, ay)
     if a_max < b_min - SMALL:
         return b_min - a_max
     if a_min > b_max + SMALL:

@@ -12,7 +12,7 @@ Topic names and types are DESIGN.md's; messages are rosbags dataclasses of the j
 from __future__ import annotations
 
 import fnmatch
-from collections.abc import Callable
+from collections.abc import Callable, Sized
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -123,6 +123,10 @@ class InProcessBus:
 
     def has_subscribers(self) -> bool:
         return bool(self._subscriptions)
+
+    def subscriptions(self) -> Sized:
+        """The subscriptions, live (it grows with each `subscribe`): empty while nobody subscribed."""
+        return self._subscriptions
 
     def wants(self, topic: str) -> bool:
         """Whether a message on `topic` reaches any subscriber."""

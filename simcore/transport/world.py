@@ -8,8 +8,13 @@ noticeable import) is never imported.
 
 from __future__ import annotations
 
+from collections.abc import Sized
+
 from simcore.transport.bus import Bus, InProcessBus, Publisher
 from simcore.world.state import WorldFrame
+
+#: the consumers of a transport to other processes: never none
+_ELSEWHERE: Sized = (True,)
 
 STATUS_TOPIC = "/carlos/status"
 STATUS_TYPE = "diagnostic_msgs/msg/DiagnosticStatus"
@@ -22,6 +27,9 @@ class WorldPublisher:
     def __init__(self, bus: Bus) -> None:
         self.bus = bus
         self._publishers: dict[str, Publisher] = {}
+        #: true while a world topic may have a consumer (read every step, so a plain attribute): an in-process
+        #: bus's subscriptions as they grow, else always (the consumers of a transport are elsewhere)
+        self.consumers: Sized = bus.subscriptions() if isinstance(bus, InProcessBus) else _ELSEWHERE
 
     def _publisher(self, topic: str, typename: str) -> Publisher:
         publisher = self._publishers.get(topic)
@@ -35,11 +43,10 @@ class WorldPublisher:
 
     def has_consumers(self) -> bool:
         """Whether any world topic may have a consumer (else publishing a frame does nothing)."""
-        bus = self.bus
-        return bus.has_subscribers() if isinstance(bus, InProcessBus) else True
+        return bool(self.consumers)
 
     def publish(self, frame: WorldFrame) -> None:
-        if not self.has_consumers():
+        if not self.consumers:
             return
         from simcore.transport import messages
 
