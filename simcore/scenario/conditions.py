@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from simcore.errors import BadInput
 from simcore.evaluation.metrics import boxes_overlap
 from simcore.scenario import model as m
-from simcore.scenario.measure import LARGE, directional
+from simcore.scenario.measure import LARGE, bounding_radii, directional
 from simcore.scenario.motion import wrap_angle
 from simcore.scenario.positions import fixed_point
 from simcore.scenario.storyboard import state_of, transition_of
@@ -327,8 +327,7 @@ def relative_distance(c: m.RelativeDistanceCondition, world: ScenarioWorld, body
         lower = measure.box_distance_lower_bound(body, other)
         if euclid and lower > c.value + 1e-6:
             return compare(c.rule, lower, c.value)
-        a, b = body.entity.box, other.entity.box
-        upper = lower + 0.5 * (math.hypot(a.length, a.width) + math.hypot(b.length, b.width))
+        upper = lower + bounding_radii(body, other)
         if upper < c.value - 1e-6:
             return compare(c.rule, upper, c.value)
     measured = measure.to_entity(body, other, c.coordinate_system, c.distance_type, c.freespace)

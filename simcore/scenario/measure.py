@@ -233,7 +233,8 @@ class Measure:
         cb, sb = math.cos(b.heading), math.sin(b.heading)
         dx = (b.x + cb * bb.center_x - sb * bb.center_y) - (a.x + ca * ba.center_x - sa * ba.center_y)
         dy = (b.y + sb * bb.center_x + cb * bb.center_y) - (a.y + sa * ba.center_x + ca * ba.center_y)
-        return math.hypot(dx, dy) - 0.5 * (math.hypot(ba.length, ba.width) + math.hypot(bb.length, bb.width))
+        # (math.sqrt: compiled, a native call, where math.hypot is a Python call; a bound needs no last bit)
+        return math.sqrt(dx * dx + dy * dy) - bounding_radii(a, b)
 
     def box(self, body: Body) -> Box:
         """The entity's bounding box footprint (this step)."""
@@ -333,6 +334,15 @@ class Measure:
             magnitude = max(abs(value) - extent, 0.0)
             value = math.copysign(magnitude, value)
         return value if signed else abs(value)
+
+
+def bounding_radii(a: Body, b: Body) -> float:
+    """The radii of the two bodies' bounding circles, added: half of each box's diagonal."""
+    ba, bb = a.entity.box, b.entity.box
+    return 0.5 * (
+        math.sqrt(ba.length * ba.length + ba.width * ba.width)
+        + math.sqrt(bb.length * bb.length + bb.width * bb.width)
+    )
 
 
 def _sign(value: float) -> float:
