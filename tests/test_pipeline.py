@@ -125,7 +125,7 @@ def test_a_scenario_without_sumo_driven_entities_starts_no_sumo_and_builds_no_me
         "from simcore.manifest import load_manifest\n"
         f"report = execute(load_manifest({str(manifest)!r}), base_dir=Path({str(tmp_path)!r}))\n"
         "print(report.exit_code)\n"
-        "print(sorted(m for m in ('libsumo', 'simcore.transport.messages', 'rosbags.typesys', "
+        "print(sorted(m for m in ('libsumo', 'libsumo._libsumo', 'simcore.transport.messages', 'rosbags.typesys', "
         "'carlos_operator', 'simcore.world.sumo') if m in sys.modules))\n"
     )
     done = subprocess.run(

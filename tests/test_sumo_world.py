@@ -27,8 +27,8 @@ from simcore.world.opendrive import OpenDrive
 network, road_file = Path(sys.argv[1]), Path(sys.argv[2])
 road = OpenDrive.from_file(road_file)
 starts = []
-plain_start = libsumo.start
-libsumo.start = lambda args, **kw: starts.append(1) or plain_start(args, **kw)
+plain_start = libsumo.simulation.start
+libsumo.simulation.start = lambda args, **kw: starts.append(1) or plain_start(args, **kw)
 
 def run(seed, reuse, fail):
     trajectory = []
@@ -105,6 +105,45 @@ def test_runs_with_the_xml_parser_kept_initialised_are_the_runs_without(tmp_path
     assert all(state for state in plain)
     assert held == [plain, plain]
     assert result["starts"] == 3  # each run started SUMO (none kept): the hold is what starts and closes use
+
+
+#: the runs of `_DRIVE` in a process that never imported the libsumo package before SumoWorld loaded libsumo's
+#: API (simcore/world/libsumo_api.py), then once more after importing the package
+_LEAN_RUNS = (
+    _DRIVE.replace("import libsumo\n", "", 1)
+    .replace("plain_start = libsumo.simulation.start\n", "", 1)
+    .replace(
+        "libsumo.simulation.start = lambda args, **kw: starts.append(1) or plain_start(args, **kw)\n", "", 1
+    )
+    + """
+first = run(3, True, False)
+apart = sorted(m for m in ("libsumo", "traci", "sumolib", "numpy", "pyproj", "lxml") if m in sys.modules)
+from simcore.world import libsumo_api
+api = libsumo_api.load()
+import libsumo
+shared = [
+    api is sys.modules["libsumo.libsumo"], api.TraCIException is libsumo.TraCIException, libsumo_api.load() is libsumo
+]
+try:
+    api.vehicle.getSpeed("nobody")
+except libsumo.TraCIException:
+    shared.append(True)
+print(json.dumps({"runs": [first, run(3, True, False), run(3, False, False)], "apart": apart, "shared": shared}))
+"""
+)
+
+
+def test_libsumo_loaded_apart_from_its_package_runs_as_the_package(tmp_path: Path) -> None:
+    """SumoWorld loads libsumo's API without the package's imports (traci, sumolib, numpy, pyproj, lxml: ~0.25
+    CPU s of a worker's first run): the runs are the package's, bit for bit, and a later `import libsumo`
+    shares its modules and classes (a TraCIException raised is the one the package names)."""
+    network, road_file = _highway(tmp_path)
+    reference = _printed(_DRIVE + "print(json.dumps(run(3, False, False)))", network, road_file)
+    result = _printed(_LEAN_RUNS, network, road_file)
+    assert result["apart"] == []
+    assert result["shared"] == [True, True, True, True]
+    assert len(reference) == 201 and all(reference)
+    assert result["runs"] == [reference, reference, reference]
 
 
 def _rewrite_keeping_size_and_times(path: Path, data: bytes) -> None:

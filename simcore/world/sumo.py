@@ -4,8 +4,8 @@ Every scenario entity is a SUMO vehicle, so SUMO's drivers see it (leaders, gaps
 scenario moves are placed each step (`moveTo` while on their edge, `moveToXY` elsewhere); entities assigned the
 SUMO driver (controller property `carlos.driver: sumo`) are moved by SUMO's car-following model and read back.
 
-libsumo holds one simulation per process (a worker runs its runs one after another); `import libsumo`
-happens only here, when a run starts, never at operator import time.
+libsumo holds one simulation per process (a worker runs its runs one after another); libsumo is loaded
+(`simcore.world.libsumo_api`) only here, when a run starts, never at operator import time.
 """
 
 from __future__ import annotations
@@ -244,8 +244,10 @@ class SumoWorld:
     def __init__(self, network: Path, step_seconds: float, seed: int, *, reuse: bool = True) -> None:
         """SUMO on `network` at time 0. `reuse`: the process's parked simulation when it was started the same
         way (simcore/world/sumo_warm.py), and parked again by `close()`; else started and closed."""
-        import libsumo  # heavy import: only where a run really starts
-        from libsumo import _libsumo
+        from simcore.world import libsumo_api
+
+        libsumo = libsumo_api.load()  # loads libsumo (~0.1 s): only where a run really starts
+        _libsumo = libsumo_api.compiled()
 
         self._sumo: Any = libsumo
         # the calls of every step go to libsumo's SWIG functions, bound once: the `libsumo.vehicle` and

@@ -97,7 +97,7 @@ def _at_exit(sumo: Any, folder: Path, pid: int) -> None:
     if os.getpid() == pid:
         if _PARKED.key is not None:
             with contextlib.suppress(Exception):
-                sumo.close()
+                sumo.simulation.close()
         shutil.rmtree(folder, ignore_errors=True)
 
 
@@ -155,7 +155,7 @@ def without_inert_parts(state: str) -> str:
 
 
 def start(sumo: Any, args: list[str], seed: int, key: Hashable | None) -> bool:
-    """A simulation as `sumo.start(args)` with `--seed seed` makes it. With a `key` (what identifies the
+    """A simulation as `sumo.simulation.start(args)` with `--seed seed` makes it. With a `key` (what identifies the
     arguments and the files they name, the seed aside): the parked one, reset for `seed`, when it was parked
     with an equal key (True), else a fresh start, prepared for parking when its saved state passes its check
     (False). Without: a fresh start, closed by `close`. A parked simulation not reused is closed first. Errors
@@ -165,10 +165,10 @@ def start(sumo: Any, args: list[str], seed: int, key: Hashable | None) -> bool:
         return True
     if parked is not None:
         with contextlib.suppress(Exception):
-            sumo.close()
+            sumo.simulation.close()
     _PARKED.template = None
     command = [*args, "--seed", str(seed), *SAVE_RNG]
-    sumo.start(command)
+    sumo.simulation.start(command)
     if key is not None and key not in _PARKED.refused:
         try:
             saved = _save_and_check(sumo, seed)
@@ -178,8 +178,8 @@ def start(sumo: Any, args: list[str], seed: int, key: Hashable | None) -> bool:
             _PARKED.template = None
             _PARKED.refused.add(key)
             with contextlib.suppress(Exception):
-                sumo.close()
-            sumo.start(command)
+                sumo.simulation.close()
+            sumo.simulation.start(command)
     return False
 
 
@@ -215,7 +215,7 @@ def close(sumo: Any, vehicles: Iterable[str], key: Hashable | None) -> None:
         _PARKED.key = key
         return
     with contextlib.suppress(Exception):  # already closed or never started: nothing to release
-        sumo.close()
+        sumo.simulation.close()
 
 
 def _clear(sumo: Any, vehicles: Iterable[str]) -> bool:
@@ -227,7 +227,7 @@ def _clear(sumo: Any, vehicles: Iterable[str]) -> bool:
         for name in dict.fromkeys((*vehicles, *sumo.vehicle.getIDList())):
             with contextlib.suppress(sumo.TraCIException):  # already left the network
                 sumo.vehicle.remove(name)
-        sumo.simulationStep()
+        sumo.simulation.step()
         return True
     except Exception:  # any failure only means: not parked
         return False
