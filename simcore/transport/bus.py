@@ -98,7 +98,7 @@ class _InProcessPublisher:
 @dataclass
 class InProcessBus:
     """Synchronous in-process delivery, in subscription order. A subscription may narrow its pattern with
-    `wants(topic)` (e.g. a recorder's topic filter); `wants`/`has_subscribers` tell a publisher whether a
+    `wants(topic)` (e.g. a recorder's topic filter); `wants`/`subscriptions` tell a publisher whether a
     message would reach anyone, so that nothing is built for no one."""
 
     _subscriptions: list[tuple[str, Callback, Callable[[str], bool] | None]] = field(default_factory=list)
@@ -120,9 +120,6 @@ class InProcessBus:
     def subscriber_count(self, topic: str) -> int:
         """Subscriptions to `topic` by its name (glob patterns such as a recorder's `*` do not count)."""
         return sum(1 for pattern, _, _ in self._subscriptions if pattern == topic)
-
-    def has_subscribers(self) -> bool:
-        return bool(self._subscriptions)
 
     def subscriptions(self) -> Sized:
         """The subscriptions, live (it grows with each `subscribe`): empty while nobody subscribed."""

@@ -2,7 +2,7 @@
 `TraCIException`) without what the `libsumo` package imports around it.
 
 `import libsumo` also imports traci, and through it sumolib, numpy, pyproj and lxml, and looks up pyarrow's
-version: ~0.15 CPU s of a worker's first run (or of a single `carlos run` with a SUMO-driven entity) that a
+version: ~0.25 CPU s of a worker's first run (or of a single `carlos run` with a SUMO-driven entity) that a
 run never uses. So the package's compiled module and its SWIG wrapper are loaded as the package would load
 them, under the same names (`libsumo._libsumo`, `libsumo.libsumo`), without running the package's
 `__init__`: a later `import libsumo` (a user's module, a test) runs it and finds both loaded, so the package
