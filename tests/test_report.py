@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import re
 import subprocess
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from simcore.report.html import constant_parameters, criteria_rows, margin, swept_parameters, worst_runs
 from tests.chromium import find_chromium, load_page
@@ -217,6 +220,37 @@ def test_sweep_plots_are_svg_with_a_cell_per_value_pair_and_a_bar_per_bin() -> N
     assert many.count("a2.4 2.4") == 2 * 30
     hist = distributions({"minDistance": [1.0, 2.0, 2.5, 3.0, 9.0], "flat": [0.0, 1.0]})
     assert hist.count('fill="#1565c0"') >= 4 and ">minDistance<" in hist and ">flat<" in hist
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(
+        st.one_of(
+            st.floats(-1e6, 1e6, allow_nan=False),
+            st.sampled_from([0.0, -0.0, 0.1, 0.2, 0.30000000000000004, 1.0, 2.5, 1e-300]),
+        ),
+        max_size=60,
+    ),
+    st.integers(1, 25),
+)
+def test_a_histogram_is_numpys_without_numpy(values: list[float], bins: int) -> None:
+    """The report's metric distributions count what `numpy.histogram` counts, with its very edges."""
+    np = pytest.importorskip("numpy")
+    from simcore.report.plots import histogram
+
+    counts, edges = histogram(values, bins)
+    expected_counts, expected_edges = np.histogram(np.asarray(values, dtype=float), bins=bins)
+    assert counts == expected_counts.tolist()
+    assert edges == expected_edges.tolist()
+
+
+def test_a_histogram_refuses_what_numpy_refuses() -> None:
+    from simcore.report.plots import histogram
+
+    for bad in ([1.0, math.inf], [math.nan, 2.0], [2.0, math.nan]):
+        with pytest.raises(ValueError):
+            histogram(bad, 5)
+    assert histogram([3.0], 2) == ([0, 1], [2.5, 3.0, 3.5])  # one value: its bins span it ± 0.5
 
 
 def test_runs_table_columns_are_stable_with_units_and_a_missing_birds_eye_says_why(tmp_path: Path) -> None:

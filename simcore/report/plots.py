@@ -6,6 +6,7 @@ Each function takes plain data and returns the `<svg>` element's text; nothing h
 
 from __future__ import annotations
 
+import bisect
 import html
 import math
 from collections.abc import Mapping, Sequence
@@ -212,11 +213,34 @@ def axis_label(metric: str) -> str:
     return f"{metric} ({u})" if u else metric
 
 
+def histogram(values: Sequence[float], bins: int) -> tuple[list[int], list[float]]:
+    """(counts, edges) of `bins` equal bins from the least to the greatest value: what `numpy.histogram(values,
+    bins)` gives, the same edges (`numpy.linspace`'s: ``i * step + least``, the last the greatest) and counts
+    (each bin half-open but the last), without importing numpy (a report of a sweep without recordings
+    needs it for nothing else: ~0.07 s of `carlos run`'s end). One value: the bins span it ± 0.5. A value
+    that is not finite is a ValueError, as numpy raises."""
+    if bins < 1:
+        raise ValueError(f"bins must be positive, not {bins}")
+    if not values:
+        least, greatest = 0.0, 1.0
+    else:
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError("autodetected range of the values is not finite")
+        least, greatest = float(min(values)), float(max(values))
+    if least == greatest:
+        least, greatest = least - 0.5, greatest + 0.5
+    step = (greatest - least) / bins
+    edges = [i * step + least for i in range(bins)] + [greatest]
+    counts = [0] * bins
+    for value in values:
+        i = bisect.bisect_right(edges, value) - 1
+        counts[min(i, bins - 1)] += 1  # the greatest value: in the last bin, which is closed
+    return counts, edges
+
+
 def distributions(values: Mapping[str, Sequence[float]], columns: int = 4) -> str:
     """One histogram per metric (small multiples): x the metric's value with its unit, y the number of
     runs."""
-    import numpy as np
-
     names = list(values)
     rows = max(1, math.ceil(len(names) / columns))
     cell_w, cell_h = 864.0 / columns, 196.0
@@ -224,9 +248,9 @@ def distributions(values: Mapping[str, Sequence[float]], columns: int = 4) -> st
     for i, name in enumerate(names):
         ox, oy = (i % columns) * cell_w, (i // columns) * cell_h
         px, py, pw, ph = ox + 40.0, oy + 24.0, cell_w - 52.0, cell_h - 64.0
-        data = np.asarray(values[name], dtype=float)
-        counts, edges = np.histogram(data, bins=min(20, max(5, len(data) // 2)))
-        top = max(int(counts.max()), 1)
+        data = [float(v) for v in values[name]]
+        counts, edges = histogram(data, bins=min(20, max(5, len(data) // 2)))
+        top = max(max(counts), 1)
         span = float(edges[-1] - edges[0]) or 1.0
         out.append(_text(ox + cell_w / 2, oy + 14.0, name, size=9))
         out.append(_text(px + pw / 2, py + ph + 26.0, axis_label(name), size=8))

@@ -745,7 +745,6 @@ class ScenarioEngine:
         world (not placed yet, deleted) is in no frame — no topic, recording, sensor or metric sees it at a
         stale position — except the ego, which metrics measure from."""
         states = self._states
-        state_of = self._state_of
         ego = self.ego
         if self.ghosts is None:
             entities = []
@@ -753,8 +752,8 @@ class ScenarioEngine:
                 if b.gone and b.name != ego:
                     continue
                 state = states.get(b.name)
-                if state is None:
-                    state = states[b.name] = state_of(b)
+                if state is None:  # (called directly: compiled, a native call, not a bound method's)
+                    state = states[b.name] = self._state_of(b)
                 entities.append(state)
             return WorldFrame(self.step_index, self.time, tuple(entities), self.ego, (), ())
         ghost_names = self.ghosts.names
