@@ -454,13 +454,13 @@ class OpenDrive:
         most = 2.0 * spacing + 1.0  # the longest Newton step either way
         least = -2.0 * spacing - 1.0
         g, lo, hi = road.geometry_span(s)
-        g_s, frame, straight = g.s, g.frame, g.straight  # the record's, asked again only on leaving it
+        g_s, straight = g.s, g.straight  # the record's, asked again only on leaving it
         for _ in range(30):
             if not lo <= s < hi:  # left the record: as road.reference_xyh(s) and road.curvature(s)
                 g, lo, hi = road.geometry_span(s)
-                g_s, frame, straight = g.s, g.frame, g.straight
+                g_s, straight = g.s, g.straight
             ds = s - g_s
-            x, y, h, c, sn = frame(ds if ds >= 0.0 else 0.0)
+            x, y, h, c, sn = g.frame(ds if ds >= 0.0 else 0.0)  # (compiled: a native call, no bound method)
             at = s
             dx, dy = px - x, py - y
             along = dx * c + dy * sn
