@@ -877,8 +877,9 @@ def test_junit_is_written_from_a_stream_in_suite_and_index_order_with_the_docume
 def test_a_footprint_has_the_very_corners_of_the_state(
     x: float, y: float, heading: float, center_x: float, center_y: float, length: float, width: float
 ) -> None:
-    """The metrics' footprint repeats `box_corners`' arithmetic (without its tuples): the same floats, so
-    that the metrics, the conditions and the published states agree to the bit."""
+    """The metrics' footprint and the states' corners are the same floats (one arithmetic,
+    `state.corner_coordinates`), so that the metrics, the conditions and the published states agree to the
+    bit."""
     from simcore.world.state import box_corners
 
     box = footprint(x, y, heading, center_x, center_y, length, width)

@@ -45,7 +45,7 @@ from collections.abc import Sequence
 from typing import ClassVar, Final, final
 
 from simcore.world.frozen import freeze
-from simcore.world.state import EntityState, Value, WorldFrame
+from simcore.world.state import EntityState, Value, WorldFrame, corner_coordinates
 
 Point = tuple[float, float]
 
@@ -202,62 +202,39 @@ def footprint(
 ) -> Box:
     """The footprint of a box centred (`center_x`, `center_y`) from a reference point (x, y) in the frame of
     `heading`: the corners `EntityState.corners()` gives, with the box's axes."""
-    # the arithmetic of `box_corners` (the same floats: tests/test_evaluation.py), without its tuples: this
-    # runs for most steps
-    c, s = math.cos(heading), math.sin(heading)
-    cx = x + c * center_x - s * center_y
-    cy = y + s * center_x + c * center_y
-    hl, hw = length / 2, width / 2
-    lc, ls, wc, ws = hl * c, hl * s, hw * c, hw * s
-    return Box(
-        cx + lc - ws,
-        cy + ls + wc,
-        cx - lc - ws,
-        cy - ls + wc,
-        cx - lc + ws,
-        cy - ls - wc,
-        cx + lc + ws,
-        cy + ls - wc,
-        c,
-        s,
-        -s,
-        c,
+    x0, y0, x1, y1, x2, y2, x3, y3, c, s = corner_coordinates(
+        x, y, heading, center_x, center_y, length, width
     )
+    return Box(x0, y0, x1, y1, x2, y2, x3, y3, c, s, -s, c)
+
+
+def _least_greatest(v0: float, v1: float, v2: float, v3: float) -> tuple[float, float]:
+    """`min(v0, v1, v2, v3)` and `max(v0, v1, v2, v3)` as the built-ins take them (the first of equals),
+    written out: compiled, no float is boxed (the built-ins of four arguments stay Python calls)."""
+    least = greatest = v0
+    if v1 < least:
+        least = v1
+    if v1 > greatest:
+        greatest = v1
+    if v2 < least:
+        least = v2
+    if v2 > greatest:
+        greatest = v2
+    if v3 < least:
+        least = v3
+    if v3 > greatest:
+        greatest = v3
+    return least, greatest
 
 
 def projections(a: Box, b: Box, ax: float, ay: float) -> tuple[float, float, float, float]:
-    """(least, greatest) projection of a's corners on the axis (ax, ay), then b's: the built-in min and max
-    of the four, as they take them (the first of equals), unrolled so that compiled, no float is boxed."""
-    p0, p1 = a.x0 * ax + a.y0 * ay, a.x1 * ax + a.y1 * ay
-    p2, p3 = a.x2 * ax + a.y2 * ay, a.x3 * ax + a.y3 * ay
-    q0, q1 = b.x0 * ax + b.y0 * ay, b.x1 * ax + b.y1 * ay
-    q2, q3 = b.x2 * ax + b.y2 * ay, b.x3 * ax + b.y3 * ay
-    p_lo = p_hi = p0
-    if p1 < p_lo:
-        p_lo = p1
-    if p1 > p_hi:
-        p_hi = p1
-    if p2 < p_lo:
-        p_lo = p2
-    if p2 > p_hi:
-        p_hi = p2
-    if p3 < p_lo:
-        p_lo = p3
-    if p3 > p_hi:
-        p_hi = p3
-    q_lo = q_hi = q0
-    if q1 < q_lo:
-        q_lo = q1
-    if q1 > q_hi:
-        q_hi = q1
-    if q2 < q_lo:
-        q_lo = q2
-    if q2 > q_hi:
-        q_hi = q2
-    if q3 < q_lo:
-        q_lo = q3
-    if q3 > q_hi:
-        q_hi = q3
+    """(least, greatest) projection of a's corners on the axis (ax, ay), then b's."""
+    p_lo, p_hi = _least_greatest(
+        a.x0 * ax + a.y0 * ay, a.x1 * ax + a.y1 * ay, a.x2 * ax + a.y2 * ay, a.x3 * ax + a.y3 * ay
+    )
+    q_lo, q_hi = _least_greatest(
+        b.x0 * ax + b.y0 * ay, b.x1 * ax + b.y1 * ay, b.x2 * ax + b.y2 * ay, b.x3 * ax + b.y3 * ay
+    )
     return p_lo, p_hi, q_lo, q_hi
 
 

@@ -37,8 +37,9 @@ def load() -> Any:
         return loaded
     try:
         return _load_apart()
-    except Exception:  # another layout of the package: load it the usual way
-        sys.modules.pop("libsumo.libsumo", None)
+    except (
+        Exception
+    ):  # another layout of the package: load it the usual way (`_module` left nothing half-made)
         import libsumo
 
         return libsumo

@@ -18,23 +18,45 @@ from simcore.world.frozen import freeze
 Corners = tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]]
 
 
-def box_corners(
+#: a box's ground-plane corners, counter-clockwise from front-left, as flat coordinates (x0, y0, …, x3, y3),
+#: then the cosine and sine of its heading
+CornerCoordinates = tuple[float, float, float, float, float, float, float, float, float, float]
+
+
+def corner_coordinates(
     x: float, y: float, heading: float, center_x: float, center_y: float, length: float, width: float
-) -> Corners:
+) -> CornerCoordinates:
     """The ground-plane corners of a box centred (`center_x`, `center_y`) in the frame of a reference point
-    (x, y) with `heading`, counter-clockwise from front-left (one arithmetic for states, metrics and
-    conditions, so their footprints are the same floats)."""
+    (x, y) with `heading`, counter-clockwise from front-left, as plain floats, then cos and sin of `heading`:
+    the one arithmetic of states' corners (`box_corners`), the metrics' footprint and the conditions', so
+    their footprints are the same floats (compiled, plain floats come back unboxed)."""
     c, s = math.cos(heading), math.sin(heading)
     cx = x + c * center_x - s * center_y
     cy = y + s * center_x + c * center_y
     hl, hw = length / 2, width / 2
     lc, ls, wc, ws = hl * c, hl * s, hw * c, hw * s
     return (
-        (cx + lc - ws, cy + ls + wc),
-        (cx - lc - ws, cy - ls + wc),
-        (cx - lc + ws, cy - ls - wc),
-        (cx + lc + ws, cy + ls - wc),
+        cx + lc - ws,
+        cy + ls + wc,
+        cx - lc - ws,
+        cy - ls + wc,
+        cx - lc + ws,
+        cy - ls - wc,
+        cx + lc + ws,
+        cy + ls - wc,
+        c,
+        s,
     )
+
+
+def box_corners(
+    x: float, y: float, heading: float, center_x: float, center_y: float, length: float, width: float
+) -> Corners:
+    """`corner_coordinates`' corners as points."""
+    x0, y0, x1, y1, x2, y2, x3, y3, _, _ = corner_coordinates(
+        x, y, heading, center_x, center_y, length, width
+    )
+    return (x0, y0), (x1, y1), (x2, y2), (x3, y3)
 
 
 class Value:
