@@ -8,9 +8,12 @@
     time, each on a copy of the file with that run's parameter values (esmini drives Ego by its script where
     CARLOS hands it to SUMO, as the file asks). Each of BENCH_SWEEP_ROUNDS rounds (default 1) runs carlos,
     esmini, esmini, carlos, so that a drift of the host's speed weighs on both sides alike; means are shown.
+    Each carlos sweep writes into an output folder of its own (nothing deleted until the end).
 (c) simulated seconds per wall second per core, warm, in one process: the run pipeline
     (`simcore.pipeline.simulate`, what `carlos run` workers and the simcore pod call) vs the bare engine
-    (`ScenarioEngine.advance` in a loop) on the corpus cut-in.
+    (`ScenarioEngine.advance` in a loop) on the corpus cut-in: BENCH_PASS_ROUNDS rounds (default 15) of
+    BENCH_PASSES passes (default 10) of each, interleaved; each rate from its median round. The pipeline's passes share one output folder
+    (recording off: a pass writes nothing into it).
 
 What runs is what a user installs: this checkout's wheel, built by tools/build-wheel (the step loop's modules
 compiled by mypyc where a C compiler is found, as `pip install` builds it; CARLOS_COMPILE=0 for the
@@ -53,6 +56,7 @@ REPEAT = int(os.environ.get("BENCH_REPEAT", "3"))
 SWEEP = int(os.environ.get("BENCH_SWEEP", "200"))
 PASSES = int(os.environ.get("BENCH_PASSES", "10"))
 SWEEP_ROUNDS = int(os.environ.get("BENCH_SWEEP_ROUNDS", "1"))
+PASS_ROUNDS = int(os.environ.get("BENCH_PASS_ROUNDS", "15"))
 BEFORE = Path(os.environ["BENCH_BEFORE"]).resolve() if os.environ.get("BENCH_BEFORE") else None
 PURE = os.environ.get("BENCH_PURE") == "1"
 CORPUS = Path(os.environ.get("CARLOS_ESMINI_CORPUS", ""))
@@ -197,9 +201,11 @@ def pipeline_vs_engine(scenario: Path, work: Path) -> tuple[float, float, float,
     run = loaded[0] if isinstance(loaded, tuple) else loaded
     point = Plan(run.spec)[0]
 
+    out = work / "pipeline-out"  # one folder for every pass: without recording a run writes nothing there
+    out.mkdir(exist_ok=True)
+
     def pipeline() -> float:
-        with tempfile.TemporaryDirectory() as out:
-            return simulate(run, point, scenario, Path(out)).sim_seconds
+        return simulate(run, point, scenario, out).sim_seconds
 
     def engine(road_once: bool = False) -> float:
         loaded_scenario = load_scenario(scenario)
@@ -212,13 +218,20 @@ def pipeline_vs_engine(scenario: Path, work: Path) -> tuple[float, float, float,
             eng.advance()
         return eng.time
 
-    rates = []
-    sim = 0.0
-    for job in (pipeline, engine, lambda: engine(road_once=True)):
+    jobs: list[Callable[[], float]] = [pipeline, engine, lambda: engine(road_once=True)]
+    for job in jobs:
         job()  # warm-up
-        started = time.perf_counter()
-        sim = sum(job() for _ in range(PASSES))
-        rates.append(sim / (time.perf_counter() - started))
+    # rounds of PASSES passes of each, the order reversed every other round (a drift of the host's speed
+    # weighs on all alike); each rate from the median round (a round a busy host slowed counts as one)
+    seconds: list[list[float]] = [[] for _ in jobs]
+    sim = 0.0
+    for k in range(PASS_ROUNDS):
+        order = list(enumerate(jobs))
+        for i, job in order if k % 2 == 0 else reversed(order):
+            started = time.perf_counter()
+            sim = sum(job() for _ in range(PASSES))
+            seconds[i].append(time.perf_counter() - started)
+    rates = [sim / statistics.median(each) for each in seconds]
     return sim / PASSES, rates[0], rates[1], rates[2]
 
 
@@ -283,8 +296,15 @@ def main() -> None:
             with ThreadPoolExecutor(max_workers=2) as pool:
                 list(pool.map(lambda p: timed(esmini_command(binary, p), esmini_dir), variants))
 
+        rounds = itertools.count()
+
         def carlos_sweep(env: dict[str, str]) -> None:
-            timed([str(CARLOS), "run", str(sweep), "--fresh", "--parallel", "2"], work, env)
+            # each round into a folder of its own, none deleted until the end: `--fresh` over the previous
+            # round's results would replace its 2,000 files, and on a file system without a journal (ext4
+            # without one skips inodes freed in the last minutes when it allocates one) every file the round
+            # creates would then pay a scan past the ones freed before it
+            out = (work / f"sweep-{next(rounds)}").as_uri()
+            timed([str(CARLOS), "run", str(sweep), "--fresh", "--parallel", "2", "-o", out], work, env)
 
         for label, env in envs.items():
             # rounds of carlos, esmini, esmini, carlos (ABBA): a drift of the host's speed during the

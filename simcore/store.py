@@ -19,9 +19,9 @@ reader never sees a half-written object under its final key.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import shutil
-import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -51,6 +51,10 @@ def _umask() -> int:
 
 #: mode of the files a FileStore writes: 0666 less the process umask, as `open()` would create them
 _FILE_MODE = 0o666 & ~_umask()
+#: a FileStore's temporary files: created, never opened if they exist, not inherited by child processes
+_CREATE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+#: numbers the temporary files of this process (`<prefix><name>.<pid>.<n>`)
+_TMP_COUNTER = itertools.count()
 
 
 class StoreError(CarlosError, RuntimeError):
@@ -197,6 +201,7 @@ class FileStore:
 
     def __init__(self, root: str | os.PathLike[str]) -> None:
         self.root = Path(root).expanduser().absolute()
+        self._root = str(self.root)
 
     def __repr__(self) -> str:
         return f"FileStore({str(self.root)!r})"
@@ -204,30 +209,58 @@ class FileStore:
     def _path(self, key: str) -> Path:
         return self.root.joinpath(*_check_key(key).split("/"))
 
+    def _create(self, key: str) -> tuple[int, str, str]:
+        """(descriptor, temporary path, final path) of a new object: an empty temporary file next to where
+        the object goes (its folders made when missing), opened for writing, with an ordinary file's mode."""
+        target = os.path.join(self._root, *_check_key(key).split("/"))
+        directory, name = os.path.split(target)
+        for _ in range(100):  # a name taken (left by a killed process of the same pid): the next one
+            tmp = os.path.join(directory, f"{_TMP_PREFIX}{name}.{os.getpid()}.{next(_TMP_COUNTER)}")
+            try:
+                return os.open(tmp, _CREATE_FLAGS, _FILE_MODE), tmp, target
+            except FileNotFoundError:  # the object's folder does not exist yet
+                try:
+                    os.makedirs(directory, exist_ok=True)
+                except OSError as exc:
+                    raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
+            except FileExistsError:
+                continue
+            except OSError as exc:
+                raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
+        raise StoreError(f"cannot write {target}: no free temporary name next to it")
+
+    @staticmethod
+    def _abandon(tmp: str, target: str, exc: BaseException) -> None:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
+
     @contextlib.contextmanager
     def _atomic(self, key: str) -> Iterator[IO[bytes]]:
-        target = self._path(key)
-        try:
-            target.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=_TMP_PREFIX + target.name + ".")
-        except OSError as exc:
-            raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
+        fd, tmp, target = self._create(key)
         try:
             with os.fdopen(fd, "wb") as f:
                 yield f
-                f.flush()
-                os.chmod(tmp, _FILE_MODE)  # mkstemp makes 0600; results are ordinary files
             os.replace(tmp, target)
         except BaseException as exc:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            if isinstance(exc, OSError):
-                raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
+            self._abandon(tmp, target, exc)
             raise
 
     def put_bytes(self, key: str, data: bytes) -> None:
-        with self._atomic(key) as f:
-            f.write(data)
+        # the object's bytes in one write (a loop for what one write leaves), no file object around them
+        fd, tmp, target = self._create(key)
+        try:
+            try:
+                view = memoryview(data)
+                while view:
+                    view = view[os.write(fd, view) :]
+            finally:
+                os.close(fd)
+            os.replace(tmp, target)
+        except BaseException as exc:
+            self._abandon(tmp, target, exc)
+            raise
 
     def sync(self) -> None:
         """Make every object written so far (by any process) durable: one syncfs of the store's file system
