@@ -67,7 +67,7 @@ COMPILED = [
     ),
     *(
         f"simcore/world/{name}.py"
-        for name in ("opendrive", "road_geometry", "road_model", "state", "sumo", "sumo_lanes")
+        for name in ("native_calls", "opendrive", "road_geometry", "road_model", "state", "sumo", "sumo_lanes")
     ),
 ]
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from simcore.errors import SimulationError
 
@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 #: wall seconds between two progress reports of a run (a sweep's run of a tenth of a second reports none: its
 #: end is reported anyway; a report from a worker process costs a queue message and a wake-up of the parent)
-PROGRESS_INTERVAL_S = 0.5
+PROGRESS_INTERVAL_S: Final = 0.5
 
 
 class FrameReaders:

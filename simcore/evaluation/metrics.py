@@ -45,21 +45,22 @@ from collections.abc import Sequence
 from typing import ClassVar, Final, final
 
 from simcore.world.frozen import freeze
+from simcore.world.native_calls import hypot
 from simcore.world.state import EntityState, Value, WorldFrame, corner_coordinates
 
 Point = tuple[float, float]
 
 #: Boxes closer than this (m) count as touching, hence colliding (absorbs rounding of rotated corners).
-TOUCH_TOLERANCE = 1e-9
+TOUCH_TOLERANCE: Final = 1e-9
 #: Slack (m) on the bounding circles whose distance bounds the footprints' from below (more than any
 #: rounding of theirs): only where that bound is below the least distance so far is the exact one computed.
-BOUND_MARGIN = 1e-6
+BOUND_MARGIN: Final = 1e-6
 #: Lane width (m) assumed for the "same lane" test of entities without lane coordinates.
-LANE_WIDTH = 3.5
+LANE_WIDTH: Final = 3.5
 #: Time headway is only sampled while the ego is faster than this (m/s).
-HEADWAY_MIN_SPEED = 0.1
+HEADWAY_MIN_SPEED: Final = 0.1
 #: Time to collision is only sampled while the closing speed is above this (m/s).
-TTC_MIN_CLOSING_SPEED = 0.01
+TTC_MIN_CLOSING_SPEED: Final = 0.01
 
 #: Every metric name this module (or the runner, for `stopTriggered`) can produce, with what it means
 #: when it is absent from `result()`.
@@ -408,7 +409,7 @@ class MetricsAccumulator:
         if not self._has_ego:
             self._first_time = t
         else:
-            self._distance += math.hypot(ego.x - self._prev_x, ego.y - self._prev_y)
+            self._distance += hypot(ego.x - self._prev_x, ego.y - self._prev_y)
             self._speed_integral += 0.5 * (self._prev_speed + speed) * (t - self._prev_time)
         self._prev_time, self._prev_x, self._prev_y, self._prev_speed = t, ego.x, ego.y, speed
         self._has_ego = True

@@ -4,7 +4,7 @@ rules that let a controller override an action (`make_runtime`)."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from simcore.errors import BadInput
 from simcore.scenario import actions, core_actions
@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from simcore.scenario.motion import Body
 
 #: private action type → its runtime (constructed with the world, the actor and the action)
-PRIVATE_ACTIONS: dict[type, Callable[[ActionWorld, Body, Any], Runtime]] = {
+PRIVATE_ACTIONS: Final[dict[type, Callable[[ActionWorld, Body, Any], Runtime]]] = {
     m.SpeedAction: core_actions.SpeedRuntime,
     m.LaneChangeAction: core_actions.LaneChangeRuntime,
     m.TeleportAction: core_actions.TeleportRuntime,
@@ -35,7 +35,7 @@ PRIVATE_ACTIONS: dict[type, Callable[[ActionWorld, Body, Any], Runtime]] = {
 }
 
 # the actions an active external controller does not override
-_KEPT_UNDER_EXTERNAL_CONTROL = (m.TeleportAction, m.NoMotionAction, m.AssignRouteAction)
+_KEPT_UNDER_EXTERNAL_CONTROL: Final = (m.TeleportAction, m.NoMotionAction, m.AssignRouteAction)
 
 
 class IgnoredRuntime(Instant):

@@ -4,21 +4,22 @@ speed profiles, synchronisation. Each sets the motion of its actor; the engine m
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from simcore.errors import BadInput
 from simcore.scenario import model as m
 from simcore.scenario import paths
 from simcore.scenario.motion import Body, lane_at_t, shape_value, wrap_angle
 from simcore.scenario.runtime import Instant, Runtime
+from simcore.world.native_calls import atan2, hypot
 
 if TYPE_CHECKING:
     from simcore.scenario.action_world import ActionWorld
     from simcore.scenario.world import Pose
     from simcore.world.opendrive import OpenDrive
 
-_BIG = 1e10  # no limit (esmini's LARGE_NUMBER)
-_EPS = 1e-10
+_BIG: Final = 1e10  # no limit (esmini's LARGE_NUMBER)
+_EPS: Final = 1e-10
 
 
 class NoMotionRuntime(Instant):
@@ -405,7 +406,7 @@ class LateralDistanceRuntime(Runtime):
         if ref.lateral_velocity != 0.0 and ref.road_id is not None and abs(ref.speed) > 0.1:
             pose = road.road_to_world(ref.road_id, ref.s, road.lane_center_t(ref.road_id, ref.lane_id, ref.s))
             travel = pose.heading if ref.direction > 0 else pose.heading + math.pi
-            drift = math.atan2(ref.lateral_velocity * ref.direction, abs(ref.speed))
+            drift = atan2(ref.lateral_velocity * ref.direction, abs(ref.speed))
             # esmini turns a lane-changing entity by the lateral rate at the start of the step: about the
             # mean of the heading it had and the one this step's lateral motion gives
             heading = ref.heading + 0.5 * wrap_angle(travel + drift + ref.heading_offset - ref.heading)
@@ -849,7 +850,7 @@ class SynchronizeRuntime(Runtime):
             s_target, off = self._projections[key]
             if off <= self.ON_PATH:
                 return abs(s_target - mover.s)
-            return math.hypot(target[0] - body.x, target[1] - body.y)
+            return hypot(target[0] - body.x, target[1] - body.y)
         road = self.world.road
         if road is not None and body.road_id is not None and body.speed < 0:
             # reversing toward a target behind: the distance either way along the road (esmini's |ds|)

@@ -11,7 +11,7 @@ import math
 import operator
 from collections.abc import Callable
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from simcore.errors import BadInput
 from simcore.evaluation.metrics import boxes_overlap
@@ -20,12 +20,13 @@ from simcore.scenario.measure import LARGE, bounding_radii, directional
 from simcore.scenario.motion import wrap_angle
 from simcore.scenario.positions import fixed_point
 from simcore.scenario.storyboard import state_of, transition_of
+from simcore.world.native_calls import hypot
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
 
-_COMPARE: dict[str, Callable[[Any, Any], Any]] = {
+_COMPARE: Final[dict[str, Callable[[Any, Any], Any]]] = {
     "greaterThan": operator.gt,
     "lessThan": operator.lt,
     "equalTo": lambda a, b: abs(a - b) < 1e-9 if isinstance(a, float) else a == b,
@@ -258,7 +259,7 @@ def relative_speed(c: m.RelativeSpeedCondition, world: ScenarioWorld, body: Body
 
 #: m: boxes whose bounding circles are this far apart do not collide (their separating-axis gap is at least
 #: 1/√2 of it, far above `TOUCH_TOLERANCE`), so their footprints are not built
-APART = 1e-3
+APART: Final = 1e-3
 
 
 def collision(c: m.CollisionCondition, world: ScenarioWorld, body: Body) -> bool:
@@ -294,12 +295,13 @@ def bind_collision(c: m.CollisionCondition, world: ScenarioWorld) -> EntityTest:
     return with_any
 
 
-REACH_ANGLE_TOLERANCE = 0.05  # rad: esmini's ReachPosition with an Orientation wants the heading within
+#: rad: esmini's ReachPosition with an Orientation wants the heading within
+REACH_ANGLE_TOLERANCE: Final = 0.05
 
 
 def reach_position(c: m.ReachPositionCondition, world: ScenarioWorld, body: Body) -> bool:
     x, y, _, h = fixed_point(world, c.position)
-    if math.hypot(body.x - x, body.y - y) >= c.tolerance:
+    if hypot(body.x - x, body.y - y) >= c.tolerance:
         return False
     if getattr(c.position, "orientation", None) is not None:
         # a position with an Orientation is reached with that heading only, within 0.05 rad, both read in
@@ -439,7 +441,7 @@ ValueBinder = Callable[[Any, "ScenarioWorld"], Bound]
 EntityBinder = Callable[[Any, "ScenarioWorld"], EntityTest]
 
 #: value condition type → its evaluation
-VALUE_CONDITIONS: dict[type, ValueEvaluator] = {
+VALUE_CONDITIONS: Final[dict[type, ValueEvaluator]] = {
     m.SimulationTimeCondition: simulation_time,
     m.StoryboardElementStateCondition: storyboard_element_state,
     m.ParameterCondition: stored_value,
@@ -451,18 +453,18 @@ VALUE_CONDITIONS: dict[type, ValueEvaluator] = {
 
 #: entity condition type → its evaluation for one triggering entity, bound to one run, where binding saves
 #: work at every evaluation
-ENTITY_BINDERS: dict[type, EntityBinder] = {
+ENTITY_BINDERS: Final[dict[type, EntityBinder]] = {
     m.CollisionCondition: bind_collision,
 }
 
 #: value condition type → its evaluation bound to one run, where binding saves work at every evaluation
-VALUE_BINDERS: dict[type, ValueBinder] = {
+VALUE_BINDERS: Final[dict[type, ValueBinder]] = {
     m.SimulationTimeCondition: bind_simulation_time,
     m.StoryboardElementStateCondition: bind_storyboard_element_state,
 }
 
 #: entity condition type → its evaluation for one triggering entity
-ENTITY_CONDITIONS: dict[type, EntityEvaluator] = {
+ENTITY_CONDITIONS: Final[dict[type, EntityEvaluator]] = {
     m.SpeedCondition: speed,
     m.AccelerationCondition: acceleration,
     m.TraveledDistanceCondition: traveled_distance,

@@ -18,20 +18,21 @@ esmini's vehicle model (vehicle.cpp), as these controllers use it:
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from simcore.scenario import model as m
 from simcore.scenario.measure import axis_gaps
 from simcore.scenario.motion import lane_at_t, wrap_angle
+from simcore.world.native_calls import atan2, hypot
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
 
-MAX_WHEEL_ANGLE = math.radians(60.0)
-SMALL = 1e-10  # esmini's SMALL_NUMBER
-NO_ROAD_SPEED_LIMIT = 70 / 3.6  # esmini's speed limit off every road
-_BIG = 1e10  # esmini's LARGE_NUMBER
+MAX_WHEEL_ANGLE: Final = math.radians(60.0)
+SMALL: Final = 1e-10  # esmini's SMALL_NUMBER
+NO_ROAD_SPEED_LIMIT: Final = 70 / 3.6  # esmini's speed limit off every road
+_BIG: Final = 1e10  # esmini's LARGE_NUMBER
 
 
 class Vehicle:
@@ -93,7 +94,7 @@ class Vehicle:
 
 def put(world: ScenarioWorld, body: Body, vehicle: Vehicle) -> None:
     """The entity where its vehicle model is (its road position found from there)."""
-    body.odometer += math.hypot(vehicle.x - body.x, vehicle.y - body.y)
+    body.odometer += hypot(vehicle.x - body.x, vehicle.y - body.y)
     body.x, body.y, body.heading, body.speed = vehicle.x, vehicle.y, vehicle.heading, vehicle.speed
     body.mover = None
     world.locate(body)
@@ -140,9 +141,9 @@ class OffroadFollower:
             return
         vehicle.max_speed = min(1.2 * speed_limit(self.world, a), a.entity.performance.max_speed)
         dx, dy = lead.x - a.x, lead.y - a.y
-        bearing = math.atan2(dy, dx) - a.heading
-        bearing = math.atan2(math.sin(bearing), math.cos(bearing))
-        distance = math.hypot(dx, dy)
+        bearing = atan2(dy, dx) - a.heading
+        bearing = atan2(math.sin(bearing), math.cos(bearing))
+        distance = hypot(dx, dy)
         steering = min(max(bearing, -1.0), 1.0)
         throttle = min(max(0.5 * (distance - self.target_distance) - 0.5 * (a.speed - lead.speed), -1.0), 1.0)
         vehicle.control_analog(dt, throttle, steering)
@@ -266,7 +267,7 @@ class NaturalDriver:
         for other in world.bodies.values():
             if other is a or other.gone or not other.placed:
                 continue
-            if math.hypot(other.x - a.x, other.y - a.y) > self.lookahead:
+            if hypot(other.x - a.x, other.y - a.y) > self.lookahead:
                 continue
             seen.append(other)
             delta = world.measure.road_delta_entity(a, other)

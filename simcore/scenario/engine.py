@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, final
 
 from simcore.errors import BadInput, SimulationError
 from simcore.scenario import drivers, ghost, global_actions, positions
@@ -36,6 +36,7 @@ from simcore.scenario.storyboard import State
 from simcore.scenario.sumo_bridge import SumoBridge
 from simcore.scenario.triggers import Triggers
 from simcore.scenario.world import Pose
+from simcore.world.native_calls import hypot
 from simcore.world.state import BoundingBox, EntityState, LaneCoordinates, WorldFrame
 
 if TYPE_CHECKING:
@@ -44,9 +45,33 @@ if TYPE_CHECKING:
     from simcore.world.sumo import SumoWorld
 
 
-#: a body's entity, its box and external driving, and what its states take from them: name, object type,
-#: category, published box and who drives it (`ScenarioEngine._fixed_of`)
-_Fixed = tuple[m.Entity, m.Box, bool, str, str, str, BoundingBox, str]
+@final
+class _Fixed:
+    """A body's entity, its box and external driving, and what its states take from them: name, object type,
+    category, published box and who drives it (`ScenarioEngine._fixed_of`). A class, not a tuple: compiled,
+    its fields are read as they are, where a tuple taken from a dict is unpacked and checked whole."""
+
+    __slots__ = ("bbox", "box", "category", "controlled_by", "entity", "external", "name", "object_type")
+
+    def __init__(
+        self,
+        entity: m.Entity,
+        box: m.Box,
+        external: bool,
+        name: str,
+        object_type: str,
+        category: str,
+        bbox: BoundingBox,
+        controlled_by: str,
+    ) -> None:
+        self.entity = entity
+        self.box = box
+        self.external = external
+        self.name = name
+        self.object_type = object_type
+        self.category = category
+        self.bbox = bbox
+        self.controlled_by = controlled_by
 
 
 class ExternalDriver(Protocol):
@@ -156,6 +181,7 @@ class ScenarioEngine:
             self.warnings.extend(unknown_signals(self.scenario, self.root, road, self.source))
         self.registry = self.story.registry
         self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
+        self._frame: WorldFrame | None = None  # this step's frame, once built (forgotten when bodies move)
         self._fixed: dict[str, _Fixed] = {}  # per body: what its states take from its entity (_fixed_of)
         self._init()
         if self.ghosts is not None:
@@ -335,7 +361,7 @@ class ScenarioEngine:
             rc = self._target_roads[key]
             if rc is not None and rc.road_id == body.road_id:
                 return max((rc.s - body.s) * body.direction, 0.0)
-        return math.hypot(x - body.x, y - body.y)
+        return hypot(x - body.x, y - body.y)
 
     # --- SUMO hooks -----------------------------------------------------------------------------------
 
@@ -651,7 +677,7 @@ class ScenarioEngine:
                 body.speed = 0.0
             return
         x, y, heading, speed = external.move(body.entity, body.x, body.y, body.heading, body.speed, dt)
-        body.odometer += math.hypot(x - body.x, y - body.y)
+        body.odometer += hypot(x - body.x, y - body.y)
         body.x, body.y, body.heading, body.speed = x, y, heading, speed
         self.locate(body)
 
@@ -676,7 +702,9 @@ class ScenarioEngine:
             advance_on_road(self.road, body, distance, self.time)
 
     def moved(self) -> None:
-        """Bodies moved: the per-step caches of their states and of condition measurements are stale."""
+        """Bodies moved: the per-step caches of their frame, their states and condition measurements are
+        stale."""
+        self._frame = None
         self._states.clear()
         self.measure.clear()
 
@@ -693,12 +721,12 @@ class ScenarioEngine:
         e = body.entity
         known = self._fixed.get(body.name)
         box = e.box
-        if known is not None and known[1] is box:
-            bbox = known[6]
+        if known is not None and known.box is box:
+            bbox = known.bbox
         else:
             bbox = BoundingBox(box.center_x, box.center_y, box.center_z, box.length, box.width, box.height)
         external = body.external
-        fixed = self._fixed[body.name] = (
+        fixed = self._fixed[body.name] = _Fixed(
             e,
             box,
             external,
@@ -712,7 +740,7 @@ class ScenarioEngine:
 
     def _state_of(self, body: Body) -> EntityState:
         fixed = self._fixed.get(body.name)
-        if fixed is None or fixed[0] is not body.entity or fixed[2] is not body.external:
+        if fixed is None or fixed.entity is not body.entity or fixed.external is not body.external:
             fixed = self._fixed_of(body)
         lane = None
         road_id = body.road_id
@@ -723,9 +751,9 @@ class ScenarioEngine:
                 t, lane_id, offset = lane_point(road, road_id, body.lane_id, s, body.offset)
                 lane = LaneCoordinates(road_id, lane_id, s, t, offset)
         return EntityState(
-            fixed[3],
-            fixed[4],
-            fixed[5],
+            fixed.name,
+            fixed.object_type,
+            fixed.category,
             body.x,
             body.y,
             body.z,
@@ -735,27 +763,27 @@ class ScenarioEngine:
             body.speed,
             body.acceleration,
             body.yaw_rate,
-            fixed[6],
+            fixed.bbox,
             lane,
-            fixed[7],
+            fixed.controlled_by,
         )
 
     def frame(self) -> WorldFrame:
         """Every entity in the world now (built once per step: `moved` forgets them). An entity out of the
         world (not placed yet, deleted) is in no frame — no topic, recording, sensor or metric sees it at a
         stale position — except the ego, which metrics measure from."""
-        states = self._states
         ego = self.ego
         if self.ghosts is None:
+            last = self._frame
+            if last is not None and last.step == self.step_index and last.time == self.time:
+                return last  # asked again before anything moved: the same frame
             entities = []
             for b in self.bodies.values():
-                if b.gone and b.name != ego:
-                    continue
-                state = states.get(b.name)
-                if state is None:  # (called directly: compiled, a native call, not a bound method's)
-                    state = states[b.name] = self._state_of(b)
-                entities.append(state)
-            return WorldFrame(self.step_index, self.time, tuple(entities), self.ego, (), ())
+                if not b.gone or b.name == ego:
+                    # (called directly: compiled, a native call, not a bound method's)
+                    entities.append(self._state_of(b))
+            last = self._frame = WorldFrame(self.step_index, self.time, tuple(entities), ego, (), ())
+            return last
         ghost_names = self.ghosts.names
         # a ghost is no object of the world (esmini shows it as a shadow): published apart
         present = [b for b in self.bodies.values() if not b.gone or b.name == ego]

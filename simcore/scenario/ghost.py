@@ -39,24 +39,25 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from simcore.scenario import model as m
 from simcore.scenario.drivers import Vehicle, put
+from simcore.world.native_calls import hypot
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import GhostWorld
 
 
-FOLLOW_GHOST = "FollowGhostController"
-SAMPLE_TIME = 0.2  # s between trail samples (esmini's GHOST_TRAIL_SAMPLE_TIME)
-SMALL = 1e-10  # esmini's SMALL_NUMBER
-MAX_ACCELERATION = 10.0  # m/s² (the controller's vehicle model)
-MAX_SPEED = 100.0
+FOLLOW_GHOST: Final = "FollowGhostController"
+SAMPLE_TIME: Final = 0.2  # s between trail samples (esmini's GHOST_TRAIL_SAMPLE_TIME)
+SMALL: Final = 1e-10  # esmini's SMALL_NUMBER
+MAX_ACCELERATION: Final = 10.0  # m/s² (the controller's vehicle model)
+MAX_SPEED: Final = 100.0
 
 # actions that move to the ghost (esmini: the event's actions of these types; CARLOS: the group's actors)
-_GHOST_ACTIONS = (
+_GHOST_ACTIONS: Final = (
     m.SpeedAction,
     m.SpeedProfileAction,
     m.LaneChangeAction,
@@ -67,7 +68,7 @@ _GHOST_ACTIONS = (
     m.TeleportAction,
 )
 # entity conditions on the entity handed over to the ghost
-_HANDED_OVER = (
+_HANDED_OVER: Final = (
     m.CollisionCondition,
     m.ReachPositionCondition,
     m.TraveledDistanceCondition,
@@ -251,7 +252,7 @@ class Trail:
     def add(self, x: float, y: float, time: float, speed: float) -> None:
         s = 0.0
         if self.x:
-            s = self.s[-1] + math.hypot(x - self.x[-1], y - self.y[-1])
+            s = self.s[-1] + hypot(x - self.x[-1], y - self.y[-1])
         self.x.append(x)
         self.y.append(y)
         self.time.append(time)
@@ -295,18 +296,18 @@ class Trail:
             dx, dy = self.x[i + 1] - x0, self.y[i + 1] - y0
             length2 = dx * dx + dy * dy
             if length2 < SMALL * SMALL:
-                dist, local = math.hypot(px - x0, py - y0), 0.0
+                dist, local = hypot(px - x0, py - y0), 0.0
             else:
                 f = ((px - x0) * dx + (py - y0) * dy) / length2
                 qx, qy = x0 + f * dx, y0 + f * dy
-                dist = math.hypot(px - qx, py - qy)
+                dist = hypot(px - qx, py - qy)
                 seg = self.s[i + 1] - self.s[i]
                 if f < 0.0:
                     along = f * math.sqrt(length2)  # distance before the segment's start
-                    dist, local = math.hypot(dist, along), 0.0
+                    dist, local = hypot(dist, along), 0.0
                 elif f > 1.0:
                     along = (f - 1.0) * math.sqrt(length2)
-                    dist, local = math.hypot(dist, along), seg
+                    dist, local = hypot(dist, along), seg
                 else:
                     local = f * seg
             if dist < best:
@@ -398,7 +399,7 @@ class GhostFollower:
         tx, ty, target_speed = target
         self.target = (tx, ty)
         dx, dy = tx - px, ty - py
-        length = math.hypot(dx, dy)
+        length = hypot(dx, dy)
         if length > SMALL:
             dx, dy = dx / length, dy / length
         else:

@@ -4,7 +4,7 @@ take effect at once (parameters and variables, entities added or deleted, traffi
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from simcore.errors import BadInput
 from simcore.scenario import model as m
@@ -73,7 +73,7 @@ def no_motion(action: m.NoMotionGlobalAction, world: ScenarioWorld) -> None:
 
 
 #: global action type → what it does
-GLOBAL_ACTIONS: dict[type, Callable[[Any, ScenarioWorld], None]] = {
+GLOBAL_ACTIONS: Final[dict[type, Callable[[Any, ScenarioWorld], None]]] = {
     m.ParameterSetAction: set_or_modify,
     m.ParameterModifyAction: set_or_modify,
     m.AddEntityAction: add_entity,

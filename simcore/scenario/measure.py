@@ -22,19 +22,20 @@ corpus; its roadmanager `Position::Distance` and `Object::Distance`):
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Final, Protocol
 
 from simcore.evaluation.metrics import Box, box_distance, boxes_overlap, footprint, projections
 from simcore.scenario import paths
 from simcore.scenario.motion import reference_heading
+from simcore.world.native_calls import hypot
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.world.opendrive import OpenDrive
 
 #: a distance that could not be measured (no road connection): compared as a very large value (as esmini)
-LARGE = 1e10
-SMALL = 1e-10
+LARGE: Final = 1e10
+SMALL: Final = 1e-10
 
 Point = tuple[float, float]
 
@@ -100,7 +101,7 @@ class Measure:
 
     def signed_euclid(self, body: Body, x: float, y: float) -> float:
         dx, dy = self.local(body, x, y)
-        return math.copysign(math.hypot(dx, dy), 1.0 if dx > 0 else -1.0)
+        return math.copysign(hypot(dx, dy), 1.0 if dx > 0 else -1.0)
 
     # --- road coordinates -----------------------------------------------------------------------------
 
@@ -272,7 +273,7 @@ class Measure:
                 rel_speed = a.speed
             else:
                 avx, avy = a.vx, a.vy
-                projected = (avx * bvx + avy * bvy) / math.hypot(bvx, bvy)
+                projected = (avx * bvx + avy * bvy) / hypot(bvx, bvy)
                 rel_speed = _sign(a.speed) * _sign(projected) * (projected - abs(b.speed))
         else:
             assert point is not None
@@ -309,7 +310,7 @@ class Measure:
         if kind in ("euclidianDistance", "cartesianDistance"):
             if freespace:
                 return box_distance(self.box(a), self.box(b))
-            return math.hypot(b.x - a.x, b.y - a.y)
+            return hypot(b.x - a.x, b.y - a.y)
         if freespace:
             ax, ay = box_center(a)
             bx, by = box_center(b)
@@ -389,7 +390,7 @@ def _point_gaps(box: Box, heading: float, x: float, y: float) -> tuple[float, fl
         length2 = dx * dx + dy * dy
         u = 0.0 if length2 <= 0 else min(max(((x - x0) * dx + (y - y0) * dy) / length2, 0.0), 1.0)
         vx, vy = x - (x0 + u * dx), y - (y0 + u * dy)
-        d = math.hypot(vx, vy)
+        d = hypot(vx, vy)
         if d < best[0]:
             best = (d, vx, vy)
     d, vx, vy = best

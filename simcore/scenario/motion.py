@@ -6,9 +6,10 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from simcore.scenario import model as m
+from simcore.world.native_calls import atan2, hypot
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
@@ -47,8 +48,8 @@ def shape_peak_rate_factor(shape: str) -> float:
     return {"linear": 1.0, "cubic": 1.5, "sinusoidal": math.pi / 2, "step": 1.0}[shape]
 
 
-_PI = math.pi
-_TWO_PI = 2 * math.pi
+_PI: Final = math.pi
+_TWO_PI: Final = 2 * math.pi
 
 
 def wrap_angle(angle: float) -> float:
@@ -371,7 +372,7 @@ def update_pose_from_road(road: OpenDrive, body: Body) -> None:
     if lateral_velocity != 0.0 and abs(speed) > 0.1:
         # (without a lateral motion the drift is atan2(±0, |speed|) = ±0: adding it changes no heading)
         lateral = lateral_velocity * direction  # + is to the left of the travel direction
-        drift = math.atan2(lateral, abs(speed))
+        drift = atan2(lateral, abs(speed))
     heading_offset = body.heading_offset
     body.heading = (road_heading + drift + heading_offset + _PI) % _TWO_PI - _PI  # wrap_angle
     body.posed = (
@@ -433,12 +434,12 @@ def pull_trailer(tow: Body, trailer: Body) -> None:
     vehicle's speed."""
     hx, hy = hitch_point(tow)
     vx, vy = trailer.x - hx, trailer.y - hy
-    length = math.hypot(vx, vy)
+    length = hypot(vx, vy)
     coupler = trailer.entity.trailer_coupler or 0.0
     if length < 1e-9:  # on the hitch: straight behind
         vx, vy, length = -math.cos(tow.heading), -math.sin(tow.heading), 1.0
     trailer.x = hx + vx * coupler / length
     trailer.y = hy + vy * coupler / length
-    trailer.heading = wrap_angle(math.atan2(vy, vx) + math.pi)
+    trailer.heading = wrap_angle(atan2(vy, vx) + math.pi)
     trailer.speed = tow.speed
     trailer.z = tow.z

@@ -3,13 +3,13 @@ planning over the OpenDRIVE road graph."""
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from simcore.scenario import model as m
+from simcore.world.native_calls import atan2, bisect_right, hypot
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
@@ -17,8 +17,8 @@ if TYPE_CHECKING:
 #: world (x, y, z, heading) of a position, resolved when the action starts
 Resolver = Callable[[m.Position], tuple[float, float, float, float]]
 
-CLOTHOID_STEP = 0.05  # m between clothoid samples
-NURBS_SAMPLES_PER_POINT = 60
+CLOTHOID_STEP: Final = 0.05  # m between clothoid samples
+NURBS_SAMPLES_PER_POINT: Final = 60
 
 
 @dataclass
@@ -45,7 +45,7 @@ class SampledPath:
             return self.x[0], self.y[0], self.z[0], self.h[0]
         if s >= self.s[-1]:
             return self.x[-1], self.y[-1], self.z[-1], self.h[-1]
-        i = bisect.bisect_right(self.s, s) - 1
+        i = bisect_right(self.s, s) - 1
         seg = self.s[i + 1] - self.s[i]
         f = (s - self.s[i]) / seg if seg > 0 else 0.0
         dh = (self.h[i + 1] - self.h[i] + math.pi) % (2 * math.pi) - math.pi
@@ -79,7 +79,7 @@ class SampledPath:
             return self.t[0]
         if s >= self.s[-1]:
             return self.t[-1]
-        i = bisect.bisect_right(self.s, s) - 1
+        i = bisect_right(self.s, s) - 1
         seg = self.s[i + 1] - self.s[i]
         f = (s - self.s[i]) / seg if seg > 0 else 0.0
         return self.t[i] + f * (self.t[i + 1] - self.t[i])
@@ -92,7 +92,7 @@ class SampledPath:
             return 0.0
         if time >= ts[-1]:
             return self.s[-1]
-        i = bisect.bisect_right(ts, time) - 1
+        i = bisect_right(ts, time) - 1
         span = ts[i + 1] - ts[i]
         if span <= 0:
             return self.s[i + 1]
@@ -116,7 +116,7 @@ def _from_points(points: list[tuple[float, float, float]], times: list[float] | 
     total = 0.0
     for i, (x, y, z) in enumerate(points):
         if xs:
-            d = math.hypot(x - xs[-1], y - ys[-1])
+            d = hypot(x - xs[-1], y - ys[-1])
             if d < 1e-9 and (times is None or times[i] <= kept_times[-1]):
                 continue  # a repeated point (kept when timed: the entity waits there)
             total += d
@@ -132,12 +132,12 @@ def _from_points(points: list[tuple[float, float, float]], times: list[float] | 
         seg: list[float] = []
         for i in range(len(xs) - 1):
             dx, dy = xs[i + 1] - xs[i], ys[i + 1] - ys[i]
-            if math.hypot(dx, dy) < 1e-9:  # a pause: keep the heading it had
+            if hypot(dx, dy) < 1e-9:  # a pause: keep the heading it had
                 seg.append(seg[-1] if seg else 0.0)
             else:
-                seg.append(math.atan2(dy, dx))
+                seg.append(atan2(dy, dx))
         for i in range(len(seg) - 1, 0, -1):  # leading pauses take the first real heading
-            if math.hypot(xs[i] - xs[i - 1], ys[i] - ys[i - 1]) < 1e-9 and i - 1 == 0:
+            if hypot(xs[i] - xs[i - 1], ys[i] - ys[i - 1]) < 1e-9 and i - 1 == 0:
                 seg[0] = seg[i]
         hs = [*seg, seg[-1]]
     return SampledPath(ss, xs, ys, zs, hs, kept_times if times is not None else None)

@@ -5,7 +5,7 @@ coordinates. Pure functions of the road network and the entities' state (`Scenar
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from simcore.errors import BadInput
 from simcore.scenario import model as m
@@ -236,7 +236,8 @@ def plan_route(world: ScenarioWorld, body: Body, targets: list[m.Position]) -> l
     return out
 
 
-_FIXED_POSITIONS = (m.WorldPosition, m.LanePosition, m.RoadPosition)  # positions that depend on no entity
+#: positions that depend on no entity
+_FIXED_POSITIONS: Final = (m.WorldPosition, m.LanePosition, m.RoadPosition)
 
 
 def fixed_point(world: ScenarioWorld, position: m.Position) -> Pose:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any
+from typing import Any, Final
 
 
 class State(Enum):
@@ -24,8 +24,8 @@ class Transition(Enum):
     SKIP = "skipTransition"
 
 
-_STATES = {s.value: s for s in State}
-_TRANSITIONS = {t.value: t for t in Transition}
+_STATES: Final = {s.value: s for s in State}
+_TRANSITIONS: Final = {t.value: t for t in Transition}
 
 
 @dataclass(eq=False)

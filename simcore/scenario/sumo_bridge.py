@@ -4,9 +4,10 @@ SUMO-driven (nothing reads SUMO back otherwise)."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING
+
+from simcore.world.native_calls import hypot
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
@@ -75,6 +76,6 @@ class SumoBridge:
                     body.end_of_road_since = now
                 continue
             x, y, body.heading, body.speed = state
-            body.odometer += math.hypot(x - body.x, y - body.y)
+            body.odometer += hypot(x - body.x, y - body.y)
             body.x, body.y = x, y
             locate(body)

@@ -34,9 +34,10 @@ import hashlib
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 from simcore.world.frozen import builder
+from simcore.world.native_calls import atan2, hypot
 from simcore.world.opendrive_parse import MAX_FILE_BYTES, OpenDriveError, parse_network, read_bounded
 from simcore.world.road_geometry import linspace
 from simcore.world.road_model import (
@@ -52,10 +53,10 @@ from simcore.world.road_model import (
 __all__ = ["OpenDrive", "OpenDriveError", "PointGrid", "load"]
 
 #: networks `OpenDrive.shared` keeps per process, by file name and content (the most recently used ones)
-_SHARED_MAX = 4
-_SHARED: dict[tuple[str, bytes], OpenDrive] = {}
+_SHARED_MAX: Final = 4
+_SHARED: Final[dict[tuple[str, bytes], OpenDrive]] = {}
 
-_S_TOL = 1e-3  # m: s values this far outside [0, length] are clamped silently
+_S_TOL: Final = 1e-3  # m: s values this far outside [0, length] are clamped silently
 
 
 class PointGrid:
@@ -90,7 +91,7 @@ class PointGrid:
         return near
 
 
-_road_coordinates = builder(RoadCoordinates)  # RoadCoordinates(...), built as fast as a plain object
+_road_coordinates: Final = builder(RoadCoordinates)  # RoadCoordinates(...), built as fast as a plain object
 
 
 class OpenDrive:
@@ -280,7 +281,7 @@ class OpenDrive:
         _, ic, oc = self._lane_borders(road, lane_id, s)
         off = t - 0.5 * (ic + oc)
         dt = ((0.5 * (i1 + o1) + off) * c1 - (0.5 * (i0 + o0) + off) * c0) / (hi_q - lo)
-        return math.atan2(dt, 1.0 - road.curvature(s) * t * c)
+        return atan2(dt, 1.0 - road.curvature(s) * t * c)
 
     def speed_limit(self, road_id: str, s: float) -> float | None:
         """The speed limit (m/s) of the road's type at ``s``; None without a speed record."""
@@ -526,7 +527,7 @@ class OpenDrive:
                 mine = [
                     (d, ci)
                     for ci in cand
-                    if rix[ci] == hint_ri and (d := math.hypot(xs[ci] - x, ys[ci] - y)) <= reach[ci]
+                    if rix[ci] == hint_ri and (d := hypot(xs[ci] - x, ys[ci] - y)) <= reach[ci]
                 ]
                 mine.sort()
                 starts: list[float] = []
@@ -548,7 +549,7 @@ class OpenDrive:
                 if best is not None and best[0][0] == 0.0 and best[0][1] == 0.0:
                     return best[1]
                 best = None
-        near = [(d, ci) for ci in cand if (d := math.hypot(xs[ci] - x, ys[ci] - y)) <= reach[ci]]
+        near = [(d, ci) for ci in cand if (d := hypot(xs[ci] - x, ys[ci] - y)) <= reach[ci]]
         near.sort()  # by distance, ties by index
         seeds: dict[int, list[float]] = {}
         for _, ci in near:

@@ -9,9 +9,11 @@ arc length. Every operation is written in a fixed order: conformance against esm
 
 from __future__ import annotations
 
-import bisect
 import itertools
 import math
+from typing import Final
+
+from simcore.world.native_calls import atan2, bisect_right, hypot
 
 __all__ = ["Arc", "Geometry", "Line", "ParamPoly3", "Spiral", "linspace"]
 
@@ -139,11 +141,12 @@ _GL16_W = (
     0.18945061045506864, 0.18260341504492364, 0.16915651939500265, 0.1495959888165767,
     0.12462897125553407, 0.0951585116824926, 0.062253523938647456, 0.027152459411754176,
 )  # fmt: skip
-_GL16 = tuple(zip(_GL16_X, _GL16_W, strict=True))
+_GL16: Final = tuple(zip(_GL16_X, _GL16_W, strict=True))
 
 
 # Fresnel integrals (Cephes ``fresnl``, as scipy.special.fresnel evaluates them: the same rational
-# approximations in the same operation order, so the same floats, without scipy's and numpy's import)
+# approximations in the same operation order, so the same floats, without scipy's and numpy's import). Not
+# Final: mypyc's check that a Final tuple of floats is set misreads it as unset (a NameError when read).
 _FRESNEL_SN = (
     -2.99181919401019853726e3, 7.08840045257738576863e5, -6.29741486205862506537e7,
     2.54890880573376359104e9, -4.42979518059697779103e10, 3.18016297876567817986e11,
@@ -341,6 +344,7 @@ class Spiral(Geometry):
         return self.k0 + self.c * ds
 
 
+# (not Final, as the Fresnel coefficients above)
 _GL_X = (
     -0.9324695142031519, -0.6612093864662645, -0.2386191860831969,
     0.2386191860831969, 0.6612093864662645, 0.9324695142031519,
@@ -407,7 +411,6 @@ class ParamPoly3(Geometry):
         cu2, du3, cv2, dv3 = 2 * cu, 3 * du, 2 * cv, 3 * dv
         x0, x1, x2, x3, x4, x5 = _GL_X
         w0, w1, w2, w3, w4, w5 = _GL_W
-        hypot = math.hypot
         out = [0.0]
         total = 0.0
         for a, b in itertools.pairwise(ps):
@@ -435,7 +438,7 @@ class ParamPoly3(Geometry):
         if last[0] == ds:
             return last[1]
         ss, ps = self._ss, self._ps
-        i = bisect.bisect_right(ss, ds) - 1
+        i = bisect_right(ss, ds) - 1
         top = len(ss) - 2
         i = 0 if i < 0 else top if i > top else i  # min(max(i, 0), top), top >= 0
         s0, s1 = ss[i], ss[i + 1]
@@ -479,24 +482,24 @@ class ParamPoly3(Geometry):
         return (
             self.x + u * self._cos - v * self._sin,
             self.y + u * self._sin + v * self._cos,
-            self.hdg + math.atan2(vp, up),
+            self.hdg + atan2(vp, up),
         )
 
     def frame(self, ds: float) -> tuple[float, float, float, float, float]:
         u, v, up, vp, _, _ = self._uv_at(ds)  # as local, then the heading's cosine and sine
         c, s = self._cos, self._sin
-        h = self.hdg + math.atan2(vp, up)
+        h = self.hdg + atan2(vp, up)
         return self.x + u * c - v * s, self.y + u * s + v * c, h, math.cos(h), math.sin(h)
 
     def curvature(self, ds: float) -> float:
         _, _, up, vp, upp, vpp = self._uv_at(ds)
-        sp = math.hypot(up, vp)
+        sp = hypot(up, vp)
         return 0.0 if sp == 0 else (up * vpp - vp * upp) / sp**3
 
     def frame_k(self, ds: float) -> tuple[float, float, float, float, float, float]:
         u, v, up, vp, upp, vpp = self._uv_at(ds)  # as frame and curvature
         c, s = self._cos, self._sin
-        h = self.hdg + math.atan2(vp, up)
-        sp = math.hypot(up, vp)
+        h = self.hdg + atan2(vp, up)
+        sp = hypot(up, vp)
         k = 0.0 if sp == 0 else (up * vpp - vp * upp) / sp**3
         return self.x + u * c - v * s, self.y + u * s + v * c, h, math.cos(h), math.sin(h), k

@@ -10,12 +10,12 @@ afterwards: the memos kept here are pure functions of the file.
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
+from simcore.world.native_calls import bisect_right
 from simcore.world.road_geometry import Geometry
 
 __all__ = [
@@ -33,7 +33,7 @@ __all__ = [
     "RoadLink",
 ]
 
-DRIVING_LANE_TYPES = frozenset(
+DRIVING_LANE_TYPES: Final = frozenset(
     {"driving", "entry", "exit", "onramp", "offramp", "connectingramp", "bidirectional", "sliplane"}
 )
 """Lane types (lower case) counted as drivable by ``lane_ids(..., driving_only=True)``."""
@@ -107,11 +107,11 @@ def _fixed_value(polys: Sequence[Poly3]) -> float | None:
     return None
 
 
-def _poly_at(polys: Sequence[Poly3], starts: Sequence[float], s: float) -> Poly3 | None:
+def _poly_at(polys: Sequence[Poly3], starts: list[float], s: float) -> Poly3 | None:
     """The record in effect at ``s`` (the last one starting at or before ``s``; the first one before it)."""
     if not polys:
         return None
-    i = bisect.bisect_right(starts, s + 1e-12) - 1
+    i = bisect_right(starts, s + 1e-12) - 1
     return polys[i if i > 0 else 0]
 
 
@@ -152,7 +152,7 @@ class Lane:
         if len(widths) == 1:  # the common case: one record, in effect before its start too
             p = widths[0]
         else:
-            i = bisect.bisect_right(self._wstarts, ds + 1e-12) - 1
+            i = bisect_right(self._wstarts, ds + 1e-12) - 1
             p = widths[i if i > 0 else 0]
         d = ds - p.s0  # Poly3.value, inline (a hot path of every step)
         return p.a + d * (p.b + d * (p.c + d * p.d))
@@ -300,26 +300,26 @@ class Road:
     # -- reference line
     def geometry_at(self, s: float) -> Geometry:
         """The planView record containing ``s``."""
-        i = bisect.bisect_right(self._gstarts, s) - 1
+        i = bisect_right(self._gstarts, s) - 1
         geometries = self.geometries
         return geometries[0 if i < 0 else i if i < len(geometries) else len(geometries) - 1]
 
     def geometry_span(self, s: float) -> tuple[Geometry, float, float]:
         """``(record, lo, hi)``: the planView record `geometry_at` gives at ``s``, and the range ``[lo, hi)``
         of every ``s`` it gives that record for (a caller moving along the road asks again only on leaving it)."""
-        i = bisect.bisect_right(self._gstarts, s) - 1
+        i = bisect_right(self._gstarts, s) - 1
         return self._gspans[i if i > 0 else 0]
 
     def reference_xyh(self, s: float) -> tuple[float, float, float]:
         """``(x, y, heading)`` of the reference line at ``s``."""
-        i = bisect.bisect_right(self._gstarts, s) - 1  # as geometry_at (inline: every step)
+        i = bisect_right(self._gstarts, s) - 1  # as geometry_at (inline: every step)
         g = self.geometries[i if i > 0 else 0]
         ds = s - g.s
         return g.local(ds if ds >= 0.0 else 0.0)
 
     def curvature(self, s: float) -> float:
         """Reference-line curvature at ``s``."""
-        i = bisect.bisect_right(self._gstarts, s) - 1  # as geometry_at (inline: every step)
+        i = bisect_right(self._gstarts, s) - 1  # as geometry_at (inline: every step)
         g = self.geometries[i if i > 0 else 0]
         ds = s - g.s
         return g.curvature(ds if ds >= 0.0 else 0.0)
@@ -339,7 +339,7 @@ class Road:
 
     def world_xyz(self, s: float, t: float) -> tuple[float, float, float, float]:
         """World ``(x, y, z, reference heading)`` of road coordinates ``(s, t)``."""
-        i = bisect.bisect_right(self._gstarts, s) - 1  # as reference_xyh, with the heading's cos and sin
+        i = bisect_right(self._gstarts, s) - 1  # as reference_xyh, with the heading's cos and sin
         g = self.geometries[i if i > 0 else 0]
         ds = s - g.s
         x, y, h, cos_h, sin_h = g.frame(ds if ds >= 0.0 else 0.0)
@@ -357,7 +357,7 @@ class Road:
     def world_xyzk(self, s: float, t: float) -> tuple[float, float, float, float, float]:
         """`world_xyz` and the reference line's `curvature` at ``s``, from one look-up of the planView record
         (an entity posed at ``s`` moves on from there at the next step, scaled by that curvature)."""
-        i = bisect.bisect_right(self._gstarts, s) - 1
+        i = bisect_right(self._gstarts, s) - 1
         g = self.geometries[i if i > 0 else 0]
         ds = s - g.s
         if ds < 0.0:
@@ -365,7 +365,7 @@ class Road:
         x, y, h, cos_h, sin_h, k = g.frame_k(ds)
         z = self._z_fixed
         if z is None:  # self.elevation(s): records there are (else 0.0 were fixed), the one at s
-            i = bisect.bisect_right(self._estarts, s + 1e-12) - 1  # as _poly_at
+            i = bisect_right(self._estarts, s + 1e-12) - 1  # as _poly_at
             p = self.elevations[i if i > 0 else 0]
             e = s - p.s0  # as Poly3.value
             z = p.a + e * (p.b + e * (p.c + e * p.d))
@@ -380,7 +380,7 @@ class Road:
     def world_points(self, s: float, ts: Sequence[float]) -> list[tuple[float, float, float]]:
         """World ``(x, y, z)`` of ``(s, t)`` for every ``t`` in ``ts``: :meth:`world_xyz` with the reference
         frame at ``s`` computed once (sampling every lane border at one ``s``)."""
-        i = bisect.bisect_right(self._gstarts, s) - 1
+        i = bisect_right(self._gstarts, s) - 1
         g = self.geometries[i if i > 0 else 0]
         ds = s - g.s
         x, y, _h, cos_h, sin_h = g.frame(ds if ds >= 0.0 else 0.0)
@@ -405,7 +405,7 @@ class Road:
     def section_at(self, s: float, side: int = -1) -> LaneSection:
         """The lane section in effect at ``s`` for the lanes of ``side`` (+1 left, -1 right)."""
         key = 1 if side > 0 else -1
-        i = bisect.bisect_right(self._side_starts[key], s + 1e-9) - 1
+        i = bisect_right(self._side_starts[key], s + 1e-9) - 1
         return self._side_sections[key][i if i > 0 else 0]
 
     def side_sections(self, side: int) -> list[LaneSection]:
@@ -481,7 +481,7 @@ class Road:
         if uniform is not None:  # one lane section on each side, the same borders all along the road
             return uniform
         # index 0: before every section start; k + 1: from the k-th start (as section_at's s + 1e-9)
-        return crosses[bisect.bisect_right(self._cross_starts, s + 1e-9)]
+        return crosses[bisect_right(self._cross_starts, s + 1e-9)]
 
     def centre_t(self, lane_id: int, s: float) -> float | None:
         """``t`` of the centre of lane `lane_id` (not 0) at ``s`` in ``[0, length]`` from the lane borders'
@@ -498,7 +498,7 @@ class Road:
 
     def _build_crosses(self) -> list[LaneCross | None]:
         def index(key: int, q: float) -> int:  # as section_at
-            i = bisect.bisect_right(self._side_starts[key], q) - 1
+            i = bisect_right(self._side_starts[key], q) - 1
             return i if i > 0 else 0
 
         made: dict[tuple[int, int], LaneCross | None] = {}

@@ -20,29 +20,29 @@ import subprocess
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, Final, NamedTuple
 
 from simcore.errors import BadInput, SimulationError
 from simcore.file_version import BoundedCache, ContentKey, content_key
 from simcore.world import sumo_warm
 from simcore.world.sumo_lanes import EdgeLanes, edge_lanes, nearest_lane
 
-NETCONVERT_OPTIONS = (
+NETCONVERT_OPTIONS: Final = (
     "--output.original-names",  # keep OpenDRIVE road/lane ids on the SUMO edges and lanes
     "--no-turnarounds",
     "--offset.disable-normalization",  # SUMO x/y == OpenDRIVE x/y
     "--opendrive.import-all-lanes",
     "false",
 )
-NETCONVERT_TIMEOUT_S = 300
+NETCONVERT_TIMEOUT_S: Final = 300
 #: moveToXY: a scripted vehicle whose front is this close to the centre line of a lane of its route is put on
 #: that lane, matched against the route's lanes only (half the cost of a search of all lanes nearby; within a
 #: driving lane of 4 m or less, its nearest lane centre is at most this far) ...
-ON_ROUTE_MATCH_M = 2.0
+ON_ROUTE_MATCH_M: Final = 2.0
 #: ... otherwise on the nearest lane within this distance (off the network beyond it), its route replaced
-ANY_LANE_MATCH_M = 50.0
+ANY_LANE_MATCH_M: Final = 50.0
 #: SUMO's default deceleration of a passenger car (m/s²): what its driver uses when not in an emergency
-COMFORT_DECELERATION = 4.5
+COMFORT_DECELERATION: Final = 4.5
 
 
 def sumo_home() -> Path:
@@ -65,7 +65,7 @@ def sumo_version() -> str:
     return version("eclipse-sumo")
 
 
-MAX_NETWORK_BYTES = 512 * 1024 * 1024
+MAX_NETWORK_BYTES: Final = 512 * 1024 * 1024
 
 
 def check_network_xml(path: Path) -> None:
@@ -99,7 +99,7 @@ def check_network_xml(path: Path) -> None:
 
 
 #: the `.net.xml` files check_network_xml passed, by content (a warm worker runs one network run after run)
-_CHECKED_NETWORKS: BoundedCache[ContentKey, bool] = BoundedCache(64)
+_CHECKED_NETWORKS: Final[BoundedCache[ContentKey, bool]] = BoundedCache(64)
 MAX_CACHED_FILES = 64
 
 
@@ -172,7 +172,7 @@ def prepare_network(road_file: Path, cache_dir: Path | None = None) -> Path:
 
 
 #: Xerces-C++ 3.2's `XMLPlatformUtils::Initialize(locale, nlsHome, panicHandler, memoryManager)` (C++ name)
-_XERCES_INITIALIZE = (
+_XERCES_INITIALIZE: Final = (
     "_ZN11xercesc_3_216XMLPlatformUtils10InitializeEPKcS2_PNS_12PanicHandlerEPNS_13MemoryManagerE"
 )
 
@@ -206,7 +206,7 @@ class SumoVehicleState(NamedTuple):
 
 
 #: SumoVehicleState((x, y, heading, speed)) without the Python-level __new__ of a NamedTuple (every step)
-_vehicle_state = functools.partial(tuple.__new__, SumoVehicleState)
+_vehicle_state: Final = functools.partial(tuple.__new__, SumoVehicleState)
 
 
 def _sumo_angle(heading: float) -> float:
@@ -220,7 +220,7 @@ def _heading(angle: float) -> float:
 
 #: per network file content, each lane looked up so far → the lanes of its edge (None: a junction's lane): a
 #: loaded network never changes, so a warm worker's runs on one network share them
-_EDGES_OF_LANES: BoundedCache[ContentKey, dict[str, EdgeLanes | None]] = BoundedCache(MAX_CACHED_FILES)
+_EDGES_OF_LANES: Final[BoundedCache[ContentKey, dict[str, EdgeLanes | None]]] = BoundedCache(MAX_CACHED_FILES)
 
 
 def _network_key(network: Path) -> ContentKey | None:

@@ -11,11 +11,13 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Final, NamedTuple
+
+from simcore.world.native_calls import hypot
 
 #: slack (m) for float rounding when a lane is shown to be farther than another without walking it: far more
 #: than the rounding of distances between points with map coordinates up to 10,000 km
-CLEARLY_FARTHER_M = 1e-6
+CLEARLY_FARTHER_M: Final = 1e-6
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,7 +44,7 @@ class LaneShape:
         ys = tuple(float(p[1]) for p in points)
         along = [0.0]
         for i in range(1, len(xs)):
-            along.append(along[-1] + math.hypot(xs[i] - xs[i - 1], ys[i] - ys[i - 1]))
+            along.append(along[-1] + hypot(xs[i] - xs[i - 1], ys[i] - ys[i - 1]))
         dxs = tuple(xs[i + 1] - xs[i] for i in range(len(xs) - 1))
         dys = tuple(ys[i + 1] - ys[i] for i in range(len(ys) - 1))
         seg2s = tuple(dx * dx + dy * dy for dx, dy in zip(dxs, dys, strict=True))
@@ -68,7 +70,7 @@ class OnLane(NamedTuple):  # built once or twice a step: a tuple is the cheapest
 
 
 #: OnLane((distance, pos, segment)) without the Python-level __new__ of a NamedTuple (called every step)
-_on_lane = functools.partial(tuple.__new__, OnLane)
+_on_lane: Final = functools.partial(tuple.__new__, OnLane)
 
 
 def _along_segment(shape: LaneShape, i: int, x: float, y: float) -> float:
@@ -194,8 +196,8 @@ class EdgeLanes:
 
 #: SUMO's description of a lane: id, polyline points, length
 RawLane = tuple[str, tuple[tuple[float, ...], ...], float]
-_EDGES: dict[tuple[RawLane, ...], EdgeLanes] = {}
-MAX_CACHED_EDGES = 4096
+_EDGES: Final[dict[tuple[RawLane, ...], EdgeLanes]] = {}
+MAX_CACHED_EDGES: Final = 4096
 
 
 def edge_lanes(raw: tuple[RawLane, ...]) -> EdgeLanes:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from simcore.errors import BadInput
 from simcore.scenario.controllers.road_view import (
@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
 
-G = 9.8  # esmini's Model::g (the deceleration limits use 9.81)
+G: Final = 9.8  # esmini's Model::g (the deceleration limits use 9.81)
 
 NONE, CUT_IN, CUT_OUT, DECELERATION = "None", "CutIn", "CutOut", "Deceleration"
 CRITICAL, TARGET_IN_SIGHT, NO_TARGET = "CRITICAL", "TARGET_IN_SIGHT", "NO_TARGET"
@@ -731,7 +731,7 @@ def _number(text: str | None, default: float) -> float:
         return default
 
 
-MODELS = ("Regulation", "ReferenceDriver", "RSS", "FSM")
+MODELS: Final = ("Regulation", "ReferenceDriver", "RSS", "FSM")
 
 
 class AlksR157Controller:

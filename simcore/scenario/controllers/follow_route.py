@@ -22,18 +22,19 @@ independently, changing lanes in time to be in the lane that leads on at every j
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from simcore.scenario import model as m
 from simcore.scenario.controllers.lane_router import RoadPoint, calculate_path, waypoints
 from simcore.scenario.motion import lane_at_t, shape_value
+from simcore.world.native_calls import atan2, hypot
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
     from simcore.world.opendrive import OpenDrive
 
-MIN_LANE_WIDTH = 0.5
+MIN_LANE_WIDTH: Final = 0.5
 PASSED, MISSED, NOT_REACHED = "passed", "missed", "not reached"
 
 
@@ -168,7 +169,7 @@ class FollowRouteController:
             same_lane = other.lane_id == body.lane_id
             if same_road and same_lane:
                 continue
-            near = math.hypot(other.x - body.x, other.y - body.y) < self.min_dist_for_collision
+            near = hypot(other.x - body.x, other.y - body.y) < self.min_dist_for_collision
             same_side = (body.lane_id > 0) == (other.lane_id > 0) and other.lane_id != 0
             if near and same_side and same_road:
                 return False
@@ -305,7 +306,7 @@ class _RouteLaneChange:
         if lane == actor.lane_id or lane == 0:
             return
         drift = (
-            math.atan2(actor.lateral_velocity * actor.direction, abs(actor.speed))
+            atan2(actor.lateral_velocity * actor.direction, abs(actor.speed))
             if abs(actor.speed) > 0.1
             else 0.0
         )

@@ -20,17 +20,17 @@ from __future__ import annotations
 import heapq
 import itertools
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
     from simcore.world.road_model import LaneSection, Road
 
 # esmini's Lane::IsDriving: the lane types a vehicle drives in
-DRIVING_TYPES = frozenset(
+DRIVING_TYPES: Final = frozenset(
     {"driving", "entry", "exit", "onRamp", "offRamp", "bidirectional", "mwyEntry", "mwyExit"}
 )
-DEFAULT_SPEED = 19.444  # m/s, esmini's speed of a road without a speed record (a rural road)
+DEFAULT_SPEED: Final = 19.444  # m/s, esmini's speed of a road without a speed record (a rural road)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ only one it operates: esmini skips an activation on the lateral one, with a warn
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from simcore.scenario import model as m
 from simcore.scenario.drivers import Vehicle
@@ -26,9 +26,9 @@ if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
 
-LOOKAHEAD = 130.0  # m along the road
-MIN_LATERAL = 5.0  # m across
-MIN_DISTANCE = 3.0  # m kept to the vehicle ahead
+LOOKAHEAD: Final = 130.0  # m along the road
+MIN_LATERAL: Final = 5.0  # m across
+MIN_DISTANCE: Final = 3.0  # m kept to the vehicle ahead
 
 
 class LoomingController:

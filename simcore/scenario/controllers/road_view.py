@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from simcore.scenario.motion import lane_point, reference_heading, wrap_angle
+from simcore.world.native_calls import hypot
 
 if TYPE_CHECKING:
     from simcore.scenario.motion import Body
@@ -126,7 +127,7 @@ def overlapping_front(own: Body, target: Body, tolerance: float) -> int:
     left = (own.x + c * fx - s * (ob.width / 2), own.y + s * fx + c * (ob.width / 2))
     right = (own.x + c * fx + s * (ob.width / 2), own.y + s * fx - c * (ob.width / 2))
     lx, ly = right[0] - left[0], right[1] - left[1]
-    width = math.hypot(lx, ly)
+    width = hypot(lx, ly)
     tb = target.entity.box
     tc, ts = math.cos(target.heading), math.sin(target.heading)
     inside = outside_left = outside_right = 0

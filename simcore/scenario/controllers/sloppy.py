@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import random
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from simcore.scenario.motion import update_pose_from_road, wrap_angle
 
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from simcore.scenario.motion import Body
     from simcore.scenario.world import ScenarioWorld
 
-SMALL = 1e-10
+SMALL: Final = 1e-10
 
 
 class _Timer:
