@@ -7,7 +7,7 @@ the metrics it feeds.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sized
 from typing import TYPE_CHECKING, Any, Final
 
 from simcore.errors import SimulationError
@@ -39,6 +39,8 @@ class FrameReaders:
         v2x: Any = None,
     ) -> None:
         self.world = world
+        #: the publisher's consumers, a live collection (the publisher is no compiled class: read once here)
+        self.consumers: Sized = world.consumers
         self.metrics = metrics
         self.ground_truth = ground_truth
         self.closed_loop = closed_loop
@@ -52,9 +54,8 @@ class FrameReaders:
             self.metrics.update(frame)
         if self.closed_loop is not None:
             self.closed_loop.published(frame.time)
-        world = self.world
-        if world.consumers:  # (what `publish` checks first: the call is skipped too)
-            world.publish(frame)
+        if self.consumers:  # (what `publish` checks first: the call is skipped too)
+            self.world.publish(frame)
         if self.perception is not None:
             self.perception.step(frame)
         if self.v2x is not None:

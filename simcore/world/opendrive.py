@@ -652,9 +652,9 @@ class OpenDrive:
             return None
         cross = road.cross_at(s)
         if cross is not None:
-            for lane_id, lo, hi, centre in cross.inside:
-                if lo <= t <= hi:
-                    return lane_id, s, t, t - centre, h
+            for span in cross.inside:
+                if span.low <= t <= span.high:
+                    return span.lane_id, s, t, t - span.centre, h
             return None
         for lane, inner, outer in road.all_borders(s):
             if inner < outer:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Final
+from typing import Any, Final, final
 
 from simcore.world.native_calls import bisect_right
 from simcore.world.road_geometry import Geometry
@@ -185,6 +185,20 @@ class LaneSection:
         return None
 
 
+@final
+class LaneSpan:
+    """One lane across a `LaneCross`: its id, the ``t`` range it covers and the ``t`` of its centre (a class,
+    not a tuple: compiled, its fields are read as they are, where a tuple's are unpacked and checked)."""
+
+    __slots__ = ("centre", "high", "lane_id", "low")
+
+    def __init__(self, lane_id: int, low: float, high: float, centre: float) -> None:
+        self.lane_id = lane_id
+        self.low = low
+        self.high = high
+        self.centre = centre
+
+
 class LaneCross:
     """The lane borders across a stretch of a road where they do not change with ``s`` (the same lane
     section on each side, each with constant widths and a constant or no laneOffset), and the look-ups that
@@ -201,15 +215,15 @@ class LaneCross:
             for lane, inner, outer in borders:
                 if lane.id != 0 and (lane.id > 0) == (side > 0) and lane.id not in self.centres:
                     self.centres[lane.id] = 0.5 * (inner + outer)
-        #: ``(lane id, t_low, t_high, t_centre)`` of the lanes wider than 1e-9, in `borders` order
-        self.inside: tuple[tuple[int, float, float, float], ...] = tuple(
-            (lane.id, min(inner, outer), max(inner, outer), 0.5 * (inner + outer))
+        #: the lanes wider than 1e-9, in `borders` order
+        self.inside: tuple[LaneSpan, ...] = tuple(
+            LaneSpan(lane.id, min(inner, outer), max(inner, outer), 0.5 * (inner + outer))
             for lane, inner, outer in self.borders
             if abs(outer - inner) > 1e-9
         )
         #: the same for lanes (not 0) of any width but zero, their ``t`` range widened by 1e-9 each way
-        self.around: tuple[tuple[int, float, float, float], ...] = tuple(
-            (lane.id, lo - 1e-9, hi + 1e-9, 0.5 * (inner + outer))
+        self.around: tuple[LaneSpan, ...] = tuple(
+            LaneSpan(lane.id, lo - 1e-9, hi + 1e-9, 0.5 * (inner + outer))
             for lane, inner, outer in self.borders
             if lane.id != 0 and inner != outer
             for lo, hi in ((inner, outer) if inner < outer else (outer, inner),)
@@ -225,11 +239,12 @@ class LaneCross:
         """The lane containing lateral position ``t`` (else the one with the closest centre) and the offset
         from its centre: `simcore.scenario.motion.lane_at_t` on this stretch of road."""
         best_lane, best_offset, best = 0, t, math.inf
-        for lane_id, lo, hi, centre in self.around:
-            if lo <= t <= hi:
-                return lane_id, t - centre
+        for lane in self.around:
+            centre = lane.centre
+            if lane.low <= t <= lane.high:
+                return lane.lane_id, t - centre
             if abs(t - centre) < best:
-                best, best_lane, best_offset = abs(t - centre), lane_id, t - centre
+                best, best_lane, best_offset = abs(t - centre), lane.lane_id, t - centre
         return best_lane, best_offset
 
 
