@@ -1,5 +1,5 @@
-"""simcore.world.native_calls: what the compiled step loop calls instead of `bisect` and `math` look-ups
-gives what those give."""
+"""simcore.world.native_calls and conditions.compare_floats: what the compiled step loop calls instead of `bisect`,
+`math` look-ups and the comparison rules gives what those give."""
 
 from __future__ import annotations
 
@@ -33,3 +33,15 @@ def test_bisect_right_of_nothing_and_of_nan() -> None:
 
 def test_the_math_functions_are_maths() -> None:
     assert hypot is math.hypot and atan2 is math.atan2
+
+
+@given(
+    st.sampled_from(["greaterThan", "lessThan", "equalTo", "greaterOrEqual", "lessOrEqual", "notEqualTo"]),
+    st.floats(width=64),
+    st.one_of(st.floats(width=64), st.sampled_from([0.0, -0.0, 1e-10, 1.0])),
+)
+def test_compare_floats_answers_as_the_rules_of_compare(rule: str, a: float, b: float) -> None:
+    from simcore.scenario.conditions import compare, compare_floats
+
+    assert compare_floats(rule, a, b) == compare(rule, a, b)
+    assert compare_floats(rule, a, a + 1e-12) == compare(rule, a, a + 1e-12)

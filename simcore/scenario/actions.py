@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Final
 from simcore.errors import BadInput
 from simcore.scenario import model as m
 from simcore.scenario import paths
-from simcore.scenario.motion import Body, lane_at_t, shape_value, wrap_angle
+from simcore.scenario.motion import UNPOSED, Body, lane_at_t, shape_value, wrap_angle
 from simcore.scenario.runtime import Instant, Runtime
 from simcore.world.native_calls import atan2, hypot
 
@@ -185,7 +185,7 @@ class FollowTrajectoryRuntime(Runtime):
                 a.lane_id, a.offset = lane_at_t(road, road_id, found[0], found[1])
                 lane_heading = road.road_to_world(road_id, a.s, 0.0).heading
                 a.direction = 1 if math.cos(a.heading - lane_heading) >= 0 else -1
-                a.posed = None
+                a.posed = UNPOSED
         if a.road_id is not None and road is not None:
             # it goes on along the lane keeping the heading it has relative to it (as esmini)
             lane_heading = road.road_to_world(a.road_id, a.s, 0.0).heading

@@ -40,6 +40,24 @@ def compare(rule: str, a: Any, b: Any) -> bool:
     return bool(_COMPARE[rule](a, b))
 
 
+def compare_floats(rule: str, a: float, b: float) -> bool:
+    """`compare` of two floats as plain comparisons (compiled: no look-up, no call, nothing boxed); the same
+    answers as `_COMPARE`'s, a KeyError for an unknown rule as there."""
+    if rule == "greaterThan":
+        return a > b
+    if rule == "lessThan":
+        return a < b
+    if rule == "equalTo":
+        return abs(a - b) < 1e-9
+    if rule == "greaterOrEqual":
+        return a >= b
+    if rule == "lessOrEqual":
+        return a <= b
+    if rule == "notEqualTo":
+        return a != b
+    raise KeyError(rule)
+
+
 #: a condition's value now, bound to one run (see `bind`); an entity condition adds the entities that fulfil
 #: it to the list given (None: nobody asks which)
 Bound = Callable[[list[str] | None], bool]
@@ -137,13 +155,13 @@ def bind_simulation_time(c: m.SimulationTimeCondition, world: ScenarioWorld) -> 
     # (rounding to digits is slow: the condition's value is rounded once; the clock only near it, where the
     # rounding decides: more than a microsecond away, rounding by at most half a nanosecond changes no order)
     value = round(c.value, 9)
-    op = _COMPARE.get(c.rule)
-    if op is None:
+    rule = c.rule
+    if rule not in _COMPARE:
         return lambda triggering: compare(c.rule, world.time, value)  # raises as `compare` does
 
     def now_holds(triggering: list[str] | None) -> bool:
         now = world.time
-        return bool(op(now if abs(now - value) > 1e-6 else round(now, 9), value))
+        return compare_floats(rule, now if abs(now - value) > 1e-6 else round(now, 9), value)
 
     return now_holds
 
@@ -317,31 +335,66 @@ def distance(c: m.DistanceCondition, world: ScenarioWorld, body: Body) -> bool:
 
 
 def relative_distance(c: m.RelativeDistanceCondition, world: ScenarioWorld, body: Body) -> bool:
-    other = world.body(c.entity)
-    if other.gone:
-        return False
-    measure = world.measure
-    euclid = c.distance_type in ("euclidianDistance", "cartesianDistance")
-    if c.freespace and (euclid or c.coordinate_system == "entity"):
-        # a bound clear of the value decides the comparison as the distance would: far apart, the lower
-        # bound of the distance between the boxes; close, the distance of their centres, which neither the
-        # distance between the boxes nor their gap along any axis exceeds
-        lower = measure.box_distance_lower_bound(body, other)
-        if euclid and lower > c.value + 1e-6:
-            return compare(c.rule, lower, c.value)
-        upper = lower + bounding_radii(body, other)
-        if upper < c.value - 1e-6:
-            return compare(c.rule, upper, c.value)
-    measured = measure.to_entity(body, other, c.coordinate_system, c.distance_type, c.freespace)
-    return compare(c.rule, LARGE if measured is None else abs(measured), c.value)
+    return bind_relative_distance(c, world)(body)
+
+
+def bind_relative_distance(c: m.RelativeDistanceCondition, world: ScenarioWorld) -> EntityTest:
+    # the condition's fields read once (as in `bind_time_headway`)
+    name, system, kind, freespace, rule, value = (
+        c.entity,
+        c.coordinate_system,
+        c.distance_type,
+        c.freespace,
+        c.rule,
+        c.value,
+    )
+    euclid = kind in ("euclidianDistance", "cartesianDistance")
+    bounded = freespace and (euclid or system == "entity")
+
+    def test(body: Body) -> bool:
+        other = world.body(name)
+        if other.gone:
+            return False
+        measure = world.measure
+        if bounded:
+            # a bound clear of the value decides the comparison as the distance would: far apart, the lower
+            # bound of the distance between the boxes; close, the distance of their centres, which neither
+            # the distance between the boxes nor their gap along any axis exceeds
+            lower = measure.box_distance_lower_bound(body, other)
+            if euclid and lower > value + 1e-6:
+                return compare_floats(rule, lower, value)
+            upper = lower + bounding_radii(body, other)
+            if upper < value - 1e-6:
+                return compare_floats(rule, upper, value)
+        measured = measure.to_entity(body, other, system, kind, freespace)
+        return compare_floats(rule, LARGE if measured is None else abs(measured), value)
+
+    return test
 
 
 def time_headway(c: m.TimeHeadwayCondition, world: ScenarioWorld, body: Body) -> bool:
-    other = world.body(c.entity)
-    if other.gone:
-        return False
-    headway = world.measure.headway(body, other, c.coordinate_system, c.distance_type, c.freespace)
-    return headway is not None and compare(c.rule, headway, c.value)
+    return bind_time_headway(c, world)(body)
+
+
+def bind_time_headway(c: m.TimeHeadwayCondition, world: ScenarioWorld) -> EntityTest:
+    # the condition's fields read once: the model is no compiled class, each read of one a look-up by name
+    name, system, kind, freespace, rule, value = (
+        c.entity,
+        c.coordinate_system,
+        c.distance_type,
+        c.freespace,
+        c.rule,
+        c.value,
+    )
+
+    def test(body: Body) -> bool:
+        other = world.body(name)
+        if other.gone:
+            return False
+        headway = world.measure.headway(body, other, system, kind, freespace)
+        return headway is not None and compare_floats(rule, headway, value)
+
+    return test
 
 
 def time_to_collision(c: m.TimeToCollisionCondition, world: ScenarioWorld, body: Body) -> bool:
@@ -455,6 +508,8 @@ VALUE_CONDITIONS: Final[dict[type, ValueEvaluator]] = {
 #: work at every evaluation
 ENTITY_BINDERS: Final[dict[type, EntityBinder]] = {
     m.CollisionCondition: bind_collision,
+    m.TimeHeadwayCondition: bind_time_headway,
+    m.RelativeDistanceCondition: bind_relative_distance,
 }
 
 #: value condition type → its evaluation bound to one run, where binding saves work at every evaluation

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING, Any, Protocol, final
+from typing import TYPE_CHECKING, Any, Protocol
 
 from simcore.errors import BadInput, SimulationError
 from simcore.scenario import drivers, ghost, global_actions, positions
@@ -21,7 +21,9 @@ from simcore.scenario.action_registry import make_runtime
 from simcore.scenario.core_actions import LaneChangeRuntime
 from simcore.scenario.measure import Measure
 from simcore.scenario.motion import (
+    UNPOSED,
     Body,
+    EntityFacts,
     advance_on_road,
     align_trailer,
     lane_point,
@@ -43,35 +45,6 @@ if TYPE_CHECKING:
     from simcore.scenario import controllers
     from simcore.world.opendrive import OpenDrive
     from simcore.world.sumo import SumoWorld
-
-
-@final
-class _Fixed:
-    """A body's entity, its box and external driving, and what its states take from them: name, object type,
-    category, published box and who drives it (`ScenarioEngine._fixed_of`). A class, not a tuple: compiled,
-    its fields are read as they are, where a tuple taken from a dict is unpacked and checked whole."""
-
-    __slots__ = ("bbox", "box", "category", "controlled_by", "entity", "external", "name", "object_type")
-
-    def __init__(
-        self,
-        entity: m.Entity,
-        box: m.Box,
-        external: bool,
-        name: str,
-        object_type: str,
-        category: str,
-        bbox: BoundingBox,
-        controlled_by: str,
-    ) -> None:
-        self.entity = entity
-        self.box = box
-        self.external = external
-        self.name = name
-        self.object_type = object_type
-        self.category = category
-        self.bbox = bbox
-        self.controlled_by = controlled_by
 
 
 class ExternalDriver(Protocol):
@@ -182,7 +155,6 @@ class ScenarioEngine:
         self.registry = self.story.registry
         self._states: dict[str, EntityState] = {}  # per-step cache of state_of (cleared when bodies move)
         self._frame: WorldFrame | None = None  # this step's frame, once built (forgotten when bodies move)
-        self._fixed: dict[str, _Fixed] = {}  # per body: what its states take from its entity (_fixed_of)
         self._init()
         if self.ghosts is not None:
             self.ghosts.start()
@@ -261,7 +233,7 @@ class ScenarioEngine:
         x, y, z, heading = self.resolve_position(position, body)
         self.moved()
         body.x, body.y, body.z, body.heading = x, y, z, heading
-        body.posed = None
+        body.posed = UNPOSED
         body.placed = True
         body.gone = False
         body.mover = None
@@ -390,9 +362,8 @@ class ScenarioEngine:
         # the first step where it holds, as esmini does); only the initial state is checked here
         if not (self.step_index == 0 and self._check_stop()):
             self.story.evaluate()
-        previous = []
         for body in self.bodies.values():
-            previous.append((body, body.speed, body.heading, body.x, body.y))
+            body.at_step_start = (body.speed, body.heading, body.x, body.y)
             body.lateral_velocity = 0.0  # lateral actions that are still running set it again
         if self.init_runtimes:
             for runtime in self.init_runtimes:
@@ -462,7 +433,8 @@ class ScenarioEngine:
         if ghosts is not None:
             ghosts.end_step(dt)
             self.moved()
-        for body, speed0, heading0, px, py in previous:
+        for body in self.bodies.values():  # (the same bodies: a run's bodies are made at its start)
+            speed0, heading0, px, py = body.at_step_start
             speed = body.speed
             body.acceleration = (speed - speed0) / dt
             turn = body.heading - heading0
@@ -714,19 +686,19 @@ class ScenarioEngine:
             cached = self._states[body.name] = self._state_of(body)
         return cached
 
-    def _fixed_of(self, body: Body) -> _Fixed:
+    def _facts_of(self, body: Body) -> EntityFacts:
         """What a body's state takes from its entity and its driver (name, type, category, box, who drives
         it): built again only when the body's entity (an assigned controller) or its external driving
         changes; the published box stays the same object while the entity's box does."""
         e = body.entity
-        known = self._fixed.get(body.name)
+        known = body.facts
         box = e.box
         if known is not None and known.box is box:
             bbox = known.bbox
         else:
             bbox = BoundingBox(box.center_x, box.center_y, box.center_z, box.length, box.width, box.height)
         external = body.external
-        fixed = self._fixed[body.name] = _Fixed(
+        fixed = body.facts = EntityFacts(
             e,
             box,
             external,
@@ -739,16 +711,24 @@ class ScenarioEngine:
         return fixed
 
     def _state_of(self, body: Body) -> EntityState:
-        fixed = self._fixed.get(body.name)
+        fixed = body.facts
         if fixed is None or fixed.entity is not body.entity or fixed.external is not body.external:
-            fixed = self._fixed_of(body)
+            fixed = self._facts_of(body)
         lane = None
         road_id = body.road_id
         if road_id is not None:
             road = self.road
             if road is not None:
                 s = body.s
-                t, lane_id, offset = lane_point(road, road_id, body.lane_id, s, body.offset)
+                posed_on = body.ref_road  # the road of the last pose: no look-up when it is this one
+                t, lane_id, offset = lane_point(
+                    road,
+                    road_id,
+                    body.lane_id,
+                    s,
+                    body.offset,
+                    posed_on if posed_on is not None and posed_on.id == road_id else None,
+                )
                 lane = LaneCoordinates(road_id, lane_id, s, t, offset)
         return EntityState(
             fixed.name,

@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Final
 
 from simcore.scenario import model as m
 from simcore.scenario.drivers import Vehicle, put
+from simcore.scenario.motion import UNPOSED
 from simcore.world.native_calls import hypot
 
 if TYPE_CHECKING:
@@ -489,7 +490,7 @@ class Ghosts:
         for attr in ("x", "y", "z", "heading", "road_id", "lane_id", "s", "offset", "direction"):
             setattr(ghost, attr, getattr(e, attr))
         ghost.heading_offset = e.heading_offset
-        ghost.posed = None
+        ghost.posed = UNPOSED
         if self.clock > SMALL:
             self.restart = True
             self.trail = Trail()

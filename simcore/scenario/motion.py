@@ -6,10 +6,11 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, Final, final
 
 from simcore.scenario import model as m
 from simcore.world.native_calls import atan2, hypot
+from simcore.world.state import BoundingBox
 
 if TYPE_CHECKING:
     from simcore.world.opendrive import OpenDrive
@@ -56,6 +57,42 @@ def wrap_angle(angle: float) -> float:
     return (angle + math.pi) % _TWO_PI - math.pi
 
 
+@final
+class EntityFacts:
+    """A body's entity, its box and external driving, and what its states take from them: name, object type,
+    category, published box and who drives it (`ScenarioEngine._facts_of`; kept in `Body.facts`). A class, not a tuple: compiled,
+    its fields are read as they are, where a tuple taken from a dict is unpacked and checked whole."""
+
+    __slots__ = ("bbox", "box", "category", "controlled_by", "entity", "external", "name", "object_type")
+
+    def __init__(
+        self,
+        entity: m.Entity,
+        box: m.Box,
+        external: bool,
+        name: str,
+        object_type: str,
+        category: str,
+        bbox: BoundingBox,
+        controlled_by: str,
+    ) -> None:
+        self.entity = entity
+        self.box = box
+        self.external = external
+        self.name = name
+        self.object_type = object_type
+        self.category = category
+        self.bbox = bbox
+        self.controlled_by = controlled_by
+
+
+#: the road state a pose is computed from (`_road_state`): road, lane, s, offset, direction, heading offset,
+#: lateral velocity, speed (a typed tuple: compiled, kept in the body as plain values, not an object)
+RoadState = tuple[str | None, int, float, float, int, float, float, float]
+#: a body not posed on a road: equal to no road state (its s is NaN)
+UNPOSED: RoadState = (None, 0, math.nan, 0.0, 0, 0.0, 0.0, 0.0)
+
+
 @dataclass
 class Body:
     """The mutable state of one entity during a run."""
@@ -73,6 +110,7 @@ class Body:
     vx: float = 0.0  # world velocity over the last step (its displacement / dt), m/s
     vy: float = 0.0
     previous_velocity: tuple[float, float] = (0.0, 0.0)  # (vx, vy) of the step before the last
+    at_step_start: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # speed, heading, x, y (advance)
     # road following (None when the entity is off every road)
     road_id: str | None = None
     lane_id: int = 0
@@ -80,10 +118,10 @@ class Body:
     offset: float = 0.0  # from the centre of lane_id, + to the left of the reference line (+t)
     direction: int = 1  # +1 travels toward increasing s
     heading_offset: float = 0.0  # heading relative to the lane's travel direction, kept along the lane
-    posed: tuple[Any, ...] | None = None  # the road state the pose was last computed from
+    posed: RoadState = UNPOSED  # the road state the pose was last computed from
     # the reference line at the s of the pose on its road (`update_pose_from_road`): its curvature, where the
     # next step's move along the lane starts, and its heading, which conditions measure in (`reference_heading`)
-    ref_road: Any = None
+    ref_road: Road | None = None
     ref_s: float = math.nan
     ref_kappa: float = 0.0
     ref_heading: float = 0.0
@@ -96,6 +134,7 @@ class Body:
     gone: bool = False  # left the SUMO network
     extra: dict[str, float] = field(default_factory=dict)
     mover: Any = None  # a runtime that moves the entity itself (a trajectory) instead of lane following
+    facts: EntityFacts | None = None  # what its published states take from its entity (ScenarioEngine)
     route: list[tuple[str, int]] = field(default_factory=list)  # roads ahead (id, direction) of a route
     # the assigned route's waypoints as road points (lane_router.RoadPoint) and their route strategies
     route_points: list[Any] = field(default_factory=list)
@@ -144,13 +183,14 @@ def lane_at_t(road: OpenDrive, road_id: str, s: float, t: float) -> tuple[int, f
 
 
 def lane_point(
-    road: OpenDrive, road_id: str, lane_id: int, s: float, offset: float
+    road: OpenDrive, road_id: str, lane_id: int, s: float, offset: float, on: Road | None = None
 ) -> tuple[float, int, float]:
     """Where a body in lane `lane_id`, `offset` from its centre at `s`, is across the road: ``(t, lane, offset
     from that lane's centre)`` with ``t = lane_center_t(road_id, lane_id, s) + offset`` and the lane
     `lane_at_t` finds at ``t`` (the lane changes mid lane change). The same floats as those two calls, with
-    one look-up of the lane borders at `s` where they are the same over a stretch of road."""
-    r = road.roads.get(road_id)
+    one look-up of the lane borders at `s` where they are the same over a stretch of road. `on`: the road
+    `road_id` names, when the caller has it at hand."""
+    r = on if on is not None else road.roads.get(road_id)
     if r is not None and lane_id != 0 and 0.0 <= s <= r.length:  # as lane_center_t and lane_at_t take s
         cross = r.cross_at(s)
         if cross is not None:
@@ -395,7 +435,7 @@ def reference_heading(r: Road, body: Body, s: float) -> float:
     return r.reference_xyh(s)[2]
 
 
-def _road_state(body: Body) -> tuple[Any, ...]:
+def _road_state(body: Body) -> RoadState:
     return (
         body.road_id,
         body.lane_id,

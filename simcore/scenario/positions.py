@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Final
 from simcore.errors import BadInput
 from simcore.scenario import model as m
 from simcore.scenario import paths
-from simcore.scenario.motion import along_lane, lane_shift, wrap_angle
+from simcore.scenario.motion import UNPOSED, along_lane, lane_shift, wrap_angle
 from simcore.scenario.world import Pose
 
 if TYPE_CHECKING:
@@ -318,6 +318,6 @@ def track(road: OpenDrive | None, body: Body, lock_lane: bool = False) -> None:
     body.road_id, body.lane_id, body.s, _, body.offset, heading = point
     body.direction = 1 if math.cos(body.heading - heading) >= 0 else -1
     body.heading_offset = 0.0
-    body.posed = None
+    body.posed = UNPOSED
     if lock_lane:
         body.lateral_velocity = 0.0
