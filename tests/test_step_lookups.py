@@ -111,3 +111,32 @@ def test_world_to_road_prefers_the_hinted_road_it_is_on(name: str) -> None:
             overlapping += free.road_id != road_id
     if name != "fabriksgatan.xodr":
         assert overlapping > 0  # junctions: some points lie on more than one road
+
+
+@pytest.mark.parametrize("name", NETWORKS)
+def test_a_lane_cross_gives_its_centres_from_its_table_as_from_its_dict(name: str) -> None:
+    """`LaneCross.centre_of` (a table from the lowest lane id) answers as the `centres` dict does, for every
+    stretch of every road and every lane id near and far."""
+    od = _network(name)
+    crosses = 0
+    for road in od.roads.values():
+        for s in (0.0, road.length / 3, road.length / 2, road.length):
+            cross = road.cross_at(s)
+            if cross is None:
+                continue
+            crosses += 1
+            for lane_id in range(-80, 81):
+                centre = cross.centres.get(lane_id)
+                assert cross.centre_of(lane_id) == ((False, 0.0) if centre is None else (True, centre))
+    assert crosses
+
+
+def test_a_lane_cross_with_lane_ids_far_apart_answers_from_its_dict() -> None:
+    from simcore.world.road_model import MAX_CENTRE_TABLE, Lane, LaneCross
+
+    far = MAX_CENTRE_TABLE + 5
+    cross = LaneCross([(Lane(-1, "driving"), 0.0, -3.5)], [(Lane(far, "driving"), 0.0, 3.0)])
+    assert cross.centres == {-1: -1.75, far: 1.5}
+    assert cross.centre_of(-1) == (True, -1.75)
+    assert cross.centre_of(far) == (True, 1.5)
+    assert cross.centre_of(1) == (False, 0.0)

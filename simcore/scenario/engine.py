@@ -89,6 +89,8 @@ class ScenarioEngine:
         self.warnings: list[str] = []
         self.ended_by: str | None = None
         self.bodies: dict[str, Body] = {e.name: Body(entity=e) for e in scenario.entities}
+        #: the same bodies in the same order, as a list (iterated natively every step; a run's bodies never change)
+        self._in_order: list[Body] = list(self.bodies.values())
         # per entity: [driver of its assigned controller, active longitudinally, active laterally]
         self.controllers: dict[str, list[Any]] = {
             e.name: [e.driver if e.driver == "external" else "scenario", False, False]
@@ -362,7 +364,7 @@ class ScenarioEngine:
         # the first step where it holds, as esmini does); only the initial state is checked here
         if not (self.step_index == 0 and self._check_stop()):
             self.story.evaluate()
-        for body in self.bodies.values():
+        for body in self._in_order:
             body.at_step_start = (body.speed, body.heading, body.x, body.y)
             body.lateral_velocity = 0.0  # lateral actions that are still running set it again
         if self.init_runtimes:
@@ -391,7 +393,7 @@ class ScenarioEngine:
             deferred = set(self.natural_drivers).union(deferred)
         if self.esmini_controllers:
             deferred = {n for n, c in self.esmini_controllers.items() if c.moves_itself}.union(deferred)
-        for body in self.bodies.values():
+        for body in self._in_order:
             if body.gone:
                 continue
             if body.external:
@@ -433,7 +435,7 @@ class ScenarioEngine:
         if ghosts is not None:
             ghosts.end_step(dt)
             self.moved()
-        for body in self.bodies.values():  # (the same bodies: a run's bodies are made at its start)
+        for body in self._in_order:  # (the bodies of the step's start: a run's bodies are made at its start)
             speed0, heading0, px, py = body.at_step_start
             speed = body.speed
             body.acceleration = (speed - speed0) / dt
@@ -758,7 +760,7 @@ class ScenarioEngine:
             if last is not None and last.step == self.step_index and last.time == self.time:
                 return last  # asked again before anything moved: the same frame
             entities = []
-            for b in self.bodies.values():
+            for b in self._in_order:
                 if not b.gone or b.name == ego:
                     # (called directly: compiled, a native call, not a bound method's)
                     entities.append(self._state_of(b))

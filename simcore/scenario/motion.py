@@ -194,8 +194,8 @@ def lane_point(
     if r is not None and lane_id != 0 and 0.0 <= s <= r.length:  # as lane_center_t and lane_at_t take s
         cross = r.cross_at(s)
         if cross is not None:
-            centre = cross.centres.get(lane_id)
-            if centre is not None:
+            known, centre = cross.centre_of(lane_id)
+            if known:
                 t = centre + offset
                 found, off = cross.lane_at(t)
                 return t, found, off

@@ -199,12 +199,26 @@ class LaneSpan:
         self.centre = centre
 
 
+#: lane ids a `LaneCross` keeps its lanes' centres for in a table (from its lowest id to its highest)
+MAX_CENTRE_TABLE: Final = 64
+
+
 class LaneCross:
     """The lane borders across a stretch of a road where they do not change with ``s`` (the same lane
     section on each side, each with constant widths and a constant or no laneOffset), and the look-ups that
     the per-step queries make on them, derived once (the same floats the per-``s`` loops compute)."""
 
-    __slots__ = ("around", "borders", "centres", "driving_ids", "ids", "inside")
+    __slots__ = (
+        "_known",
+        "_lowest",
+        "_table",
+        "around",
+        "borders",
+        "centres",
+        "driving_ids",
+        "ids",
+        "inside",
+    )
 
     def __init__(self, right: list[tuple[Lane, float, float]], left: list[tuple[Lane, float, float]]) -> None:
         #: every non-centre lane's ``(lane, t_inner, t_outer)``, right side first (`Road.all_borders`)
@@ -215,6 +229,14 @@ class LaneCross:
             for lane, inner, outer in borders:
                 if lane.id != 0 and (lane.id > 0) == (side > 0) and lane.id not in self.centres:
                     self.centres[lane.id] = 0.5 * (inner + outer)
+        # the same as a table from the lowest id, for `centre_of` (lane ids are small numbers around 0; ids
+        # too far apart for a small table stay in the dict only)
+        ids = sorted(self.centres)
+        span = ids[-1] - ids[0] + 1 if ids else 0
+        self._lowest = ids[0] if ids and span <= MAX_CENTRE_TABLE else 0
+        size = span if ids and span <= MAX_CENTRE_TABLE else 0
+        self._known: list[bool] = [self._lowest + i in self.centres for i in range(size)]
+        self._table: list[float] = [self.centres.get(self._lowest + i, 0.0) for i in range(size)]
         #: the lanes wider than 1e-9, in `borders` order
         self.inside: tuple[LaneSpan, ...] = tuple(
             LaneSpan(lane.id, min(inner, outer), max(inner, outer), 0.5 * (inner + outer))
@@ -234,6 +256,17 @@ class LaneCross:
         self.driving_ids: tuple[int, ...] = tuple(
             sorted(lane_id for lane_id, kind in wide if kind.lower() in DRIVING_LANE_TYPES)
         )
+
+    def centre_of(self, lane_id: int) -> tuple[bool, float]:
+        """``(True, t of the centre of lane `lane_id`)`` as `centres` has it, else ``(False, 0.0)`` (compiled:
+        a list read and a pair of plain values, where the dict's look-up boxes the id and the ``t``)."""
+        i = lane_id - self._lowest
+        if 0 <= i < len(self._table):
+            return self._known[i], self._table[i]
+        if self._table:
+            return False, 0.0
+        centre = self.centres.get(lane_id)
+        return (False, 0.0) if centre is None else (True, centre)
 
     def lane_at(self, t: float) -> tuple[int, float]:
         """The lane containing lateral position ``t`` (else the one with the closest centre) and the offset
@@ -509,7 +542,8 @@ class Road:
             cross = self.cross_at(s)
             if cross is None:
                 return None
-        return cross.centres.get(lane_id)
+        known, centre = cross.centre_of(lane_id)
+        return centre if known else None
 
     def _build_crosses(self) -> list[LaneCross | None]:
         def index(key: int, q: float) -> int:  # as section_at
