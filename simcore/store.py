@@ -229,38 +229,35 @@ class FileStore:
                 raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
         raise StoreError(f"cannot write {target}: no free temporary name next to it")
 
-    @staticmethod
-    def _abandon(tmp: str, target: str, exc: BaseException) -> None:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
-
     @contextlib.contextmanager
-    def _atomic(self, key: str) -> Iterator[IO[bytes]]:
-        fd, tmp, target = self._create(key)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                yield f
-            os.replace(tmp, target)
-        except BaseException as exc:
-            self._abandon(tmp, target, exc)
-            raise
-
-    def put_bytes(self, key: str, data: bytes) -> None:
-        # the object's bytes in one write (a loop for what one write leaves), no file object around them
+    def _written(self, key: str) -> Iterator[int]:
+        """A descriptor to write a new object's bytes to. When the block ends the object is under its key;
+        when it fails, nothing is (the temporary file removed; an OSError raised as a StoreError)."""
         fd, tmp, target = self._create(key)
         try:
             try:
-                view = memoryview(data)
-                while view:
-                    view = view[os.write(fd, view) :]
+                yield fd
             finally:
                 os.close(fd)
             os.replace(tmp, target)
         except BaseException as exc:
-            self._abandon(tmp, target, exc)
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            if isinstance(exc, OSError):
+                raise StoreError(f"cannot write {target}: {exc.strerror or exc}") from exc
             raise
+
+    @contextlib.contextmanager
+    def _atomic(self, key: str) -> Iterator[IO[bytes]]:
+        with self._written(key) as fd, os.fdopen(fd, "wb", closefd=False) as f:
+            yield f
+
+    def put_bytes(self, key: str, data: bytes) -> None:
+        # the object's bytes in one write (a loop for what one write leaves), no file object around them
+        with self._written(key) as fd:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view) :]
 
     def sync(self) -> None:
         """Make every object written so far (by any process) durable: one syncfs of the store's file system

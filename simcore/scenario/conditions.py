@@ -338,16 +338,17 @@ def relative_distance(c: m.RelativeDistanceCondition, world: ScenarioWorld, body
     return bind_relative_distance(c, world)(body)
 
 
+def _between_entities(
+    c: m.RelativeDistanceCondition | m.TimeHeadwayCondition,
+) -> tuple[str, str, str, bool, str, float]:
+    """(other entity, coordinate system, distance type, freespace, rule, value) of a condition measured
+    between two entities, read once when it is bound: the model is no compiled class, each read of a field
+    a look-up by name."""
+    return c.entity, c.coordinate_system, c.distance_type, c.freespace, c.rule, c.value
+
+
 def bind_relative_distance(c: m.RelativeDistanceCondition, world: ScenarioWorld) -> EntityTest:
-    # the condition's fields read once (as in `bind_time_headway`)
-    name, system, kind, freespace, rule, value = (
-        c.entity,
-        c.coordinate_system,
-        c.distance_type,
-        c.freespace,
-        c.rule,
-        c.value,
-    )
+    name, system, kind, freespace, rule, value = _between_entities(c)
     euclid = kind in ("euclidianDistance", "cartesianDistance")
     bounded = freespace and (euclid or system == "entity")
 
@@ -377,15 +378,7 @@ def time_headway(c: m.TimeHeadwayCondition, world: ScenarioWorld, body: Body) ->
 
 
 def bind_time_headway(c: m.TimeHeadwayCondition, world: ScenarioWorld) -> EntityTest:
-    # the condition's fields read once: the model is no compiled class, each read of one a look-up by name
-    name, system, kind, freespace, rule, value = (
-        c.entity,
-        c.coordinate_system,
-        c.distance_type,
-        c.freespace,
-        c.rule,
-        c.value,
-    )
+    name, system, kind, freespace, rule, value = _between_entities(c)
 
     def test(body: Body) -> bool:
         other = world.body(name)

@@ -60,8 +60,8 @@ def wrap_angle(angle: float) -> float:
 @final
 class EntityFacts:
     """A body's entity, its box and external driving, and what its states take from them: name, object type,
-    category, published box and who drives it (`ScenarioEngine._facts_of`; kept in `Body.facts`). A class, not a tuple: compiled,
-    its fields are read as they are, where a tuple taken from a dict is unpacked and checked whole."""
+    category, published box and who drives it (`ScenarioEngine._facts_of`; kept in `Body.facts`). A class,
+    not a tuple: compiled, its fields are read as they are, where a tuple is unpacked and checked whole."""
 
     __slots__ = ("bbox", "box", "category", "controlled_by", "entity", "external", "name", "object_type")
 

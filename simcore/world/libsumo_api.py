@@ -37,9 +37,8 @@ def load() -> Any:
         return loaded
     try:
         return _load_apart()
-    except (
-        Exception
-    ):  # another layout of the package: load it the usual way (`_module` left nothing half-made)
+    except Exception:
+        # another layout of the package: load it the usual way (`_module` left nothing half-made)
         import libsumo
 
         return libsumo
